@@ -1,0 +1,48 @@
+//! The error type of the core: every variant names the input it is about.
+
+use std::fmt;
+use std::path::Path;
+
+/// An error raised by the core, always naming the file or field concerned.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Error {
+    /// A file could not be opened, read or written.
+    Io { path: String, message: String },
+    /// A file was read but its content is not acceptable (format, channels, values).
+    Format { path: String, message: String },
+    /// An in-memory input (an argument or a field) is not acceptable.
+    Input { field: String, message: String },
+}
+
+impl Error {
+    /// An I/O failure on `path`.
+    pub fn io(path: &Path, err: impl fmt::Display) -> Self {
+        Error::Io { path: path.display().to_string(), message: err.to_string() }
+    }
+
+    /// A content problem in the file at `path`.
+    pub fn format(path: &Path, message: impl Into<String>) -> Self {
+        Error::Format { path: path.display().to_string(), message: message.into() }
+    }
+
+    /// A problem with the input named `field`.
+    pub fn input(field: &str, message: impl Into<String>) -> Self {
+        Error::Input { field: field.to_string(), message: message.into() }
+    }
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Error::Io { path, message } | Error::Format { path, message } => {
+                write!(f, "{path}: {message}")
+            }
+            Error::Input { field, message } => write!(f, "{field}: {message}"),
+        }
+    }
+}
+
+impl std::error::Error for Error {}
+
+/// The result type of the core.
+pub type Result<T> = std::result::Result<T, Error>;

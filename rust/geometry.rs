@@ -1,0 +1,382 @@
+//! Triangle geometry of a scene, built exactly as the contract says: the height-field
+//! triangulation, the skirt under its boundary, the floor and the Cornell-box walls.
+//!
+//! Large flat surfaces are tessellated to about a pixel so that per-vertex light caching
+//! (see [`crate::light_cache`]) resolves shadows on them.
+
+use glam::{vec3a, Vec3A};
+
+use crate::scene::{Rgb, Scene};
+
+/// What a triangle belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SurfaceKind {
+    /// The height field seen by the camera.
+    Object,
+    /// The vertical wall under the object's boundary.
+    Skirt,
+    /// The floor plane.
+    Floor,
+    /// A Cornell-box wall.
+    Wall,
+}
+
+/// An indexed triangle mesh with per-vertex albedo and per-triangle facing normals.
+#[derive(Debug, Clone, Default)]
+pub struct Mesh {
+    /// Vertex positions (world units).
+    pub positions: Vec<Vec3A>,
+    /// Vertex albedo, interpolated barycentrically across each triangle.
+    pub albedo: Vec<Rgb>,
+    /// Unit direction in which a ray leaving the vertex is offset (mean of the adjacent
+    /// facing normals).
+    pub vertex_normals: Vec<Vec3A>,
+    /// Vertex indices of each triangle.
+    pub triangles: Vec<[u32; 3]>,
+    /// Unit geometric normal of each triangle, on its reflecting (front) side.
+    pub normals: Vec<Vec3A>,
+    /// Surface each triangle belongs to.
+    pub kinds: Vec<SurfaceKind>,
+    /// Triangles too large for per-vertex light caching: shadows are traced at each hit.
+    pub traced_shadows: Vec<bool>,
+    /// Index of the height-field vertex of each pixel (`u32::MAX` when it has none).
+    pub pixel_vertex: Vec<u32>,
+}
+
+/// Cells per side beyond which a flat surface is tessellated more coarsely than a pixel.
+const MAX_CELLS_PER_SIDE: usize = 256;
+/// Vertical subdivisions of a skirt quad at most.
+const MAX_SKIRT_ROWS: usize = 32;
+/// Size of the far floor (no box) relative to the near, tessellated part.
+const FAR_FLOOR_SCALE: f32 = 1000.0;
+
+impl Mesh {
+    /// Builds the geometry of `scene`.
+    pub fn from_scene(scene: &Scene) -> Mesh {
+        let mut mesh = Mesh::default();
+        mesh.add_height_field(scene);
+        if let Some(b) = &scene.cornell_box {
+            mesh.add_cornell_box(scene, b);
+        }
+        if let Some(f) = &scene.floor {
+            mesh.add_floor(scene, f.height, f.albedo);
+        }
+        mesh.finish_vertex_normals();
+        mesh
+    }
+
+    /// Albedo at barycentric coordinates (`u`, `v`) of triangle `t` (weights 1−u−v, u, v
+    /// on its vertices 0, 1, 2).
+    #[inline]
+    pub fn albedo_at(&self, t: usize, u: f32, v: f32) -> Rgb {
+        let [a, b, c] = self.triangles[t].map(|i| self.albedo[i as usize]);
+        let w = 1.0 - u - v;
+        [0, 1, 2].map(|ch| w * a[ch] + u * b[ch] + v * c[ch])
+    }
+
+    /// Corner positions of triangle `t`.
+    #[inline]
+    pub fn corners(&self, t: usize) -> [Vec3A; 3] {
+        self.triangles[t].map(|i| self.positions[i as usize])
+    }
+
+    /// Axis-aligned bounds of the part of the scene near the object (the far floor excluded).
+    pub fn near_bounds(&self) -> (Vec3A, Vec3A) {
+        let mut lo = Vec3A::splat(f32::INFINITY);
+        let mut hi = Vec3A::splat(f32::NEG_INFINITY);
+        for (t, tri) in self.triangles.iter().enumerate() {
+            if self.traced_shadows[t] {
+                continue;
+            }
+            for &i in tri {
+                lo = lo.min(self.positions[i as usize]);
+                hi = hi.max(self.positions[i as usize]);
+            }
+        }
+        (lo, hi)
+    }
+
+    fn add_vertex(&mut self, p: Vec3A, albedo: Rgb) -> u32 {
+        self.positions.push(p);
+        self.albedo.push(albedo);
+        (self.positions.len() - 1) as u32
+    }
+
+    /// Adds a triangle wound so that its normal points to the `facing` side.
+    fn add_triangle(&mut self, mut tri: [u32; 3], facing: Vec3A, kind: SurfaceKind, traced: bool) {
+        let [a, b, c] = tri.map(|i| self.positions[i as usize]);
+        let mut n = (b - a).cross(c - a);
+        if n.dot(facing) < 0.0 {
+            tri.swap(1, 2);
+            n = -n;
+        }
+        let n = n.normalize_or_zero();
+        if n == Vec3A::ZERO {
+            return;
+        }
+        self.triangles.push(tri);
+        self.normals.push(n);
+        self.kinds.push(kind);
+        self.traced_shadows.push(traced);
+    }
+
+    /// A grid of `nu × nv` cells spanning `origin + [0,1]·edge_u + [0,1]·edge_v`.
+    #[allow(clippy::too_many_arguments)]
+    fn add_grid(&mut self, origin: Vec3A, edge_u: Vec3A, edge_v: Vec3A, cells: (usize, usize), albedo: Rgb, facing: Vec3A, kind: SurfaceKind) {
+        let (nu, nv) = cells;
+        let base = self.positions.len() as u32;
+        for b in 0..=nv {
+            for a in 0..=nu {
+                let p = origin + edge_u * (a as f32 / nu as f32) + edge_v * (b as f32 / nv as f32);
+                self.add_vertex(p, albedo);
+            }
+        }
+        let index = |a: usize, b: usize| base + (b * (nu + 1) + a) as u32;
+        for b in 0..nv {
+            for a in 0..nu {
+                self.add_triangle([index(a, b), index(a + 1, b), index(a, b + 1)], facing, kind, false);
+                self.add_triangle([index(a + 1, b), index(a + 1, b + 1), index(a, b + 1)], facing, kind, false);
+            }
+        }
+    }
+
+    fn add_height_field(&mut self, scene: &Scene) {
+        let cam = &scene.camera;
+        let (w, h) = (cam.width, cam.height);
+        let surface = &scene.surface;
+        let masked = |i: usize, j: usize| surface.mask[i * w + j];
+        // Block (i, j) holds pixels (i..=i+1, j..=j+1); it is meshed when all four are masked.
+        let block = |i: isize, j: isize| -> bool {
+            if i < 0 || j < 0 || i + 1 >= h as isize || j + 1 >= w as isize {
+                return false;
+            }
+            let (i, j) = (i as usize, j as usize);
+            masked(i, j) && masked(i + 1, j) && masked(i, j + 1) && masked(i + 1, j + 1)
+        };
+        self.pixel_vertex = vec![u32::MAX; w * h];
+        for i in 0..h {
+            for j in 0..w {
+                let (ii, jj) = (i as isize, j as isize);
+                let used = block(ii - 1, jj - 1) || block(ii - 1, jj) || block(ii, jj - 1) || block(ii, jj);
+                if used {
+                    let (x, y) = cam.pixel_center(i, j);
+                    let p = i * w + j;
+                    self.pixel_vertex[p] = self.add_vertex(vec3a(x, y, surface.height[p]), surface.albedo[p]);
+                }
+            }
+        }
+        let pixel_vertex = self.pixel_vertex.clone();
+        let v = |i: usize, j: usize| pixel_vertex[i * w + j];
+        let up = Vec3A::Z;
+        for i in 0..h.saturating_sub(1) {
+            for j in 0..w.saturating_sub(1) {
+                if block(i as isize, j as isize) {
+                    let t1 = [v(i, j), v(i + 1, j), v(i, j + 1)];
+                    let t2 = [v(i, j + 1), v(i + 1, j), v(i + 1, j + 1)];
+                    self.add_triangle(t1, up, SurfaceKind::Object, false);
+                    self.add_triangle(t2, up, SurfaceKind::Object, false);
+                }
+            }
+        }
+        // Skirt under every boundary edge: an edge shared by exactly one meshed block.
+        let base = scene.base_height();
+        for i in 0..h {
+            for j in 0..w {
+                let (ii, jj) = (i as isize, j as isize);
+                // Horizontal edge (i, j)–(i, j+1): block (i−1, j) above it, (i, j) below it.
+                if j + 1 < w && block(ii - 1, jj) != block(ii, jj) {
+                    let outward = if block(ii, jj) { Vec3A::Y } else { -Vec3A::Y };
+                    self.add_skirt(v(i, j), v(i, j + 1), outward, base, cam.pixel_size);
+                }
+                // Vertical edge (i, j)–(i+1, j): block (i, j−1) left of it, (i, j) right of it.
+                if i + 1 < h && block(ii, jj - 1) != block(ii, jj) {
+                    let outward = if block(ii, jj) { -Vec3A::X } else { Vec3A::X };
+                    self.add_skirt(v(i, j), v(i + 1, j), outward, base, cam.pixel_size);
+                }
+            }
+        }
+    }
+
+    fn add_skirt(&mut self, top_a: u32, top_b: u32, outward: Vec3A, base: f32, pixel_size: f32) {
+        let (pa, pb) = (self.positions[top_a as usize], self.positions[top_b as usize]);
+        let (albedo_a, albedo_b) = (self.albedo[top_a as usize], self.albedo[top_b as usize]);
+        let drop = pa.z.max(pb.z) - base;
+        if drop <= 0.0 {
+            return;
+        }
+        let rows = ((drop / pixel_size).ceil() as usize).clamp(1, MAX_SKIRT_ROWS);
+        let column = |mesh: &mut Mesh, top: Vec3A, albedo: Rgb| -> Vec<u32> {
+            let z_top = top.z.max(base);
+            (0..=rows)
+                .map(|r| {
+                    let z = z_top + (base - z_top) * r as f32 / rows as f32;
+                    mesh.add_vertex(vec3a(top.x, top.y, z), albedo)
+                })
+                .collect()
+        };
+        let col_a = column(self, pa, albedo_a);
+        let col_b = column(self, pb, albedo_b);
+        for r in 0..rows {
+            self.add_triangle([col_a[r], col_b[r], col_a[r + 1]], outward, SurfaceKind::Skirt, false);
+            self.add_triangle([col_b[r], col_b[r + 1], col_a[r + 1]], outward, SurfaceKind::Skirt, false);
+        }
+    }
+
+    fn add_cornell_box(&mut self, scene: &Scene, b: &crate::scene::CornellBox) {
+        let z0 = scene.base_height();
+        let [x0, x1] = b.x;
+        let [y0, y1] = b.y;
+        let height = b.z_top - z0;
+        let s = scene.camera.pixel_size;
+        let cells = |len: f32| cells_for(len, s);
+        let (nx, ny, nz) = (cells(x1 - x0), cells(y1 - y0), cells(height));
+        let up = Vec3A::Z * height;
+        let kind = SurfaceKind::Wall;
+        self.add_grid(vec3a(x0, y0, z0), Vec3A::Y * (y1 - y0), up, (ny, nz), b.left, Vec3A::X, kind);
+        self.add_grid(vec3a(x1, y0, z0), Vec3A::Y * (y1 - y0), up, (ny, nz), b.right, -Vec3A::X, kind);
+        self.add_grid(vec3a(x0, y1, z0), Vec3A::X * (x1 - x0), up, (nx, nz), b.back, -Vec3A::Y, kind);
+        self.add_grid(vec3a(x0, y0, z0), Vec3A::X * (x1 - x0), up, (nx, nz), b.front, Vec3A::Y, kind);
+    }
+
+    fn add_floor(&mut self, scene: &Scene, z0: f32, albedo: Rgb) {
+        let s = scene.camera.pixel_size;
+        let (lo, hi) = match &scene.cornell_box {
+            Some(b) => ((b.x[0], b.y[0]), (b.x[1], b.y[1])),
+            None => self.near_floor_extent(scene),
+        };
+        let (sx, sy) = (hi.0 - lo.0, hi.1 - lo.1);
+        let cells = (cells_for(sx, s), cells_for(sy, s));
+        self.add_grid(vec3a(lo.0, lo.1, z0), Vec3A::X * sx, Vec3A::Y * sy, cells, albedo, Vec3A::Z, SurfaceKind::Floor);
+        if scene.cornell_box.is_none() {
+            self.add_far_floor(lo, hi, z0, albedo);
+        }
+    }
+
+    /// The floor rectangle that is tessellated when there is no box: the camera's view and
+    /// the object's longest possible shadows (three times its height) around it.
+    fn near_floor_extent(&self, scene: &Scene) -> ((f32, f32), (f32, f32)) {
+        let cam = &scene.camera;
+        let (x0, y1) = cam.image_to_world(0.0, 0.0);
+        let (x1, y0) = cam.image_to_world(cam.height as f32, cam.width as f32);
+        let top = self.positions.iter().map(|p| p.z).fold(scene.base_height(), f32::max);
+        let margin = 3.0 * (top - scene.base_height()) + cam.pixel_size;
+        ((x0 - margin, y0 - margin), (x1 + margin, y1 + margin))
+    }
+
+    /// Four large rectangles around the near floor that stand in for an unbounded plane.
+    fn add_far_floor(&mut self, lo: (f32, f32), hi: (f32, f32), z0: f32, albedo: Rgb) {
+        let reach = FAR_FLOOR_SCALE * (hi.0 - lo.0).max(hi.1 - lo.1);
+        let (fx0, fx1, fy0, fy1) = (lo.0 - reach, hi.0 + reach, lo.1 - reach, hi.1 + reach);
+        let rects = [
+            (fx0, fy0, fx1, lo.1),
+            (fx0, hi.1, fx1, fy1),
+            (fx0, lo.1, lo.0, hi.1),
+            (hi.0, lo.1, fx1, hi.1),
+        ];
+        for (ax, ay, bx, by) in rects {
+            let c = [
+                self.add_vertex(vec3a(ax, ay, z0), albedo),
+                self.add_vertex(vec3a(bx, ay, z0), albedo),
+                self.add_vertex(vec3a(bx, by, z0), albedo),
+                self.add_vertex(vec3a(ax, by, z0), albedo),
+            ];
+            self.add_triangle([c[0], c[1], c[2]], Vec3A::Z, SurfaceKind::Floor, true);
+            self.add_triangle([c[0], c[2], c[3]], Vec3A::Z, SurfaceKind::Floor, true);
+        }
+    }
+
+    fn finish_vertex_normals(&mut self) {
+        let mut sum = vec![Vec3A::ZERO; self.positions.len()];
+        for (tri, n) in self.triangles.iter().zip(&self.normals) {
+            for &i in tri {
+                sum[i as usize] += *n;
+            }
+        }
+        self.vertex_normals = sum.into_iter().map(|n| n.normalize_or(Vec3A::Z)).collect();
+    }
+}
+
+fn cells_for(length: f32, pixel_size: f32) -> usize {
+    ((length / pixel_size).ceil() as usize).clamp(1, MAX_CELLS_PER_SIDE)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Camera, CornellBox, Floor, HeightField};
+
+    pub(crate) fn flat_scene(w: usize, h: usize, z: f32, mask: impl Fn(usize, usize) -> bool) -> Scene {
+        let n = w * h;
+        Scene {
+            camera: Camera { width: w, height: h, pixel_size: 1.0 },
+            surface: HeightField {
+                height: vec![z; n],
+                mask: (0..n).map(|p| mask(p / w, p % w)).collect(),
+                albedo: vec![[0.5, 0.5, 0.5]; n],
+            },
+            floor: None,
+            cornell_box: None,
+        }
+    }
+
+    #[test]
+    fn height_field_follows_the_contract_triangulation() {
+        let mut scene = flat_scene(3, 2, 0.0, |_, _| true);
+        scene.surface.height = vec![0.0, 1.0, 2.0, 3.0, 4.0, 5.0];
+        let mesh = Mesh::from_scene(&scene);
+        let object: Vec<_> = (0..mesh.triangles.len()).filter(|&t| mesh.kinds[t] == SurfaceKind::Object).collect();
+        assert_eq!(object.len(), 4);
+        // First triangle of block (0,0): pixels (0,0), (1,0), (0,1), normal facing +z.
+        let corners = mesh.corners(object[0]);
+        let expect: Vec<Vec3A> = [(0, 0), (1, 0), (0, 1)]
+            .iter()
+            .map(|&(i, j)| {
+                let (x, y) = scene.camera.pixel_center(i, j);
+                vec3a(x, y, scene.surface.height[i * 3 + j])
+            })
+            .collect();
+        for c in expect {
+            assert!(corners.contains(&c));
+        }
+        // z = j + 3 i  →  dz/dx = 1, dz/dy = −3 (rows grow downward): n ∝ (−1, 3, 1).
+        let n = mesh.normals[object[0]];
+        assert!((n - vec3a(-1.0, 3.0, 1.0).normalize()).length() < 1e-6, "{n:?}");
+    }
+
+    #[test]
+    fn skirt_closes_the_object_and_faces_outward() {
+        let scene = flat_scene(4, 4, 2.0, |i, j| (1..3).contains(&i) && (1..3).contains(&j));
+        let mesh = Mesh::from_scene(&scene);
+        let skirt: Vec<_> = (0..mesh.triangles.len()).filter(|&t| mesh.kinds[t] == SurfaceKind::Skirt).collect();
+        // One block, four boundary edges, two skirt rows of two triangles each.
+        assert_eq!(skirt.len(), 4 * 2 * 2);
+        for &t in &skirt {
+            let centroid = mesh.corners(t).iter().sum::<Vec3A>() / 3.0;
+            let outward = vec3a(centroid.x, centroid.y, 0.0);
+            assert!(mesh.normals[t].dot(outward) > 0.0);
+            assert!(mesh.normals[t].z.abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn box_walls_face_inside_and_floor_faces_up() {
+        let mut scene = flat_scene(4, 4, 1.0, |_, _| false);
+        scene.floor = Some(Floor { height: 0.0, albedo: [0.8; 3] });
+        scene.cornell_box = Some(CornellBox {
+            x: [-3.0, 3.0],
+            y: [-3.0, 3.0],
+            z_top: 2.0,
+            left: [1.0, 0.0, 0.0],
+            right: [0.0, 1.0, 0.0],
+            back: [0.5; 3],
+            front: [0.5; 3],
+        });
+        let mesh = Mesh::from_scene(&scene);
+        for t in 0..mesh.triangles.len() {
+            let centroid = mesh.corners(t).iter().sum::<Vec3A>() / 3.0;
+            let inside = vec3a(0.0, 0.0, 1.0) - centroid;
+            assert!(mesh.normals[t].dot(inside) > 0.0, "triangle {t} faces outward");
+        }
+        assert!(mesh.traced_shadows.iter().all(|&t| !t));
+    }
+}

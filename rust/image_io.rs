@@ -1,0 +1,295 @@
+//! Reading and writing images: OpenEXR (float R, G, B or Y) and PNG (8 or 16 bit).
+//!
+//! Pixel data is row-major, top row first, channels interleaved, as `f32`.
+//! PNG values are normalised to [0, 1] by `2^bits - 1` (linear, per the scene contract).
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter};
+use std::path::{Path, PathBuf};
+
+use exr::prelude::*;
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+
+/// An image in memory: `height` rows of `width` pixels of `channels` interleaved `f32` values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Image {
+    pub width: usize,
+    pub height: usize,
+    pub channels: usize,
+    pub data: Vec<f32>,
+}
+
+impl Image {
+    /// The same image with a single channel replicated to three (RGB unchanged).
+    pub fn into_rgb(self) -> Image {
+        if self.channels == 3 {
+            return self;
+        }
+        let data = self.data.iter().flat_map(|&v| [v, v, v]).collect();
+        Image { channels: 3, data, ..self }
+    }
+
+    /// Index and value of the first non-finite sample, if any.
+    pub fn first_non_finite(&self) -> Option<(usize, f32)> {
+        self.data.iter().position(|v| !v.is_finite()).map(|i| (i, self.data[i]))
+    }
+}
+
+/// Reads an OpenEXR file with channels R, G, B (3 channels) or Y (1 channel).
+pub fn read_exr(path: &Path) -> Result<Image> {
+    if !path.is_file() {
+        return Err(Error::io(path, "no such file"));
+    }
+    let image = read_first_flat_layer_from_file(path)
+        .map_err(|e| Error::format(path, format!("not a readable OpenEXR file ({e})")))?;
+    let layer = image.layer_data;
+    let (width, height) = (layer.size.width(), layer.size.height());
+    let channels = &layer.channel_data.list;
+    let find = |name: &str| channels.iter().find(|c| c.name.eq(name));
+    let names: Vec<String> = channels.iter().map(|c| c.name.to_string()).collect();
+    let wanted: Vec<&str> = if find("R").is_some() && find("G").is_some() && find("B").is_some() {
+        vec!["R", "G", "B"]
+    } else if find("Y").is_some() && names.len() == 1 {
+        vec!["Y"]
+    } else {
+        return Err(Error::format(
+            path,
+            format!("channels {names:?}: expected R, G, B (optionally A) or a single Y"),
+        ));
+    };
+    let planes: Vec<Vec<f32>> = wanted
+        .iter()
+        .map(|n| find(n).expect("channel checked above").sample_data.values_as_f32().collect())
+        .collect();
+    let pixel_count = width * height;
+    if planes.iter().any(|p| p.len() != pixel_count) {
+        return Err(Error::format(path, "channels are subsampled; only full-resolution channels are supported"));
+    }
+    let n = planes.len();
+    let mut data = vec![0.0f32; pixel_count * n];
+    for (c, plane) in planes.iter().enumerate() {
+        for (i, &v) in plane.iter().enumerate() {
+            data[i * n + c] = v;
+        }
+    }
+    Ok(Image { width, height, channels: n, data })
+}
+
+/// Writes a 1-channel (Y) or 3-channel (R, G, B) image as 32-bit float OpenEXR, zip-compressed.
+pub fn write_exr(path: &Path, image: &Image) -> Result<()> {
+    let names: &[&str] = match image.channels {
+        1 => &["Y"],
+        3 => &["R", "G", "B"],
+        n => return Err(Error::input("image", format!("{n} channels: EXR output takes 1 or 3"))),
+    };
+    check_data_len(image)?;
+    let n = image.channels;
+    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = names
+        .iter()
+        .enumerate()
+        .map(|(c, name)| {
+            let plane: Vec<f32> = image.data.iter().skip(c).step_by(n).copied().collect();
+            AnyChannel::new(*name, FlatSamples::F32(plane))
+        })
+        .collect();
+    let mut layer = Layer::new(
+        (image.width, image.height),
+        LayerAttributes::default(),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(list),
+    );
+    layer.encoding.compression = Compression::ZIP16;
+    Image2::from_layer(layer)
+        .write()
+        .to_file(path)
+        .map_err(|e| Error::io(path, format!("could not write OpenEXR ({e})")))
+}
+
+type Image2<L> = exr::image::Image<L>;
+
+/// Reads an 8- or 16-bit PNG (gray, gray+alpha, RGB, RGBA or palette), alpha dropped,
+/// values divided by `2^bits - 1`. Returns the image and its bit depth.
+pub fn read_png(path: &Path) -> Result<(Image, u8)> {
+    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut decoder = png::Decoder::new(BufReader::new(file));
+    decoder.set_transformations(png::Transformations::EXPAND);
+    let mut reader = decoder
+        .read_info()
+        .map_err(|e| Error::format(path, format!("not a readable PNG file ({e})")))?;
+    let size = reader
+        .output_buffer_size()
+        .ok_or_else(|| Error::format(path, "PNG dimensions are too large"))?;
+    let mut buffer = vec![0u8; size];
+    let info = reader
+        .next_frame(&mut buffer)
+        .map_err(|e| Error::format(path, format!("corrupt PNG data ({e})")))?;
+    let (width, height) = (info.width as usize, info.height as usize);
+    let (bits, scale) = match info.bit_depth {
+        png::BitDepth::Sixteen => (16u8, 65535.0f32),
+        _ => (8u8, 255.0f32),
+    };
+    let in_channels = info.color_type.samples();
+    let keep = if in_channels >= 3 { 3 } else { 1 };
+    let bytes = &buffer[..info.buffer_size()];
+    let sample = |i: usize| -> f32 {
+        if bits == 16 {
+            u16::from_be_bytes([bytes[2 * i], bytes[2 * i + 1]]) as f32 / scale
+        } else {
+            bytes[i] as f32 / scale
+        }
+    };
+    let mut data = Vec::with_capacity(width * height * keep);
+    for p in 0..width * height {
+        for c in 0..keep {
+            data.push(sample(p * in_channels + c));
+        }
+    }
+    Ok((Image { width, height, channels: keep, data }, bits))
+}
+
+/// Writes an image of values in [0, 1] (clipped) as an 8- or 16-bit gray or RGB PNG.
+pub fn write_png(path: &Path, image: &Image, bit_depth: u8) -> Result<()> {
+    check_data_len(image)?;
+    let color = match image.channels {
+        1 => png::ColorType::Grayscale,
+        3 => png::ColorType::Rgb,
+        n => return Err(Error::input("image", format!("{n} channels: PNG output takes 1 or 3"))),
+    };
+    let (depth, bytes): (png::BitDepth, Vec<u8>) = match bit_depth {
+        8 => (
+            png::BitDepth::Eight,
+            image.data.iter().map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect(),
+        ),
+        16 => (
+            png::BitDepth::Sixteen,
+            image
+                .data
+                .iter()
+                .flat_map(|&v| ((v.clamp(0.0, 1.0) * 65535.0).round() as u16).to_be_bytes())
+                .collect(),
+        ),
+        b => return Err(Error::input("bit_depth", format!("{b}: PNG output takes 8 or 16"))),
+    };
+    let file = File::create(path).map_err(|e| Error::io(path, e))?;
+    let mut encoder = png::Encoder::new(BufWriter::new(file), image.width as u32, image.height as u32);
+    encoder.set_color(color);
+    encoder.set_depth(depth);
+    let mut writer = encoder.write_header().map_err(|e| Error::io(path, e))?;
+    writer.write_image_data(&bytes).map_err(|e| Error::io(path, e))?;
+    writer.finish().map_err(|e| Error::io(path, e))
+}
+
+/// Reads one image by its extension (`.exr` or `.png`), as RGB.
+pub fn read_image_rgb(path: &Path) -> Result<Image> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let image = match ext.as_deref() {
+        Some("exr") => read_exr(path)?,
+        Some("png") => read_png(path)?.0,
+        _ => return Err(Error::format(path, "unknown image type: expected .exr or .png")),
+    };
+    Ok(image.into_rgb())
+}
+
+/// Reads a stack of images in parallel into one `(K, H, W, 3)` buffer.
+///
+/// Every image must have the size of the first and only finite values; the error names
+/// the first file that does not.
+pub fn read_image_stack(paths: &[PathBuf]) -> Result<(usize, usize, Vec<f32>)> {
+    let images: Vec<Image> = paths.par_iter().map(|p| read_image_rgb(p)).collect::<Result<_>>()?;
+    let Some(first) = images.first() else {
+        return Err(Error::input("paths", "no images given"));
+    };
+    let (width, height) = (first.width, first.height);
+    for (path, image) in paths.iter().zip(&images) {
+        if (image.width, image.height) != (width, height) {
+            return Err(Error::format(
+                path,
+                format!(
+                    "size {}x{} differs from {} ({}x{})",
+                    image.width,
+                    image.height,
+                    paths[0].display(),
+                    width,
+                    height
+                ),
+            ));
+        }
+        if let Some((index, value)) = image.first_non_finite() {
+            let pixel = index / 3;
+            return Err(Error::format(
+                path,
+                format!("non-finite value {value} at row {}, column {}", pixel / width, pixel % width),
+            ));
+        }
+    }
+    let mut data = Vec::with_capacity(images.len() * width * height * 3);
+    for image in images {
+        data.extend_from_slice(&image.data);
+    }
+    Ok((width, height, data))
+}
+
+fn check_data_len(image: &Image) -> Result<()> {
+    if image.data.len() != image.width * image.height * image.channels {
+        return Err(Error::input("image", "data length does not match width x height x channels"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp_path(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("irtps-io-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join(name)
+    }
+
+    fn ramp(width: usize, height: usize, channels: usize) -> Image {
+        let data = (0..width * height * channels).map(|i| i as f32 / 100.0).collect();
+        Image { width, height, channels, data }
+    }
+
+    #[test]
+    fn exr_round_trip_rgb_and_y() {
+        for channels in [1, 3] {
+            let path = temp_path(&format!("ramp{channels}.exr"));
+            let image = ramp(7, 5, channels);
+            write_exr(&path, &image).unwrap();
+            assert_eq!(read_exr(&path).unwrap(), image);
+        }
+    }
+
+    #[test]
+    fn png_round_trip_keeps_16_bits() {
+        let path = temp_path("ramp16.png");
+        let image = Image { width: 3, height: 1, channels: 1, data: vec![0.0, 1.0 / 65535.0, 1.0] };
+        write_png(&path, &image, 16).unwrap();
+        let (back, bits) = read_png(&path).unwrap();
+        assert_eq!(bits, 16);
+        assert_eq!(back.data, image.data);
+    }
+
+    #[test]
+    fn errors_name_the_file() {
+        let path = temp_path("garbage.exr");
+        std::fs::write(&path, b"not an exr").unwrap();
+        let message = read_exr(&path).unwrap_err().to_string();
+        assert!(message.starts_with(&path.display().to_string()), "{message}");
+        let missing = temp_path("missing.png");
+        assert!(read_png(&missing).unwrap_err().to_string().contains("missing.png"));
+    }
+
+    #[test]
+    fn stack_rejects_size_mismatch() {
+        let a = temp_path("a.exr");
+        let b = temp_path("b.exr");
+        write_exr(&a, &ramp(4, 4, 3)).unwrap();
+        write_exr(&b, &ramp(4, 3, 3)).unwrap();
+        let message = read_image_stack(&[a, b.clone()]).unwrap_err().to_string();
+        assert!(message.contains("b.exr") && message.contains("differs"), "{message}");
+    }
+}

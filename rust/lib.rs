@@ -1,0 +1,23 @@
+//! irtps core: the geometry, ray tracing, rendering and image I/O behind Iterative Ray
+//! Tracing Photometric Stereo.
+//!
+//! The crate builds and tests without Python; the `python` feature adds the pyo3 bindings
+//! (module `irtps._core`).
+
+pub mod error;
+pub mod geometry;
+pub mod image_io;
+pub mod light_cache;
+pub mod render;
+pub mod sampler;
+pub mod scene;
+pub mod tracer;
+
+#[cfg(feature = "python")]
+mod python;
+
+pub use error::{Error, Result};
+pub use geometry::{Mesh, SurfaceKind};
+pub use render::{RenderSettings, Renderer};
+pub use scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
+pub use tracer::{Hit, Tracer};

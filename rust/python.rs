@@ -1,0 +1,235 @@
+//! The pyo3 bindings (`irtps._core`): conversions only. Heavy work runs with the GIL
+//! released, and every core error becomes a Python exception naming its input.
+
+use std::path::PathBuf;
+
+use glam::vec3a;
+use numpy::ndarray::{Array, Array1, Array2, IxDyn};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyOSError, PyValueError};
+use pyo3::prelude::*;
+use rayon::prelude::*;
+
+use crate::error::Error;
+use crate::image_io::{self, Image};
+use crate::render::{RenderSettings, Renderer as CoreRenderer};
+use crate::scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
+
+fn to_py(err: Error) -> PyErr {
+    match err {
+        Error::Io { .. } => PyOSError::new_err(err.to_string()),
+        _ => PyValueError::new_err(err.to_string()),
+    }
+}
+
+fn image_to_array(py: Python<'_>, image: Image) -> PyResult<Bound<'_, PyArrayDyn<f32>>> {
+    let shape = if image.channels == 1 { vec![image.height, image.width] } else { vec![image.height, image.width, image.channels] };
+    let array = Array::from_shape_vec(IxDyn(&shape), image.data).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(array.into_pyarray(py))
+}
+
+fn array_to_image(array: &PyReadonlyArrayDyn<'_, f32>, name: &str) -> PyResult<Image> {
+    let shape = array.shape();
+    let (height, width, channels) = match *shape {
+        [h, w] => (h, w, 1),
+        [h, w, c] => (h, w, c),
+        _ => return Err(PyValueError::new_err(format!("{name}: expected an (H, W) or (H, W, C) array, got shape {shape:?}"))),
+    };
+    let data = array.as_array().iter().copied().collect();
+    Ok(Image { width, height, channels, data })
+}
+
+/// Reads an OpenEXR file: float32 (H, W, 3) for R, G, B or (H, W) for a single Y channel.
+#[pyfunction]
+fn read_exr(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArrayDyn<f32>>> {
+    let image = py.detach(|| image_io::read_exr(&path)).map_err(to_py)?;
+    image_to_array(py, image)
+}
+
+/// Writes a float32 (H, W) array as a Y channel or (H, W, 3) as R, G, B to OpenEXR.
+#[pyfunction]
+fn write_exr(py: Python<'_>, path: PathBuf, array: PyReadonlyArrayDyn<'_, f32>) -> PyResult<()> {
+    let image = array_to_image(&array, "array")?;
+    py.detach(|| image_io::write_exr(&path, &image)).map_err(to_py)
+}
+
+/// Reads an 8- or 16-bit PNG: (values / (2^bits − 1) as float32, (H, W) or (H, W, 3); bits).
+#[pyfunction]
+fn read_png(py: Python<'_>, path: PathBuf) -> PyResult<(Bound<'_, PyArrayDyn<f32>>, u8)> {
+    let (image, bits) = py.detach(|| image_io::read_png(&path)).map_err(to_py)?;
+    Ok((image_to_array(py, image)?, bits))
+}
+
+/// Writes float32 values in [0, 1], (H, W) gray or (H, W, 3) RGB, as an 8- or 16-bit PNG.
+#[pyfunction]
+fn write_png(py: Python<'_>, path: PathBuf, array: PyReadonlyArrayDyn<'_, f32>, bit_depth: u8) -> PyResult<()> {
+    let image = array_to_image(&array, "array")?;
+    py.detach(|| image_io::write_png(&path, &image, bit_depth)).map_err(to_py)
+}
+
+/// Reads EXR/PNG images in parallel into one float32 (K, H, W, 3) array.
+#[pyfunction]
+fn read_images(py: Python<'_>, paths: Vec<PathBuf>) -> PyResult<Bound<'_, PyArrayDyn<f32>>> {
+    let (width, height, data) = py.detach(|| image_io::read_image_stack(&paths)).map_err(to_py)?;
+    let array = Array::from_shape_vec(IxDyn(&[paths.len(), height, width, 3]), data).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(array.into_pyarray(py))
+}
+
+fn rows_of_3(array: &PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<Vec<[f32; 3]>> {
+    let a = array.as_array();
+    if a.ncols() != 3 {
+        return Err(PyValueError::new_err(format!("{name}: expected shape (N, 3), got {:?}", a.shape())));
+    }
+    Ok(a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
+}
+
+type BoxArgs = ((f32, f32), (f32, f32), f32, Rgb, Rgb, Rgb, Rgb);
+
+/// A scene made ready for rendering and ray queries: height-field object, optional floor
+/// and Cornell box, distant lights.
+///
+/// Parameters: `height` (H, W) float32, `mask` (H, W) bool, `albedo` (H, W, 3) float32,
+/// `pixel_size`, `light_directions` (K, 3), `light_irradiance` (K, 3), `floor`
+/// `(height, (r, g, b))` or None, `cornell_box` `((x0, x1), (y0, y1), z_top, left, right,
+/// back, front)` or None.
+#[pyclass(frozen, module = "irtps._core")]
+struct Renderer {
+    inner: CoreRenderer,
+}
+
+#[pymethods]
+impl Renderer {
+    #[new]
+    #[pyo3(signature = (height, mask, albedo, pixel_size, light_directions, light_irradiance, floor=None, cornell_box=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        height: PyReadonlyArray2<'_, f32>,
+        mask: PyReadonlyArray2<'_, bool>,
+        albedo: PyReadonlyArray3<'_, f32>,
+        pixel_size: f32,
+        light_directions: PyReadonlyArray2<'_, f32>,
+        light_irradiance: PyReadonlyArray2<'_, f32>,
+        floor: Option<(f32, Rgb)>,
+        cornell_box: Option<BoxArgs>,
+    ) -> PyResult<Renderer> {
+        let (h, w) = (height.shape()[0], height.shape()[1]);
+        if mask.shape() != [h, w] {
+            return Err(PyValueError::new_err(format!("mask: shape {:?} differs from height {:?}", mask.shape(), [h, w])));
+        }
+        if albedo.shape() != [h, w, 3] {
+            return Err(PyValueError::new_err(format!("albedo: shape {:?}, expected {:?}", albedo.shape(), [h, w, 3])));
+        }
+        let directions = rows_of_3(&light_directions, "light_directions")?;
+        let irradiance = rows_of_3(&light_irradiance, "light_irradiance")?;
+        if directions.len() != irradiance.len() {
+            return Err(PyValueError::new_err("light_irradiance: needs one row per light direction"));
+        }
+        let albedo_view = albedo.as_array();
+        let surface = HeightField {
+            height: height.as_array().iter().copied().collect(),
+            mask: mask.as_array().iter().copied().collect(),
+            albedo: albedo_view.as_slice().map_or_else(
+                || albedo_view.outer_iter().flat_map(|r| r.outer_iter().map(|p| [p[0], p[1], p[2]]).collect::<Vec<_>>()).collect(),
+                |s| s.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect(),
+            ),
+        };
+        let scene = Scene {
+            camera: Camera { width: w, height: h, pixel_size },
+            surface,
+            floor: floor.map(|(height, albedo)| Floor { height, albedo }),
+            cornell_box: cornell_box.map(|(x, y, z_top, left, right, back, front)| CornellBox {
+                x: [x.0, x.1],
+                y: [y.0, y.1],
+                z_top,
+                left,
+                right,
+                back,
+                front,
+            }),
+        };
+        let lights: Vec<Light> = directions
+            .iter()
+            .zip(&irradiance)
+            .map(|(d, e)| Light { direction: vec3a(d[0], d[1], d[2]), irradiance: *e })
+            .collect();
+        let inner = py.detach(|| CoreRenderer::new(&scene, &lights)).map_err(to_py)?;
+        Ok(Renderer { inner })
+    }
+
+    /// Number of triangles in the scene.
+    #[getter]
+    fn triangle_count(&self) -> usize {
+        self.inner.tracer().len()
+    }
+
+    /// Number of lights.
+    #[getter]
+    fn light_count(&self) -> usize {
+        self.inner.light_count()
+    }
+
+    /// Renders rows `row_start..row_end`: float32 (B+1, K, rows, W, 3), index 0 the direct
+    /// image, index b the b-th inter-reflection bounce.
+    #[pyo3(signature = (row_start, row_end, bounces, samples, direct_samples, seed))]
+    fn render_rows<'py>(&self, py: Python<'py>, row_start: usize, row_end: usize, bounces: usize, samples: usize, direct_samples: usize, seed: u64) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let settings = RenderSettings { bounces, samples, direct_samples, seed };
+        let data = py.detach(|| self.inner.render_rows(row_start..row_end, &settings)).map_err(to_py)?;
+        let shape = [bounces + 1, self.inner.light_count(), row_end - row_start, self.inner.camera().width, 3];
+        let array = Array::from_shape_vec(IxDyn(&shape), data).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        Ok(array.into_pyarray(py))
+    }
+
+    /// The scene's triangles: (positions (V, 3) float32, triangles (T, 3) uint32).
+    fn mesh_arrays<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<u32>>) {
+        let mesh = self.inner.mesh();
+        let positions = Array2::from_shape_fn((mesh.positions.len(), 3), |(i, c)| mesh.positions[i][c]);
+        let triangles = Array2::from_shape_fn((mesh.triangles.len(), 3), |(t, c)| mesh.triangles[t][c]);
+        (positions.into_pyarray(py), triangles.into_pyarray(py))
+    }
+
+    /// Closest hits of a batch of rays, traced on `threads` threads (all cores if None):
+    /// (distance (N,) float32, inf on a miss; triangle (N,) int64, −1 on a miss).
+    #[pyo3(signature = (origins, directions, threads=None))]
+    fn intersect<'py>(&self, py: Python<'py>, origins: PyReadonlyArray2<'_, f32>, directions: PyReadonlyArray2<'_, f32>, threads: Option<usize>) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<i64>>)> {
+        let o = rows_of_3(&origins, "origins")?;
+        let d = rows_of_3(&directions, "directions")?;
+        if o.len() != d.len() {
+            return Err(PyValueError::new_err("directions: needs one row per origin"));
+        }
+        let tracer = self.inner.tracer();
+        let trace = || -> Vec<(f32, i64)> {
+            o.par_iter()
+                .zip(&d)
+                .map(|(o, d)| match tracer.closest_hit(vec3a(o[0], o[1], o[2]), vec3a(d[0], d[1], d[2]), f32::INFINITY) {
+                    Some(hit) => (hit.t, hit.triangle as i64),
+                    None => (f32::INFINITY, -1),
+                })
+                .collect()
+        };
+        let hits = py.detach(|| -> PyResult<Vec<(f32, i64)>> {
+            match threads {
+                None => Ok(trace()),
+                Some(n) => {
+                    let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| PyValueError::new_err(format!("threads: {e}")))?;
+                    Ok(pool.install(trace))
+                }
+            }
+        })?;
+        let t: Array1<f32> = hits.iter().map(|h| h.0).collect();
+        let id: Array1<i64> = hits.iter().map(|h| h.1).collect();
+        Ok((t.into_pyarray(py), id.into_pyarray(py)))
+    }
+}
+
+/// The compiled core of irtps.
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(read_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(write_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(read_png, m)?)?;
+    m.add_function(wrap_pyfunction!(write_png, m)?)?;
+    m.add_function(wrap_pyfunction!(read_images, m)?)?;
+    m.add_class::<Renderer>()?;
+    Ok(())
+}

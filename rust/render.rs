@@ -1,0 +1,186 @@
+//! The forward renderer: for every light, the direct image and the image of each
+//! inter-reflection bounce, averaged over each pixel's footprint.
+//!
+//! Every camera path is traced once and serves all K lights: the direct light at each path
+//! vertex comes from the [`LightCache`]. Bounce b of a path (b = 1 … B) carries the product of
+//! the albedos met so far (cosine-weighted sampling cancels the Lambert cosine and 1/π) times
+//! the direct radiance leaving its (b+1)-th vertex.
+
+use std::ops::Range;
+
+use glam::{vec3a, Vec3A};
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::geometry::Mesh;
+use crate::light_cache::LightCache;
+use crate::sampler::{cosine_hemisphere, hash, low_discrepancy_4d, unit_float, Rng};
+use crate::scene::{validate_lights, Camera, Light, Rgb, Scene};
+use crate::tracer::Tracer;
+
+/// How much to render.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderSettings {
+    /// Number of inter-reflection bounces B (0 renders the direct image only).
+    pub bounces: usize,
+    /// Camera paths per pixel for the indirect images.
+    pub samples: usize,
+    /// Footprint samples per pixel for the direct image (0 skips it); at most `samples`
+    /// when there are bounces.
+    pub direct_samples: usize,
+    /// Seed of every random choice.
+    pub seed: u64,
+}
+
+/// A scene made ready for rendering: geometry, BVH and light cache.
+pub struct Renderer {
+    camera: Camera,
+    mesh: Mesh,
+    tracer: Tracer,
+    cache: LightCache,
+    ray_offset: f32,
+    camera_z: f32,
+}
+
+impl Renderer {
+    /// Builds the geometry, its BVH and the per-vertex light visibility.
+    pub fn new(scene: &Scene, lights: &[Light]) -> Result<Renderer> {
+        scene.validate()?;
+        if lights.is_empty() {
+            return Err(Error::input("lights", "no lights given"));
+        }
+        validate_lights(lights)?;
+        let mesh = Mesh::from_scene(scene);
+        let tracer = Tracer::new(&mesh);
+        let (lo, hi) = mesh.near_bounds();
+        let view = scene.camera.pixel_size * scene.camera.width.max(scene.camera.height) as f32;
+        let extent = if lo.x.is_finite() { (hi - lo).max_element().max(view) } else { view };
+        let ray_offset = 1e-4 * extent;
+        let camera_z = if hi.z.is_finite() { hi.z + extent } else { extent };
+        let cache = LightCache::new(&mesh, &tracer, lights, ray_offset);
+        Ok(Renderer { camera: scene.camera, mesh, tracer, cache, ray_offset, camera_z })
+    }
+
+    /// The camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// The scene's triangles.
+    pub fn mesh(&self) -> &Mesh {
+        &self.mesh
+    }
+
+    /// The ray-query structure.
+    pub fn tracer(&self) -> &Tracer {
+        &self.tracer
+    }
+
+    /// Number of lights.
+    pub fn light_count(&self) -> usize {
+        self.cache.light_count()
+    }
+
+    /// Renders image rows `rows`. The result is laid out `(B+1, K, rows, W, 3)`: index 0 of
+    /// the first axis is the direct image, index b the b-th bounce.
+    pub fn render_rows(&self, rows: Range<usize>, settings: &RenderSettings) -> Result<Vec<f32>> {
+        self.check(&rows, settings)?;
+        let (w, k_count) = (self.camera.width, self.light_count());
+        let stride = (settings.bounces + 1) * k_count * 3;
+        let row_count = rows.len();
+        let mut per_pixel = vec![0.0f32; row_count * w * stride];
+        per_pixel.par_chunks_mut(stride).enumerate().for_each_init(
+            || vec![[0.0f32; 3]; k_count],
+            |scratch, (p, acc)| self.render_pixel(rows.start + p / w, p % w, settings, acc, scratch),
+        );
+        // Transpose pixel-major (pixel, b, k, c) to image-major (b, k, pixel, c).
+        let planes = (settings.bounces + 1) * k_count;
+        let plane_len = row_count * w * 3;
+        let mut out = vec![0.0f32; planes * plane_len];
+        out.par_chunks_mut(plane_len).enumerate().for_each(|(plane, dst)| {
+            for (p, px) in dst.chunks_exact_mut(3).enumerate() {
+                px.copy_from_slice(&per_pixel[p * stride + plane * 3..][..3]);
+            }
+        });
+        Ok(out)
+    }
+
+    fn check(&self, rows: &Range<usize>, s: &RenderSettings) -> Result<()> {
+        if rows.start >= rows.end || rows.end > self.camera.height {
+            return Err(Error::input("rows", format!("{rows:?} is not inside 0..{}", self.camera.height)));
+        }
+        if s.bounces > 0 && s.samples == 0 {
+            return Err(Error::input("samples", "must be at least 1 when bounces are rendered"));
+        }
+        if s.bounces == 0 && s.direct_samples == 0 {
+            return Err(Error::input("direct_samples", "must be at least 1 when no bounces are rendered"));
+        }
+        Ok(())
+    }
+
+    /// Accumulates one pixel into `acc` (layout `(B+1, K, 3)`), already averaged.
+    fn render_pixel(&self, row: usize, col: usize, s: &RenderSettings, acc: &mut [f32], light: &mut [Rgb]) {
+        let k_count = self.light_count();
+        let pixel = (row * self.camera.width + col) as u64;
+        let key = hash(&[s.seed, pixel]);
+        let shift = [0u64, 1, 2, 3].map(|d| unit_float(hash(&[key, d])));
+        let path_count = if s.bounces > 0 { s.samples } else { 0 };
+        for sample in 0..path_count.max(s.direct_samples) {
+            let q = low_discrepancy_4d(sample as u32, shift);
+            let (x, y) = self.camera.image_to_world(row as f32 + q[1], col as f32 + q[0]);
+            let origin = vec3a(x, y, self.camera_z);
+            let Some(hit) = self.tracer.closest_hit(origin, -Vec3A::Z, f32::INFINITY) else { continue };
+            let n = self.mesh.normals[hit.triangle];
+            if n.z <= 0.0 {
+                continue;
+            }
+            let point = origin - Vec3A::Z * hit.t;
+            let albedo = self.mesh.albedo_at(hit.triangle, hit.u, hit.v);
+            if sample < s.direct_samples {
+                self.cache.traced_direct_radiance(&self.tracer, point, n, albedo, light);
+                add_scaled(&mut acc[..k_count * 3], light, [1.0 / s.direct_samples as f32; 3]);
+            }
+            if sample < path_count {
+                let mut rng = Rng::new(hash(&[key, sample as u64, 0x5EED]));
+                self.trace_path(point, n, albedo, (q[2], q[3]), &mut rng, s, acc, light);
+            }
+        }
+    }
+
+    /// Follows one cosine-sampled path from a camera hit, adding bounce b's radiance
+    /// (already divided by the sample count) into `acc[b]`.
+    #[allow(clippy::too_many_arguments)]
+    fn trace_path(&self, mut point: Vec3A, mut n: Vec3A, albedo: Rgb, first: (f32, f32), rng: &mut Rng, s: &RenderSettings, acc: &mut [f32], light: &mut [Rgb]) {
+        let k3 = self.light_count() * 3;
+        let inv_samples = 1.0 / s.samples as f32;
+        let mut throughput = albedo.map(|a| a * inv_samples);
+        for bounce in 1..=s.bounces {
+            let (u1, u2) = if bounce == 1 { first } else { (rng.next_f32(), rng.next_f32()) };
+            let dir = cosine_hemisphere(u1, u2, n);
+            let Some(hit) = self.tracer.closest_hit(point + n * self.ray_offset, dir, f32::INFINITY) else { return };
+            let n_hit = self.mesh.normals[hit.triangle];
+            if n_hit.dot(dir) >= 0.0 {
+                return; // the back of a surface is black
+            }
+            let p_hit = point + n * self.ray_offset + dir * hit.t;
+            let albedo_hit = self.mesh.albedo_at(hit.triangle, hit.u, hit.v);
+            self.cache.direct_radiance(&self.mesh, &self.tracer, hit.triangle, (hit.u, hit.v), p_hit, albedo_hit, light);
+            add_scaled(&mut acc[bounce * k3..(bounce + 1) * k3], light, throughput);
+            throughput = [0, 1, 2].map(|c| throughput[c] * albedo_hit[c]);
+            if throughput.iter().all(|&t| t == 0.0) {
+                return;
+            }
+            point = p_hit;
+            n = n_hit;
+        }
+    }
+}
+
+#[inline]
+fn add_scaled(acc: &mut [f32], values: &[Rgb], weight: Rgb) {
+    for (dst, v) in acc.chunks_exact_mut(3).zip(values) {
+        dst[0] += v[0] * weight[0];
+        dst[1] += v[1] * weight[1];
+        dst[2] += v[2] * weight[2];
+    }
+}
