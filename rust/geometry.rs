@@ -37,17 +37,63 @@ pub struct Mesh {
     pub normals: Vec<Vec3A>,
     /// Surface each triangle belongs to.
     pub kinds: Vec<SurfaceKind>,
-    /// Triangles too large for per-vertex light caching: shadows are traced at each hit.
-    pub traced_shadows: Vec<bool>,
+    /// The panel each triangle belongs to, or [`NO_PANEL`] for the object's triangles
+    /// (whose light is cached per vertex).
+    pub panel_of: Vec<u32>,
+    /// The flat rectangles of the surroundings (floor and walls).
+    pub panels: Vec<Panel>,
     /// Index of the height-field vertex of each pixel (`u32::MAX` when it has none).
     pub pixel_vertex: Vec<u32>,
+}
+
+/// `panel_of` value of a triangle that belongs to no panel.
+pub const NO_PANEL: u32 = u32::MAX;
+
+/// A flat rectangle of the surroundings, `origin + s·edge_u + t·edge_v` for s, t in [0, 1],
+/// meshed as two triangles. Its light is cached on a grid of `cells` over the parameter
+/// window `grid_lo..grid_hi` (the whole panel, or the part near the object for the far floor);
+/// outside the window, shadows are traced at each hit. An `unbounded` panel is traced as its
+/// whole plane.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Panel {
+    pub origin: Vec3A,
+    pub edge_u: Vec3A,
+    pub edge_v: Vec3A,
+    /// Unit normal of the reflecting side.
+    pub normal: Vec3A,
+    pub grid_lo: [f32; 2],
+    pub grid_hi: [f32; 2],
+    pub cells: (usize, usize),
+    /// Stands in for an unbounded plane: ray queries treat it as the whole plane.
+    pub unbounded: bool,
+}
+
+impl Panel {
+    /// Continuous grid coordinates of `point`, or None outside the cached window.
+    #[inline]
+    pub fn grid_coords(&self, point: Vec3A) -> Option<(f32, f32)> {
+        let d = point - self.origin;
+        let s = d.dot(self.edge_u) / self.edge_u.length_squared();
+        let t = d.dot(self.edge_v) / self.edge_v.length_squared();
+        let gs = (s - self.grid_lo[0]) / (self.grid_hi[0] - self.grid_lo[0]) * self.cells.0 as f32;
+        let gt = (t - self.grid_lo[1]) / (self.grid_hi[1] - self.grid_lo[1]) * self.cells.1 as f32;
+        let inside = (0.0..=self.cells.0 as f32).contains(&gs) && (0.0..=self.cells.1 as f32).contains(&gt);
+        inside.then_some((gs, gt))
+    }
+
+    /// World position of grid vertex (`a`, `b`).
+    pub fn grid_point(&self, a: usize, b: usize) -> Vec3A {
+        let s = self.grid_lo[0] + (self.grid_hi[0] - self.grid_lo[0]) * a as f32 / self.cells.0 as f32;
+        let t = self.grid_lo[1] + (self.grid_hi[1] - self.grid_lo[1]) * b as f32 / self.cells.1 as f32;
+        self.origin + self.edge_u * s + self.edge_v * t
+    }
 }
 
 /// Cells per side beyond which a flat surface is tessellated more coarsely than a pixel.
 const MAX_CELLS_PER_SIDE: usize = 256;
 /// Vertical subdivisions of a skirt quad at most.
 const MAX_SKIRT_ROWS: usize = 32;
-/// Size of the far floor (no box) relative to the near, tessellated part.
+/// Size of the unbounded floor (no box) relative to its cached part near the object.
 const FAR_FLOOR_SCALE: f32 = 1000.0;
 
 impl Mesh {
@@ -80,17 +126,23 @@ impl Mesh {
         self.triangles[t].map(|i| self.positions[i as usize])
     }
 
-    /// Axis-aligned bounds of the part of the scene near the object (the far floor excluded).
+    /// Axis-aligned bounds of the object and the cached part of the panels (the far floor
+    /// excluded); infinite when the scene is empty.
     pub fn near_bounds(&self) -> (Vec3A, Vec3A) {
         let mut lo = Vec3A::splat(f32::INFINITY);
         let mut hi = Vec3A::splat(f32::NEG_INFINITY);
-        for (t, tri) in self.triangles.iter().enumerate() {
-            if self.traced_shadows[t] {
-                continue;
+        for (tri, &panel) in self.triangles.iter().zip(&self.panel_of) {
+            if panel == NO_PANEL {
+                for &i in tri {
+                    lo = lo.min(self.positions[i as usize]);
+                    hi = hi.max(self.positions[i as usize]);
+                }
             }
-            for &i in tri {
-                lo = lo.min(self.positions[i as usize]);
-                hi = hi.max(self.positions[i as usize]);
+        }
+        for p in &self.panels {
+            for corner in [p.grid_point(0, 0), p.grid_point(p.cells.0, p.cells.1)] {
+                lo = lo.min(corner);
+                hi = hi.max(corner);
             }
         }
         (lo, hi)
@@ -103,7 +155,7 @@ impl Mesh {
     }
 
     /// Adds a triangle wound so that its normal points to the `facing` side.
-    fn add_triangle(&mut self, mut tri: [u32; 3], facing: Vec3A, kind: SurfaceKind, traced: bool) {
+    fn add_triangle(&mut self, mut tri: [u32; 3], facing: Vec3A, kind: SurfaceKind, panel: u32) {
         let [a, b, c] = tri.map(|i| self.positions[i as usize]);
         let mut n = (b - a).cross(c - a);
         if n.dot(facing) < 0.0 {
@@ -117,27 +169,20 @@ impl Mesh {
         self.triangles.push(tri);
         self.normals.push(n);
         self.kinds.push(kind);
-        self.traced_shadows.push(traced);
+        self.panel_of.push(panel);
     }
 
-    /// A grid of `nu × nv` cells spanning `origin + [0,1]·edge_u + [0,1]·edge_v`.
+    /// A rectangle `origin + [0,1]·edge_u + [0,1]·edge_v` as two triangles, facing `facing`,
+    /// with its light cached on `cells` over the parameter window `grid_lo..grid_hi`.
     #[allow(clippy::too_many_arguments)]
-    fn add_grid(&mut self, origin: Vec3A, edge_u: Vec3A, edge_v: Vec3A, cells: (usize, usize), albedo: Rgb, facing: Vec3A, kind: SurfaceKind) {
-        let (nu, nv) = cells;
-        let base = self.positions.len() as u32;
-        for b in 0..=nv {
-            for a in 0..=nu {
-                let p = origin + edge_u * (a as f32 / nu as f32) + edge_v * (b as f32 / nv as f32);
-                self.add_vertex(p, albedo);
-            }
-        }
-        let index = |a: usize, b: usize| base + (b * (nu + 1) + a) as u32;
-        for b in 0..nv {
-            for a in 0..nu {
-                self.add_triangle([index(a, b), index(a + 1, b), index(a, b + 1)], facing, kind, false);
-                self.add_triangle([index(a + 1, b), index(a + 1, b + 1), index(a, b + 1)], facing, kind, false);
-            }
-        }
+    fn add_panel(&mut self, origin: Vec3A, edge_u: Vec3A, edge_v: Vec3A, albedo: Rgb, kind: SurfaceKind, window: ([f32; 2], [f32; 2]), cells: (usize, usize)) -> usize {
+        let normal = edge_u.cross(edge_v).normalize();
+        let id = self.panels.len() as u32;
+        self.panels.push(Panel { origin, edge_u, edge_v, normal, grid_lo: window.0, grid_hi: window.1, cells, unbounded: false });
+        let c = [origin, origin + edge_u, origin + edge_u + edge_v, origin + edge_v].map(|p| self.add_vertex(p, albedo));
+        self.add_triangle([c[0], c[1], c[2]], normal, kind, id);
+        self.add_triangle([c[0], c[2], c[3]], normal, kind, id);
+        id as usize
     }
 
     fn add_height_field(&mut self, scene: &Scene) {
@@ -173,8 +218,8 @@ impl Mesh {
                 if block(i as isize, j as isize) {
                     let t1 = [v(i, j), v(i + 1, j), v(i, j + 1)];
                     let t2 = [v(i, j + 1), v(i + 1, j), v(i + 1, j + 1)];
-                    self.add_triangle(t1, up, SurfaceKind::Object, false);
-                    self.add_triangle(t2, up, SurfaceKind::Object, false);
+                    self.add_triangle(t1, up, SurfaceKind::Object, NO_PANEL);
+                    self.add_triangle(t2, up, SurfaceKind::Object, NO_PANEL);
                 }
             }
         }
@@ -217,8 +262,8 @@ impl Mesh {
         let col_a = column(self, pa, albedo_a);
         let col_b = column(self, pb, albedo_b);
         for r in 0..rows {
-            self.add_triangle([col_a[r], col_b[r], col_a[r + 1]], outward, SurfaceKind::Skirt, false);
-            self.add_triangle([col_b[r], col_b[r + 1], col_a[r + 1]], outward, SurfaceKind::Skirt, false);
+            self.add_triangle([col_a[r], col_b[r], col_a[r + 1]], outward, SurfaceKind::Skirt, NO_PANEL);
+            self.add_triangle([col_b[r], col_b[r + 1], col_a[r + 1]], outward, SurfaceKind::Skirt, NO_PANEL);
         }
     }
 
@@ -226,34 +271,41 @@ impl Mesh {
         let z0 = scene.base_height();
         let [x0, x1] = b.x;
         let [y0, y1] = b.y;
-        let height = b.z_top - z0;
         let s = scene.camera.pixel_size;
-        let cells = |len: f32| cells_for(len, s);
-        let (nx, ny, nz) = (cells(x1 - x0), cells(y1 - y0), cells(height));
-        let up = Vec3A::Z * height;
+        let up = Vec3A::Z * (b.z_top - z0);
+        let (ex, ey) = (Vec3A::X * (x1 - x0), Vec3A::Y * (y1 - y0));
+        let (nx, ny, nz) = (cells_for(x1 - x0, s), cells_for(y1 - y0, s), cells_for(b.z_top - z0, s));
+        let whole = ([0.0, 0.0], [1.0, 1.0]);
         let kind = SurfaceKind::Wall;
-        self.add_grid(vec3a(x0, y0, z0), Vec3A::Y * (y1 - y0), up, (ny, nz), b.left, Vec3A::X, kind);
-        self.add_grid(vec3a(x1, y0, z0), Vec3A::Y * (y1 - y0), up, (ny, nz), b.right, -Vec3A::X, kind);
-        self.add_grid(vec3a(x0, y1, z0), Vec3A::X * (x1 - x0), up, (nx, nz), b.back, -Vec3A::Y, kind);
-        self.add_grid(vec3a(x0, y0, z0), Vec3A::X * (x1 - x0), up, (nx, nz), b.front, Vec3A::Y, kind);
+        // Edge order makes edge_u × edge_v point into the box.
+        self.add_panel(vec3a(x0, y0, z0), ey, up, b.left, kind, whole, (ny, nz));
+        self.add_panel(vec3a(x1, y0, z0), up, ey, b.right, kind, whole, (nz, ny));
+        self.add_panel(vec3a(x0, y1, z0), ex, up, b.back, kind, whole, (nx, nz));
+        self.add_panel(vec3a(x0, y0, z0), up, ex, b.front, kind, whole, (nz, nx));
     }
 
     fn add_floor(&mut self, scene: &Scene, z0: f32, albedo: Rgb) {
         let s = scene.camera.pixel_size;
-        let (lo, hi) = match &scene.cornell_box {
-            Some(b) => ((b.x[0], b.y[0]), (b.x[1], b.y[1])),
-            None => self.near_floor_extent(scene),
-        };
-        let (sx, sy) = (hi.0 - lo.0, hi.1 - lo.1);
-        let cells = (cells_for(sx, s), cells_for(sy, s));
-        self.add_grid(vec3a(lo.0, lo.1, z0), Vec3A::X * sx, Vec3A::Y * sy, cells, albedo, Vec3A::Z, SurfaceKind::Floor);
-        if scene.cornell_box.is_none() {
-            self.add_far_floor(lo, hi, z0, albedo);
+        let kind = SurfaceKind::Floor;
+        if let Some(b) = &scene.cornell_box {
+            let (sx, sy) = (b.x[1] - b.x[0], b.y[1] - b.y[0]);
+            let cells = (cells_for(sx, s), cells_for(sy, s));
+            let origin = vec3a(b.x[0], b.y[0], z0);
+            self.add_panel(origin, Vec3A::X * sx, Vec3A::Y * sy, albedo, kind, ([0.0, 0.0], [1.0, 1.0]), cells);
+            return;
         }
+        // Unbounded floor: one large panel, cached only near the object.
+        let (lo, hi) = self.near_floor_extent(scene);
+        let reach = FAR_FLOOR_SCALE * (hi.0 - lo.0).max(hi.1 - lo.1);
+        let (fx0, fy0, size) = (lo.0 - reach, lo.1 - reach, 2.0 * reach + (hi.0 - lo.0).max(hi.1 - lo.1));
+        let window = ([(lo.0 - fx0) / size, (lo.1 - fy0) / size], [(hi.0 - fx0) / size, (hi.1 - fy0) / size]);
+        let cells = (cells_for(hi.0 - lo.0, s), cells_for(hi.1 - lo.1, s));
+        let id = self.add_panel(vec3a(fx0, fy0, z0), Vec3A::X * size, Vec3A::Y * size, albedo, kind, window, cells);
+        self.panels[id].unbounded = true;
     }
 
-    /// The floor rectangle that is tessellated when there is no box: the camera's view and
-    /// the object's longest possible shadows (three times its height) around it.
+    /// The part of an unbounded floor whose light is cached: the camera's view and the
+    /// object's longest likely shadows (three times its height) around it.
     fn near_floor_extent(&self, scene: &Scene) -> ((f32, f32), (f32, f32)) {
         let cam = &scene.camera;
         let (x0, y1) = cam.image_to_world(0.0, 0.0);
@@ -261,28 +313,6 @@ impl Mesh {
         let top = self.positions.iter().map(|p| p.z).fold(scene.base_height(), f32::max);
         let margin = 3.0 * (top - scene.base_height()) + cam.pixel_size;
         ((x0 - margin, y0 - margin), (x1 + margin, y1 + margin))
-    }
-
-    /// Four large rectangles around the near floor that stand in for an unbounded plane.
-    fn add_far_floor(&mut self, lo: (f32, f32), hi: (f32, f32), z0: f32, albedo: Rgb) {
-        let reach = FAR_FLOOR_SCALE * (hi.0 - lo.0).max(hi.1 - lo.1);
-        let (fx0, fx1, fy0, fy1) = (lo.0 - reach, hi.0 + reach, lo.1 - reach, hi.1 + reach);
-        let rects = [
-            (fx0, fy0, fx1, lo.1),
-            (fx0, hi.1, fx1, fy1),
-            (fx0, lo.1, lo.0, hi.1),
-            (hi.0, lo.1, fx1, hi.1),
-        ];
-        for (ax, ay, bx, by) in rects {
-            let c = [
-                self.add_vertex(vec3a(ax, ay, z0), albedo),
-                self.add_vertex(vec3a(bx, ay, z0), albedo),
-                self.add_vertex(vec3a(bx, by, z0), albedo),
-                self.add_vertex(vec3a(ax, by, z0), albedo),
-            ];
-            self.add_triangle([c[0], c[1], c[2]], Vec3A::Z, SurfaceKind::Floor, true);
-            self.add_triangle([c[0], c[2], c[3]], Vec3A::Z, SurfaceKind::Floor, true);
-        }
     }
 
     fn finish_vertex_normals(&mut self) {
@@ -377,6 +407,11 @@ mod tests {
             let inside = vec3a(0.0, 0.0, 1.0) - centroid;
             assert!(mesh.normals[t].dot(inside) > 0.0, "triangle {t} faces outward");
         }
-        assert!(mesh.traced_shadows.iter().all(|&t| !t));
+        assert_eq!(mesh.panels.len(), 5);
+        for panel in &mesh.panels {
+            let centre = panel.origin + (panel.edge_u + panel.edge_v) * 0.5;
+            assert!(panel.normal.dot(vec3a(0.0, 0.0, 1.0) - centre) > 0.0);
+            assert_eq!(panel.grid_coords(centre), Some((panel.cells.0 as f32 / 2.0, panel.cells.1 as f32 / 2.0)));
+        }
     }
 }

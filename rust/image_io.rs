@@ -49,7 +49,9 @@ pub fn read_exr(path: &Path) -> Result<Image> {
     let channels = &layer.channel_data.list;
     let find = |name: &str| channels.iter().find(|c| c.name.eq(name));
     let names: Vec<String> = channels.iter().map(|c| c.name.to_string()).collect();
-    let wanted: Vec<&str> = if find("R").is_some() && find("G").is_some() && find("B").is_some() {
+    let rgb = find("R").is_some() && find("G").is_some() && find("B").is_some();
+    let extra_alpha = usize::from(find("A").is_some());
+    let wanted: Vec<&str> = if rgb && names.len() == 3 + extra_alpha {
         vec!["R", "G", "B"]
     } else if find("Y").is_some() && names.len() == 1 {
         vec!["Y"]

@@ -1,56 +1,74 @@
 //! Direct light for every light at once.
 //!
-//! Each mesh vertex stores whether each light is visible from it (one shadow ray per vertex
-//! and light, traced once). The direct radiance leaving any point of a triangle then costs K
-//! multiply-adds and no rays: the Lambert term uses the triangle's own normal and the
-//! visibility is interpolated from its corners. Triangles flagged `traced_shadows` (the far
-//! floor) and the points the camera sees directly are shaded with real shadow rays instead.
+//! Whether each light is visible is traced once per cache point: at each vertex of the
+//! object's mesh, and at each vertex of a grid on each panel of the surroundings (about a
+//! pixel apart). The direct radiance leaving any surface point then costs K multiply-adds
+//! and no rays: the Lambert term uses the surface's own normal and the visibility is
+//! interpolated (barycentrically on the object, bilinearly on a panel). Points outside a
+//! panel's cached window (the far floor), and the points the camera sees directly, are shaded
+//! with real shadow rays instead.
 
 use std::f32::consts::PI;
 
 use glam::Vec3A;
 use rayon::prelude::*;
 
-use crate::geometry::Mesh;
+use crate::geometry::{Mesh, Panel, NO_PANEL};
 use crate::scene::{Light, Rgb};
 use crate::tracer::Tracer;
 
-/// Per-vertex light visibility plus the light parameters needed to shade with it.
+/// Light visibility at the cache points, plus the light parameters needed to shade with it.
 pub struct LightCache {
     directions: Vec<Vec3A>,
-    /// Irradiance of each light divided by π (Lambertian BRDF without the albedo).
+    /// Irradiance of each light divided by π (the Lambertian BRDF without the albedo).
     radiance_scale: Vec<Rgb>,
-    /// `visibility[vertex · K + k]` is 1 when light k is unoccluded from the vertex.
-    visibility: Vec<u8>,
+    /// `vertex_visibility[v · K + k]` is 1 when light k is unoccluded from mesh vertex v.
+    vertex_visibility: Vec<u8>,
+    /// Per panel, `[(b · (nu + 1) + a) · K + k]` for grid vertex (a, b).
+    panel_visibility: Vec<Vec<u8>>,
     ray_offset: f32,
 }
 
 impl LightCache {
-    /// Traces one shadow ray per vertex and light (in parallel); `ray_offset` is the distance
-    /// by which shadow rays start off the surface.
+    /// Traces one shadow ray per cache point and light (in parallel); `ray_offset` is the
+    /// distance by which shadow rays start off the surface.
     pub fn new(mesh: &Mesh, tracer: &Tracer, lights: &[Light], ray_offset: f32) -> LightCache {
-        let k = lights.len();
         let directions: Vec<Vec3A> = lights.iter().map(|l| l.direction.normalize()).collect();
         let radiance_scale = lights.iter().map(|l| l.irradiance.map(|e| e / PI)).collect();
-        let mut cached = vec![false; mesh.positions.len()];
-        for (tri, &traced) in mesh.triangles.iter().zip(&mesh.traced_shadows) {
-            if !traced {
-                tri.iter().for_each(|&v| cached[v as usize] = true);
+        let mut object_vertex = vec![false; mesh.positions.len()];
+        for (tri, &panel) in mesh.triangles.iter().zip(&mesh.panel_of) {
+            if panel == NO_PANEL {
+                tri.iter().for_each(|&v| object_vertex[v as usize] = true);
             }
         }
-        let mut visibility = vec![0u8; mesh.positions.len() * k];
-        if k > 0 {
-            visibility.par_chunks_mut(k).enumerate().for_each(|(v, row)| {
-                if !cached[v] {
-                    return;
-                }
-                let origin = mesh.positions[v] + mesh.vertex_normals[v] * ray_offset;
-                for (slot, dir) in row.iter_mut().zip(&directions) {
-                    *slot = u8::from(!tracer.occluded(origin, *dir, f32::INFINITY));
+        let visibility_at = |points: &[Option<(Vec3A, Vec3A)>]| -> Vec<u8> {
+            let k = directions.len();
+            let mut out = vec![0u8; points.len() * k];
+            out.par_chunks_mut(k.max(1)).zip(points).for_each(|(row, point)| {
+                if let Some((p, n)) = point {
+                    let origin = *p + *n * ray_offset;
+                    for (slot, dir) in row.iter_mut().zip(&directions) {
+                        *slot = u8::from(!tracer.occluded(origin, *dir, f32::INFINITY));
+                    }
                 }
             });
-        }
-        LightCache { directions, radiance_scale, visibility, ray_offset }
+            out
+        };
+        let vertex_points: Vec<_> = (0..mesh.positions.len())
+            .map(|v| object_vertex[v].then(|| (mesh.positions[v], mesh.vertex_normals[v])))
+            .collect();
+        let vertex_visibility = visibility_at(&vertex_points);
+        let panel_visibility = mesh
+            .panels
+            .iter()
+            .map(|panel| {
+                let (nu, nv) = panel.cells;
+                let points: Vec<_> =
+                    (0..(nu + 1) * (nv + 1)).map(|i| Some((panel.grid_point(i % (nu + 1), i / (nu + 1)), panel.normal))).collect();
+                visibility_at(&points)
+            })
+            .collect();
+        LightCache { directions, radiance_scale, vertex_visibility, panel_visibility, ray_offset }
     }
 
     /// Number of lights.
@@ -63,19 +81,41 @@ impl LightCache {
     #[inline]
     pub fn direct_radiance(&self, mesh: &Mesh, tracer: &Tracer, t: usize, (u, v): (f32, f32), point: Vec3A, albedo: Rgb, out: &mut [Rgb]) {
         let n = mesh.normals[t];
-        if mesh.traced_shadows[t] {
-            self.traced_direct_radiance(tracer, point, n, albedo, out);
+        let k_count = self.directions.len();
+        let panel = mesh.panel_of[t];
+        if panel == NO_PANEL {
+            let [a, b, c] = mesh.triangles[t].map(|i| &self.vertex_visibility[i as usize * k_count..][..k_count]);
+            let w = 1.0 - u - v;
+            self.shade(n, albedo, out, |k| w * a[k] as f32 + u * b[k] as f32 + v * c[k] as f32);
             return;
         }
-        let k_count = self.directions.len();
-        let [a, b, c] = mesh.triangles[t].map(|i| &self.visibility[i as usize * k_count..][..k_count]);
-        let w = 1.0 - u - v;
-        for k in 0..k_count {
-            let cosine = n.dot(self.directions[k]);
-            let visible = w * a[k] as f32 + u * b[k] as f32 + v * c[k] as f32;
-            let factor = cosine.max(0.0) * visible;
+        let panel_index = panel as usize;
+        let grid: &Panel = &mesh.panels[panel_index];
+        let Some((gs, gt)) = grid.grid_coords(point) else {
+            self.traced_direct_radiance(tracer, point, n, albedo, out);
+            return;
+        };
+        let (nu, nv) = grid.cells;
+        let (a, b) = ((gs as usize).min(nu - 1), (gt as usize).min(nv - 1));
+        let (fs, ft) = (gs - a as f32, gt - b as f32);
+        let vis = &self.panel_visibility[panel_index];
+        let row = |a: usize, b: usize| &vis[(b * (nu + 1) + a) * k_count..][..k_count];
+        let (v00, v10, v01, v11) = (row(a, b), row(a + 1, b), row(a, b + 1), row(a + 1, b + 1));
+        let (w00, w10, w01, w11) = ((1.0 - fs) * (1.0 - ft), fs * (1.0 - ft), (1.0 - fs) * ft, fs * ft);
+        self.shade(n, albedo, out, |k| w00 * v00[k] as f32 + w10 * v10[k] as f32 + w01 * v01[k] as f32 + w11 * v11[k] as f32);
+    }
+
+    #[inline]
+    fn shade(&self, n: Vec3A, albedo: Rgb, out: &mut [Rgb], visibility: impl Fn(usize) -> f32) {
+        for (k, slot) in out.iter_mut().enumerate() {
+            let factor = n.dot(self.directions[k]).max(0.0);
+            if factor == 0.0 {
+                *slot = [0.0; 3];
+                continue;
+            }
+            let factor = factor * visibility(k);
             let s = self.radiance_scale[k];
-            out[k] = [albedo[0] * s[0] * factor, albedo[1] * s[1] * factor, albedo[2] * s[2] * factor];
+            *slot = [albedo[0] * s[0] * factor, albedo[1] * s[1] * factor, albedo[2] * s[2] * factor];
         }
     }
 

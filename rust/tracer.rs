@@ -10,7 +10,7 @@ use obvhs::rt_triangle::RtTriangle;
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
 
-use crate::geometry::Mesh;
+use crate::geometry::{Mesh, NO_PANEL};
 
 /// The closest intersection of a ray with the mesh.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -24,62 +24,103 @@ pub struct Hit {
     pub v: f32,
 }
 
-/// A BVH over a mesh's triangles, answering closest-hit and occlusion queries.
+/// A BVH over a mesh's triangles, answering closest-hit and occlusion queries. Unbounded
+/// panels (an infinite floor) are intersected analytically, outside the BVH, so that their
+/// size does not spoil the BVH's spatial ordering.
 pub struct Tracer {
     bvh: CwBvh,
     /// Triangles in BVH order, laid out for fast intersection.
     triangles: Vec<RtTriangle>,
     /// Mesh index of each triangle in BVH order.
     mesh_index: Vec<u32>,
+    /// Infinite planes: a point on the plane, its normal, and the mesh triangle reported.
+    planes: Vec<(Vec3A, Vec3A, usize)>,
+    /// Number of mesh triangles.
+    triangle_count: usize,
 }
 
 impl Tracer {
     /// Builds the BVH (in parallel on rayon's pool).
     pub fn new(mesh: &Mesh) -> Tracer {
-        let tris: Vec<Triangle> = (0..mesh.triangles.len())
-            .map(|t| {
-                let [v0, v1, v2] = mesh.corners(t);
+        let on_plane = |t: usize| mesh.panel_of[t] != NO_PANEL && mesh.panels[mesh.panel_of[t] as usize].unbounded;
+        let mut planes: Vec<(Vec3A, Vec3A, usize)> = Vec::new();
+        let mut in_bvh: Vec<u32> = Vec::new();
+        for t in 0..mesh.triangles.len() {
+            if !on_plane(t) {
+                in_bvh.push(t as u32);
+            } else if !planes.iter().any(|p| mesh.panel_of[p.2] == mesh.panel_of[t]) {
+                let panel = &mesh.panels[mesh.panel_of[t] as usize];
+                planes.push((panel.origin, panel.normal, t));
+            }
+        }
+        let tris: Vec<Triangle> = in_bvh
+            .iter()
+            .map(|&t| {
+                let [v0, v1, v2] = mesh.corners(t as usize);
                 Triangle { v0, v1, v2 }
             })
             .collect();
+        let triangle_count = mesh.triangles.len();
         if tris.is_empty() {
-            return Tracer { bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new() };
+            return Tracer { bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), planes, triangle_count };
         }
         let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut Duration::default());
-        let mesh_index = bvh.primitive_indices.clone();
-        let triangles = mesh_index.iter().map(|&i| RtTriangle::from(&tris[i as usize])).collect();
-        Tracer { bvh, triangles, mesh_index }
+        let mesh_index = bvh.primitive_indices.iter().map(|&i| in_bvh[i as usize]).collect();
+        let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&tris[i as usize])).collect();
+        Tracer { bvh, triangles, mesh_index, planes, triangle_count }
     }
 
     /// Number of triangles.
     pub fn len(&self) -> usize {
-        self.triangles.len()
+        self.triangle_count
     }
 
     /// Whether there is nothing to hit.
     pub fn is_empty(&self) -> bool {
-        self.triangles.is_empty()
+        self.triangle_count == 0
+    }
+
+    /// The nearest infinite-plane hit in (0, `t_max`), as (t, triangle).
+    #[inline]
+    fn plane_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<(f32, usize)> {
+        let mut best: Option<(f32, usize)> = None;
+        for &(point, normal, triangle) in &self.planes {
+            let t = (point - origin).dot(normal) / direction.dot(normal);
+            if t > 0.0 && t < best.map_or(t_max, |b| b.0) {
+                best = Some((t, triangle));
+            }
+        }
+        best
     }
 
     /// The closest hit along `origin + t·direction` for `t` in (0, `t_max`).
     #[inline]
     pub fn closest_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
-        if self.triangles.is_empty() {
-            return None;
+        let mut best = None;
+        let mut t_limit = t_max;
+        if !self.triangles.is_empty() {
+            let ray = make_ray(origin, direction, t_max);
+            let mut hit = RayHit::none();
+            if self.bvh.ray_traverse(ray, &mut hit, |r, id| self.triangles[id].intersect(r)) {
+                let id = hit.primitive_id as usize;
+                let uv = self.triangles[id].compute_barycentric(&ray);
+                best = Some(Hit { triangle: self.mesh_index[id] as usize, t: hit.t, u: uv.x, v: uv.y });
+                t_limit = hit.t;
+            }
         }
-        let ray = make_ray(origin, direction, t_max);
-        let mut hit = RayHit::none();
-        if !self.bvh.ray_traverse(ray, &mut hit, |r, id| self.triangles[id].intersect(r)) {
-            return None;
+        // A plane's albedo is uniform, so its barycentrics do not matter.
+        match self.plane_hit(origin, direction, t_limit) {
+            Some((t, triangle)) => Some(Hit { triangle, t, u: 0.0, v: 0.0 }),
+            None => best,
         }
-        let id = hit.primitive_id as usize;
-        let uv = self.triangles[id].compute_barycentric(&ray);
-        Some(Hit { triangle: self.mesh_index[id] as usize, t: hit.t, u: uv.x, v: uv.y })
     }
 
     /// Whether anything lies along `origin + t·direction` for `t` in (0, `t_max`).
     #[inline]
     pub fn occluded(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
+        if self.plane_hit(origin, direction, t_max).is_some() {
+            return true;
+        }
         if self.triangles.is_empty() {
             return false;
         }
@@ -109,7 +150,7 @@ mod tests {
         mesh.triangles = vec![[0, 1, 2]];
         mesh.normals = vec![Vec3A::Z];
         mesh.kinds = vec![SurfaceKind::Object];
-        mesh.traced_shadows = vec![false];
+        mesh.panel_of = vec![crate::geometry::NO_PANEL];
         mesh
     }
 

@@ -1,0 +1,327 @@
+"""Data sets: images under known lights, a mask and optional ground truth.
+
+`load_dataset` reads a folder in the irtps layout (``scene.json``, contract
+``irtps.scene/1``) or the DiLiGenT layout; `save_dataset` writes the irtps layout.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+
+import numpy as np
+
+from irtps.atomic import atomic_output_dir
+from irtps.errors import DatasetError
+from irtps.imageio import check_finite, format_size, read_exr, read_image, read_images, read_mask, write_exr, write_png
+from irtps.scene import Scene, load_scene, write_scene
+
+SCENE_FILE = "scene.json"
+MASK_FILE = "mask.png"
+IMAGES_FOLDER = "images"
+GT_FOLDER = "gt"
+DILIGENT_MARKER = "light_directions.txt"
+
+_NUMBERED_IMAGE = re.compile(r"\d{3,}\.(exr|png)", re.IGNORECASE)
+_HEIGHT_CHANNEL_TOLERANCE = 1e-6
+
+
+@dataclass
+class GroundTruth:
+    """Ground truth of a data set, for evaluation only; each part is optional.
+
+    Attributes
+    ----------
+    height : numpy.ndarray or None
+        float32 (H, W): heights above the floor, 0 outside the mask.
+    normal : numpy.ndarray or None
+        float32 (H, W, 3): unit normals (nx, ny, nz), 0 outside the mask.
+    albedo : numpy.ndarray or None
+        float32 (H, W, 3): RGB albedo.
+    direct : numpy.ndarray or None
+        float32 (K, H, W, 3): the direct-light-only image for each light.
+    """
+
+    height: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    albedo: np.ndarray | None = None
+    direct: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("height", "normal", "albedo", "direct"):
+            value = getattr(self, name)
+            if value is not None:
+                setattr(self, name, np.asarray(value, dtype=np.float32))
+
+
+@dataclass
+class Dataset:
+    """Photometric-stereo images of one object with their scene.
+
+    Attributes
+    ----------
+    scene : Scene
+    images : numpy.ndarray
+        float32 (K, H, W, 3), linear RGB radiance; image k is lit by ``scene.lights[k]``.
+    mask : numpy.ndarray
+        bool (H, W): True on object pixels.
+    gt : GroundTruth or None
+    source : str or None
+        The folder the data set was read from.
+
+    Raises
+    ------
+    DatasetError
+        On construction, if an array's shape disagrees with the scene.
+    """
+
+    scene: Scene
+    images: np.ndarray
+    mask: np.ndarray
+    gt: GroundTruth | None = None
+    source: str | None = None
+
+    def __post_init__(self) -> None:
+        self.images = np.asarray(self.images, dtype=np.float32)
+        self.mask = np.asarray(self.mask, dtype=bool)
+        self.check_shapes()
+
+    def check_shapes(self) -> None:
+        """Raise `DatasetError` if an array's shape disagrees with the scene's lights and camera."""
+        count = len(self.scene.lights)
+        size = (self.scene.camera.height, self.scene.camera.width)
+        _expect_shape("Dataset.images", self.images, (count, *size, 3))
+        _expect_shape("Dataset.mask", self.mask, size)
+        if self.gt is not None:
+            for name, shape in _gt_shapes(count, size).items():
+                value = getattr(self.gt, name)
+                if value is not None:
+                    _expect_shape(f"Dataset.gt.{name}", value, shape)
+
+
+def load_dataset(path: str | Path, *, ground_truth: bool = True) -> Dataset:
+    """Read a data set folder, in the irtps layout or the DiLiGenT layout.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A folder holding ``scene.json`` (irtps layout) or ``light_directions.txt``
+        (DiLiGenT layout).
+    ground_truth : bool
+        Also read the ground truth (``gt/``, or DiLiGenT's ``Normal_gt.mat``) when present.
+
+    Returns
+    -------
+    Dataset
+
+    Raises
+    ------
+    DatasetError
+        Naming the file and the problem: missing files, an image count that is not
+        the number of lights, sizes that disagree, non-finite pixels, too few
+        lights, a light that is not a unit vector with z > 0, an unknown format.
+    """
+    folder = Path(path)
+    if not folder.is_dir():
+        problem = "not a folder" if folder.exists() else "no such data set folder"
+        raise DatasetError(f"{folder}: {problem}")
+    if (folder / SCENE_FILE).is_file():
+        return _load_irtps(folder, ground_truth)
+    if (folder / DILIGENT_MARKER).is_file():
+        from irtps.diligent import load_diligent
+
+        return load_diligent(folder, ground_truth=ground_truth)
+    raise DatasetError(
+        f"{folder}: not a data set: it holds neither {SCENE_FILE} (irtps layout) "
+        f"nor {DILIGENT_MARKER} (DiLiGenT layout)"
+    )
+
+
+def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.ndarray] | None = None) -> None:
+    """Write a data set folder in the irtps layout, atomically.
+
+    Writes ``scene.json``, ``images/000.exr`` ..., ``mask.png`` (8-bit, 0 or 255)
+    and, when present, ``gt/height.exr`` (Y), ``gt/normal.exr``, ``gt/albedo.exr``
+    and ``gt/direct/000.exr`` .... An existing folder at ``path`` is replaced only
+    once everything is written.
+
+    Parameters
+    ----------
+    dataset : Dataset
+    path : str or pathlib.Path
+    extra : mapping of str to numpy.ndarray, optional
+        More EXR files to write in the same transaction: a relative POSIX path
+        ending in ``.exr`` (e.g. ``"gt/bounce1/000.exr"``) to a (H, W) or
+        (H, W, 3) array. It must not name one of the files above.
+
+    Raises
+    ------
+    DatasetError
+        If the data set breaks the contract (shapes, non-finite values, scene) or
+        ``extra`` is malformed; nothing is written then.
+    """
+    dataset.check_shapes()
+    if not dataset.mask.any():
+        raise DatasetError("Dataset.mask is empty: a data set needs at least one object pixel")
+    extra = dict(extra or {})
+    _check_extra(extra)
+    for k, image in enumerate(dataset.images):
+        check_finite(f"Dataset.images[{k}]", image)
+    for name, files in _gt_files(dataset.gt).items():
+        for relative, array in files:
+            check_finite(f"Dataset.gt.{name} ({relative})", array)
+    with atomic_output_dir(path) as out:
+        write_scene(dataset.scene, out / SCENE_FILE)
+        (out / IMAGES_FOLDER).mkdir()
+        for k, image in enumerate(dataset.images):
+            write_exr(out / IMAGES_FOLDER / _image_name(k), image)
+        write_png(out / MASK_FILE, dataset.mask.astype(np.float32), bit_depth=8)
+        for files in _gt_files(dataset.gt).values():
+            for relative, array in files:
+                _write_new_exr(out, relative, array)
+        for relative, array in extra.items():
+            _write_new_exr(out, relative, array)
+
+
+def _load_irtps(folder: Path, ground_truth: bool) -> Dataset:
+    scene = load_scene(folder / SCENE_FILE)
+    count = len(scene.lights)
+    size = (scene.camera.height, scene.camera.width)
+    paths = _numbered_images(folder / IMAGES_FOLDER, count)
+    images = read_images(paths)
+    if images.shape[1:3] != size:
+        raise DatasetError(
+            f"{paths[0]}: size {format_size(images.shape[1:3])} does not match "
+            f"the camera in {SCENE_FILE} ({format_size(size)})"
+        )
+    mask_path = folder / MASK_FILE
+    mask = read_mask(mask_path, size) if mask_path.exists() else np.ones(size, dtype=bool)
+    gt = _load_ground_truth(folder / GT_FOLDER, count, size) if ground_truth else None
+    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder))
+
+
+def _numbered_images(folder: Path, count: int) -> list[Path]:
+    """``folder/000.exr`` (or ``.png``) ... for ``count`` lights; no more, no fewer."""
+    if not folder.is_dir():
+        raise DatasetError(f"{folder}: missing folder ({SCENE_FILE} has {count} lights, one image each)")
+    paths = []
+    for k in range(count):
+        candidates = [folder / _image_name(k, suffix) for suffix in (".exr", ".png")]
+        present = [candidate for candidate in candidates if candidate.is_file()]
+        if not present:
+            raise DatasetError(f"{candidates[0]}: missing ({SCENE_FILE} has {count} lights, one image each)")
+        if len(present) > 1:
+            raise DatasetError(f"{folder}: both {present[0].name} and {present[1].name} exist; keep one")
+        paths.append(present[0])
+    numbered = sorted(entry.name for entry in folder.iterdir() if _NUMBERED_IMAGE.fullmatch(entry.name))
+    if len(numbered) > count:
+        unexpected = sorted(set(numbered) - {path.name for path in paths})
+        raise DatasetError(
+            f"{folder}: {len(numbered)} images for {count} lights in {SCENE_FILE} ({unexpected[0]} has no light)"
+        )
+    return paths
+
+
+def _load_ground_truth(folder: Path, count: int, size: tuple[int, int]) -> GroundTruth | None:
+    if not folder.is_dir():
+        return None
+    parts = {
+        "height": _if_file(folder / "height.exr", lambda path: _read_height(path, size)),
+        "normal": _if_file(folder / "normal.exr", lambda path: _read_normal(path, size)),
+        "albedo": _if_file(folder / "albedo.exr", lambda path: _checked_size(path, read_image(path), size)),
+    }
+    direct_folder = folder / "direct"
+    if direct_folder.is_dir():
+        paths = _numbered_images(direct_folder, count)
+        parts["direct"] = _checked_size(paths[0], read_images(paths), size)
+    if all(part is None for part in parts.values()):
+        return None
+    return GroundTruth(**parts)
+
+
+def _read_height(path: Path, size: tuple[int, int]) -> np.ndarray:
+    height = read_exr(path)
+    check_finite(path, height)
+    if height.ndim == 3:
+        spread = float(np.ptp(height, axis=2).max())
+        if spread > _HEIGHT_CHANNEL_TOLERANCE * max(1.0, float(np.abs(height).max())):
+            raise DatasetError(
+                f"{path}: R, G and B differ (by up to {spread:g}); a height map needs R = G = B or a single Y channel"
+            )
+        height = np.ascontiguousarray(height[:, :, 0])
+    return _checked_size(path, height, size)
+
+
+def _read_normal(path: Path, size: tuple[int, int]) -> np.ndarray:
+    normal = read_exr(path)
+    if normal.ndim != 3:
+        raise DatasetError(f"{path}: has a single Y channel; a normal map needs R, G, B = nx, ny, nz")
+    check_finite(path, normal)
+    return _checked_size(path, normal, size)
+
+
+def _checked_size(path: Path, array: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``array`` (an image or a stack of images) if its image size is ``size`` (H, W)."""
+    if _image_size(array.shape) != tuple(size):
+        raise DatasetError(
+            f"{path}: size {format_size(_image_size(array.shape))} does not match the images ({format_size(size)})"
+        )
+    return array
+
+
+def _image_size(shape: tuple[int, ...]) -> tuple[int, int]:
+    """(H, W) of an image shape (H, W), (H, W, 3) or a stack shape (K, H, W, 3)."""
+    return tuple(shape[1:3]) if len(shape) == 4 else tuple(shape[:2])
+
+
+def _if_file(path: Path, read):
+    return read(path) if path.is_file() else None
+
+
+def _gt_shapes(count: int, size: tuple[int, int]) -> dict[str, tuple[int, ...]]:
+    return {"height": size, "normal": (*size, 3), "albedo": (*size, 3), "direct": (count, *size, 3)}
+
+
+def _gt_files(gt: GroundTruth | None) -> dict[str, list[tuple[str, np.ndarray]]]:
+    """The EXR files of the ground truth, by part: relative path and array."""
+    if gt is None:
+        return {}
+    files = {}
+    for name in ("height", "normal", "albedo"):
+        value = getattr(gt, name)
+        if value is not None:
+            files[name] = [(f"{GT_FOLDER}/{name}.exr", value)]
+    if gt.direct is not None:
+        files["direct"] = [(f"{GT_FOLDER}/direct/{_image_name(k)}", image) for k, image in enumerate(gt.direct)]
+    return files
+
+
+def _check_extra(extra: dict) -> None:
+    for relative, array in extra.items():
+        if not isinstance(relative, str):
+            raise DatasetError(f"extra: keys must be relative paths (str), got {relative!r}")
+        path = PurePosixPath(relative)
+        if path.is_absolute() or "\\" in relative or ".." in path.parts or path.suffix != ".exr":
+            raise DatasetError(f"extra: {relative!r} must be a relative POSIX path inside the data set ending in .exr")
+        shape = np.shape(array)
+        if not (len(shape) == 2 or (len(shape) == 3 and shape[2] == 3)):
+            raise DatasetError(f"extra: {relative!r} has shape {shape}, expected (H, W) or (H, W, 3)")
+
+
+def _write_new_exr(out: Path, relative: str, array: np.ndarray) -> None:
+    target = out / relative
+    if target.exists():
+        raise DatasetError(f"extra: {relative!r} would overwrite a file of the data set")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    write_exr(target, array)
+
+
+def _image_name(k: int, suffix: str = ".exr") -> str:
+    return f"{k:03d}{suffix}"
+
+
+def _expect_shape(name: str, array: np.ndarray, shape: tuple[int, ...]) -> None:
+    if array.shape != tuple(shape):
+        raise DatasetError(f"{name} has shape {array.shape}, expected {tuple(shape)} from the scene")

@@ -1,0 +1,164 @@
+"""Reading data sets in the DiLiGenT layout.
+
+A DiLiGenT folder holds the images listed in ``filenames.txt`` (16-bit PNG), one
+line per image in ``light_directions.txt`` (x right, y up, z toward the camera:
+the irtps frame) and ``light_intensities.txt`` (RGB), ``mask.png`` and, for
+evaluation, ``Normal_gt.mat`` (variable ``Normal_gt``, (H, W, 3)).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import scipy.io
+
+from irtps.dataset import Dataset, GroundTruth
+from irtps.errors import DatasetError
+from irtps.imageio import check_finite, format_size, read_images, read_mask
+from irtps.scene import MIN_LIGHTS, Camera, Light, Scene
+
+FILENAMES_FILE = "filenames.txt"
+DIRECTIONS_FILE = "light_directions.txt"
+INTENSITIES_FILE = "light_intensities.txt"
+MASK_FILE = "mask.png"
+NORMALS_FILE = "Normal_gt.mat"
+NORMALS_VARIABLE = "Normal_gt"
+
+UNIT_TOLERANCE = 1e-2
+"""How far the norm of a listed light direction may be from 1; within it, it is renormalised."""
+
+
+def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
+    """Read a data set folder in the DiLiGenT layout.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+    ground_truth : bool
+        Also read the normals of ``Normal_gt.mat`` when the file is present.
+
+    Returns
+    -------
+    Dataset
+        Images in ``filenames.txt`` order, read at full bit depth and divided by
+        ``2^bits - 1``. Each light's irradiance is its line of
+        ``light_intensities.txt``. The camera is orthographic with the images'
+        size and ``pixel_size`` 1; there is no floor and no environment.
+        ``mask.png`` is optional (absent means every pixel).
+
+    Raises
+    ------
+    DatasetError
+        Naming the file (and line) and the problem: a missing file, line counts
+        that disagree, a direction that is not a unit vector (beyond 1e-2) or
+        has z <= 0, a negative intensity, fewer than 3 lights, images of
+        different sizes or with non-finite values.
+
+    Notes
+    -----
+    With the irradiance E taken from ``light_intensities.txt``, the contract's
+    image model ``L = rho * E * (n . l) / pi`` makes irtps albedos pi times
+    DiLiGenT's convention ``I = rho * e * (n . l)``.
+    """
+    folder = Path(path)
+    names, name_lines = _read_filenames(folder / FILENAMES_FILE)
+    directions, direction_lines = _read_table(folder / DIRECTIONS_FILE)
+    intensities, intensity_lines = _read_table(folder / INTENSITIES_FILE)
+    for other, table in ((DIRECTIONS_FILE, directions), (INTENSITIES_FILE, intensities)):
+        if len(table) != len(names):
+            raise DatasetError(f"{folder / other}: {len(table)} lines, but {FILENAMES_FILE} lists {len(names)} images")
+    if len(names) < MIN_LIGHTS:
+        raise DatasetError(
+            f"{folder / FILENAMES_FILE}: {len(names)} images: photometric stereo needs at least {MIN_LIGHTS}"
+        )
+    directions = _unit_directions(folder / DIRECTIONS_FILE, directions, direction_lines)
+    _check_non_negative(folder / INTENSITIES_FILE, intensities, intensity_lines)
+    image_paths = [folder / name for name in names]
+    for image_path, line in zip(image_paths, name_lines, strict=True):
+        if not image_path.is_file():
+            raise DatasetError(f"{image_path}: missing (listed on line {line} of {FILENAMES_FILE})")
+    images = read_images(image_paths)
+    size = images.shape[1:3]
+    mask_path = folder / MASK_FILE
+    mask = read_mask(mask_path, size) if mask_path.exists() else np.ones(size, dtype=bool)
+    normals_path = folder / NORMALS_FILE
+    gt = GroundTruth(normal=_read_normals(normals_path, size)) if ground_truth and normals_path.is_file() else None
+    scene = Scene(
+        camera=Camera(width=size[1], height=size[0], pixel_size=1.0),
+        lights=tuple(Light(direction=d, irradiance=e) for d, e in zip(directions, intensities, strict=True)),
+    )
+    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder))
+
+
+def _read_lines(path: Path) -> list[tuple[int, str]]:
+    """Non-blank lines of a text file, stripped, with their 1-based line numbers."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DatasetError(
+            f"{path}: missing (a DiLiGenT folder needs {FILENAMES_FILE}, {DIRECTIONS_FILE} and {INTENSITIES_FILE})"
+        ) from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise DatasetError(f"{path}: cannot read ({error})") from None
+    return [(number, line.strip()) for number, line in enumerate(text.splitlines(), start=1) if line.strip()]
+
+
+def _read_filenames(path: Path) -> tuple[list[str], list[int]]:
+    lines = _read_lines(path)
+    return [name for _, name in lines], [number for number, _ in lines]
+
+
+def _read_table(path: Path) -> tuple[np.ndarray, list[int]]:
+    """Three finite numbers per line: a float64 (N, 3) array and the line numbers."""
+    rows, numbers = [], []
+    for number, line in _read_lines(path):
+        fields = line.replace(",", " ").split()
+        try:
+            row = [float(field) for field in fields]
+        except ValueError:
+            raise DatasetError(f"{path}: line {number}: expected 3 numbers, got {line!r}") from None
+        if len(row) != 3:
+            raise DatasetError(f"{path}: line {number}: expected 3 numbers, got {len(row)}")
+        if not all(np.isfinite(row)):
+            raise DatasetError(f"{path}: line {number}: non-finite value in {line!r}")
+        rows.append(row)
+        numbers.append(number)
+    return np.array(rows, dtype=np.float64).reshape(-1, 3), numbers
+
+
+def _unit_directions(path: Path, directions: np.ndarray, lines: list[int]) -> np.ndarray:
+    norms = np.linalg.norm(directions, axis=1)
+    for direction, norm, line in zip(directions, norms, lines, strict=True):
+        if abs(norm - 1.0) > UNIT_TOLERANCE:
+            raise DatasetError(f"{path}: line {line}: light direction is not a unit vector (norm {norm:.6g})")
+        if direction[2] <= 0.0:
+            raise DatasetError(
+                f"{path}: line {line}: light direction must point toward the camera side (z > 0), "
+                f"got z = {direction[2]:g}"
+            )
+    return directions / norms[:, None]
+
+
+def _check_non_negative(path: Path, intensities: np.ndarray, lines: list[int]) -> None:
+    for row, line in zip(intensities, lines, strict=True):
+        if (row < 0.0).any():
+            raise DatasetError(f"{path}: line {line}: light intensities must not be negative, got {row.tolist()}")
+
+
+def _read_normals(path: Path, size: tuple[int, int]) -> np.ndarray:
+    try:
+        variables = scipy.io.loadmat(path)
+    except Exception as error:  # scipy raises many types on a malformed file (MatReadError, ValueError, zlib.error...)
+        raise DatasetError(f"{path}: not a readable MATLAB file ({error})") from None
+    if NORMALS_VARIABLE not in variables:
+        found = sorted(name for name in variables if not name.startswith("__"))
+        raise DatasetError(f"{path}: no variable {NORMALS_VARIABLE!r} (found {found})")
+    normals = np.asarray(variables[NORMALS_VARIABLE])
+    if normals.ndim != 3 or normals.shape[2] != 3:
+        raise DatasetError(f"{path}: {NORMALS_VARIABLE} has shape {normals.shape}, expected (H, W, 3)")
+    if normals.shape[:2] != tuple(size):
+        raise DatasetError(f"{path}: size {format_size(normals.shape)} does not match the images ({format_size(size)})")
+    normals = normals.astype(np.float32)
+    check_finite(path, normals)
+    return normals

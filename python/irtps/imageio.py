@@ -1,0 +1,206 @@
+"""Image files (OpenEXR and PNG) through the Rust core ``irtps._core``.
+
+Arrays are row-major, top row first: (H, W) for one channel, (H, W, 3) for RGB.
+PNG values are linear, divided by ``2^bits - 1``. Errors raised by the core
+(``ValueError``, ``OSError``) become `DatasetError` with the same message.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from irtps import _core
+from irtps.errors import DatasetError
+
+PNG_BIT_DEPTHS = (8, 16)
+"""Bit depths of PNG files that can be written."""
+
+
+def read_exr(path: str | Path) -> np.ndarray:
+    """Read an OpenEXR file with channels R, G, B or a single Y.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+
+    Returns
+    -------
+    numpy.ndarray
+        float32, (H, W, 3) for R, G, B or (H, W) for Y.
+
+    Raises
+    ------
+    DatasetError
+        If the file is missing, unreadable, corrupt or has other channels.
+    """
+    return _core_call(_core.read_exr, path)
+
+
+def write_exr(path: str | Path, array: np.ndarray) -> None:
+    """Write a 32-bit float OpenEXR file (Y for (H, W), R, G, B for (H, W, 3)).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+    array : numpy.ndarray
+        (H, W) or (H, W, 3); converted to float32.
+    """
+    _core_call(_core.write_exr, path, _image_array(path, array))
+
+
+def read_png(path: str | Path) -> tuple[np.ndarray, int]:
+    """Read an 8- or 16-bit PNG file, alpha dropped.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+
+    Returns
+    -------
+    values : numpy.ndarray
+        float32 in [0, 1] (stored value / (2^bits - 1)); (H, W) for gray,
+        (H, W, 3) for colour.
+    bit_depth : int
+        8 or 16.
+    """
+    return _core_call(_core.read_png, path)
+
+
+def write_png(path: str | Path, array: np.ndarray, bit_depth: int = 8) -> None:
+    """Write a gray ((H, W)) or RGB ((H, W, 3)) PNG of values in [0, 1] (clipped).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+    array : numpy.ndarray
+    bit_depth : {8, 16}
+    """
+    if bit_depth not in PNG_BIT_DEPTHS:
+        raise DatasetError(f"{path}: PNG bit depth must be 8 or 16, got {bit_depth}")
+    _core_call(_core.write_png, path, _image_array(path, array), bit_depth)
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """Read an .exr or .png image as linear RGB.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 (H, W, 3); a Y-only EXR or a gray PNG is replicated to 3 channels.
+
+    Raises
+    ------
+    DatasetError
+        If the file cannot be read, has an unknown extension or holds non-finite values.
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix == ".exr":
+        image = read_exr(path)
+    elif suffix == ".png":
+        image, _ = read_png(path)
+    else:
+        raise DatasetError(f"{path}: unknown image type {suffix!r}: expected .exr or .png")
+    if image.ndim == 2:
+        image = np.repeat(image[:, :, None], 3, axis=2)
+    check_finite(path, image)
+    return image
+
+
+def read_images(paths: Sequence[str | Path]) -> np.ndarray:
+    """Read a stack of same-sized .exr / .png images in parallel, as linear RGB.
+
+    Parameters
+    ----------
+    paths : sequence of str or pathlib.Path
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 (K, H, W, 3).
+
+    Raises
+    ------
+    DatasetError
+        Naming the first file that cannot be read, differs in size from the
+        first image, or holds non-finite values.
+    """
+    if not paths:
+        raise DatasetError("no image files given")
+    try:
+        return _core.read_images([str(path) for path in paths])
+    except (ValueError, OSError) as error:
+        raise DatasetError(str(error)) from error
+
+
+def read_mask(path: str | Path, shape: tuple[int, int]) -> np.ndarray:
+    """Read a mask image: a pixel is in the mask if any channel is non-zero.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+    shape : tuple of int
+        The expected (H, W).
+
+    Returns
+    -------
+    numpy.ndarray
+        bool (H, W).
+
+    Raises
+    ------
+    DatasetError
+        If the file cannot be read, its size is not ``shape`` or no pixel is set.
+    """
+    mask = np.any(read_image(path) != 0.0, axis=2)
+    if mask.shape != tuple(shape):
+        raise DatasetError(f"{path}: size {format_size(mask.shape)} does not match the images ({format_size(shape)})")
+    if not mask.any():
+        raise DatasetError(f"{path}: the mask is empty (every pixel is zero)")
+    return mask
+
+
+def check_finite(path: str | Path, array: np.ndarray) -> None:
+    """Raise `DatasetError` naming ``path`` and the first pixel if ``array`` has a NaN or infinity.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The file the array was read from.
+    array : numpy.ndarray
+        (H, W) or (H, W, C).
+    """
+    bad = ~np.isfinite(array)
+    if bad.any():
+        index = tuple(np.argwhere(bad)[0])
+        row, column = index[0], index[1]
+        value = array[index]
+        raise DatasetError(f"{path}: non-finite value {value} at row {row}, column {column}")
+
+
+def format_size(shape: Sequence[int]) -> str:
+    """An image size as ``"WxH"`` (width x height) from a shape starting with (H, W)."""
+    return f"{shape[1]}x{shape[0]}"
+
+
+def _image_array(path: str | Path, array: np.ndarray) -> np.ndarray:
+    array = np.ascontiguousarray(array, dtype=np.float32)
+    if not (array.ndim == 2 or (array.ndim == 3 and array.shape[2] == 3)):
+        raise DatasetError(f"{path}: cannot write an array of shape {array.shape}: expected (H, W) or (H, W, 3)")
+    return array
+
+
+def _core_call(function: Callable, path: str | Path, *args):
+    try:
+        return function(str(path), *args)
+    except (ValueError, OSError) as error:
+        message = str(error)
+        if str(path) not in message:
+            message = f"{path}: {message}"
+        raise DatasetError(message) from error

@@ -1,0 +1,66 @@
+"""Make tests/data/diligent_ball_small from DiLiGenT's ballPNG.
+
+The fixture is a crop around the ball (rows 176..351, columns 212..403), reduced
+4x by box averaging, under 8 of the 96 lights (spread over the light directions).
+Images stay 16-bit PNG; the text files keep the original lines of those lights;
+the mask keeps the pixels whose 4x4 block is entirely in the object; the normals
+are block means, renormalised, 0 outside the mask.
+
+Usage: python tests/data/make_diligent_ball_small.py SHARED/data/diligent/ballPNG
+"""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import scipy.io
+from irtps import _core
+
+ROWS, COLUMNS, FACTOR = slice(176, 352), slice(212, 404), 4
+LIGHT_COUNT = 8
+OUT = Path(__file__).resolve().parent / "diligent_ball_small"
+
+
+def spread_lights(directions: np.ndarray, count: int) -> list[int]:
+    """Farthest-point choice of ``count`` light indices, starting with the most frontal one."""
+    chosen = [int(np.argmax(directions[:, 2]))]
+    while len(chosen) < count:
+        distance = np.min(np.linalg.norm(directions[:, None] - directions[chosen][None], axis=2), axis=1)
+        chosen.append(int(np.argmax(distance)))
+    return sorted(chosen)
+
+
+def reduce(image: np.ndarray) -> np.ndarray:
+    """Crop and box-average by FACTOR: (H, W, C) -> (H/FACTOR, W/FACTOR, C)."""
+    crop = image[ROWS, COLUMNS]
+    h, w = crop.shape[0] // FACTOR, crop.shape[1] // FACTOR
+    return crop.reshape(h, FACTOR, w, FACTOR, -1).mean(axis=(1, 3))
+
+
+def main(source: Path) -> None:
+    lines = {
+        name: (source / name).read_text().splitlines()
+        for name in ("filenames.txt", "light_directions.txt", "light_intensities.txt")
+    }
+    directions = np.loadtxt(source / "light_directions.txt")
+    chosen = spread_lights(directions, LIGHT_COUNT)
+    OUT.mkdir(exist_ok=True)
+    for name, text in lines.items():
+        (OUT / name).write_text("".join(text[k] + "\n" for k in chosen))
+    for k in chosen:
+        name = lines["filenames.txt"][k]
+        image, bits = _core.read_png(str(source / name))
+        assert bits == 16
+        _core.write_png(str(OUT / name), reduce(image).astype(np.float32), 16)
+    mask_image, _ = _core.read_png(str(source / "mask.png"))
+    mask_full = np.atleast_3d(mask_image).max(axis=2) > 0
+    mask = reduce(mask_full[..., None].astype(np.float64))[..., 0] == 1.0
+    _core.write_png(str(OUT / "mask.png"), mask.astype(np.float32), 8)
+    normals = reduce(scipy.io.loadmat(source / "Normal_gt.mat")["Normal_gt"])
+    normals /= np.maximum(np.linalg.norm(normals, axis=2, keepdims=True), 1e-12)
+    normals[~mask] = 0.0
+    scipy.io.savemat(OUT / "Normal_gt.mat", {"Normal_gt": normals}, do_compression=True)
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]))
