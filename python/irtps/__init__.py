@@ -2,9 +2,12 @@
 
 from importlib.metadata import PackageNotFoundError, version
 
-from irtps.dataset import Dataset, GroundTruth, load_dataset, save_dataset
+from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object, save_dataset
 from irtps.errors import DatasetError, IrtpsError
+from irtps.render import Rendering, render
 from irtps.scene import Camera, CornellBox, Floor, Light, Scene, load_scene
+from irtps.surface import height_to_normals
+from irtps.synth import synthesize
 
 try:
     __version__ = version("irtps")
@@ -20,9 +23,14 @@ __all__ = [
     "GroundTruth",
     "IrtpsError",
     "Light",
+    "Rendering",
     "Scene",
     "__version__",
+    "height_to_normals",
     "load_dataset",
     "load_scene",
+    "load_scene_object",
+    "render",
     "save_dataset",
+    "synthesize",
 ]

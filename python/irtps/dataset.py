@@ -325,3 +325,39 @@ def _image_name(k: int, suffix: str = ".exr") -> str:
 def _expect_shape(name: str, array: np.ndarray, shape: tuple[int, ...]) -> None:
     if array.shape != tuple(shape):
         raise DatasetError(f"{name} has shape {array.shape}, expected {tuple(shape)} from the scene")
+
+
+def load_scene_object(path: str | Path) -> tuple[Scene, np.ndarray, np.ndarray, np.ndarray]:
+    """Read what rendering a data set folder needs: its scene and its true object.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A folder with ``scene.json``, ``gt/height.exr``, ``gt/albedo.exr`` and optionally
+        ``mask.png`` (absent: every pixel). Images are not needed.
+
+    Returns
+    -------
+    (Scene, height, albedo, mask)
+        float32 (H, W) heights, float32 (H, W, 3) albedo, bool (H, W) mask.
+
+    Raises
+    ------
+    DatasetError
+        Naming the missing or malformed file.
+    """
+    folder = Path(path)
+    if not folder.is_dir():
+        raise DatasetError(f"{folder}: no such folder")
+    scene = load_scene(folder / SCENE_FILE)
+    size = (scene.camera.height, scene.camera.width)
+    mask_path = folder / MASK_FILE
+    mask = read_mask(mask_path, size) if mask_path.is_file() else np.ones(size, dtype=bool)
+    height_path, albedo_path = folder / GT_FOLDER / "height.exr", folder / GT_FOLDER / "albedo.exr"
+    for required in (height_path, albedo_path):
+        if not required.is_file():
+            raise DatasetError(f"{required}: missing (rendering needs the true height and albedo)")
+    height = _read_height(height_path, size)
+    albedo = _checked_size(albedo_path, read_image(albedo_path), size)
+    check_finite(albedo_path, albedo)
+    return scene, height, albedo, mask
