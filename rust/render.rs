@@ -184,3 +184,56 @@ fn add_scaled(acc: &mut [f32], values: &[Rgb], weight: Rgb) {
         dst[2] += v[2] * weight[2];
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::HeightField;
+    use std::f32::consts::PI;
+
+    fn tilted_plate(size: usize, albedo: Rgb) -> Scene {
+        let height = (0..size * size).map(|p| 0.25 * (p % size) as f32 + 3.0).collect();
+        Scene {
+            camera: Camera { width: size, height: size, pixel_size: 1.0 },
+            surface: HeightField { height, mask: vec![true; size * size], albedo: vec![albedo; size * size] },
+            floor: None,
+            cornell_box: None,
+        }
+    }
+
+    #[test]
+    fn direct_light_on_an_unshadowed_plane_is_lamberts_law() {
+        let albedo = [0.8, 0.5, 0.25];
+        let light = Light { direction: vec3a(-0.3, 0.2, 0.9).normalize(), irradiance: [PI, 2.0, 1.0] };
+        let renderer = Renderer::new(&tilted_plate(8, albedo), &[light]).unwrap();
+        let settings = RenderSettings { bounces: 0, samples: 0, direct_samples: 9, seed: 0 };
+        let image = renderer.render_rows(0..8, &settings).unwrap();
+        let cosine = vec3a(-0.25, 0.0, 1.0).normalize().dot(light.direction);
+        for (row, col) in [(1, 1), (4, 5), (6, 2)] {
+            for c in 0..3 {
+                let expected = albedo[c] * light.irradiance[c] * cosine / PI;
+                let got = image[(row * 8 + col) * 3 + c];
+                assert!((got - expected).abs() <= 1e-6 * expected, "{got} vs {expected}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_convex_object_alone_has_no_inter_reflection() {
+        let light = Light { direction: Vec3A::Z, irradiance: [PI; 3] };
+        let renderer = Renderer::new(&tilted_plate(8, [0.9; 3]), &[light]).unwrap();
+        let settings = RenderSettings { bounces: 2, samples: 16, direct_samples: 1, seed: 0 };
+        let image = renderer.render_rows(0..8, &settings).unwrap();
+        let plane = 8 * 8 * 3;
+        assert!(image[..plane].iter().any(|&v| v > 0.0));
+        assert!(image[plane..].iter().all(|&v| v == 0.0));
+    }
+
+    #[test]
+    fn rows_out_of_range_are_an_error_naming_rows() {
+        let light = Light { direction: Vec3A::Z, irradiance: [PI; 3] };
+        let renderer = Renderer::new(&tilted_plate(4, [0.5; 3]), &[light]).unwrap();
+        let settings = RenderSettings { bounces: 1, samples: 1, direct_samples: 1, seed: 0 };
+        assert!(renderer.render_rows(2..9, &settings).unwrap_err().to_string().starts_with("rows"));
+    }
+}

@@ -1,0 +1,67 @@
+"""The irtps command line, run as a user would."""
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from irtps import load_dataset
+from irtps.cli import main
+
+SMALL = Path(__file__).parent / "data" / "mitsuba_small" / "cap_cornell"
+
+
+def test_render_writes_a_complete_data_set(tmp_path):
+    out = tmp_path / "render"
+    assert main(["render", str(SMALL), "--out", str(out), "--bounces", "2", "--samples", "8", "--quiet"]) == 0
+    for name in ["scene.json", "mask.png", "gt/height.exr", "gt/normal.exr", "gt/albedo.exr"]:
+        assert (out / name).is_file(), name
+    for sub in ["images", "gt/direct", "gt/bounce1", "gt/bounce2"]:
+        assert sorted(p.name for p in (out / sub).iterdir()) == ["000.exr", "001.exr", "002.exr"], sub
+    data = load_dataset(out)
+    source = load_dataset(SMALL)
+    np.testing.assert_array_equal(data.mask, source.mask)
+    np.testing.assert_array_equal(data.gt.height[data.mask], source.gt.height[data.mask])
+    assert data.images.sum() > data.gt.direct.sum()  # images hold the bounces too
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary left
+
+
+@pytest.mark.parametrize("shape", ["cap", "cavity", "grooves", "relief"])
+def test_synth_shapes_write_loadable_data_sets(tmp_path, shape):
+    out = tmp_path / shape
+    code = main(["synth", shape, "--out", str(out), "--size", "24", "--lights", "4", "--bounces", "1", "--samples", "4", "--albedo", "textured", "--quiet"])
+    assert code == 0
+    data = load_dataset(out)
+    assert data.images.shape == (4, 24, 24, 3)
+    assert data.mask.any() and (data.gt.height[data.mask] > 0).all()
+    normals = data.gt.normal[data.mask]
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=-1), 1.0, atol=1e-5)
+
+
+def test_failed_render_names_the_file_and_writes_nothing(tmp_path, capsys):
+    broken = tmp_path / "broken"
+    shutil.copytree(SMALL, broken)
+    (broken / "gt" / "albedo.exr").unlink()
+    out = tmp_path / "out"
+    assert main(["render", str(broken), "--out", str(out), "--quiet"]) == 2
+    assert "albedo.exr" in capsys.readouterr().err
+    assert not out.exists()
+    assert [p.name for p in tmp_path.iterdir()] == ["broken"]
+
+
+def test_existing_output_survives_a_failed_run(tmp_path):
+    out = tmp_path / "out"
+    assert main(["synth", "cap", "--out", str(out), "--size", "16", "--lights", "3", "--bounces", "0", "--quiet"]) == 0
+    before = sorted(p.relative_to(out) for p in out.rglob("*"))
+    assert main(["render", str(tmp_path / "missing"), "--out", str(out), "--quiet"]) == 2
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
+
+
+def test_every_command_has_help_with_examples():
+    for command in ([], ["render"], ["synth"]):
+        result = subprocess.run([sys.executable, "-m", "irtps.cli", *command, "--help"], capture_output=True, text=True)
+        assert result.returncode == 0
+        assert "examples:" in result.stdout

@@ -1,0 +1,14 @@
+"""The examples in the public docstrings run and print what they say."""
+
+import doctest
+import importlib
+
+import pytest
+
+MODULES = ["irtps.render", "irtps.surface", "irtps.synth", "irtps.scene", "irtps.dataset", "irtps.imageio", "irtps.atomic", "irtps.diligent"]
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_docstring_examples(name):
+    result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    assert result.failed == 0
