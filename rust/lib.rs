@@ -8,6 +8,7 @@ pub mod error;
 pub mod geometry;
 pub mod image_io;
 pub mod light_cache;
+pub mod ps;
 pub mod render;
 pub mod sampler;
 pub mod scene;

@@ -5,13 +5,14 @@ use std::path::PathBuf;
 
 use glam::vec3a;
 use numpy::ndarray::{Array, Array1, Array2, IxDyn};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
 use rayon::prelude::*;
 
 use crate::error::Error;
 use crate::image_io::{self, Image};
+use crate::ps::{photometric_stereo as core_ps, PsSettings};
 use crate::render::{RenderSettings, Renderer as CoreRenderer};
 use crate::scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
 
@@ -222,6 +223,55 @@ impl Renderer {
     }
 }
 
+fn lights_from(directions: &PyReadonlyArray2<'_, f32>, irradiance: &PyReadonlyArray2<'_, f32>) -> PyResult<Vec<Light>> {
+    let directions = rows_of_3(directions, "light_directions")?;
+    let irradiance = rows_of_3(irradiance, "light_irradiance")?;
+    if directions.len() != irradiance.len() {
+        return Err(PyValueError::new_err("light_irradiance: needs one row per light direction"));
+    }
+    Ok(directions.iter().zip(&irradiance).map(|(d, e)| Light { direction: vec3a(d[0], d[1], d[2]), irradiance: *e }).collect())
+}
+
+type PsArrays<'py> = (Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<u8>>, Bound<'py, PyArrayDyn<u16>>);
+
+/// Calibrated Lambertian photometric stereo on C-contiguous float32 images (K, H, W, 3):
+/// (normals (H, W, 3), albedo (H, W, 3), flags (H, W) uint8, observations used (H, W) uint16).
+#[pyfunction]
+#[pyo3(signature = (images, mask, light_directions, light_irradiance, robust=true, shadow_fraction=0.05, saturation=None))]
+#[allow(clippy::too_many_arguments)]
+fn photometric_stereo<'py>(
+    py: Python<'py>,
+    images: PyReadonlyArray4<'_, f32>,
+    mask: PyReadonlyArray2<'_, bool>,
+    light_directions: PyReadonlyArray2<'_, f32>,
+    light_irradiance: PyReadonlyArray2<'_, f32>,
+    robust: bool,
+    shadow_fraction: f32,
+    saturation: Option<f32>,
+) -> PyResult<PsArrays<'py>> {
+    let shape = images.shape().to_vec();
+    if shape[3] != 3 || mask.shape() != [shape[1], shape[2]] {
+        return Err(PyValueError::new_err(format!("images: shape {shape:?} does not match mask {:?} x 3 channels", mask.shape())));
+    }
+    let lights = lights_from(&light_directions, &light_irradiance)?;
+    if lights.len() != shape[0] {
+        return Err(PyValueError::new_err(format!("images: {} images for {} lights", shape[0], lights.len())));
+    }
+    let data = images.as_slice().map_err(|_| PyValueError::new_err("images: must be C-contiguous"))?;
+    let mask_data = mask.as_slice().map_err(|_| PyValueError::new_err("mask: must be C-contiguous"))?;
+    let settings = PsSettings { robust, shadow_fraction, saturation };
+    let out = py.detach(|| core_ps(data, mask_data, &lights, &settings)).map_err(to_py)?;
+    let (h, w) = (shape[1], shape[2]);
+    let planar = |v: Vec<[f32; 3]>| Array::from_shape_vec(IxDyn(&[h, w, 3]), v.into_iter().flatten().collect());
+    let err = |e: numpy::ndarray::ShapeError| PyValueError::new_err(e.to_string());
+    Ok((
+        planar(out.normals).map_err(err)?.into_pyarray(py),
+        planar(out.albedo).map_err(err)?.into_pyarray(py),
+        Array::from_shape_vec(IxDyn(&[h, w]), out.flags).map_err(err)?.into_pyarray(py),
+        Array::from_shape_vec(IxDyn(&[h, w]), out.used).map_err(err)?.into_pyarray(py),
+    ))
+}
+
 /// The compiled core of irtps.
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -230,6 +280,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_png, m)?)?;
     m.add_function(wrap_pyfunction!(write_png, m)?)?;
     m.add_function(wrap_pyfunction!(read_images, m)?)?;
+    m.add_function(wrap_pyfunction!(photometric_stereo, m)?)?;
     m.add_class::<Renderer>()?;
     Ok(())
 }

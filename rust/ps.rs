@@ -1,0 +1,350 @@
+//! Calibrated Lambertian photometric stereo.
+//!
+//! Per pixel and channel c, image k holds `a_kc = ρ_c E_kc (n·l_k) / π`, so
+//! `b_kc = π a_kc / E_kc = ρ_c (l_k·n)`. The normal comes from one least-squares fit over all
+//! three channels (`g = (LᵀL)⁻¹ Lᵀ Σ_c b_c`, `n = g/|g|`); the albedo of each channel is then the
+//! least-squares scale `ρ_c = (Ln)·b_c / |Ln|²`.
+//!
+//! The robust mode drops, per pixel, the observations in shadow (whose summed `b` is below
+//! `shadow_fraction` of that pixel's brightest) and the saturated ones, and re-solves from the
+//! rest when at least 3 non-coplanar lights remain; otherwise it keeps the full fit and flags
+//! the pixel.
+//!
+//! Work runs over tiles of pixels, streaming through each image's rows of the tile (twice in
+//! robust mode: once for each pixel's brightest, once to accumulate); the sums are kept per
+//! pixel in structure-of-arrays form so that the loops run over contiguous pixels.
+
+use std::f32::consts::PI;
+
+use glam::{Mat3, Vec3};
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::scene::Light;
+
+/// Pixels per tile.
+const TILE: usize = 256;
+/// A set of lights is coplanar when the smallest eigenvalue of LᵀL is below this fraction of
+/// the largest.
+const COPLANAR_RATIO: f32 = 1e-4;
+
+/// How to fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PsSettings {
+    /// Drop shadowed and saturated observations per pixel.
+    pub robust: bool,
+    /// In robust mode, an observation is in shadow when its channel-summed `b` is below this
+    /// fraction of the pixel's brightest.
+    pub shadow_fraction: f32,
+    /// In robust mode, raw values at or above this level (in any channel) are saturated.
+    pub saturation: Option<f32>,
+}
+
+impl Default for PsSettings {
+    fn default() -> Self {
+        PsSettings { robust: true, shadow_fraction: 0.05, saturation: None }
+    }
+}
+
+/// What happened at a pixel.
+pub mod flag {
+    /// Fitted from the observations the mode asks for.
+    pub const OK: u8 = 0;
+    /// Robust mode: fewer than 3 non-coplanar observations were left; the full fit was kept.
+    pub const FULL_FIT: u8 = 1;
+    /// No light reached the pixel (or it is outside the mask): normal (0, 0, 1), albedo 0.
+    pub const DARK: u8 = 2;
+    /// Outside the mask.
+    pub const MASKED_OUT: u8 = 3;
+}
+
+/// Per-pixel results, row-major.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PsOutput {
+    /// Unit normals (zero outside the mask).
+    pub normals: Vec<[f32; 3]>,
+    /// RGB albedo.
+    pub albedo: Vec<[f32; 3]>,
+    /// One of [`flag`] per pixel.
+    pub flags: Vec<u8>,
+    /// Number of observations used.
+    pub used: Vec<u16>,
+}
+
+/// Checks the lights for photometric stereo: at least 3, not coplanar, positive irradiance.
+pub fn check_lights(lights: &[Light]) -> Result<Mat3> {
+    if lights.len() < 3 {
+        return Err(Error::input("lights", format!("{} given; photometric stereo needs at least 3", lights.len())));
+    }
+    for (k, light) in lights.iter().enumerate() {
+        if light.irradiance.iter().any(|&e| !(e > 0.0 && e.is_finite())) {
+            return Err(Error::input(&format!("lights[{k}].irradiance"), "must be positive in every channel"));
+        }
+    }
+    let gram = lights.iter().fold(Mat3::ZERO, |m, l| m + outer(l.direction.into()));
+    let (min, max) = eigen_range(gram);
+    if min < COPLANAR_RATIO * max {
+        return Err(Error::input("lights", "directions are (nearly) coplanar: the normal is not determined"));
+    }
+    Ok(gram)
+}
+
+/// Fits normals and albedo to `images` laid out `(K, pixels, 3)` (row-major images, RGB
+/// interleaved) for the pixels where `mask` is true.
+pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], settings: &PsSettings) -> Result<PsOutput> {
+    let gram = check_lights(lights)?;
+    let k_count = lights.len();
+    let n = mask.len();
+    if images.len() != k_count * n * 3 {
+        return Err(Error::input("images", format!("{} values for {k_count} lights x {n} pixels x 3", images.len())));
+    }
+    let fit = Fit::new(lights, gram, settings);
+    let mut out = PsOutput { normals: vec![[0.0; 3]; n], albedo: vec![[0.0; 3]; n], flags: vec![flag::MASKED_OUT; n], used: vec![0; n] };
+    out.normals
+        .par_chunks_mut(TILE)
+        .zip(out.albedo.par_chunks_mut(TILE))
+        .zip(out.flags.par_chunks_mut(TILE))
+        .zip(out.used.par_chunks_mut(TILE))
+        .enumerate()
+        .for_each_init(
+            || Box::new(Sums::default()),
+            |sums, (tile, (((normals, albedo), flags), used))| {
+                let start = tile * TILE;
+                let pixels = normals.len();
+                let tile_mask = &mask[start..start + pixels];
+                if !tile_mask.iter().any(|&m| m) {
+                    return;
+                }
+                let src = |k: usize| &images[(k * n + start) * 3..][..pixels * 3];
+                fit.accumulate_tile(src, sums, pixels);
+                for (p, _) in tile_mask.iter().enumerate().filter(|(_, &m)| m) {
+                    let (normal, rho, f, count) = fit.solve(sums, p, || (0..k_count).map(|k| fit.observation(src(k), k, p)));
+                    normals[p] = normal;
+                    albedo[p] = rho;
+                    flags[p] = f;
+                    used[p] = count;
+                }
+            },
+        );
+    Ok(out)
+}
+
+/// Per-pixel sums of a tile, structure of arrays so that loops run over contiguous pixels.
+struct Sums {
+    /// Σ w l_j b_c, index `j·3 + c`.
+    rhs: [[f32; TILE]; 9],
+    /// Σ w l lᵀ: xx, xy, xz, yy, yz, zz.
+    gram: [[f32; TILE]; 6],
+    /// Σ w.
+    count: [f32; TILE],
+    /// Largest channel-summed `b` of each pixel.
+    brightest: [f32; TILE],
+    /// One light's `b` per channel, de-interleaved.
+    b: [[f32; TILE]; 3],
+}
+
+impl Default for Sums {
+    fn default() -> Self {
+        Sums { rhs: [[0.0; TILE]; 9], gram: [[0.0; TILE]; 6], count: [0.0; TILE], brightest: [0.0; TILE], b: [[0.0; TILE]; 3] }
+    }
+}
+
+/// Light-dependent constants of a fit.
+struct Fit {
+    directions: Vec<Vec3>,
+    /// π / E_kc, per light and channel.
+    scale: Vec<[f32; 3]>,
+    /// Raw saturation level times π / E_kc, per light and channel (∞ when off).
+    saturated_b: Vec<[f32; 3]>,
+    gram: Mat3,
+    settings: PsSettings,
+}
+
+impl Fit {
+    fn new(lights: &[Light], gram: Mat3, settings: &PsSettings) -> Fit {
+        let scale: Vec<[f32; 3]> = lights.iter().map(|l| l.irradiance.map(|e| PI / e)).collect();
+        let level = settings.saturation.filter(|_| settings.robust).unwrap_or(f32::INFINITY);
+        let saturated_b = scale.iter().map(|s| s.map(|v| v * level)).collect();
+        Fit { directions: lights.iter().map(|l| l.direction.into()).collect(), scale, saturated_b, gram, settings: *settings }
+    }
+
+    /// `b` of light k at tile pixel p, from that light's interleaved tile data.
+    #[inline]
+    fn observation(&self, src: &[f32], k: usize, p: usize) -> [f32; 3] {
+        let s = self.scale[k];
+        [src[p * 3] * s[0], src[p * 3 + 1] * s[1], src[p * 3 + 2] * s[2]]
+    }
+
+    fn load(&self, sums: &mut Sums, src: &[f32], k: usize, pixels: usize) {
+        let s = self.scale[k];
+        for c in 0..3 {
+            for (p, d) in sums.b[c][..pixels].iter_mut().enumerate() {
+                *d = src[p * 3 + c] * s[c];
+            }
+        }
+    }
+
+    /// Fills `sums` for one tile; `src(k)` is light k's interleaved data of the tile.
+    fn accumulate_tile<'a>(&self, src: impl Fn(usize) -> &'a [f32], sums: &mut Sums, pixels: usize) {
+        for row in sums.rhs.iter_mut().chain(sums.gram.iter_mut()) {
+            row[..pixels].fill(0.0);
+        }
+        sums.count[..pixels].fill(0.0);
+        sums.brightest[..pixels].fill(0.0);
+        if self.settings.robust {
+            for k in 0..self.directions.len() {
+                self.load(sums, src(k), k, pixels);
+                let Sums { b, brightest, .. } = sums;
+                for p in 0..pixels {
+                    brightest[p] = brightest[p].max(b[0][p] + b[1][p] + b[2][p]);
+                }
+            }
+            let fraction = self.settings.shadow_fraction;
+            for v in &mut sums.brightest[..pixels] {
+                *v *= fraction;
+            }
+        } else {
+            sums.brightest[..pixels].fill(f32::NEG_INFINITY);
+        }
+        for (k, l) in self.directions.iter().enumerate() {
+            self.load(sums, src(k), k, pixels);
+            let sat = self.saturated_b[k];
+            let ll = [l.x * l.x, l.x * l.y, l.x * l.z, l.y * l.y, l.y * l.z, l.z * l.z];
+            let lj = [l.x, l.y, l.z];
+            let Sums { rhs, gram, count, brightest, b } = sums;
+            for p in 0..pixels {
+                let (b0, b1, b2) = (b[0][p], b[1][p], b[2][p]);
+                let keep = b0 + b1 + b2 > brightest[p] && b0 < sat[0] && b1 < sat[1] && b2 < sat[2];
+                let w = if keep { 1.0 } else { 0.0 };
+                count[p] += w;
+                for m in 0..6 {
+                    gram[m][p] += w * ll[m];
+                }
+                for j in 0..3 {
+                    let wl = w * lj[j];
+                    rhs[j * 3][p] += wl * b0;
+                    rhs[j * 3 + 1][p] += wl * b1;
+                    rhs[j * 3 + 2][p] += wl * b2;
+                }
+            }
+        }
+    }
+
+    /// Fits tile pixel `p` from its sums; `all` yields every observation of the pixel, for
+    /// the full fit when the robust selection is not enough. Returns (normal, albedo, flag,
+    /// observations used).
+    fn solve<I: Iterator<Item = [f32; 3]>>(&self, sums: &Sums, p: usize, all: impl Fn() -> I) -> ([f32; 3], [f32; 3], u8, u16) {
+        let k_count = self.directions.len();
+        let g = |m: usize| sums.gram[m][p];
+        let kept_gram = Mat3::from_cols(Vec3::new(g(0), g(1), g(2)), Vec3::new(g(1), g(3), g(4)), Vec3::new(g(2), g(4), g(5)));
+        let kept_rhs = [0, 1, 2].map(|c| Vec3::new(sums.rhs[c][p], sums.rhs[3 + c][p], sums.rhs[6 + c][p]));
+        let count = sums.count[p] as usize;
+        let (min, max) = eigen_range(kept_gram);
+        let (gram, rhs, used, flag) = if count >= 3 && min >= COPLANAR_RATIO * max {
+            (kept_gram, kept_rhs, count, if count == k_count || self.settings.robust { flag::OK } else { flag::FULL_FIT })
+        } else {
+            let mut rhs = [Vec3::ZERO; 3];
+            for (b, l) in all().zip(&self.directions) {
+                for c in 0..3 {
+                    rhs[c] += *l * b[c];
+                }
+            }
+            (self.gram, rhs, k_count, flag::FULL_FIT)
+        };
+        let g = gram.inverse() * (rhs[0] + rhs[1] + rhs[2]);
+        if !(g.length() > 0.0) || !g.is_finite() {
+            return ([0.0, 0.0, 1.0], [0.0; 3], flag::DARK, used as u16);
+        }
+        let normal = g.normalize();
+        let denominator = normal.dot(gram * normal);
+        let albedo = [0, 1, 2].map(|c| (normal.dot(rhs[c]) / denominator).max(0.0));
+        (normal.to_array(), albedo, flag, used as u16)
+    }
+}
+
+fn outer(l: Vec3) -> Mat3 {
+    Mat3::from_cols(l * l.x, l * l.y, l * l.z)
+}
+
+/// Smallest and largest eigenvalue of a symmetric positive semi-definite 3×3 matrix
+/// (closed form, Smith 1961).
+fn eigen_range(m: Mat3) -> (f32, f32) {
+    let a = m.to_cols_array_2d().map(|c| c.map(f64::from));
+    let p1 = a[0][1].powi(2) + a[0][2].powi(2) + a[1][2].powi(2);
+    let q = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
+    if p1 <= 1e-30 * q.abs().max(1e-30) {
+        let d = [a[0][0], a[1][1], a[2][2]];
+        return (d.iter().copied().fold(f64::INFINITY, f64::min) as f32, d.iter().copied().fold(f64::NEG_INFINITY, f64::max) as f32);
+    }
+    let p2 = (a[0][0] - q).powi(2) + (a[1][1] - q).powi(2) + (a[2][2] - q).powi(2) + 2.0 * p1;
+    let p = (p2 / 6.0).sqrt();
+    let bm = |i: usize, j: usize| (a[i][j] - if i == j { q } else { 0.0 }) / p;
+    let det = bm(0, 0) * (bm(1, 1) * bm(2, 2) - bm(1, 2) * bm(2, 1)) - bm(0, 1) * (bm(1, 0) * bm(2, 2) - bm(1, 2) * bm(2, 0))
+        + bm(0, 2) * (bm(1, 0) * bm(2, 1) - bm(1, 1) * bm(2, 0));
+    let phi = (det / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
+    let largest = q + 2.0 * p * phi.cos();
+    let smallest = q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos();
+    (smallest as f32, largest as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::vec3a;
+
+    fn lights(dirs: &[[f32; 3]]) -> Vec<Light> {
+        dirs.iter().map(|d| Light { direction: vec3a(d[0], d[1], d[2]).normalize(), irradiance: [2.0, 3.0, 4.0] }).collect()
+    }
+
+    fn render(normal: Vec3, albedo: [f32; 3], lights: &[Light]) -> Vec<f32> {
+        lights
+            .iter()
+            .flat_map(|l| {
+                let cosine = normal.dot(l.direction.into()).max(0.0);
+                [0, 1, 2].map(|c| albedo[c] * l.irradiance[c] * cosine / PI)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn recovers_normal_and_albedo_exactly_without_shadows() {
+        let ls = lights(&[[0.0, 0.0, 1.0], [0.5, 0.1, 0.8], [-0.3, 0.4, 0.8], [0.1, -0.5, 0.8]]);
+        let normal = Vec3::new(0.1, -0.2, 1.0).normalize();
+        let images = render(normal, [0.9, 0.5, 0.2], &ls);
+        for robust in [false, true] {
+            let out = photometric_stereo(&images, &[true], &ls, &PsSettings { robust, ..Default::default() }).unwrap();
+            assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5);
+            for (got, want) in out.albedo[0].iter().zip([0.9, 0.5, 0.2]) {
+                assert!((got - want).abs() < 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn robust_mode_ignores_attached_shadows() {
+        let ls = lights(&[[0.0, 0.0, 1.0], [0.7, 0.0, 0.7], [-0.7, 0.0, 0.7], [0.0, 0.7, 0.7], [0.0, -0.7, 0.7], [-0.9, -0.3, 0.3]]);
+        let normal = Vec3::new(0.6, 0.2, 0.8).normalize(); // the last light is behind it
+        let images = render(normal, [0.5; 3], &ls);
+        let plain = photometric_stereo(&images, &[true], &ls, &PsSettings { robust: false, ..Default::default() }).unwrap();
+        let robust = photometric_stereo(&images, &[true], &ls, &PsSettings::default()).unwrap();
+        assert!((Vec3::from(robust.normals[0]) - normal).length() < 1e-5);
+        assert!((Vec3::from(plain.normals[0]) - normal).length() > 1e-2);
+        assert_eq!(robust.used[0], 5);
+    }
+
+    #[test]
+    fn too_few_or_coplanar_lights_are_errors() {
+        let two = lights(&[[0.0, 0.0, 1.0], [0.5, 0.0, 0.8]]);
+        assert!(check_lights(&two).unwrap_err().to_string().contains("at least 3"));
+        let coplanar = lights(&[[0.0, 0.0, 1.0], [0.5, 0.0, 0.8], [-0.5, 0.0, 0.8], [0.3, 0.0, 0.9]]);
+        assert!(check_lights(&coplanar).unwrap_err().to_string().contains("coplanar"));
+    }
+
+    #[test]
+    fn dark_and_masked_pixels_are_flagged() {
+        let ls = lights(&[[0.0, 0.0, 1.0], [0.5, 0.1, 0.8], [-0.3, 0.4, 0.8]]);
+        let images = vec![0.0; 3 * 2 * 3];
+        let out = photometric_stereo(&images, &[true, false], &ls, &PsSettings::default()).unwrap();
+        assert_eq!(out.flags, vec![flag::DARK, flag::MASKED_OUT]);
+    }
+}
