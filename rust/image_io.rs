@@ -30,11 +30,6 @@ impl Image {
         let data = self.data.iter().flat_map(|&v| [v, v, v]).collect();
         Image { channels: 3, data, ..self }
     }
-
-    /// Index and value of the first non-finite sample, if any.
-    pub fn first_non_finite(&self) -> Option<(usize, f32)> {
-        self.data.iter().position(|v| !v.is_finite()).map(|i| (i, self.data[i]))
-    }
 }
 
 /// Reads an OpenEXR file with channels R, G, B (3 channels) or Y (1 channel).
@@ -197,38 +192,37 @@ pub fn read_image_rgb(path: &Path) -> Result<Image> {
 /// Reads a stack of images in parallel into one `(K, H, W, 3)` buffer.
 ///
 /// Every image must have the size of the first and only finite values; the error names
-/// the first file that does not.
+/// the first file that does not. Each image is decoded straight into its slot of the
+/// result, so the peak memory is the result plus one decoded image per thread.
 pub fn read_image_stack(paths: &[PathBuf]) -> Result<(usize, usize, Vec<f32>)> {
-    let images: Vec<Image> = paths.par_iter().map(|p| read_image_rgb(p)).collect::<Result<_>>()?;
-    let Some(first) = images.first() else {
+    let Some(first_path) = paths.first() else {
         return Err(Error::input("paths", "no images given"));
     };
+    let first = read_image_rgb(first_path)?;
     let (width, height) = (first.width, first.height);
-    for (path, image) in paths.iter().zip(&images) {
+    let plane = width * height * 3;
+    let mut data = vec![0.0f32; paths.len() * plane];
+    data[..plane].copy_from_slice(&first.data);
+    drop(first);
+    data.par_chunks_mut(plane).zip(paths).skip(1).try_for_each(|(slot, path)| -> Result<()> {
+        let image = read_image_rgb(path)?;
         if (image.width, image.height) != (width, height) {
             return Err(Error::format(
                 path,
-                format!(
-                    "size {}x{} differs from {} ({}x{})",
-                    image.width,
-                    image.height,
-                    paths[0].display(),
-                    width,
-                    height
-                ),
+                format!("size {}x{} differs from {} ({}x{})", image.width, image.height, first_path.display(), width, height),
             ));
         }
-        if let Some((index, value)) = image.first_non_finite() {
+        slot.copy_from_slice(&image.data);
+        Ok(())
+    })?;
+    for (path, slot) in paths.iter().zip(data.chunks(plane)) {
+        if let Some(index) = slot.iter().position(|v| !v.is_finite()) {
             let pixel = index / 3;
             return Err(Error::format(
                 path,
-                format!("non-finite value {value} at row {}, column {}", pixel / width, pixel % width),
+                format!("non-finite value {} at row {}, column {}", slot[index], pixel / width, pixel % width),
             ));
         }
-    }
-    let mut data = Vec::with_capacity(images.len() * width * height * 3);
-    for image in images {
-        data.extend_from_slice(&image.data);
     }
     Ok((width, height, data))
 }

@@ -1,0 +1,104 @@
+"""Calibrated Lambertian photometric stereo (the Rust core's least-squares fit)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from irtps import _core
+from irtps.errors import IrtpsError
+
+#: Meaning of the values of `PsResult.flags`.
+FLAGS = {0: "fitted", 1: "full fit kept (too few non-coplanar lit observations)", 2: "no light", 3: "outside the mask"}
+
+
+@dataclass
+class PsResult:
+    """Normals and albedo fitted per pixel.
+
+    Attributes
+    ----------
+    normals : numpy.ndarray
+        float32 (H, W, 3) unit normals, 0 outside the mask.
+    albedo : numpy.ndarray
+        float32 (H, W, 3) RGB albedo.
+    flags : numpy.ndarray
+        uint8 (H, W), see `FLAGS`.
+    used : numpy.ndarray
+        uint16 (H, W), observations used per pixel.
+    """
+
+    normals: np.ndarray
+    albedo: np.ndarray
+    flags: np.ndarray
+    used: np.ndarray
+
+
+def photometric_stereo(
+    images: np.ndarray,
+    light_directions: np.ndarray,
+    light_irradiance: np.ndarray,
+    mask: np.ndarray | None = None,
+    *,
+    robust: bool = True,
+    shadow_fraction: float = 0.05,
+    saturation: float | None = None,
+) -> PsResult:
+    """Fit a normal and an RGB albedo per pixel to images under known distant lights.
+
+    Image k holds ``ρ ⊙ E_k (n·l_k) / π`` (the scene contract); each channel is divided by
+    its irradiance, the normal is the least-squares fit ``(LᵀL)⁻¹Lᵀb`` over all three
+    channels and each channel's albedo the least-squares scale along it.
+
+    Parameters
+    ----------
+    images : numpy.ndarray
+        (K, H, W, 3) linear images, one per light.
+    light_directions : numpy.ndarray
+        (K, 3) unit vectors toward the lights (x right, y up, z toward the camera).
+    light_irradiance : numpy.ndarray
+        (K, 3) RGB irradiance of each light.
+    mask : numpy.ndarray, optional
+        (H, W) bool; default every pixel.
+    robust : bool
+        Per pixel, drop observations in shadow (channel sum below `shadow_fraction` of the
+        pixel's brightest) or saturated, and re-solve from the rest when at least 3
+        non-coplanar lights remain (else keep the full fit and flag the pixel).
+    shadow_fraction : float
+        Shadow threshold of the robust mode.
+    saturation : float, optional
+        Raw value at or above which an observation is saturated (robust mode).
+
+    Returns
+    -------
+    PsResult
+
+    Raises
+    ------
+    IrtpsError
+        Fewer than 3 lights, coplanar lights, or shapes that disagree.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> lights = np.array([[0, 0, 1], [0.6, 0, 0.8], [0, 0.6, 0.8], [-0.6, 0, 0.8]])
+    >>> normal = np.array([0.0, 0.6, 0.8])
+    >>> images = (0.5 * np.clip(lights @ normal, 0, None))[:, None, None, None] * np.ones((4, 1, 1, 3))
+    >>> fit = photometric_stereo(images, lights, np.full((4, 3), np.pi))
+    >>> np.round(fit.normals[0, 0], 4).tolist(), np.round(fit.albedo[0, 0], 4).tolist()
+    ([0.0, 0.6, 0.8], [0.5, 0.5, 0.5])
+    """
+    images = np.ascontiguousarray(images, dtype=np.float32)
+    if images.ndim != 4 or images.shape[3] != 3:
+        raise IrtpsError(f"images: expected shape (K, H, W, 3), got {images.shape}")
+    mask = np.ones(images.shape[1:3], bool) if mask is None else np.ascontiguousarray(mask, dtype=bool)
+    directions = np.ascontiguousarray(light_directions, dtype=np.float32)
+    irradiance = np.ascontiguousarray(light_irradiance, dtype=np.float32)
+    if not 0 <= shadow_fraction < 1:
+        raise IrtpsError(f"shadow_fraction: {shadow_fraction} is not in [0, 1)")
+    try:
+        normals, albedo, flags, used = _core.photometric_stereo(images, mask, directions, irradiance, robust, shadow_fraction, saturation)
+    except ValueError as err:
+        raise IrtpsError(str(err)) from None
+    return PsResult(normals=normals, albedo=albedo, flags=flags, used=used)
