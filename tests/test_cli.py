@@ -1,5 +1,6 @@
 """The irtps command line, run as a user would."""
 
+import json
 import shutil
 import subprocess
 import sys
@@ -61,7 +62,43 @@ def test_existing_output_survives_a_failed_run(tmp_path):
 
 
 def test_every_command_has_help_with_examples():
-    for command in ([], ["render"], ["synth"]):
+    for command in ([], ["render"], ["synth"], ["reconstruct"], ["evaluate"]):
         result = subprocess.run([sys.executable, "-m", "irtps.cli", *command, "--help"], capture_output=True, text=True)
         assert result.returncode == 0
         assert "examples:" in result.stdout
+
+
+BALL = Path(__file__).parent / "data" / "diligent_ball_small"
+
+
+def test_reconstruct_and_evaluate_a_diligent_capture(tmp_path, capsys):
+    out = tmp_path / "ball"
+    assert main(["reconstruct", str(BALL), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "reconstructed" in printed and "normal angle" in printed
+    for name in ["normal.exr", "albedo.exr", "height.exr", "mask.png", "mesh.ply", "run.json"]:
+        assert (out / name).is_file(), name
+    run = json.loads((out / "run.json").read_text())
+    assert run["parameters"]["method"] == "ps" and run["parameters"]["robust"] is True
+    assert set(run["timings_s"]) >= {"load", "photometric_stereo", "integration"}
+    assert main(["evaluate", str(out), "--gt", str(BALL), "--json"]) == 0
+    metrics = json.loads(capsys.readouterr().out)
+    assert 0 < metrics["normal_mean_angular_deg"] < 3.5
+    assert metrics["albedo_error"] is None  # DiLiGenT has no albedo ground truth
+
+
+def test_reconstruct_places_a_synthetic_object_on_its_floor(tmp_path, capsys):
+    data = tmp_path / "cap"
+    assert main(["synth", "cap", "--out", str(data), "--size", "32", "--lights", "8", "--bounces", "0", "--environment", "none", "--quiet"]) == 0
+    out = tmp_path / "cap_ps"
+    assert main(["reconstruct", str(data), "--out", str(out), "--integration", "mestimator", "--quiet"]) == 0
+    assert main(["evaluate", str(out), "--gt", str(data), "--json"]) == 0
+    metrics = json.loads(capsys.readouterr().out)
+    assert metrics["normal_mean_angular_deg"] < 2.0
+    assert metrics["height_error"] < 0.1 * 0.22 * 32  # 10% of the cap's height, as reconstructed
+    assert metrics["albedo_error"] < 0.15  # rim pixels are only partly covered by the object
+
+
+def test_evaluate_rejects_a_folder_that_is_not_a_reconstruction(tmp_path, capsys):
+    assert main(["evaluate", str(tmp_path), "--gt", str(BALL)]) == 2
+    assert "normal.exr" in capsys.readouterr().err

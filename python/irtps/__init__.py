@@ -4,6 +4,10 @@ from importlib.metadata import PackageNotFoundError, version
 
 from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object, save_dataset
 from irtps.errors import DatasetError, IrtpsError
+from irtps.evaluate import Metrics, angular_error_deg, evaluate
+from irtps.integrate import integrate_normals, place_height
+from irtps.ps import PsResult, photometric_stereo
+from irtps.reconstruct import Reconstruction, reconstruct, save_reconstruction
 from irtps.render import Rendering, render
 from irtps.scene import Camera, CornellBox, Floor, Light, Scene, load_scene
 from irtps.surface import height_to_normals
@@ -23,14 +27,24 @@ __all__ = [
     "GroundTruth",
     "IrtpsError",
     "Light",
+    "Metrics",
+    "PsResult",
+    "Reconstruction",
     "Rendering",
     "Scene",
     "__version__",
+    "angular_error_deg",
+    "evaluate",
     "height_to_normals",
+    "integrate_normals",
     "load_dataset",
     "load_scene",
     "load_scene_object",
+    "photometric_stereo",
+    "place_height",
+    "reconstruct",
     "render",
     "save_dataset",
+    "save_reconstruction",
     "synthesize",
 ]

@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from irtps.dataset import Dataset, GroundTruth, load_scene_object, save_dataset
+from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object, save_dataset
 from irtps.errors import IrtpsError
+from irtps.evaluate import evaluate, format_metrics
+from irtps.integrate import METHODS as INTEGRATION_METHODS
+from irtps.reconstruct import METHODS, load_reconstruction, reconstruct, save_reconstruction
 from irtps.render import Rendering, render
 from irtps.surface import height_to_normals
 from irtps.synth import SHAPES, synthesize
@@ -68,6 +72,38 @@ def _cmd_synth(args: argparse.Namespace) -> None:
         )
 
 
+def _cmd_reconstruct(args: argparse.Namespace) -> None:
+    start = time.perf_counter()
+    dataset = load_dataset(args.data)
+    loaded = time.perf_counter() - start
+    result = reconstruct(
+        dataset,
+        args.method,
+        robust=args.robust,
+        shadow_fraction=args.shadow_fraction,
+        saturation=args.saturation,
+        integration=args.integration,
+        base_height=args.base_height,
+    )
+    result.timings = {"load": loaded, **result.timings}
+    save_reconstruction(result, args.out, source=str(args.data))
+    if not args.quiet:
+        stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
+        print(f"reconstructed {args.data} ({args.method}; {stages}) -> {args.out}")
+        if dataset.gt is not None:
+            metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=dataset.gt)
+            print(format_metrics(metrics))
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> None:
+    normals, albedo, height, mask = load_reconstruction(args.out)
+    truth = load_dataset(args.gt).gt
+    if truth is None:
+        raise IrtpsError(f"{args.gt}: has no ground truth (gt/ or Normal_gt.mat)")
+    metrics = evaluate(mask=mask, normals=normals, albedo=albedo, height=height, gt=truth)
+    print(json.dumps(metrics.to_dict(), indent=2) if args.json else format_metrics(metrics))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``irtps`` command."""
     parser = argparse.ArgumentParser(
@@ -75,7 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Iterative Ray Tracing Photometric Stereo: shape and colour from photometric-stereo images, "
         "with inter-reflections removed by ray tracing.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        epilog="examples:\n  irtps synth cavity --out cavity\n  irtps render cavity --out cavity_rerendered --samples 512\n\n"
+        epilog="examples:\n  irtps synth cavity --out cavity\n  irtps reconstruct cavity --out cavity_ps\n"
+        "  irtps evaluate cavity_ps --gt cavity\n  irtps render cavity --out cavity_rerendered --samples 512\n\n"
         "Run 'irtps COMMAND --help' for a command's options.",
     )
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -114,6 +151,43 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--floor", action=argparse.BooleanOptionalAction, default=None, help="a floor (default: only with the box)")
     _add_render_options(p, samples=256)
     p.set_defaults(run=_cmd_synth)
+
+    p = commands.add_parser(
+        "reconstruct",
+        help="recover normals, albedo, a height map and a mesh from a data set",
+        description="Reconstruct the object of DATA (contract layout, or DiLiGenT layout, detected) and write OUT: "
+        "normal.exr (R, G, B = nx, ny, nz), albedo.exr, height.exr, mask.png, mesh.ply (the height field with "
+        "per-vertex albedo colour) and run.json (parameters, timings, versions). When DATA has ground truth, "
+        "the errors are printed too. OUT is replaced atomically.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="examples:\n  irtps reconstruct shared/data/diligent/ballPNG --out ball\n"
+        "  irtps reconstruct cavity --out cavity_ps --integration mestimator\n"
+        "  irtps reconstruct capture --out capture_ps --saturation 0.99 --base-height 0",
+    )
+    p.add_argument("data", type=Path, help="data set folder")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--method", choices=METHODS, default="ps", help="reconstruction method (default ps)")
+    p.add_argument("--robust", action=argparse.BooleanOptionalAction, default=True, help="drop shadowed and saturated observations (default on)")
+    p.add_argument("--shadow-fraction", type=float, default=0.05, help="shadow threshold relative to a pixel's brightest (default 0.05)")
+    p.add_argument("--saturation", type=float, default=None, help="raw value at or above which an observation is saturated")
+    p.add_argument("--integration", choices=INTEGRATION_METHODS, default="ls", help="normal integration (default ls)")
+    p.add_argument("--base-height", type=float, default=None, help="height of the object's boundary (default: the floor's)")
+    p.add_argument("--quiet", action="store_true", help="no summary")
+    p.set_defaults(run=_cmd_reconstruct)
+
+    p = commands.add_parser(
+        "evaluate",
+        help="compare a reconstruction with ground truth",
+        description="Print the errors of the reconstruction in OUT against the ground truth of the data set GT "
+        "(gt/ folder, or DiLiGenT's Normal_gt.mat): mean and median angular error, the IRT-PS paper's normal, "
+        "albedo and height errors, and the height error after removing the best constant offset.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="examples:\n  irtps evaluate ball --gt shared/data/diligent/ballPNG\n  irtps evaluate cavity_ps --gt cavity --json",
+    )
+    p.add_argument("out", type=Path, help="reconstruction folder (from irtps reconstruct)")
+    p.add_argument("--gt", type=Path, required=True, help="data set folder with ground truth")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(run=_cmd_evaluate)
     return parser
 
 

@@ -86,8 +86,8 @@ def photometric_stereo(
     >>> normal = np.array([0.0, 0.6, 0.8])
     >>> images = (0.5 * np.clip(lights @ normal, 0, None))[:, None, None, None] * np.ones((4, 1, 1, 3))
     >>> fit = photometric_stereo(images, lights, np.full((4, 3), np.pi))
-    >>> np.round(fit.normals[0, 0], 4).tolist(), np.round(fit.albedo[0, 0], 4).tolist()
-    ([0.0, 0.6, 0.8], [0.5, 0.5, 0.5])
+    >>> print(np.round(fit.normals[0, 0], 4), np.round(fit.albedo[0, 0], 4))
+    [0.  0.6 0.8] [0.5 0.5 0.5]
     """
     images = np.ascontiguousarray(images, dtype=np.float32)
     if images.ndim != 4 or images.shape[3] != 3:

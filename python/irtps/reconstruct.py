@@ -1,0 +1,193 @@
+"""The reconstruction pipeline: photometric stereo, normal integration, height placement."""
+
+from __future__ import annotations
+
+import json
+import platform
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from irtps.atomic import atomic_output_dir
+from irtps.dataset import Dataset
+from irtps.errors import IrtpsError
+from irtps.imageio import write_exr, write_png
+from irtps.integrate import integrate_normals, place_height
+from irtps.mesh import height_field_mesh, write_ply
+from irtps.ps import FLAGS, photometric_stereo
+
+METHODS = ("ps",)
+
+
+@dataclass
+class Reconstruction:
+    """Shape and colour recovered from a data set.
+
+    Attributes
+    ----------
+    normals : numpy.ndarray
+        float32 (H, W, 3) unit normals, 0 outside the mask.
+    albedo : numpy.ndarray
+        float32 (H, W, 3) RGB albedo.
+    height : numpy.ndarray
+        float32 (H, W) heights (world units), 0 outside the mask, placed per contract §6.
+    mask : numpy.ndarray
+        bool (H, W).
+    flags : numpy.ndarray
+        uint8 (H, W) per-pixel photometric-stereo flags (see `irtps.ps.FLAGS`).
+    pixel_size : float
+        World size of a pixel.
+    timings : dict
+        Seconds spent in each stage.
+    parameters : dict
+        The settings used.
+    """
+
+    normals: np.ndarray
+    albedo: np.ndarray
+    height: np.ndarray
+    mask: np.ndarray
+    flags: np.ndarray
+    pixel_size: float
+    timings: dict[str, float] = field(default_factory=dict)
+    parameters: dict = field(default_factory=dict)
+
+
+def reconstruct(
+    dataset: Dataset,
+    method: str = "ps",
+    *,
+    robust: bool = True,
+    shadow_fraction: float = 0.05,
+    saturation: float | None = None,
+    integration: str = "ls",
+    base_height: float | None = None,
+) -> Reconstruction:
+    """Recover normals, albedo and a height map from a data set.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        Images, lights and mask (`irtps.load_dataset`).
+    method : str
+        ``"ps"``: classic calibrated Lambertian photometric stereo.
+    robust, shadow_fraction, saturation
+        As for `irtps.ps.photometric_stereo`.
+    integration : str
+        Normal integration method of `irtps.integrate.integrate_normals`: ``"ls"``,
+        ``"mestimator"``, ``"dct"`` or ``"fc"``.
+    base_height : float, optional
+        Height of the mask boundary's median; default the floor's (0 without a floor).
+
+    Returns
+    -------
+    Reconstruction
+
+    Examples
+    --------
+    >>> from irtps.synth import synthesize
+    >>> data, _ = synthesize("cap", size=24, lights=6, bounces=0, environment="none")
+    >>> result = reconstruct(data)
+    >>> result.normals.shape, sorted(result.timings)
+    ((24, 24, 3), ['integration', 'photometric_stereo'])
+    """
+    if method not in METHODS:
+        raise IrtpsError(f"method: unknown {method!r} (choose from {', '.join(METHODS)})")
+    scene = dataset.scene
+    if base_height is None:
+        base_height = scene.floor.height if scene.floor is not None else 0.0
+    timings = {}
+    start = time.perf_counter()
+    fit = photometric_stereo(
+        dataset.images,
+        scene.light_directions,
+        scene.light_irradiance,
+        dataset.mask,
+        robust=robust,
+        shadow_fraction=shadow_fraction,
+        saturation=saturation,
+    )
+    timings["photometric_stereo"] = time.perf_counter() - start
+    start = time.perf_counter()
+    pixel_size = scene.camera.pixel_size
+    height = integrate_normals(fit.normals, dataset.mask, pixel_size=pixel_size, method=integration)
+    height = place_height(height, dataset.mask, base_height=base_height)
+    timings["integration"] = time.perf_counter() - start
+    parameters = {
+        "method": method,
+        "robust": robust,
+        "shadow_fraction": shadow_fraction,
+        "saturation": saturation,
+        "integration": integration,
+        "base_height": base_height,
+    }
+    return Reconstruction(
+        normals=fit.normals,
+        albedo=fit.albedo,
+        height=np.where(dataset.mask, height, 0).astype(np.float32),
+        mask=dataset.mask,
+        flags=fit.flags,
+        pixel_size=pixel_size,
+        timings=timings,
+        parameters=parameters,
+    )
+
+
+def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str | None = None) -> None:
+    """Write a reconstruction folder atomically.
+
+    Files: ``normal.exr`` (R, G, B = nx, ny, nz), ``albedo.exr``, ``height.exr`` (Y),
+    ``mask.png``, ``mesh.ply`` (binary; the height field with per-vertex albedo colour and
+    normals) and ``run.json`` (parameters, timings, versions, source).
+
+    Parameters
+    ----------
+    result : Reconstruction
+    path : str or pathlib.Path
+        The output folder; replaced only once everything is written.
+    source : str, optional
+        The input data set, recorded in ``run.json``.
+    """
+    from irtps import __version__
+
+    with atomic_output_dir(path) as folder:
+        write_exr(folder / "normal.exr", result.normals)
+        write_exr(folder / "albedo.exr", result.albedo)
+        write_exr(folder / "height.exr", result.height)
+        write_png(folder / "mask.png", result.mask.astype(np.float32), bit_depth=8)
+        vertices, faces, colors, normals = height_field_mesh(result.height, result.mask, result.pixel_size, albedo=result.albedo, normals=result.normals)
+        write_ply(folder / "mesh.ply", vertices, faces, colors=colors, normals=normals)
+        run = {
+            "irtps": __version__,
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+            "source": source,
+            "parameters": result.parameters,
+            "timings_s": result.timings,
+            "flags": {name: int((result.flags[result.mask] == value).sum()) for value, name in FLAGS.items()},
+        }
+        (folder / "run.json").write_text(json.dumps(run, indent=2))
+
+
+def load_reconstruction(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Read the normals, albedo, height and mask of a reconstruction folder.
+
+    Returns
+    -------
+    (normals (H, W, 3), albedo (H, W, 3), height (H, W), mask (H, W) bool)
+    """
+    from irtps.imageio import read_exr, read_mask
+
+    folder = Path(path)
+    normal_path = folder / "normal.exr"
+    if not normal_path.is_file():
+        raise IrtpsError(f"{normal_path}: missing (not a reconstruction folder?)")
+    normals = read_exr(normal_path)
+    albedo = read_exr(folder / "albedo.exr")
+    height = read_exr(folder / "height.exr")
+    height = height if height.ndim == 2 else height[..., 0]
+    mask = read_mask(folder / "mask.png", normals.shape[:2])
+    return normals, albedo, height, mask
+
