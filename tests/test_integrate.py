@@ -364,3 +364,40 @@ def test_tiny_masks_match_direct_least_squares():
         assert np.all(np.isfinite(height)) and abs(height[mask].mean()) < 1e-6
     exact = integrate_normals(normals, mask, pixel_size=1.0 / 24)
     assert relative_rmse(exact, truth, mask) < 0.005
+
+
+def _v_grooves_on_a_disc(size=160):
+    rows, cols = np.mgrid[0:size, 0:size].astype(float)
+    mask = (rows - size / 2) ** 2 + (cols - size / 2) ** 2 < (0.45 * size) ** 2
+    height = 20 + 10 * np.abs(((cols / 10.0) % 2) - 1) + 0.02 * rows
+    return height, mask
+
+
+def test_footprint_integration_keeps_creases_that_least_squares_blunts():
+    from irtps.surface import height_to_normals
+
+    height, mask = _v_grooves_on_a_disc()
+    normals = height_to_normals(height, mask)  # the footprint-mean (central-difference) normals
+
+    def relative_rmse(z):
+        d = (z - height)[mask]
+        return np.sqrt(((d - d.mean()) ** 2).mean()) / np.ptp(height[mask])
+
+    footprint = relative_rmse(integrate_normals(normals, mask, method="footprint"))
+    least_squares = relative_rmse(integrate_normals(normals, mask, method="ls"))
+    assert footprint < 0.005
+    assert footprint < 0.3 * least_squares
+
+
+def test_footprint_integration_of_a_smooth_surface_with_two_parts():
+    from irtps.surface import height_to_normals
+
+    rows, cols = np.mgrid[0:96, 0:96].astype(float)
+    mask = ((rows - 30) ** 2 + (cols - 30) ** 2 < 20**2) | ((rows - 66) ** 2 + (cols - 66) ** 2 < 22**2)
+    height = 5 * np.sin(cols / 9) + 3 * np.cos(rows / 7)
+    z = integrate_normals(height_to_normals(height, mask), mask, method="footprint")
+    labels, count = scipy.ndimage.label(mask)
+    assert count == 2
+    for part in (1, 2):
+        d = (z - height)[labels == part]
+        assert np.sqrt(((d - d.mean()) ** 2).mean()) < 0.005 * np.ptp(height[mask])
