@@ -14,6 +14,7 @@ from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object,
 from irtps.errors import IrtpsError
 from irtps.evaluate import evaluate, format_metrics
 from irtps.integrate import METHODS as INTEGRATION_METHODS
+from irtps.interreflection import UPDATES
 from irtps.reconstruct import METHODS, load_reconstruction, reconstruct, save_reconstruction
 from irtps.render import Rendering, render
 from irtps.surface import height_to_normals
@@ -84,12 +85,23 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
         saturation=args.saturation,
         integration=args.integration,
         base_height=args.base_height,
+        bounces=args.bounces,
+        iterations=args.iterations,
+        samples=args.samples,
+        seed=args.seed,
+        relaxation=args.relaxation,
+        update=args.update,
+        progress=not args.quiet,
     )
     result.timings = {"load": loaded, **result.timings}
     save_reconstruction(result, args.out, source=str(args.data))
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
         print(f"reconstructed {args.data} ({args.method}; {stages}) -> {args.out}")
+        for step in result.history:
+            change = "" if step.height_change is None else f"  height change {step.height_change:.4f}"
+            error = "" if step.metrics is None or step.metrics["normal_mean_angular_deg"] is None else f"  normal error {step.metrics['normal_mean_angular_deg']:.2f} deg"
+            print(f"  pass {step.index}:{error}{change}")
         if dataset.gt is not None:
             metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=dataset.gt)
             print(format_metrics(metrics))
@@ -157,10 +169,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="recover normals, albedo, a height map and a mesh from a data set",
         description="Reconstruct the object of DATA (contract layout, or DiLiGenT layout, detected) and write OUT: "
         "normal.exr (R, G, B = nx, ny, nz), albedo.exr, height.exr, mask.png, mesh.ply (the height field with "
-        "per-vertex albedo colour) and run.json (parameters, timings, versions). When DATA has ground truth, "
-        "the errors are printed too. OUT is replaced atomically.",
+        "per-vertex albedo colour) and run.json (parameters, timings, versions); with --method irtps also "
+        "indirect/NNN.exr (the estimated inter-reflected light) and the per-iteration history in run.json. "
+        "When DATA has ground truth, the errors are printed too. OUT is replaced atomically.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  irtps reconstruct shared/data/diligent/ballPNG --out ball\n"
+        "  irtps reconstruct shared/data/mitsuba/cap_cornell --out cap_irtps --method irtps --bounces 3\n"
         "  irtps reconstruct cavity --out cavity_ps --integration mestimator\n"
         "  irtps reconstruct capture --out capture_ps --saturation 0.99 --base-height 0",
     )
@@ -170,9 +184,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robust", action=argparse.BooleanOptionalAction, default=True, help="drop shadowed and saturated observations (default on)")
     p.add_argument("--shadow-fraction", type=float, default=0.05, help="shadow threshold relative to a pixel's brightest (default 0.05)")
     p.add_argument("--saturation", type=float, default=None, help="raw value at or above which an observation is saturated")
-    p.add_argument("--integration", choices=INTEGRATION_METHODS, default="ls", help="normal integration (default ls)")
+    p.add_argument("--integration", choices=INTEGRATION_METHODS, default=None, help="normal integration (default ls for ps, footprint for irtps)")
     p.add_argument("--base-height", type=float, default=None, help="height of the object's boundary (default: the floor's)")
-    p.add_argument("--quiet", action="store_true", help="no summary")
+    irt = p.add_argument_group("IRT-PS (--method irtps)")
+    irt.add_argument("--bounces", type=int, default=3, help="inter-reflection bounces estimated (default 3)")
+    irt.add_argument("--iterations", type=int, default=8, help="largest number of corrections (default 8)")
+    irt.add_argument("--samples", type=int, default=256, help="camera paths per pixel per estimate (default 256)")
+    irt.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    irt.add_argument("--relaxation", type=float, default=1.0, help="fraction of each new estimate taken (default 1)")
+    irt.add_argument("--update", choices=UPDATES, default="original", help="A0 - E (original, default) or the paper's A_t - E_t (previous)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(run=_cmd_reconstruct)
 
     p = commands.add_parser(

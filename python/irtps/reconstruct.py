@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import platform
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -15,10 +15,15 @@ from irtps.dataset import Dataset
 from irtps.errors import IrtpsError
 from irtps.imageio import write_exr, write_png
 from irtps.integrate import integrate_normals, place_height
+from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_ply
 from irtps.ps import FLAGS, photometric_stereo
 
-METHODS = ("ps",)
+METHODS = ("ps", "irtps")
+
+#: Default normal integration per method: IRT-PS renders the surface again, so it needs
+#: creases kept sharp.
+DEFAULT_INTEGRATION = {"ps": "ls", "irtps": "footprint"}
 
 
 @dataclass
@@ -43,6 +48,11 @@ class Reconstruction:
         Seconds spent in each stage.
     parameters : dict
         The settings used.
+    indirect : numpy.ndarray or None
+        IRT-PS: float32 (K, H, W, 3), the last estimate of the inter-reflected light.
+    history : list of Iteration
+        IRT-PS: one entry per pass (height change, timings, errors when ground truth is
+        present); empty for classic photometric stereo.
     """
 
     normals: np.ndarray
@@ -53,6 +63,8 @@ class Reconstruction:
     pixel_size: float
     timings: dict[str, float] = field(default_factory=dict)
     parameters: dict = field(default_factory=dict)
+    indirect: np.ndarray | None = None
+    history: list[Iteration] = field(default_factory=list)
 
 
 def reconstruct(
@@ -62,8 +74,15 @@ def reconstruct(
     robust: bool = True,
     shadow_fraction: float = 0.05,
     saturation: float | None = None,
-    integration: str = "ls",
+    integration: str | None = None,
     base_height: float | None = None,
+    bounces: int = 3,
+    iterations: int = 8,
+    samples: int = 256,
+    seed: int = 0,
+    relaxation: float = 1.0,
+    update: str = "original",
+    progress: bool = False,
 ) -> Reconstruction:
     """Recover normals, albedo and a height map from a data set.
 
@@ -72,14 +91,18 @@ def reconstruct(
     dataset : Dataset
         Images, lights and mask (`irtps.load_dataset`).
     method : str
-        ``"ps"``: classic calibrated Lambertian photometric stereo.
+        ``"ps"``: classic calibrated Lambertian photometric stereo; ``"irtps"``: the same,
+        iterated with the inter-reflections estimated by ray tracing and removed
+        (`irtps.interreflection.remove_interreflections`).
     robust, shadow_fraction, saturation
         As for `irtps.ps.photometric_stereo`.
-    integration : str
-        Normal integration method of `irtps.integrate.integrate_normals`: ``"ls"``,
-        ``"mestimator"``, ``"dct"`` or ``"fc"``.
+    integration : str, optional
+        Normal integration method of `irtps.integrate.integrate_normals`; default
+        ``"ls"`` for ``"ps"`` and ``"footprint"`` for ``"irtps"``.
     base_height : float, optional
         Height of the mask boundary's median; default the floor's (0 without a floor).
+    bounces, iterations, samples, seed, relaxation, update, progress
+        IRT-PS only, as for `irtps.interreflection.remove_interreflections`.
 
     Returns
     -------
@@ -98,7 +121,48 @@ def reconstruct(
     scene = dataset.scene
     if base_height is None:
         base_height = scene.floor.height if scene.floor is not None else 0.0
+    integration = DEFAULT_INTEGRATION[method] if integration is None else integration
+    parameters = {
+        "method": method,
+        "robust": robust,
+        "shadow_fraction": shadow_fraction,
+        "saturation": saturation,
+        "integration": integration,
+        "base_height": base_height,
+    }
+    pixel_size = scene.camera.pixel_size
     timings = {}
+    if method == "irtps":
+        parameters.update(bounces=bounces, iterations=iterations, samples=samples, seed=seed, relaxation=relaxation, update=update)
+        start = time.perf_counter()
+        loop = remove_interreflections(
+            dataset,
+            bounces=bounces,
+            iterations=iterations,
+            samples=samples,
+            seed=seed,
+            relaxation=relaxation,
+            update=update,
+            integration=integration,
+            robust=robust,
+            shadow_fraction=shadow_fraction,
+            saturation=saturation,
+            base_height=base_height,
+            progress=progress,
+        )
+        timings["irtps"] = time.perf_counter() - start
+        return Reconstruction(
+            normals=loop.fit.normals,
+            albedo=loop.fit.albedo,
+            height=loop.height,
+            mask=dataset.mask,
+            flags=loop.fit.flags,
+            pixel_size=pixel_size,
+            timings=timings,
+            parameters=parameters,
+            indirect=loop.indirect,
+            history=loop.history,
+        )
     start = time.perf_counter()
     fit = photometric_stereo(
         dataset.images,
@@ -111,18 +175,9 @@ def reconstruct(
     )
     timings["photometric_stereo"] = time.perf_counter() - start
     start = time.perf_counter()
-    pixel_size = scene.camera.pixel_size
     height = integrate_normals(fit.normals, dataset.mask, pixel_size=pixel_size, method=integration)
     height = place_height(height, dataset.mask, base_height=base_height)
     timings["integration"] = time.perf_counter() - start
-    parameters = {
-        "method": method,
-        "robust": robust,
-        "shadow_fraction": shadow_fraction,
-        "saturation": saturation,
-        "integration": integration,
-        "base_height": base_height,
-    }
     return Reconstruction(
         normals=fit.normals,
         albedo=fit.albedo,
@@ -140,7 +195,8 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
 
     Files: ``normal.exr`` (R, G, B = nx, ny, nz), ``albedo.exr``, ``height.exr`` (Y),
     ``mask.png``, ``mesh.ply`` (binary; the height field with per-vertex albedo colour and
-    normals) and ``run.json`` (parameters, timings, versions, source).
+    normals), ``run.json`` (parameters, timings, versions, source, IRT-PS history) and, for
+    IRT-PS, ``indirect/NNN.exr`` (the last estimate of each image's inter-reflected light).
 
     Parameters
     ----------
@@ -167,7 +223,12 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             "parameters": result.parameters,
             "timings_s": result.timings,
             "flags": {name: int((result.flags[result.mask] == value).sum()) for value, name in FLAGS.items()},
+            "history": [asdict(step) for step in result.history],
         }
+        if result.indirect is not None:
+            (folder / "indirect").mkdir()
+            for k, image in enumerate(result.indirect):
+                write_exr(folder / "indirect" / f"{k:03d}.exr", image)
         (folder / "run.json").write_text(json.dumps(run, indent=2))
 
 

@@ -115,7 +115,8 @@ def render(
         Camera paths per pixel for the bounces.
     direct_samples : int, optional
         Footprint samples per pixel for the direct image; by default
-        ``min(samples, 64)`` (stratified, with exact shadow rays).
+        ``min(samples, 64)`` (stratified, with exact shadow rays); 0 skips the direct image
+        (left at 0) when only the bounces are wanted.
     seed : int
         Seed of every random choice.
     progress : bool
@@ -142,8 +143,8 @@ def render(
     if samples < 1:
         raise IrtpsError(f"samples: {samples} must be at least 1")
     direct_samples = min(samples, DEFAULT_DIRECT_SAMPLES) if direct_samples is None else direct_samples
-    if direct_samples < 1:
-        raise IrtpsError(f"direct_samples: {direct_samples} must be at least 1")
+    if direct_samples < 0 or (direct_samples == 0 and bounces == 0):
+        raise IrtpsError(f"direct_samples: {direct_samples} must be at least 1 (or 0 with bounces)")
     renderer = make_renderer(scene, height, albedo, mask)
     rows, cols = scene.camera.height, scene.camera.width
     out = np.empty((bounces + 1, len(scene.lights), rows, cols, 3), dtype=np.float32)

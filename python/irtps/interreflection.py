@@ -1,0 +1,164 @@
+"""IRT-PS: remove inter-reflections by ray tracing the recovered surface, and iterate.
+
+Stage 0 is the input images A₀. Each iteration then fits photometric stereo to the current
+images, integrates the normals into a height map, places it in its known surroundings,
+renders the light that reaches the camera after 1..r bounces (every path serves all K
+lights), and subtracts that indirect estimate from the images.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from tqdm import tqdm
+
+from irtps.dataset import Dataset
+from irtps.errors import IrtpsError
+from irtps.evaluate import evaluate
+from irtps.integrate import integrate_normals, place_height
+from irtps.ps import PsResult, photometric_stereo
+from irtps.render import render
+
+#: Ways to form the corrected images: from the input (A₀ − E) or from the previous ones
+#: (the paper's literal Aₜ₊₁ = Aₜ − Eₜ).
+UPDATES = ("original", "previous")
+
+
+@dataclass
+class Iteration:
+    """What one pass of the loop measured.
+
+    Attributes
+    ----------
+    index : int
+        0 is classic photometric stereo on the input images.
+    height_change : float or None
+        Mean absolute change of the height map from the previous pass (world units).
+    timings : dict
+        Seconds per stage.
+    metrics : dict or None
+        Errors against ground truth (`irtps.evaluate.Metrics.to_dict`), when present.
+    """
+
+    index: int
+    height_change: float | None
+    timings: dict[str, float] = field(default_factory=dict)
+    metrics: dict | None = None
+
+
+@dataclass
+class InterreflectionResult:
+    """The last pass's fit and height, the last indirect estimate, and the history."""
+
+    fit: PsResult
+    height: np.ndarray
+    indirect: np.ndarray | None
+    history: list[Iteration]
+
+
+def remove_interreflections(
+    dataset: Dataset,
+    *,
+    bounces: int = 3,
+    iterations: int = 8,
+    samples: int = 256,
+    seed: int = 0,
+    tolerance: float | None = None,
+    relaxation: float = 1.0,
+    update: str = "original",
+    integration: str = "footprint",
+    robust: bool = True,
+    shadow_fraction: float = 0.05,
+    saturation: float | None = None,
+    base_height: float | None = None,
+    progress: bool = False,
+) -> InterreflectionResult:
+    """Run the IRT-PS loop on a data set.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        Images, lights, mask and the known surroundings (floor, Cornell box) of the scene.
+    bounces : int
+        Number r of inter-reflection bounces estimated (1, 2 or 3 in the paper).
+    iterations : int
+        Largest number of corrections.
+    samples : int
+        Camera paths per pixel of each indirect estimate.
+    seed : int
+        Seed of the first estimate; pass t uses ``seed + t``.
+    tolerance : float, optional
+        Stop when the mean absolute height change falls below it; default 0.002 pixel sizes.
+    relaxation : float
+        Fraction of each new indirect estimate taken (1 takes it whole; below 1 damps the
+        oscillation that very bright surfaces can cause).
+    update : str
+        ``"original"``: Aₜ₊₁ = A₀ − Eₜ (default); ``"previous"``: the paper's literal
+        Aₜ₊₁ = Aₜ − Eₜ. Corrected images are kept non-negative.
+    integration : str
+        Normal integration method; ``"footprint"`` (default) keeps creases, which keeps the
+        rendered concavities as deep as the real ones.
+    robust, shadow_fraction, saturation
+        As for `irtps.ps.photometric_stereo`.
+    base_height : float, optional
+        Height of the object's boundary; default the floor's (0 without a floor).
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    InterreflectionResult
+    """
+    if bounces < 1:
+        raise IrtpsError(f"bounces: {bounces} must be at least 1")
+    if iterations < 0:
+        raise IrtpsError(f"iterations: {iterations} is negative")
+    if not 0 < relaxation <= 1:
+        raise IrtpsError(f"relaxation: {relaxation} is not in (0, 1]")
+    if update not in UPDATES:
+        raise IrtpsError(f"update: unknown {update!r} (choose from {', '.join(UPDATES)})")
+    scene, mask = dataset.scene, dataset.mask
+    pixel_size = scene.camera.pixel_size
+    tolerance = 0.002 * pixel_size if tolerance is None else tolerance
+    if base_height is None:
+        base_height = scene.floor.height if scene.floor is not None else 0.0
+    original = dataset.images
+    images = original
+    indirect = None
+    previous_height = None
+    history: list[Iteration] = []
+    with tqdm(total=iterations + 1, desc="IRT-PS", unit="pass", disable=not progress, leave=False) as bar:
+        for index in range(iterations + 1):
+            timings = {}
+            start = time.perf_counter()
+            fit = photometric_stereo(images, scene.light_directions, scene.light_irradiance, mask, robust=robust, shadow_fraction=shadow_fraction, saturation=saturation)
+            timings["photometric_stereo"] = time.perf_counter() - start
+            start = time.perf_counter()
+            height = place_height(integrate_normals(fit.normals, mask, pixel_size=pixel_size, method=integration), mask, base_height=base_height)
+            height = np.where(mask, height, 0).astype(np.float32)
+            timings["integration"] = time.perf_counter() - start
+            change = None if previous_height is None else float(np.abs(height - previous_height)[mask].mean())
+            metrics = None
+            if dataset.gt is not None:
+                metrics = evaluate(mask=mask, normals=fit.normals, albedo=fit.albedo, height=height, gt=dataset.gt).to_dict()
+            record = Iteration(index=index, height_change=change, timings=timings, metrics=metrics)
+            history.append(record)
+            bar.update(1)
+            if metrics is not None and metrics.get("normal_mean_angular_deg") is not None:
+                bar.set_postfix(error=f"{metrics['normal_mean_angular_deg']:.2f}°", refresh=False)
+            if index == iterations or (change is not None and change < tolerance):
+                break
+            start = time.perf_counter()
+            albedo = np.clip(fit.albedo, 0.0, 1.0)
+            estimate = render(scene, height, albedo, mask, bounces=bounces, samples=samples, direct_samples=0, seed=seed + index).indirect
+            timings["indirect_estimate"] = time.perf_counter() - start
+            if update == "original":
+                indirect = estimate if indirect is None else indirect + relaxation * (estimate - indirect)
+                images = np.maximum(original - indirect, 0.0)
+            else:
+                indirect = estimate
+                images = np.maximum(images - relaxation * estimate, 0.0)
+            previous_height = height
+    return InterreflectionResult(fit=fit, height=height, indirect=indirect, history=history)

@@ -1,0 +1,58 @@
+"""IRT-PS: the loop removes inter-reflections where there are some and changes nothing else."""
+
+import json
+
+import numpy as np
+import pytest
+
+import irtps
+from irtps.cli import main
+from irtps.errors import IrtpsError
+from irtps.interreflection import remove_interreflections
+
+
+@pytest.fixture(scope="module")
+def grooves():
+    data, _ = irtps.synthesize("grooves", size=40, lights=10, environment="none", bounces=4, samples=128, seed=4)
+    return data
+
+
+def _error(result):
+    return result.history[-1].metrics["normal_mean_angular_deg"]
+
+
+def test_irtps_removes_most_of_the_inter_reflection_error(grooves):
+    floor = irtps.evaluate(mask=grooves.mask, normals=irtps.photometric_stereo(grooves.gt.direct, grooves.scene.light_directions, grooves.scene.light_irradiance, grooves.mask).normals, gt=grooves.gt).normal_mean_angular_deg
+    result = remove_interreflections(grooves, bounces=3, iterations=4, samples=128)
+    classic = result.history[0].metrics["normal_mean_angular_deg"]
+    assert classic > floor + 2.0  # the scene has strong inter-reflection
+    closed = (classic - _error(result)) / (classic - floor)
+    assert closed > 0.6
+    changes = [step.height_change for step in result.history[1:]]
+    assert changes[-1] < changes[0]  # converging
+    assert result.indirect.shape == grooves.images.shape and (result.indirect >= 0).all()
+
+
+def test_irtps_leaves_a_scene_without_inter_reflection_alone():
+    data, _ = irtps.synthesize("cap", size=32, lights=8, environment="none", floor=False, bounces=0, seed=1)
+    result = remove_interreflections(data, bounces=3, iterations=2, samples=32)
+    assert abs(_error(result) - result.history[0].metrics["normal_mean_angular_deg"]) <= 0.1
+    assert np.abs(result.indirect).max() == 0.0
+
+
+def test_reconstruct_cli_writes_indirect_images_and_history(tmp_path, grooves):
+    data = tmp_path / "grooves"
+    irtps.save_dataset(grooves, data)
+    out = tmp_path / "out"
+    assert main(["reconstruct", str(data), "--out", str(out), "--method", "irtps", "--iterations", "2", "--samples", "32", "--quiet"]) == 0
+    assert sorted(p.name for p in (out / "indirect").iterdir()) == [f"{k:03d}.exr" for k in range(10)]
+    run = json.loads((out / "run.json").read_text())
+    assert run["parameters"]["method"] == "irtps" and run["parameters"]["integration"] == "footprint"
+    assert [step["index"] for step in run["history"]] == [0, 1, 2]
+    assert run["history"][0]["metrics"]["normal_mean_angular_deg"] > run["history"][-1]["metrics"]["normal_mean_angular_deg"]
+
+
+@pytest.mark.parametrize("argument, value", [("bounces", 0), ("relaxation", 1.5), ("update", "sideways"), ("iterations", -1)])
+def test_bad_settings_are_named(grooves, argument, value):
+    with pytest.raises(IrtpsError, match=argument):
+        remove_interreflections(grooves, **{argument: value})
