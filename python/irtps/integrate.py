@@ -25,7 +25,6 @@ import numpy as np
 import scipy.fft
 import scipy.ndimage
 import scipy.sparse
-import scipy.sparse.linalg
 
 from irtps.errors import IrtpsError
 
@@ -461,8 +460,6 @@ _FOOTPRINT_COUPLING = 0.05
 
 def _integrate_footprint(mask, gc, gr, tolerance):
     """Least squares on central differences (one-sided at the mask edge), weakly coupled."""
-    import pyamg
-
     index = np.full(mask.shape, -1, dtype=np.int64)
     n = int(mask.sum())
     index[mask] = np.arange(n)
@@ -521,9 +518,7 @@ def _integrate_footprint(mask, gc, gr, tolerance):
     rhs = a_free.T @ b
     z = np.zeros(n)
     if normal.shape[0] > 0:
-        preconditioner = pyamg.ruge_stuben_solver(normal, max_coarse=500).aspreconditioner()
-        solution, _ = scipy.sparse.linalg.cg(normal, rhs, rtol=tolerance, maxiter=1000, M=preconditioner)
-        z[free] = solution
+        z[free], _, _ = _pcg(normal, rhs, _AmgPreconditioner(normal), np.zeros(normal.shape[0]), tolerance)
     means = np.bincount(component, z, components) / np.bincount(component, minlength=components)
     z -= means[component]
     out = np.zeros(mask.shape, dtype=np.float32)
