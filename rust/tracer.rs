@@ -37,6 +37,8 @@ pub struct Tracer {
     planes: Vec<(Vec3A, Vec3A, usize)>,
     /// Number of mesh triangles.
     triangle_count: usize,
+    /// BVH position of the point placed beyond the bounds (see [`Tracer::new`]).
+    bounds_guard: usize,
 }
 
 impl Tracer {
@@ -62,12 +64,34 @@ impl Tracer {
             .collect();
         let triangle_count = mesh.triangles.len();
         if tris.is_empty() {
-            return Tracer { bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), planes, triangle_count };
+            return Tracer { bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), planes, triangle_count, bounds_guard: usize::MAX };
         }
-        let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut Duration::default());
-        let mesh_index = bvh.primitive_indices.iter().map(|&i| in_bvh[i as usize]).collect();
-        let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&tris[i as usize])).collect();
-        Tracer { bvh, triangles, mesh_index, planes, triangle_count }
+        // obvhs's Morton code wraps a coordinate lying exactly on the build bounds' maximum
+        // to 0 (e.g. the skirt on the +x and +y sides), which spoils the BVH (2x the nodes
+        // visited). A degenerate point beyond the maximum keeps every real triangle inside;
+        // traversal skips it.
+        let (lo, hi) = tris.iter().fold((Vec3A::INFINITY, Vec3A::NEG_INFINITY), |(lo, hi), t| {
+            (lo.min(t.v0).min(t.v1).min(t.v2), hi.max(t.v0).max(t.v1).max(t.v2))
+        });
+        let guard = hi + (hi - lo).max(Vec3A::ONE) * 0.01;
+        let guard_index = tris.len() as u32;
+        let mut build = tris.clone();
+        build.push(Triangle { v0: guard, v1: guard, v2: guard });
+        let bvh = build_cwbvh_from_tris(&build, BvhBuildParams::very_fast_build(), &mut Duration::default());
+        let bounds_guard = bvh.primitive_indices.iter().position(|&i| i == guard_index).expect("the guard is in the BVH");
+        let mesh_index = bvh.primitive_indices.iter().map(|&i| in_bvh.get(i as usize).copied().unwrap_or(u32::MAX)).collect();
+        let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&build[i as usize])).collect();
+        Tracer { bvh, triangles, mesh_index, planes, triangle_count, bounds_guard }
+    }
+
+    /// Distance to BVH primitive `id` along `ray` (infinite for the bounds guard).
+    #[inline(always)]
+    fn intersect(&self, ray: &Ray, id: usize) -> f32 {
+        if id == self.bounds_guard {
+            f32::INFINITY
+        } else {
+            self.triangles[id].intersect(ray)
+        }
     }
 
     /// Number of triangles.
@@ -101,7 +125,7 @@ impl Tracer {
         if !self.triangles.is_empty() {
             let ray = make_ray(origin, direction, t_max);
             let mut hit = RayHit::none();
-            if self.bvh.ray_traverse(ray, &mut hit, |r, id| self.triangles[id].intersect(r)) {
+            if self.bvh.ray_traverse(ray, &mut hit, |r, id| self.intersect(r, id)) {
                 let id = hit.primitive_id as usize;
                 let uv = self.triangles[id].compute_barycentric(&ray);
                 best = Some(Hit { triangle: self.mesh_index[id] as usize, t: hit.t, u: uv.x, v: uv.y });
@@ -125,7 +149,7 @@ impl Tracer {
             return false;
         }
         let ray = make_ray(origin, direction, t_max);
-        !self.bvh.ray_traverse_miss(ray, |r, id| self.triangles[id].intersect(r))
+        !self.bvh.ray_traverse_miss(ray, |r, id| self.intersect(r, id))
     }
 }
 
@@ -166,6 +190,16 @@ mod tests {
         assert!((p - vec3a(0.5, 0.25, 0.0)).length() < 1e-6, "{p:?}");
         let albedo = mesh.albedo_at(0, hit.u, hit.v);
         assert!((albedo[1] - 0.25).abs() < 1e-6 && (albedo[2] - 0.125).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_bounds_guard_is_never_hit() {
+        let tracer = Tracer::new(&one_triangle());
+        // The guard lies just beyond the maximum corner (2, 2, 0) of the triangle's bounds.
+        let origin = vec3a(-1.0, -1.0, -1.0);
+        let toward_guard = (vec3a(2.03, 2.03, 0.01) - origin).normalize();
+        assert!(tracer.closest_hit(origin, toward_guard, f32::INFINITY).is_none());
+        assert!(!tracer.occluded(origin, toward_guard, f32::INFINITY));
     }
 
     #[test]
