@@ -1,0 +1,67 @@
+"""The paper's comparison table and the demo, run as a user would."""
+
+import json
+
+import pytest
+
+import irtps
+from irtps.cli import main
+from irtps.table import ROWS, comparison_table, format_table
+
+
+@pytest.fixture(scope="module")
+def two_scenes(tmp_path_factory):
+    root = tmp_path_factory.mktemp("scenes")
+    folders = []
+    for shape, seed in (("cap", 1), ("relief", 2)):
+        data, _ = irtps.synthesize(shape, size=24, lights=8, environment="cornell", bounces=3, samples=32, seed=seed)
+        irtps.save_dataset(data, root / shape)
+        folders.append(root / shape)
+    return folders
+
+
+def test_table_has_the_papers_layout_and_marks_the_best(two_scenes, tmp_path, capsys):
+    out = tmp_path / "table"
+    assert main(["table", *map(str, two_scenes), "--out", str(out), "--bounces", "1", "3", "--iterations", "2", "--samples", "32", "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "| **cap** | PS | IRTPSr1 | IRTPSr3 |" in printed
+    assert "| **Overall** | PS | IRTPSr1 | IRTPSr3 |" in printed
+    assert (out / "table.md").read_text() in printed
+    table = json.loads((out / "table.json").read_text())
+    assert table["methods"] == ["PS", "IRTPSr1", "IRTPSr3"]
+    assert set(table["datasets"]) == {"cap", "relief"}
+    for key in table["rows"]:
+        values = [table["datasets"][name]["PS"][key] for name in ("cap", "relief")]
+        if None not in values:
+            assert table["overall"]["PS"][key] == pytest.approx(sum(values) / 2)
+    for label, _ in ROWS:
+        row = next(line for line in printed.splitlines() if line.startswith(f"| {label} |"))
+        assert row.count("**") == 2  # exactly one best value per row
+
+
+def test_irtps_beats_classic_ps_in_a_cornell_box(two_scenes):
+    data = irtps.load_dataset(two_scenes[0])
+    table = comparison_table([("cap", data)], bounces=(3,), iterations=3, samples=64)
+    ps, irt = table["datasets"]["cap"]["PS"], table["datasets"]["cap"]["IRTPSr3"]
+    assert irt["normal_mean_angular_deg"] < 0.7 * ps["normal_mean_angular_deg"]
+    assert irt["height_error_aligned"] < ps["height_error_aligned"]
+    assert format_table(table).count("| **cap** |") == 1
+
+
+def test_demo_writes_everything_it_announces(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--size", "24", "--samples", "32", "--iterations", "2", "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "| **cap_cornell** | PS | IRTPSr1 | IRTPSr2 | IRTPSr3 |" in printed and str(out) in printed
+    assert irtps.load_dataset(out / "data").gt is not None
+    for method in ("PS", "IRTPSr1", "IRTPSr2", "IRTPSr3"):
+        assert (out / "cap_cornell" / method / "mesh.ply").is_file()
+    assert (out / "table.md").is_file() and (out / "table.json").is_file()
+
+
+def test_table_needs_ground_truth(tmp_path, capsys):
+    data, _ = irtps.synthesize("cap", size=16, lights=4, bounces=0, environment="none")
+    data.gt = None
+    irtps.save_dataset(data, tmp_path / "nogt")
+    assert main(["table", str(tmp_path / "nogt"), "--quiet"]) == 2
+    assert "ground truth" in capsys.readouterr().err
