@@ -170,13 +170,15 @@ impl Renderer {
         self.inner.light_count()
     }
 
-    /// Renders rows `row_start..row_end`: float32 (B+1, K, rows, W, 3), index 0 the direct
-    /// image, index b the b-th inter-reflection bounce.
-    #[pyo3(signature = (row_start, row_end, bounces, samples, direct_samples, seed))]
-    fn render_rows<'py>(&self, py: Python<'py>, row_start: usize, row_end: usize, bounces: usize, samples: usize, direct_samples: usize, seed: u64) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-        let settings = RenderSettings { bounces, samples, direct_samples, seed };
+    /// Renders rows `row_start..row_end`: float32 (P, K, rows, W, 3) whose planes are the
+    /// direct image (when `direct_samples` > 0), then each inter-reflection bounce
+    /// (`split_bounces`) or their sum.
+    #[pyo3(signature = (row_start, row_end, bounces, samples, direct_samples, seed, split_bounces=true))]
+    #[allow(clippy::too_many_arguments)]
+    fn render_rows<'py>(&self, py: Python<'py>, row_start: usize, row_end: usize, bounces: usize, samples: usize, direct_samples: usize, seed: u64, split_bounces: bool) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let settings = RenderSettings { bounces, samples, direct_samples, seed, split_bounces };
         let data = py.detach(|| self.inner.render_rows(row_start..row_end, &settings)).map_err(to_py)?;
-        let shape = [bounces + 1, self.inner.light_count(), row_end - row_start, self.inner.camera().width, 3];
+        let shape = [settings.planes(), self.inner.light_count(), row_end - row_start, self.inner.camera().width, 3];
         let array = Array::from_shape_vec(IxDyn(&shape), data).map_err(|e| PyValueError::new_err(e.to_string()))?;
         Ok(array.into_pyarray(py))
     }

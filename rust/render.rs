@@ -30,6 +30,22 @@ pub struct RenderSettings {
     pub direct_samples: usize,
     /// Seed of every random choice.
     pub seed: u64,
+    /// One image per bounce (true), or all the bounces summed into one (false).
+    pub split_bounces: bool,
+}
+
+impl RenderSettings {
+    /// Number of image planes per light: the direct image when it is rendered, then each
+    /// bounce or their sum.
+    pub fn planes(&self) -> usize {
+        usize::from(self.direct_samples > 0) + if self.split_bounces { self.bounces } else { self.bounces.min(1) }
+    }
+
+    /// Plane of bounce `b` (1-based) in the output.
+    #[inline]
+    fn bounce_plane(&self, b: usize) -> usize {
+        usize::from(self.direct_samples > 0) + if self.split_bounces { b - 1 } else { 0 }
+    }
 }
 
 /// A scene made ready for rendering: geometry, BVH and light cache.
@@ -81,20 +97,21 @@ impl Renderer {
         self.cache.light_count()
     }
 
-    /// Renders image rows `rows`. The result is laid out `(B+1, K, rows, W, 3)`: index 0 of
-    /// the first axis is the direct image, index b the b-th bounce.
+    /// Renders image rows `rows`. The result is laid out `(P, K, rows, W, 3)` with the P
+    /// planes of [`RenderSettings::planes`]: the direct image first when it is rendered, then
+    /// bounce 1 … B (or their sum when the bounces are not split).
     pub fn render_rows(&self, rows: Range<usize>, settings: &RenderSettings) -> Result<Vec<f32>> {
         self.check(&rows, settings)?;
         let (w, k_count) = (self.camera.width, self.light_count());
-        let stride = (settings.bounces + 1) * k_count * 3;
+        let stride = settings.planes() * k_count * 3;
         let row_count = rows.len();
         let mut per_pixel = vec![0.0f32; row_count * w * stride];
         per_pixel.par_chunks_mut(stride).enumerate().for_each_init(
             || vec![[0.0f32; 3]; k_count],
             |scratch, (p, acc)| self.render_pixel(rows.start + p / w, p % w, settings, acc, scratch),
         );
-        // Transpose pixel-major (pixel, b, k, c) to image-major (b, k, pixel, c).
-        let planes = (settings.bounces + 1) * k_count;
+        // Transpose pixel-major (pixel, plane, k, c) to image-major (plane, k, pixel, c).
+        let planes = settings.planes() * k_count;
         let plane_len = row_count * w * 3;
         let mut out = vec![0.0f32; planes * plane_len];
         out.par_chunks_mut(plane_len).enumerate().for_each(|(plane, dst)| {
@@ -118,7 +135,7 @@ impl Renderer {
         Ok(())
     }
 
-    /// Accumulates one pixel into `acc` (layout `(B+1, K, 3)`), already averaged.
+    /// Accumulates one pixel into `acc` (layout `(P, K, 3)`), already averaged.
     fn render_pixel(&self, row: usize, col: usize, s: &RenderSettings, acc: &mut [f32], light: &mut [Rgb]) {
         let k_count = self.light_count();
         let pixel = (row * self.camera.width + col) as u64;
@@ -148,7 +165,7 @@ impl Renderer {
     }
 
     /// Follows one cosine-sampled path from a camera hit, adding bounce b's radiance
-    /// (already divided by the sample count) into `acc[b]`.
+    /// (already divided by the sample count) into its plane of `acc`.
     #[allow(clippy::too_many_arguments)]
     fn trace_path(&self, mut point: Vec3A, mut n: Vec3A, albedo: Rgb, first: (f32, f32), rng: &mut Rng, s: &RenderSettings, acc: &mut [f32], light: &mut [Rgb]) {
         let k3 = self.light_count() * 3;
@@ -165,7 +182,8 @@ impl Renderer {
             let p_hit = point + n * self.ray_offset + dir * hit.t;
             let albedo_hit = self.mesh.albedo_at(hit.triangle, hit.u, hit.v);
             self.cache.direct_radiance(&self.mesh, &self.tracer, hit.triangle, (hit.u, hit.v), p_hit, albedo_hit, light);
-            add_scaled(&mut acc[bounce * k3..(bounce + 1) * k3], light, throughput);
+            let plane = s.bounce_plane(bounce);
+            add_scaled(&mut acc[plane * k3..(plane + 1) * k3], light, throughput);
             throughput = [0, 1, 2].map(|c| throughput[c] * albedo_hit[c]);
             if throughput.iter().all(|&t| t == 0.0) {
                 return;
@@ -206,7 +224,7 @@ mod tests {
         let albedo = [0.8, 0.5, 0.25];
         let light = Light { direction: vec3a(-0.3, 0.2, 0.9).normalize(), irradiance: [PI, 2.0, 1.0] };
         let renderer = Renderer::new(&tilted_plate(8, albedo), &[light]).unwrap();
-        let settings = RenderSettings { bounces: 0, samples: 0, direct_samples: 9, seed: 0 };
+        let settings = RenderSettings { bounces: 0, samples: 0, direct_samples: 9, seed: 0, split_bounces: true };
         let image = renderer.render_rows(0..8, &settings).unwrap();
         let cosine = vec3a(-0.25, 0.0, 1.0).normalize().dot(light.direction);
         for (row, col) in [(1, 1), (4, 5), (6, 2)] {
@@ -222,7 +240,7 @@ mod tests {
     fn a_convex_object_alone_has_no_inter_reflection() {
         let light = Light { direction: Vec3A::Z, irradiance: [PI; 3] };
         let renderer = Renderer::new(&tilted_plate(8, [0.9; 3]), &[light]).unwrap();
-        let settings = RenderSettings { bounces: 2, samples: 16, direct_samples: 1, seed: 0 };
+        let settings = RenderSettings { bounces: 2, samples: 16, direct_samples: 1, seed: 0, split_bounces: true };
         let image = renderer.render_rows(0..8, &settings).unwrap();
         let plane = 8 * 8 * 3;
         assert!(image[..plane].iter().any(|&v| v > 0.0));
@@ -230,10 +248,29 @@ mod tests {
     }
 
     #[test]
+    fn summed_bounces_equal_the_split_ones_added() {
+        let mut scene = tilted_plate(8, [0.7; 3]);
+        scene.floor = Some(crate::scene::Floor { height: 0.0, albedo: [0.5; 3] });
+        let light = Light { direction: vec3a(0.3, 0.1, 0.9).normalize(), irradiance: [PI; 3] };
+        let renderer = Renderer::new(&scene, &[light]).unwrap();
+        let split = RenderSettings { bounces: 3, samples: 8, direct_samples: 0, seed: 2, split_bounces: true };
+        let summed = RenderSettings { split_bounces: false, ..split };
+        assert_eq!((split.planes(), summed.planes()), (3, 1));
+        let per_bounce = renderer.render_rows(0..8, &split).unwrap();
+        let total = renderer.render_rows(0..8, &summed).unwrap();
+        let plane = total.len();
+        for (i, &t) in total.iter().enumerate() {
+            let expected: f32 = (0..3).map(|b| per_bounce[b * plane + i]).sum();
+            assert!((t - expected).abs() <= 1e-6 * expected.max(1e-3), "{t} vs {expected}");
+        }
+        assert!(total.iter().any(|&v| v > 0.0));
+    }
+
+    #[test]
     fn rows_out_of_range_are_an_error_naming_rows() {
         let light = Light { direction: Vec3A::Z, irradiance: [PI; 3] };
         let renderer = Renderer::new(&tilted_plate(4, [0.5; 3]), &[light]).unwrap();
-        let settings = RenderSettings { bounces: 1, samples: 1, direct_samples: 1, seed: 0 };
+        let settings = RenderSettings { bounces: 1, samples: 1, direct_samples: 1, seed: 0, split_bounces: true };
         assert!(renderer.render_rows(2..9, &settings).unwrap_err().to_string().starts_with("rows"));
     }
 }

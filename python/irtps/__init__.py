@@ -8,7 +8,7 @@ from irtps.evaluate import Metrics, angular_error_deg, evaluate
 from irtps.integrate import integrate_normals, place_height
 from irtps.ps import PsResult, photometric_stereo
 from irtps.reconstruct import Reconstruction, reconstruct, save_reconstruction
-from irtps.render import Rendering, render
+from irtps.render import Rendering, render, render_indirect
 from irtps.scene import Camera, CornellBox, Floor, Light, Scene, load_scene
 from irtps.surface import height_to_normals
 from irtps.synth import synthesize
@@ -44,6 +44,7 @@ __all__ = [
     "place_height",
     "reconstruct",
     "render",
+    "render_indirect",
     "save_dataset",
     "save_reconstruction",
     "synthesize",

@@ -19,7 +19,7 @@ from irtps.errors import IrtpsError
 from irtps.evaluate import evaluate
 from irtps.integrate import integrate_normals, place_height
 from irtps.ps import PsResult, photometric_stereo
-from irtps.render import render
+from irtps.render import render_indirect
 
 #: Ways to form the corrected images: from the input (A₀ − E) or from the previous ones
 #: (the paper's literal Aₜ₊₁ = Aₜ − Eₜ).
@@ -152,7 +152,7 @@ def remove_interreflections(
                 break
             start = time.perf_counter()
             albedo = np.clip(fit.albedo, 0.0, 1.0)
-            estimate = render(scene, height, albedo, mask, bounces=bounces, samples=samples, direct_samples=0, seed=seed + index).indirect
+            estimate = render_indirect(scene, height, albedo, mask, bounces=bounces, samples=samples, seed=seed + index)
             timings["indirect_estimate"] = time.perf_counter() - start
             if update == "original":
                 indirect = estimate if indirect is None else indirect + relaxation * (estimate - indirect)

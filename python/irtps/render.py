@@ -138,20 +138,67 @@ def render(
     >>> round(float(flat.direct[1, 4, 4, 0]), 4)  # albedo · cos θ = 0.5 · 0.8
     0.4
     """
-    if bounces < 0:
-        raise IrtpsError(f"bounces: {bounces} is negative")
-    if samples < 1:
-        raise IrtpsError(f"samples: {samples} must be at least 1")
+    _check_counts(bounces, samples)
     direct_samples = min(samples, DEFAULT_DIRECT_SAMPLES) if direct_samples is None else direct_samples
     if direct_samples < 0 or (direct_samples == 0 and bounces == 0):
         raise IrtpsError(f"direct_samples: {direct_samples} must be at least 1 (or 0 with bounces)")
     renderer = make_renderer(scene, height, albedo, mask)
+    planes = _render_planes(renderer, scene, bounces, samples, direct_samples, seed, True, progress)
+    if direct_samples == 0:
+        direct = np.zeros(planes.shape[1:], dtype=np.float32)
+        return Rendering(direct=direct, bounces=planes)
+    return Rendering(direct=planes[0], bounces=planes[1:])
+
+
+def render_indirect(
+    scene: Scene,
+    height: np.ndarray,
+    albedo: np.ndarray,
+    mask: np.ndarray,
+    *,
+    bounces: int = 3,
+    samples: int = 256,
+    seed: int = 0,
+    progress: bool = False,
+) -> np.ndarray:
+    """Render only the inter-reflected light: bounces 1..B summed, for every light.
+
+    The same paths as `render`, without the direct image and without keeping the bounces
+    apart: this is the estimate IRT-PS subtracts, at a fraction of the memory.
+
+    Parameters
+    ----------
+    scene, height, albedo, mask, bounces, samples, seed, progress
+        As for `render`.
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 (K, H, W, 3).
+    """
+    _check_counts(bounces, samples)
+    if bounces < 1:
+        raise IrtpsError(f"bounces: {bounces} must be at least 1")
+    renderer = make_renderer(scene, height, albedo, mask)
+    return _render_planes(renderer, scene, bounces, samples, 0, seed, False, progress)[0]
+
+
+def _check_counts(bounces: int, samples: int) -> None:
+    if bounces < 0:
+        raise IrtpsError(f"bounces: {bounces} is negative")
+    if samples < 1:
+        raise IrtpsError(f"samples: {samples} must be at least 1")
+
+
+def _render_planes(renderer, scene: Scene, bounces: int, samples: int, direct_samples: int, seed: int, split: bool, progress: bool) -> np.ndarray:
+    """Render all rows in chunks (for the progress bar): float32 (P, K, H, W, 3)."""
     rows, cols = scene.camera.height, scene.camera.width
-    out = np.empty((bounces + 1, len(scene.lights), rows, cols, 3), dtype=np.float32)
+    planes = int(direct_samples > 0) + (bounces if split else min(bounces, 1))
+    out = np.empty((planes, len(scene.lights), rows, cols, 3), dtype=np.float32)
     chunk = max(1, rows // 32)
     with tqdm(total=rows, unit="row", desc="render", disable=not progress, leave=False) as bar:
         for start in range(0, rows, chunk):
             stop = min(rows, start + chunk)
-            out[:, :, start:stop] = renderer.render_rows(start, stop, bounces, samples, direct_samples, seed)
+            out[:, :, start:stop] = renderer.render_rows(start, stop, bounces, samples, direct_samples, seed, split)
             bar.update(stop - start)
-    return Rendering(direct=out[0], bounces=out[1:])
+    return out
