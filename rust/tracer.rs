@@ -2,10 +2,10 @@
 
 use std::time::Duration;
 
-use glam::Vec3A;
+use glam::{UVec2, Vec3A};
 use obvhs::cwbvh::builder::build_cwbvh_from_tris;
 use obvhs::cwbvh::CwBvh;
-use obvhs::ray::{Ray, RayHit};
+use obvhs::ray::Ray;
 use obvhs::rt_triangle::RtTriangle;
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
@@ -39,6 +39,8 @@ pub struct Tracer {
     triangle_count: usize,
     /// BVH position of the point placed beyond the bounds (see [`Tracer::new`]).
     bounds_guard: usize,
+    /// Whether this CPU runs the AVX2 build of the traversal.
+    avx2: bool,
 }
 
 impl Tracer {
@@ -64,7 +66,7 @@ impl Tracer {
             .collect();
         let triangle_count = mesh.triangles.len();
         if tris.is_empty() {
-            return Tracer { bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), planes, triangle_count, bounds_guard: usize::MAX };
+            return Tracer { bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), planes, triangle_count, bounds_guard: usize::MAX, avx2: false };
         }
         // obvhs's Morton code wraps a coordinate lying exactly on the build bounds' maximum
         // to 0 (e.g. the skirt on the +x and +y sides), which spoils the BVH (2x the nodes
@@ -81,7 +83,7 @@ impl Tracer {
         let bounds_guard = bvh.primitive_indices.iter().position(|&i| i == guard_index).expect("the guard is in the BVH");
         let mesh_index = bvh.primitive_indices.iter().map(|&i| in_bvh.get(i as usize).copied().unwrap_or(u32::MAX)).collect();
         let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&build[i as usize])).collect();
-        Tracer { bvh, triangles, mesh_index, planes, triangle_count, bounds_guard }
+        Tracer { bvh, triangles, mesh_index, planes, triangle_count, bounds_guard, avx2: avx2_available() }
     }
 
     /// Distance to BVH primitive `id` along `ray` (infinite for the bounds guard).
@@ -124,12 +126,10 @@ impl Tracer {
         let mut t_limit = t_max;
         if !self.triangles.is_empty() {
             let ray = make_ray(origin, direction, t_max);
-            let mut hit = RayHit::none();
-            if self.bvh.ray_traverse(ray, &mut hit, |r, id| self.intersect(r, id)) {
-                let id = hit.primitive_id as usize;
+            if let Some((id, t)) = self.closest_in_bvh(ray) {
                 let uv = self.triangles[id].compute_barycentric(&ray);
-                best = Some(Hit { triangle: self.mesh_index[id] as usize, t: hit.t, u: uv.x, v: uv.y });
-                t_limit = hit.t;
+                best = Some(Hit { triangle: self.mesh_index[id] as usize, t, u: uv.x, v: uv.y });
+                t_limit = t;
             }
         }
         // A plane's albedo is uniform, so its barycentrics do not matter.
@@ -148,8 +148,92 @@ impl Tracer {
         if self.triangles.is_empty() {
             return false;
         }
-        let ray = make_ray(origin, direction, t_max);
-        !self.bvh.ray_traverse_miss(ray, |r, id| self.intersect(r, id))
+        self.any_in_bvh(make_ray(origin, direction, t_max))
+    }
+
+    /// The closest BVH primitive along `ray`: (BVH position, distance).
+    #[inline]
+    fn closest_in_bvh(&self, ray: Ray) -> Option<(usize, f32)> {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is set only when the CPU has every feature enabled below.
+            return unsafe { self.closest_avx2(ray) };
+        }
+        self.closest_portable(ray)
+    }
+
+    /// Whether any BVH primitive lies along `ray`.
+    #[inline]
+    fn any_in_bvh(&self, ray: Ray) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: as in `closest_in_bvh`.
+            return unsafe { self.any_avx2(ray) };
+        }
+        self.any_portable(ray)
+    }
+
+    #[inline(always)]
+    fn closest_portable(&self, ray: Ray) -> Option<(usize, f32)> {
+        let mut traverse_ray = ray;
+        let mut state = self.bvh.new_traversal(ray.direction);
+        let mut node;
+        let mut best = None;
+        obvhs::traverse!(self.bvh, node, state, node.intersect_ray(&traverse_ray, state.oct_inv4), {
+            let id = state.primitive_id as usize;
+            let t = self.intersect(&traverse_ray, id);
+            if t < traverse_ray.tmax {
+                best = Some(id);
+                traverse_ray.tmax = t;
+            }
+        });
+        best.map(|id| (id, traverse_ray.tmax))
+    }
+
+    #[inline(always)]
+    fn any_portable(&self, ray: Ray) -> bool {
+        let mut state = self.bvh.new_traversal(ray.direction);
+        let mut node;
+        let mut hit = false;
+        'search: {
+            obvhs::traverse!(self.bvh, node, state, node.intersect_ray(&ray, state.oct_inv4), {
+                if self.intersect(&ray, state.primitive_id as usize) < ray.tmax {
+                    hit = true;
+                    break 'search;
+                }
+            });
+        }
+        hit
+    }
+
+    /// The same traversal compiled for AVX2 (chosen at run time; the results are identical).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn closest_avx2(&self, ray: Ray) -> Option<(usize, f32)> {
+        self.closest_portable(ray)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn any_avx2(&self, ray: Ray) -> bool {
+        self.any_portable(ray)
+    }
+}
+
+/// Whether the CPU has the features of the AVX2 traversal.
+fn avx2_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx2")
+            && is_x86_feature_detected!("fma")
+            && is_x86_feature_detected!("bmi1")
+            && is_x86_feature_detected!("bmi2")
+            && is_x86_feature_detected!("lzcnt")
+            && is_x86_feature_detected!("popcnt")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
     }
 }
 
@@ -200,6 +284,29 @@ mod tests {
         let toward_guard = (vec3a(2.03, 2.03, 0.01) - origin).normalize();
         assert!(tracer.closest_hit(origin, toward_guard, f32::INFINITY).is_none());
         assert!(!tracer.occluded(origin, toward_guard, f32::INFINITY));
+    }
+
+    #[test]
+    fn the_avx2_traversal_agrees_with_the_portable_one() {
+        let scene = crate::scene::Scene {
+            camera: crate::scene::Camera { width: 24, height: 24, pixel_size: 1.0 },
+            surface: crate::scene::HeightField {
+                height: (0..576).map(|p| ((p % 24) as f32 * 0.7).sin() * 3.0 + 5.0).collect(),
+                mask: vec![true; 576],
+                albedo: vec![[0.5; 3]; 576],
+            },
+            floor: Some(crate::scene::Floor { height: 0.0, albedo: [0.5; 3] }),
+            cornell_box: None,
+        };
+        let tracer = Tracer::new(&Mesh::from_scene(&scene));
+        let mut rng = crate::sampler::Rng::new(9);
+        for _ in 0..2000 {
+            let origin = vec3a(rng.next_f32() * 24.0 - 12.0, rng.next_f32() * 24.0 - 12.0, 9.0);
+            let direction = vec3a(rng.next_f32() - 0.5, rng.next_f32() - 0.5, -rng.next_f32()).normalize();
+            let ray = make_ray(origin, direction, f32::INFINITY);
+            assert_eq!(tracer.closest_in_bvh(ray), tracer.closest_portable(ray));
+            assert_eq!(tracer.any_in_bvh(ray), tracer.any_portable(ray));
+        }
     }
 
     #[test]
