@@ -183,6 +183,18 @@ impl Renderer {
         Ok(array.into_pyarray(py))
     }
 
+    /// Renders the listed pixels (row-major indices): float32 (P, K, N, 3), planes as in
+    /// `render_rows`.
+    #[pyo3(signature = (pixels, bounces, samples, direct_samples, seed, split_bounces=true))]
+    #[allow(clippy::too_many_arguments)]
+    fn render_pixels<'py>(&self, py: Python<'py>, pixels: Vec<usize>, bounces: usize, samples: usize, direct_samples: usize, seed: u64, split_bounces: bool) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let settings = RenderSettings { bounces, samples, direct_samples, seed, split_bounces };
+        let data = py.detach(|| self.inner.render_pixels(&pixels, &settings)).map_err(to_py)?;
+        let shape = [settings.planes(), self.inner.light_count(), pixels.len(), 3];
+        let array = Array::from_shape_vec(IxDyn(&shape), data).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        Ok(array.into_pyarray(py))
+    }
+
     /// The scene's triangles: (positions (V, 3) float32, triangles (T, 3) uint32).
     fn mesh_arrays<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<u32>>) {
         let mesh = self.inner.mesh();

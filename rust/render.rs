@@ -101,20 +101,32 @@ impl Renderer {
     /// planes of [`RenderSettings::planes`]: the direct image first when it is rendered, then
     /// bounce 1 … B (or their sum when the bounces are not split).
     pub fn render_rows(&self, rows: Range<usize>, settings: &RenderSettings) -> Result<Vec<f32>> {
-        self.check(&rows, settings)?;
+        if rows.start >= rows.end || rows.end > self.camera.height {
+            return Err(Error::input("rows", format!("{rows:?} is not inside 0..{}", self.camera.height)));
+        }
+        let w = self.camera.width;
+        let pixels: Vec<usize> = (rows.start * w..rows.end * w).collect();
+        self.render_pixels(&pixels, settings)
+    }
+
+    /// Renders the listed pixels (row-major indices), laid out `(P, K, pixels, 3)`.
+    pub fn render_pixels(&self, pixels: &[usize], settings: &RenderSettings) -> Result<Vec<f32>> {
+        self.check(settings)?;
         let (w, k_count) = (self.camera.width, self.light_count());
+        if let Some(&bad) = pixels.iter().find(|&&p| p >= self.camera.pixel_count()) {
+            return Err(Error::input("pixels", format!("index {bad} is outside the {}x{} image", w, self.camera.height)));
+        }
         let stride = settings.planes() * k_count * 3;
-        let row_count = rows.len();
-        let mut per_pixel = vec![0.0f32; row_count * w * stride];
-        per_pixel.par_chunks_mut(stride).enumerate().for_each_init(
+        let mut per_pixel = vec![0.0f32; pixels.len() * stride];
+        per_pixel.par_chunks_mut(stride).zip(pixels).for_each_init(
             || vec![[0.0f32; 3]; k_count],
-            |scratch, (p, acc)| self.render_pixel(rows.start + p / w, p % w, settings, acc, scratch),
+            |scratch, (acc, &p)| self.render_pixel(p / w, p % w, settings, acc, scratch),
         );
         // Transpose pixel-major (pixel, plane, k, c) to image-major (plane, k, pixel, c).
         let planes = settings.planes() * k_count;
-        let plane_len = row_count * w * 3;
+        let plane_len = pixels.len() * 3;
         let mut out = vec![0.0f32; planes * plane_len];
-        out.par_chunks_mut(plane_len).enumerate().for_each(|(plane, dst)| {
+        out.par_chunks_mut(plane_len.max(1)).enumerate().for_each(|(plane, dst)| {
             for (p, px) in dst.chunks_exact_mut(3).enumerate() {
                 px.copy_from_slice(&per_pixel[p * stride + plane * 3..][..3]);
             }
@@ -122,10 +134,7 @@ impl Renderer {
         Ok(out)
     }
 
-    fn check(&self, rows: &Range<usize>, s: &RenderSettings) -> Result<()> {
-        if rows.start >= rows.end || rows.end > self.camera.height {
-            return Err(Error::input("rows", format!("{rows:?} is not inside 0..{}", self.camera.height)));
-        }
+    fn check(&self, s: &RenderSettings) -> Result<()> {
         if s.bounces > 0 && s.samples == 0 {
             return Err(Error::input("samples", "must be at least 1 when bounces are rendered"));
         }

@@ -104,3 +104,31 @@ def test_bad_arguments_raise_named_errors():
         render(scene, np.zeros((7, 8)), *flat[1:])
     with pytest.raises(IrtpsError, match="albedo"):
         render(scene, flat[0], np.full((8, 8, 3), 1.5), flat[2])
+
+
+def test_sparse_indirect_estimate_is_exact_where_rendered_and_close_elsewhere():
+    from scipy import ndimage
+
+    from irtps.render import render_indirect
+    from irtps.synth import synthesize
+
+    data, _ = synthesize("cap", size=32, lights=4, environment="cornell", bounces=0, seed=3)
+    height, albedo = data.gt.height, data.gt.albedo
+    full = render_indirect(data.scene, height, albedo, data.mask, bounces=2, samples=64, seed=7)
+    sparse = render_indirect(data.scene, height, albedo, data.mask, bounces=2, samples=64, seed=7, stride=2)
+    rows, cols = np.indices(data.mask.shape)
+    edge = data.mask & ~ndimage.binary_erosion(data.mask)
+    # Every pixel's paths depend only on (seed, pixel): rendered pixels match the full render.
+    shift_row, shift_col = np.random.default_rng(7).integers(0, 2, size=2)
+    rendered = data.mask & ((((rows - shift_row) % 2 == 0) & ((cols - shift_col) % 2 == 0)) | edge)
+    np.testing.assert_array_equal(sparse[:, rendered], full[:, rendered])
+    filled = data.mask & ~rendered
+    assert filled.sum() > 0.5 * data.mask.sum()
+    # Against a low-noise reference, the interpolated pixels are about as good as rendered ones.
+    reference = render_indirect(data.scene, height, albedo, data.mask, bounces=2, samples=1024, seed=1)
+
+    def error(estimate):
+        return np.abs(estimate[:, filled] - reference[:, filled]).mean() / reference[:, filled].mean()
+
+    assert error(sparse) < 1.2 * error(full)
+    assert (sparse[:, ~data.mask] == 0).all()

@@ -93,6 +93,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
         seed=args.seed,
         relaxation=args.relaxation,
         update=args.update,
+        stride=args.stride,
         progress=not args.quiet,
     )
     result.timings = {"load": loaded, **result.timings}
@@ -258,6 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     irt.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     irt.add_argument("--relaxation", type=float, default=1.0, help="fraction of each new estimate taken (default 1)")
     irt.add_argument("--update", choices=UPDATES, default="original", help="A0 - E (original, default) or the paper's A_t - E_t (previous)")
+    irt.add_argument("--stride", type=int, default=1, help="estimate at one pixel in SxS and interpolate (faster; default 1: every pixel)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(run=_cmd_reconstruct)
 

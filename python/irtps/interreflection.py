@@ -73,6 +73,7 @@ def remove_interreflections(
     shadow_fraction: float = 0.05,
     saturation: float | None = None,
     base_height: float | None = None,
+    stride: int = 1,
     progress: bool = False,
 ) -> InterreflectionResult:
     """Run the IRT-PS loop on a data set.
@@ -104,6 +105,10 @@ def remove_interreflections(
         As for `irtps.ps.photometric_stereo`.
     base_height : float, optional
         Height of the object's boundary; default the floor's (0 without a floor).
+    stride : int
+        1 estimates the indirect light at every pixel; s > 1 at one pixel in s×s,
+        interpolated to the rest (faster, slightly less accurate; see
+        `irtps.render.render_indirect`).
     progress : bool
         Show a progress bar.
 
@@ -152,7 +157,7 @@ def remove_interreflections(
                 break
             start = time.perf_counter()
             albedo = np.clip(fit.albedo, 0.0, 1.0)
-            estimate = render_indirect(scene, height, albedo, mask, bounces=bounces, samples=samples, seed=seed + index)
+            estimate = render_indirect(scene, height, albedo, mask, bounces=bounces, samples=samples, seed=seed + index, stride=stride)
             timings["indirect_estimate"] = time.perf_counter() - start
             if update == "original":
                 indirect = estimate if indirect is None else indirect + relaxation * (estimate - indirect)

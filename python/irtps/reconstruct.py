@@ -82,6 +82,7 @@ def reconstruct(
     seed: int = 0,
     relaxation: float = 1.0,
     update: str = "original",
+    stride: int = 1,
     progress: bool = False,
 ) -> Reconstruction:
     """Recover normals, albedo and a height map from a data set.
@@ -101,7 +102,7 @@ def reconstruct(
         ``"ls"`` for ``"ps"`` and ``"footprint"`` for ``"irtps"``.
     base_height : float, optional
         Height of the mask boundary's median; default the floor's (0 without a floor).
-    bounces, iterations, samples, seed, relaxation, update, progress
+    bounces, iterations, samples, seed, relaxation, update, stride, progress
         IRT-PS only, as for `irtps.interreflection.remove_interreflections`.
 
     Returns
@@ -133,7 +134,7 @@ def reconstruct(
     pixel_size = scene.camera.pixel_size
     timings = {}
     if method == "irtps":
-        parameters.update(bounces=bounces, iterations=iterations, samples=samples, seed=seed, relaxation=relaxation, update=update)
+        parameters.update(bounces=bounces, iterations=iterations, samples=samples, seed=seed, relaxation=relaxation, update=update, stride=stride)
         start = time.perf_counter()
         loop = remove_interreflections(
             dataset,
@@ -148,6 +149,7 @@ def reconstruct(
             shadow_fraction=shadow_fraction,
             saturation=saturation,
             base_height=base_height,
+            stride=stride,
             progress=progress,
         )
         timings["irtps"] = time.perf_counter() - start

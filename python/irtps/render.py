@@ -159,6 +159,7 @@ def render_indirect(
     bounces: int = 3,
     samples: int = 256,
     seed: int = 0,
+    stride: int = 1,
     progress: bool = False,
 ) -> np.ndarray:
     """Render only the inter-reflected light: bounces 1..B summed, for every light.
@@ -170,6 +171,12 @@ def render_indirect(
     ----------
     scene, height, albedo, mask, bounces, samples, seed, progress
         As for `render`.
+    stride : int
+        1 renders every pixel. s > 1 renders only the masked pixels of a randomly shifted
+        grid one pixel in s×s (plus the mask's edge pixels) and fills the other masked
+        pixels by linear interpolation over their Delaunay triangulation (the paper's
+        sparse estimate with non-uniform interpolation): about s² times faster, slightly
+        blurred. Pixels outside the mask are then 0.
 
     Returns
     -------
@@ -179,8 +186,43 @@ def render_indirect(
     _check_counts(bounces, samples)
     if bounces < 1:
         raise IrtpsError(f"bounces: {bounces} must be at least 1")
+    if stride < 1:
+        raise IrtpsError(f"stride: {stride} must be at least 1")
     renderer = make_renderer(scene, height, albedo, mask)
-    return _render_planes(renderer, scene, bounces, samples, 0, seed, False, progress)[0]
+    if stride == 1:
+        return _render_planes(renderer, scene, bounces, samples, 0, seed, False, progress)[0]
+    return _render_sparse(renderer, np.asarray(mask, dtype=bool), bounces, samples, seed, stride)
+
+
+def _render_sparse(renderer, mask: np.ndarray, bounces: int, samples: int, seed: int, stride: int) -> np.ndarray:
+    """Indirect light at a sparse subset of the masked pixels, interpolated to the rest."""
+    from scipy import ndimage
+    from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
+
+    rows, cols = np.indices(mask.shape)
+    shift_row, shift_col = np.random.default_rng(seed).integers(0, stride, size=2)
+    on_grid = ((rows - shift_row) % stride == 0) & ((cols - shift_col) % stride == 0)
+    edge = mask & ~ndimage.binary_erosion(mask)
+    chosen = mask & (on_grid | edge)
+    pixels = np.flatnonzero(chosen)
+    values = renderer.render_pixels(pixels.tolist(), bounces, samples, 0, seed, False)[0]  # (K, N, 3)
+    k = values.shape[0]
+    flat = np.moveaxis(values, 1, 0).reshape(len(pixels), k * 3)
+    known = np.column_stack([rows.ravel()[pixels], cols.ravel()[pixels]])
+    wanted = np.argwhere(mask & ~chosen)
+    out = np.zeros((k, *mask.shape, 3), dtype=np.float32)
+    out[:, chosen] = values
+    if len(wanted):
+        if len(pixels) >= 3:
+            filled = LinearNDInterpolator(known, flat)(wanted)
+            missing = np.isnan(filled).any(axis=1)
+        else:
+            filled = np.empty((len(wanted), k * 3))
+            missing = np.ones(len(wanted), dtype=bool)
+        if missing.any():
+            filled[missing] = NearestNDInterpolator(known, flat)(wanted[missing])
+        out[:, wanted[:, 0], wanted[:, 1]] = np.moveaxis(filled.reshape(len(wanted), k, 3), 1, 0)
+    return out
 
 
 def _check_counts(bounces: int, samples: int) -> None:
