@@ -79,6 +79,7 @@ impl LightCache {
     /// Radiance leaving a point of triangle `t` (barycentrics `u`, `v`, albedo `albedo`,
     /// position `point`) under each light alone, written to `out[k]`.
     #[inline]
+    #[allow(clippy::too_many_arguments)]
     pub fn direct_radiance(&self, mesh: &Mesh, tracer: &Tracer, t: usize, (u, v): (f32, f32), point: Vec3A, albedo: Rgb, out: &mut [Rgb]) {
         let n = mesh.normals[t];
         let k_count = self.directions.len();

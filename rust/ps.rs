@@ -252,7 +252,7 @@ impl Fit {
             (self.gram, rhs, k_count, flag::FULL_FIT)
         };
         let g = gram.inverse() * (rhs[0] + rhs[1] + rhs[2]);
-        if !(g.length() > 0.0) || !g.is_finite() {
+        if !g.is_finite() || g.length() == 0.0 {
             return ([0.0, 0.0, 1.0], [0.0; 3], flag::DARK, used as u16);
         }
         let normal = g.normalize();

@@ -84,6 +84,9 @@ fn rows_of_3(array: &PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<Vec<[f32
     Ok(a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
 }
 
+/// Distances (inf on a miss) and triangle indices (−1 on a miss) of a batch of rays.
+type HitArrays<'py> = (Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<i64>>);
+
 type BoxArgs = ((f32, f32), (f32, f32), f32, Rgb, Rgb, Rgb, Rgb);
 
 /// A scene made ready for rendering and ray queries: height-field object, optional floor
@@ -206,7 +209,7 @@ impl Renderer {
     /// Closest hits of a batch of rays, traced on `threads` threads (all cores if None):
     /// (distance (N,) float32, inf on a miss; triangle (N,) int64, −1 on a miss).
     #[pyo3(signature = (origins, directions, threads=None))]
-    fn intersect<'py>(&self, py: Python<'py>, origins: PyReadonlyArray2<'_, f32>, directions: PyReadonlyArray2<'_, f32>, threads: Option<usize>) -> PyResult<(Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<i64>>)> {
+    fn intersect<'py>(&self, py: Python<'py>, origins: PyReadonlyArray2<'_, f32>, directions: PyReadonlyArray2<'_, f32>, threads: Option<usize>) -> PyResult<HitArrays<'py>> {
         let o = rows_of_3(&origins, "origins")?;
         let d = rows_of_3(&directions, "directions")?;
         if o.len() != d.len() {

@@ -118,10 +118,11 @@ impl Scene {
             check_albedo("floor.albedo", &f.albedo)?;
         }
         if let Some(b) = &self.cornell_box {
-            if !(b.x[0] < b.x[1]) || !(b.y[0] < b.y[1]) {
-                return Err(Error::input("environment", "box bounds must satisfy x0 < x1 and y0 < y1"));
+            let finite = b.x.iter().chain(&b.y).chain([&b.z_top]).all(|v| v.is_finite());
+            if !finite || b.x[0] >= b.x[1] || b.y[0] >= b.y[1] {
+                return Err(Error::input("environment", "box bounds must be finite with x0 < x1 and y0 < y1"));
             }
-            if !(b.z_top > self.base_height()) {
+            if b.z_top <= self.base_height() {
                 return Err(Error::input("environment.z_top", "must lie above the floor"));
             }
             for (name, rgb) in [("left", &b.left), ("right", &b.right), ("back", &b.back), ("front", &b.front)] {

@@ -252,14 +252,15 @@ mod tests {
     use glam::vec3a;
 
     fn one_triangle() -> Mesh {
-        let mut mesh = Mesh::default();
-        mesh.positions = vec![vec3a(0.0, 0.0, 0.0), vec3a(2.0, 0.0, 0.0), vec3a(0.0, 2.0, 0.0)];
-        mesh.albedo = vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-        mesh.triangles = vec![[0, 1, 2]];
-        mesh.normals = vec![Vec3A::Z];
-        mesh.kinds = vec![SurfaceKind::Object];
-        mesh.panel_of = vec![crate::geometry::NO_PANEL];
-        mesh
+        Mesh {
+            positions: vec![vec3a(0.0, 0.0, 0.0), vec3a(2.0, 0.0, 0.0), vec3a(0.0, 2.0, 0.0)],
+            albedo: vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            triangles: vec![[0, 1, 2]],
+            normals: vec![Vec3A::Z],
+            kinds: vec![SurfaceKind::Object],
+            panel_of: vec![crate::geometry::NO_PANEL],
+            ..Mesh::default()
+        }
     }
 
     #[test]
