@@ -136,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     renderer, height = build_renderer(n)
     irtps_setup = time.perf_counter() - t0
-    positions, triangles = renderer.mesh_arrays()
+    positions, triangles, _, _ = renderer.mesh_arrays()
     # All pixels are masked, so the first n*n vertices are the pixel vertices in row-major order.
     assert np.array_equal(positions[: n * n, 2], height.ravel()), "unexpected vertex order"
     normals = vertex_normals(positions, triangles)

@@ -87,6 +87,9 @@ fn rows_of_3(array: &PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<Vec<[f32
 /// Distances (inf on a miss) and triangle indices (−1 on a miss) of a batch of rays.
 type HitArrays<'py> = (Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<i64>>);
 
+/// Positions, triangles, vertex albedo and triangle normals of a scene's mesh.
+type MeshArrays<'py> = (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<u32>>, Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<f32>>);
+
 type BoxArgs = ((f32, f32), (f32, f32), f32, Rgb, Rgb, Rgb, Rgb);
 
 /// A scene made ready for rendering and ray queries: height-field object, optional floor
@@ -198,12 +201,15 @@ impl Renderer {
         Ok(array.into_pyarray(py))
     }
 
-    /// The scene's triangles: (positions (V, 3) float32, triangles (T, 3) uint32).
-    fn mesh_arrays<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<u32>>) {
+    /// The scene's triangles: (positions (V, 3) float32, triangles (T, 3) uint32, vertex
+    /// albedo (V, 3) float32, facing unit normals (T, 3) float32).
+    fn mesh_arrays<'py>(&self, py: Python<'py>) -> MeshArrays<'py> {
         let mesh = self.inner.mesh();
         let positions = Array2::from_shape_fn((mesh.positions.len(), 3), |(i, c)| mesh.positions[i][c]);
         let triangles = Array2::from_shape_fn((mesh.triangles.len(), 3), |(t, c)| mesh.triangles[t][c]);
-        (positions.into_pyarray(py), triangles.into_pyarray(py))
+        let albedo = Array2::from_shape_fn((mesh.albedo.len(), 3), |(i, c)| mesh.albedo[i][c]);
+        let normals = Array2::from_shape_fn((mesh.normals.len(), 3), |(t, c)| mesh.normals[t][c]);
+        (positions.into_pyarray(py), triangles.into_pyarray(py), albedo.into_pyarray(py), normals.into_pyarray(py))
     }
 
     /// Closest hits of a batch of rays, traced on `threads` threads (all cores if None):

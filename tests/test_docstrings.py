@@ -5,7 +5,7 @@ import importlib
 
 import pytest
 
-MODULES = ["irtps.render", "irtps.surface", "irtps.synth", "irtps.scene", "irtps.dataset", "irtps.imageio", "irtps.atomic", "irtps.diligent", "irtps.evaluate", "irtps.mesh", "irtps.integrate", "irtps.ps", "irtps.reconstruct"]
+MODULES = ["irtps.paper_estimator", "irtps.render", "irtps.surface", "irtps.synth", "irtps.scene", "irtps.dataset", "irtps.imageio", "irtps.atomic", "irtps.diligent", "irtps.evaluate", "irtps.mesh", "irtps.integrate", "irtps.ps", "irtps.reconstruct"]
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -15,7 +15,7 @@ from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object,
 from irtps.errors import IrtpsError
 from irtps.evaluate import evaluate, format_metrics
 from irtps.integrate import METHODS as INTEGRATION_METHODS
-from irtps.interreflection import UPDATES
+from irtps.interreflection import ESTIMATORS, UPDATES
 from irtps.reconstruct import METHODS, load_reconstruction, reconstruct, save_reconstruction
 from irtps.render import Rendering, render
 from irtps.surface import height_to_normals
@@ -94,6 +94,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
         relaxation=args.relaxation,
         update=args.update,
         stride=args.stride,
+        estimator=args.estimator,
         progress=not args.quiet,
     )
     result.timings = {"load": loaded, **result.timings}
@@ -123,7 +124,7 @@ def _run_table(datasets, args, out: Path | None, save_reconstructions: bool) -> 
     """Compute the comparison table, write it (and the reconstructions) under `out`."""
     from tqdm import tqdm
 
-    total = len(datasets) * len(method_names(args.bounces))
+    total = len(datasets) * len(method_names(args.bounces, not args.no_paper))
     with tqdm(total=total, desc="table", unit="run", disable=args.quiet, leave=False) as bar:
 
         def finished(name, method, result):
@@ -131,7 +132,9 @@ def _run_table(datasets, args, out: Path | None, save_reconstructions: bool) -> 
                 save_reconstruction(result, out / name / method)
             bar.update(1)
 
-        table = comparison_table(datasets, bounces=args.bounces, iterations=args.iterations, samples=args.samples, seed=args.seed, on_result=finished)
+        table = comparison_table(
+            datasets, bounces=args.bounces, iterations=args.iterations, samples=args.samples, seed=args.seed, paper=not args.no_paper, on_result=finished
+        )
     text = format_table(table)
     if out is not None:
         (out / "table.md").write_text(text)
@@ -179,6 +182,7 @@ def _add_table_options(parser: argparse.ArgumentParser, iterations: int, samples
     parser.add_argument("--iterations", type=int, default=iterations, help=f"IRT-PS corrections at most (default {iterations})")
     parser.add_argument("--samples", type=int, default=samples, help=f"camera paths per pixel per estimate (default {samples})")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--no-paper", action="store_true", help="leave out the paper's own estimator (columns 'Paper rN')")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -260,6 +264,7 @@ def build_parser() -> argparse.ArgumentParser:
     irt.add_argument("--relaxation", type=float, default=1.0, help="fraction of each new estimate taken (default 1)")
     irt.add_argument("--update", choices=UPDATES, default="original", help="A0 - E (original, default) or the paper's A_t - E_t (previous)")
     irt.add_argument("--stride", type=int, default=1, help="estimate at one pixel in SxS and interpolate (faster; default 1: every pixel)")
+    irt.add_argument("--estimator", choices=ESTIMATORS, default="physical", help="indirect estimate: physical (default) or the paper's heuristic")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(run=_cmd_reconstruct)
 

@@ -18,8 +18,13 @@ from irtps.dataset import Dataset
 from irtps.errors import IrtpsError
 from irtps.evaluate import evaluate
 from irtps.integrate import integrate_normals, place_height
+from irtps.paper_estimator import PAPER_SCALE, paper_indirect
 from irtps.ps import PsResult, photometric_stereo
 from irtps.render import render_indirect
+
+#: Indirect-light estimators: the physically based renderer, or the paper's own heuristic
+#: (`irtps.paper_estimator`).
+ESTIMATORS = ("physical", "paper")
 
 #: Ways to form the corrected images: from the input (A₀ − E) or from the previous ones
 #: (the paper's literal Aₜ₊₁ = Aₜ − Eₜ).
@@ -74,6 +79,7 @@ def remove_interreflections(
     saturation: float | None = None,
     base_height: float | None = None,
     stride: int = 1,
+    estimator: str = "physical",
     progress: bool = False,
 ) -> InterreflectionResult:
     """Run the IRT-PS loop on a data set.
@@ -109,6 +115,10 @@ def remove_interreflections(
         1 estimates the indirect light at every pixel; s > 1 at one pixel in s×s,
         interpolated to the rest (faster, slightly less accurate; see
         `irtps.render.render_indirect`).
+    estimator : str
+        ``"physical"``: the renderer's estimate of bounces 1..r for every light (default);
+        ``"paper"``: the paper's environment-colour heuristic (`irtps.paper_estimator`),
+        for comparison.
     progress : bool
         Show a progress bar.
 
@@ -122,6 +132,10 @@ def remove_interreflections(
         raise IrtpsError(f"iterations: {iterations} is negative")
     if not 0 < relaxation <= 1:
         raise IrtpsError(f"relaxation: {relaxation} is not in (0, 1]")
+    if estimator not in ESTIMATORS:
+        raise IrtpsError(f"estimator: unknown {estimator!r} (choose from {', '.join(ESTIMATORS)})")
+    if estimator == "paper" and bounces not in PAPER_SCALE:
+        raise IrtpsError(f"bounces: the paper's estimator takes 1, 2 or 3 reflections, not {bounces}")
     if update not in UPDATES:
         raise IrtpsError(f"update: unknown {update!r} (choose from {', '.join(UPDATES)})")
     scene, mask = dataset.scene, dataset.mask
@@ -157,7 +171,10 @@ def remove_interreflections(
                 break
             start = time.perf_counter()
             albedo = np.clip(fit.albedo, 0.0, 1.0)
-            estimate = render_indirect(scene, height, albedo, mask, bounces=bounces, samples=samples, seed=seed + index, stride=stride)
+            if estimator == "paper":
+                estimate = paper_indirect(scene, height, albedo, mask, reflections=bounces, seed=seed + index)
+            else:
+                estimate = render_indirect(scene, height, albedo, mask, bounces=bounces, samples=samples, seed=seed + index, stride=stride)
             timings["indirect_estimate"] = time.perf_counter() - start
             if update == "original":
                 indirect = estimate if indirect is None else indirect + relaxation * (estimate - indirect)

@@ -83,6 +83,7 @@ def reconstruct(
     relaxation: float = 1.0,
     update: str = "original",
     stride: int = 1,
+    estimator: str = "physical",
     progress: bool = False,
 ) -> Reconstruction:
     """Recover normals, albedo and a height map from a data set.
@@ -102,7 +103,7 @@ def reconstruct(
         ``"ls"`` for ``"ps"`` and ``"footprint"`` for ``"irtps"``.
     base_height : float, optional
         Height of the mask boundary's median; default the floor's (0 without a floor).
-    bounces, iterations, samples, seed, relaxation, update, stride, progress
+    bounces, iterations, samples, seed, relaxation, update, stride, estimator, progress
         IRT-PS only, as for `irtps.interreflection.remove_interreflections`.
 
     Returns
@@ -134,7 +135,7 @@ def reconstruct(
     pixel_size = scene.camera.pixel_size
     timings = {}
     if method == "irtps":
-        parameters.update(bounces=bounces, iterations=iterations, samples=samples, seed=seed, relaxation=relaxation, update=update, stride=stride)
+        parameters.update(bounces=bounces, iterations=iterations, samples=samples, seed=seed, relaxation=relaxation, update=update, stride=stride, estimator=estimator)
         start = time.perf_counter()
         loop = remove_interreflections(
             dataset,
@@ -150,6 +151,7 @@ def reconstruct(
             saturation=saturation,
             base_height=base_height,
             stride=stride,
+            estimator=estimator,
             progress=progress,
         )
         timings["irtps"] = time.perf_counter() - start

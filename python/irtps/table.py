@@ -9,6 +9,7 @@ import numpy as np
 from irtps.dataset import Dataset
 from irtps.errors import IrtpsError
 from irtps.evaluate import evaluate
+from irtps.paper_estimator import PAPER_SCALE
 from irtps.reconstruct import Reconstruction, reconstruct
 
 #: Rows of the table: (label, metric key); lower is better for all of them.
@@ -21,9 +22,19 @@ ROWS = (
 )
 
 
-def method_names(bounces: Sequence[int]) -> list[str]:
-    """Column names: ``PS`` then ``IRTPSr1`` … for each bounce count."""
-    return ["PS"] + [f"IRTPSr{r}" for r in bounces]
+def method_names(bounces: Sequence[int], paper: bool = True) -> list[str]:
+    """Column names: ``PS``, ``IRTPSr1`` … for each bounce count, then (with `paper`) the
+    paper's estimator ``Paper r1`` … for the counts it takes (1 to 3)."""
+    return ["PS"] + [f"IRTPSr{r}" for r in bounces] + ([f"Paper r{r}" for r in bounces if r in PAPER_SCALE] if paper else [])
+
+
+def _runs(bounces: Sequence[int], paper: bool) -> list[tuple[str, dict | None]]:
+    """(column, reconstruct settings) for each column; None is classic PS."""
+    runs: list[tuple[str, dict | None]] = [("PS", None)]
+    runs += [(f"IRTPSr{r}", {"bounces": r}) for r in bounces]
+    if paper:
+        runs += [(f"Paper r{r}", {"bounces": r, "estimator": "paper", "update": "previous"}) for r in bounces if r in PAPER_SCALE]
+    return runs
 
 
 def comparison_table(
@@ -33,6 +44,7 @@ def comparison_table(
     iterations: int = 6,
     samples: int = 256,
     seed: int = 0,
+    paper: bool = True,
     on_result: Callable[[str, str, Reconstruction], None] | None = None,
 ) -> dict:
     """Reconstruct each data set with classic PS and IRT-PS r1..r3 and collect the errors.
@@ -45,6 +57,9 @@ def comparison_table(
         The IRT-PS variants (bounces estimated).
     iterations, samples, seed
         IRT-PS settings, as for `irtps.reconstruct`.
+    paper : bool
+        Also run the paper's own estimator (`irtps.paper_estimator`) with its own update
+        Aₜ₊₁ = Aₜ − Eₜ, for each bounce count it takes.
     on_result : callable, optional
         Called as ``on_result(name, method, reconstruction)`` after each reconstruction
         (e.g. to save it or to advance a progress bar).
@@ -58,17 +73,17 @@ def comparison_table(
     """
     if not datasets:
         raise IrtpsError("datasets: none given")
-    methods = method_names(bounces)
+    methods = method_names(bounces, paper)
     per_dataset: dict[str, dict[str, dict]] = {}
     for name, data in datasets:
         if data.gt is None:
             raise IrtpsError(f"{name}: has no ground truth to compare with")
         per_dataset[name] = {}
-        for method, r in zip(methods, [None, *bounces]):
-            if r is None:
+        for method, settings in _runs(bounces, paper):
+            if settings is None:
                 result = reconstruct(data, "ps")
             else:
-                result = reconstruct(data, "irtps", bounces=r, iterations=iterations, samples=samples, seed=seed)
+                result = reconstruct(data, "irtps", iterations=iterations, samples=samples, seed=seed, **settings)
             metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=data.gt)
             per_dataset[name][method] = metrics.to_dict()
             if on_result is not None:
