@@ -24,11 +24,11 @@ def test_table_has_the_papers_layout_and_marks_the_best(two_scenes, tmp_path, ca
     out = tmp_path / "table"
     assert main(["table", *map(str, two_scenes), "--out", str(out), "--bounces", "1", "3", "--iterations", "2", "--samples", "32", "--quiet"]) == 0
     printed = capsys.readouterr().out
-    assert "| **cap** | PS | IRTPSr1 | IRTPSr3 | Paper r1 | Paper r3 |" in printed
-    assert "| **Overall** | PS | IRTPSr1 | IRTPSr3 | Paper r1 | Paper r3 |" in printed
+    assert "| **cap** | PS | IRTPSr1 | IRTPSr3 | Paper-r1 | Paper-r3 |" in printed
+    assert "| **Overall** | PS | IRTPSr1 | IRTPSr3 | Paper-r1 | Paper-r3 |" in printed
     assert (out / "table.md").read_text() in printed
     table = json.loads((out / "table.json").read_text())
-    assert table["methods"] == ["PS", "IRTPSr1", "IRTPSr3", "Paper r1", "Paper r3"]
+    assert table["methods"] == ["PS", "IRTPSr1", "IRTPSr3", "Paper-r1", "Paper-r3"]
     assert set(table["datasets"]) == {"cap", "relief"}
     for key in table["rows"]:
         values = [table["datasets"][name]["PS"][key] for name in ("cap", "relief")]
@@ -52,7 +52,7 @@ def test_demo_writes_everything_it_announces(tmp_path, capsys):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--size", "24", "--samples", "32", "--iterations", "2", "--quiet"]) == 0
     printed = capsys.readouterr().out
-    assert "| **cap_cornell** | PS | IRTPSr1 | IRTPSr2 | IRTPSr3 | Paper r1 | Paper r2 | Paper r3 |" in printed
+    assert "| **cap_cornell** | PS | IRTPSr1 | IRTPSr2 | IRTPSr3 | Paper-r1 | Paper-r2 | Paper-r3 |" in printed
     assert str(out) in printed
     assert irtps.load_dataset(out / "data").gt is not None
     for method in ("PS", "IRTPSr1", "IRTPSr2", "IRTPSr3"):

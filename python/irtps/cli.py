@@ -172,7 +172,8 @@ def _cmd_demo(args: argparse.Namespace) -> None:
     print(text)
     print(
         f"Done in {time.perf_counter() - start:.0f} s. Outputs in {args.out}/: data/ (the synthetic data set with ground "
-        f"truth), cap_cornell/PS/ and cap_cornell/IRTPSr*/ (normals, albedo, height, mesh.ply, run.json), "
+        f"truth), cap_cornell/PS/, cap_cornell/IRTPSr*/ and cap_cornell/Paper-r*/ (normals, albedo, height, mesh.ply, "
+        f"run.json), "
         f"table.md, table.json."
     )
 
@@ -182,7 +183,7 @@ def _add_table_options(parser: argparse.ArgumentParser, iterations: int, samples
     parser.add_argument("--iterations", type=int, default=iterations, help=f"IRT-PS corrections at most (default {iterations})")
     parser.add_argument("--samples", type=int, default=samples, help=f"camera paths per pixel per estimate (default {samples})")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--no-paper", action="store_true", help="leave out the paper's own estimator (columns 'Paper rN')")
+    parser.add_argument("--no-paper", action="store_true", help="leave out the paper's own estimator (columns 'Paper-rN')")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 

@@ -24,8 +24,8 @@ ROWS = (
 
 def method_names(bounces: Sequence[int], paper: bool = True) -> list[str]:
     """Column names: ``PS``, ``IRTPSr1`` … for each bounce count, then (with `paper`) the
-    paper's estimator ``Paper r1`` … for the counts it takes (1 to 3)."""
-    return ["PS"] + [f"IRTPSr{r}" for r in bounces] + ([f"Paper r{r}" for r in bounces if r in PAPER_SCALE] if paper else [])
+    paper's estimator ``Paper-r1`` … for the counts it takes (1 to 3)."""
+    return ["PS"] + [f"IRTPSr{r}" for r in bounces] + ([f"Paper-r{r}" for r in bounces if r in PAPER_SCALE] if paper else [])
 
 
 def _runs(bounces: Sequence[int], paper: bool) -> list[tuple[str, dict | None]]:
@@ -33,7 +33,7 @@ def _runs(bounces: Sequence[int], paper: bool) -> list[tuple[str, dict | None]]:
     runs: list[tuple[str, dict | None]] = [("PS", None)]
     runs += [(f"IRTPSr{r}", {"bounces": r}) for r in bounces]
     if paper:
-        runs += [(f"Paper r{r}", {"bounces": r, "estimator": "paper", "update": "previous"}) for r in bounces if r in PAPER_SCALE]
+        runs += [(f"Paper-r{r}", {"bounces": r, "estimator": "paper", "update": "previous"}) for r in bounces if r in PAPER_SCALE]
     return runs
 
 
