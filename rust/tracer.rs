@@ -57,7 +57,7 @@ impl Tracer {
                 planes.push((panel.origin, panel.normal, t));
             }
         }
-        let tris: Vec<Triangle> = in_bvh
+        let mut tris: Vec<Triangle> = in_bvh
             .iter()
             .map(|&t| {
                 let [v0, v1, v2] = mesh.corners(t as usize);
@@ -77,12 +77,11 @@ impl Tracer {
         });
         let guard = hi + (hi - lo).max(Vec3A::ONE) * 0.01;
         let guard_index = tris.len() as u32;
-        let mut build = tris.clone();
-        build.push(Triangle { v0: guard, v1: guard, v2: guard });
-        let bvh = build_cwbvh_from_tris(&build, BvhBuildParams::very_fast_build(), &mut Duration::default());
+        tris.push(Triangle { v0: guard, v1: guard, v2: guard });
+        let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::very_fast_build(), &mut Duration::default());
         let bounds_guard = bvh.primitive_indices.iter().position(|&i| i == guard_index).expect("the guard is in the BVH");
         let mesh_index = bvh.primitive_indices.iter().map(|&i| in_bvh.get(i as usize).copied().unwrap_or(u32::MAX)).collect();
-        let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&build[i as usize])).collect();
+        let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&tris[i as usize])).collect();
         Tracer { bvh, triangles, mesh_index, planes, triangle_count, bounds_guard, avx2: avx2_available() }
     }
 

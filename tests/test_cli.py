@@ -102,3 +102,24 @@ def test_reconstruct_places_a_synthetic_object_on_its_floor(tmp_path, capsys):
 def test_evaluate_rejects_a_folder_that_is_not_a_reconstruction(tmp_path, capsys):
     assert main(["evaluate", str(tmp_path), "--gt", str(BALL)]) == 2
     assert "normal.exr" in capsys.readouterr().err
+
+
+def test_evaluate_reads_only_the_ground_truth(tmp_path, capsys):
+    data = tmp_path / "cap"
+    assert main(["synth", "cap", "--out", str(data), "--size", "24", "--lights", "6", "--bounces", "0", "--environment", "none", "--quiet"]) == 0
+    out = tmp_path / "cap_ps"
+    assert main(["reconstruct", str(data), "--out", str(out), "--quiet"]) == 0
+    shutil.rmtree(data / "images")  # evaluation must not need the images
+    shutil.rmtree(data / "gt" / "direct")
+    assert main(["evaluate", str(out), "--gt", str(data), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["normal_mean_angular_deg"] < 2.0
+
+
+def test_evaluate_rejects_ground_truth_of_another_size(tmp_path, capsys):
+    small, large = tmp_path / "small", tmp_path / "large"
+    for folder, size in ((small, "16"), (large, "20")):
+        assert main(["synth", "cap", "--out", str(folder), "--size", size, "--lights", "4", "--bounces", "0", "--environment", "none", "--quiet"]) == 0
+    out = tmp_path / "small_ps"
+    assert main(["reconstruct", str(small), "--out", str(out), "--quiet"]) == 0
+    assert main(["evaluate", str(out), "--gt", str(large)]) == 2
+    assert "scene.json" in capsys.readouterr().err

@@ -2,7 +2,7 @@
 
 from importlib.metadata import PackageNotFoundError, version
 
-from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object, save_dataset
+from irtps.dataset import Dataset, GroundTruth, load_dataset, load_ground_truth, load_scene_object, save_dataset
 from irtps.errors import DatasetError, IrtpsError
 from irtps.evaluate import Metrics, angular_error_deg, evaluate
 from irtps.integrate import integrate_normals, place_height
@@ -38,6 +38,7 @@ __all__ = [
     "height_to_normals",
     "integrate_normals",
     "load_dataset",
+    "load_ground_truth",
     "load_scene",
     "load_scene_object",
     "photometric_stereo",

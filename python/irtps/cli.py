@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from irtps.atomic import atomic_output_dir
-from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object, save_dataset
+from irtps.dataset import Dataset, GroundTruth, load_dataset, load_ground_truth, load_scene_object, save_dataset
 from irtps.errors import IrtpsError
 from irtps.evaluate import evaluate, format_metrics
 from irtps.integrate import METHODS as INTEGRATION_METHODS
@@ -113,7 +113,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
 
 def _cmd_evaluate(args: argparse.Namespace) -> None:
     normals, albedo, height, mask = load_reconstruction(args.out)
-    truth = load_dataset(args.gt).gt
+    truth = load_ground_truth(args.gt, mask.shape)
     if truth is None:
         raise IrtpsError(f"{args.gt}: has no ground truth (gt/ or Normal_gt.mat)")
     metrics = evaluate(mask=mask, normals=normals, albedo=albedo, height=height, gt=truth)

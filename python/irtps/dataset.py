@@ -185,6 +185,47 @@ def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.n
             _write_new_exr(out, relative, array)
 
 
+def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | None:
+    """Read only the ground truth of a data set folder, without decoding its images.
+
+    The direct-light images of ``gt/direct/`` are left out: this is what evaluating a
+    reconstruction needs.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A data set folder (irtps or DiLiGenT layout).
+    size : tuple of int
+        The (H, W) the ground truth must have (the reconstruction's).
+
+    Returns
+    -------
+    GroundTruth or None
+        None when the folder holds no ground truth.
+
+    Raises
+    ------
+    DatasetError
+        Naming the file: not a data set, a camera of another size, malformed ground truth.
+    """
+    folder = Path(path)
+    if not folder.is_dir():
+        raise DatasetError(f"{folder}: no such data set folder")
+    if (folder / SCENE_FILE).is_file():
+        scene = load_scene(folder / SCENE_FILE)
+        camera_size = (scene.camera.height, scene.camera.width)
+        if camera_size != tuple(size):
+            raise DatasetError(
+                f"{folder / SCENE_FILE}: camera size {format_size(camera_size)} differs from the reconstruction's ({format_size(size)})"
+            )
+        return _load_ground_truth(folder / GT_FOLDER, len(scene.lights), camera_size, direct=False)
+    if (folder / DILIGENT_MARKER).is_file():
+        from irtps.diligent import load_diligent_ground_truth
+
+        return load_diligent_ground_truth(folder, tuple(size))
+    raise DatasetError(f"{folder}: not a data set: it holds neither {SCENE_FILE} nor {DILIGENT_MARKER}")
+
+
 def _load_irtps(folder: Path, ground_truth: bool) -> Dataset:
     scene = load_scene(folder / SCENE_FILE)
     count = len(scene.lights)
@@ -224,7 +265,7 @@ def _numbered_images(folder: Path, count: int) -> list[Path]:
     return paths
 
 
-def _load_ground_truth(folder: Path, count: int, size: tuple[int, int]) -> GroundTruth | None:
+def _load_ground_truth(folder: Path, count: int, size: tuple[int, int], direct: bool = True) -> GroundTruth | None:
     if not folder.is_dir():
         return None
     parts = {
@@ -233,7 +274,7 @@ def _load_ground_truth(folder: Path, count: int, size: tuple[int, int]) -> Groun
         "albedo": _if_file(folder / "albedo.exr", lambda path: _checked_size(path, read_image(path), size)),
     }
     direct_folder = folder / "direct"
-    if direct_folder.is_dir():
+    if direct and direct_folder.is_dir():
         paths = _numbered_images(direct_folder, count)
         parts["direct"] = _checked_size(paths[0], read_images(paths), size)
     if all(part is None for part in parts.values()):

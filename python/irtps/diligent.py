@@ -91,6 +91,24 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
     return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder))
 
 
+def load_diligent_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | None:
+    """Read only the true normals (``Normal_gt.mat``) of a DiLiGenT folder, no images.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+    size : tuple of int
+        The expected (H, W).
+
+    Returns
+    -------
+    GroundTruth or None
+        None when the folder has no ``Normal_gt.mat``.
+    """
+    normals_path = Path(path) / NORMALS_FILE
+    return GroundTruth(normal=_read_normals(normals_path, size)) if normals_path.is_file() else None
+
+
 def _read_lines(path: Path) -> list[tuple[int, str]]:
     """Non-blank lines of a text file, stripped, with their 1-based line numbers."""
     try:

@@ -13,7 +13,7 @@ import numpy as np
 from irtps.atomic import atomic_output_dir
 from irtps.dataset import Dataset
 from irtps.errors import IrtpsError
-from irtps.imageio import write_exr, write_png
+from irtps.imageio import read_exr, read_mask, write_exr, write_png
 from irtps.integrate import integrate_normals, place_height
 from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_ply
@@ -243,8 +243,6 @@ def load_reconstruction(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.nd
     -------
     (normals (H, W, 3), albedo (H, W, 3), height (H, W), mask (H, W) bool)
     """
-    from irtps.imageio import read_exr, read_mask
-
     folder = Path(path)
     normal_path = folder / "normal.exr"
     if not normal_path.is_file():
