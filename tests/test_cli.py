@@ -62,7 +62,7 @@ def test_existing_output_survives_a_failed_run(tmp_path):
 
 
 def test_every_command_has_help_with_examples():
-    for command in ([], ["render"], ["synth"], ["reconstruct"], ["evaluate"], ["table"], ["demo"]):
+    for command in ([], ["render"], ["synth"], ["reconstruct"], ["evaluate"], ["table"], ["demo"], ["batch"]):
         result = subprocess.run([sys.executable, "-m", "irtps.cli", *command, "--help"], capture_output=True, text=True)
         assert result.returncode == 0
         assert "examples:" in result.stdout

@@ -11,12 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from irtps.atomic import atomic_output_dir
+from irtps.batch import SUMMARY_JSON, SUMMARY_MARKDOWN, connect, local_cluster, reconstruct_many, summary_table, write_summary
 from irtps.dataset import Dataset, GroundTruth, load_dataset, load_ground_truth, load_scene_object, save_dataset
 from irtps.errors import IrtpsError
 from irtps.evaluate import evaluate, format_metrics
 from irtps.integrate import METHODS as INTEGRATION_METHODS
 from irtps.interreflection import ESTIMATORS, UPDATES
-from irtps.reconstruct import METHODS, load_reconstruction, reconstruct, save_reconstruction
+from irtps.reconstruct import METHODS, load_and_reconstruct, load_reconstruction, save_reconstruction
 from irtps.render import Rendering, render
 from irtps.surface import height_to_normals
 from irtps.synth import SHAPES, synthesize
@@ -75,29 +76,14 @@ def _cmd_synth(args: argparse.Namespace) -> None:
         )
 
 
+def _reconstruct_options(args: argparse.Namespace) -> dict:
+    """The keyword arguments of `irtps.reconstruct` given by `_add_reconstruct_options`."""
+    names = ("method", "robust", "shadow_fraction", "saturation", "integration", "base_height", "bounces", "iterations", "samples", "seed", "relaxation", "update", "stride", "estimator")
+    return {name: getattr(args, name) for name in names}
+
+
 def _cmd_reconstruct(args: argparse.Namespace) -> None:
-    start = time.perf_counter()
-    dataset = load_dataset(args.data)
-    loaded = time.perf_counter() - start
-    result = reconstruct(
-        dataset,
-        args.method,
-        robust=args.robust,
-        shadow_fraction=args.shadow_fraction,
-        saturation=args.saturation,
-        integration=args.integration,
-        base_height=args.base_height,
-        bounces=args.bounces,
-        iterations=args.iterations,
-        samples=args.samples,
-        seed=args.seed,
-        relaxation=args.relaxation,
-        update=args.update,
-        stride=args.stride,
-        estimator=args.estimator,
-        progress=not args.quiet,
-    )
-    result.timings = {"load": loaded, **result.timings}
+    dataset, result = load_and_reconstruct(args.data, **_reconstruct_options(args), progress=not args.quiet)
     save_reconstruction(result, args.out, source=str(args.data))
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
@@ -109,6 +95,25 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
         if dataset.gt is not None:
             metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=dataset.gt)
             print(format_metrics(metrics))
+
+
+def _cmd_batch(args: argparse.Namespace) -> None:
+    if args.scheduler is not None and (args.workers is not None or args.threads_per_worker is not None):
+        raise IrtpsError("--workers and --threads-per-worker set up the local cluster; with --scheduler, give them to 'dask worker' (--nworkers, --nthreads)")
+    options = _reconstruct_options(args)
+    if args.scheduler is None:
+        cluster = local_cluster(args.workers, 1 if args.threads_per_worker is None else args.threads_per_worker)
+    else:
+        cluster = connect(args.scheduler)
+    with cluster as client:
+        results = reconstruct_many(args.data, args.out, client=client, progress=not args.quiet, **options)
+    write_summary(results, args.out, settings=options)
+    print(summary_table(results), end="")
+    failed = sum(result.failed for result in results)
+    if failed:
+        raise IrtpsError(f"{failed} of {len(results)} data sets failed (see {args.out / SUMMARY_MARKDOWN})")
+    if not args.quiet:
+        print(f"{len(results)} data sets reconstructed into {args.out}/; summary in {args.out / SUMMARY_MARKDOWN} and {args.out / SUMMARY_JSON}")
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> None:
@@ -187,6 +192,24 @@ def _add_table_options(parser: argparse.ArgumentParser, iterations: int, samples
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def _add_reconstruct_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--method", choices=METHODS, default="ps", help="reconstruction method (default ps)")
+    parser.add_argument("--robust", action=argparse.BooleanOptionalAction, default=True, help="drop shadowed and saturated observations (default on)")
+    parser.add_argument("--shadow-fraction", type=float, default=0.05, help="shadow threshold relative to a pixel's brightest (default 0.05)")
+    parser.add_argument("--saturation", type=float, default=None, help="raw value at or above which an observation is saturated")
+    parser.add_argument("--integration", choices=INTEGRATION_METHODS, default=None, help="normal integration (default ls for ps, footprint for irtps)")
+    parser.add_argument("--base-height", type=float, default=None, help="height of the object's boundary (default: the floor's)")
+    irt = parser.add_argument_group("IRT-PS (--method irtps)")
+    irt.add_argument("--bounces", type=int, default=3, help="inter-reflection bounces estimated (default 3)")
+    irt.add_argument("--iterations", type=int, default=8, help="largest number of corrections (default 8)")
+    irt.add_argument("--samples", type=int, default=256, help="camera paths per pixel per estimate (default 256)")
+    irt.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    irt.add_argument("--relaxation", type=float, default=1.0, help="fraction of each new estimate taken (default 1)")
+    irt.add_argument("--update", choices=UPDATES, default="original", help="A0 - E (original, default) or the paper's A_t - E_t (previous)")
+    irt.add_argument("--stride", type=int, default=1, help="estimate at one pixel in SxS and interpolate (faster; default 1: every pixel)")
+    irt.add_argument("--estimator", choices=ESTIMATORS, default="physical", help="indirect estimate: physical (default) or the paper's heuristic")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``irtps`` command."""
     parser = argparse.ArgumentParser(
@@ -195,7 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
         "with inter-reflections removed by ray tracing.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  irtps demo\n  irtps synth cavity --out cavity\n  irtps reconstruct cavity --out cavity_ps\n"
-        "  irtps evaluate cavity_ps --gt cavity\n  irtps render cavity --out cavity_rerendered --samples 512\n\n"
+        "  irtps evaluate cavity_ps --gt cavity\n  irtps batch cavity cap --out runs\n  irtps render cavity --out cavity_rerendered --samples 512\n\n"
         "Run 'irtps COMMAND --help' for a command's options.",
     )
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -251,23 +274,37 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("data", type=Path, help="data set folder")
     p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--method", choices=METHODS, default="ps", help="reconstruction method (default ps)")
-    p.add_argument("--robust", action=argparse.BooleanOptionalAction, default=True, help="drop shadowed and saturated observations (default on)")
-    p.add_argument("--shadow-fraction", type=float, default=0.05, help="shadow threshold relative to a pixel's brightest (default 0.05)")
-    p.add_argument("--saturation", type=float, default=None, help="raw value at or above which an observation is saturated")
-    p.add_argument("--integration", choices=INTEGRATION_METHODS, default=None, help="normal integration (default ls for ps, footprint for irtps)")
-    p.add_argument("--base-height", type=float, default=None, help="height of the object's boundary (default: the floor's)")
-    irt = p.add_argument_group("IRT-PS (--method irtps)")
-    irt.add_argument("--bounces", type=int, default=3, help="inter-reflection bounces estimated (default 3)")
-    irt.add_argument("--iterations", type=int, default=8, help="largest number of corrections (default 8)")
-    irt.add_argument("--samples", type=int, default=256, help="camera paths per pixel per estimate (default 256)")
-    irt.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    irt.add_argument("--relaxation", type=float, default=1.0, help="fraction of each new estimate taken (default 1)")
-    irt.add_argument("--update", choices=UPDATES, default="original", help="A0 - E (original, default) or the paper's A_t - E_t (previous)")
-    irt.add_argument("--stride", type=int, default=1, help="estimate at one pixel in SxS and interpolate (faster; default 1: every pixel)")
-    irt.add_argument("--estimator", choices=ESTIMATORS, default="physical", help="indirect estimate: physical (default) or the paper's heuristic")
+    _add_reconstruct_options(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(run=_cmd_reconstruct)
+
+    p = commands.add_parser(
+        "batch",
+        help="reconstruct many data sets on a Dask cluster, with a summary",
+        description="Reconstruct each DATA into OUT/NAME/ (NAME: the folder's name, made unique with -2, -3 ...), "
+        "the files of 'irtps reconstruct', each written atomically by the worker that reconstructed it. Runs on a "
+        "local Dask cluster (one worker process per core, one data set at a time each) or, with --scheduler, on a "
+        "running Dask cluster whose workers see the same file system under the same paths. A data set that fails is "
+        "reported and the others go on. Prints a summary (status, seconds, mean angular error when there is ground "
+        "truth, the error of a failed data set) and writes it to OUT/batch.md and OUT/batch.json; exits with status "
+        "2 if any data set failed. Needs Dask: pip install 'irtps[batch]'.\n\n"
+        "On a cluster with a shared file system: run 'dask scheduler' on one node, "
+        "'RAYON_NUM_THREADS=1 dask worker tcp://HOST:8786 --nworkers $(nproc) --nthreads 1' on each compute node, "
+        "then 'irtps batch ... --scheduler tcp://HOST:8786'.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="examples:\n  irtps batch shared/data/diligent/*PNG --out diligent_ps\n"
+        "  irtps batch scenes/* --out runs --method irtps --bounces 2 --workers 2 --threads-per-worker 4\n"
+        "  irtps batch /shared/scenes/* --out /shared/runs --method irtps --scheduler tcp://head-node:8786",
+    )
+    p.add_argument("data", type=Path, nargs="+", help="data set folders")
+    p.add_argument("--out", type=Path, required=True, help="folder for one reconstruction folder per data set and the summary")
+    _add_reconstruct_options(p)
+    dask = p.add_argument_group("cluster")
+    dask.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster of this scheduler (e.g. tcp://head-node:8786) instead of a local one")
+    dask.add_argument("--workers", type=int, default=None, metavar="N", help="local cluster: worker processes (default: cores / threads per worker)")
+    dask.add_argument("--threads-per-worker", type=int, default=None, metavar="T", help="local cluster: data sets per worker at once, and its Rust threads (default 1)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(run=_cmd_batch)
 
     p = commands.add_parser(
         "evaluate",
@@ -324,7 +361,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"irtps: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("irtps: interrupted; nothing was written", file=sys.stderr)
+        print("irtps: interrupted; unfinished outputs were not written", file=sys.stderr)
         return 130
     return 0
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from irtps.atomic import atomic_output_dir
-from irtps.dataset import Dataset
+from irtps.dataset import Dataset, load_dataset
 from irtps.errors import IrtpsError
 from irtps.imageio import read_exr, read_mask, write_exr, write_png
 from irtps.integrate import integrate_normals, place_height
@@ -192,6 +192,49 @@ def reconstruct(
         timings=timings,
         parameters=parameters,
     )
+
+
+def load_and_reconstruct(path: str | Path, method: str = "ps", **options) -> tuple[Dataset, Reconstruction]:
+    """Read a data set folder and reconstruct it, timing the reading too.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A data set folder, as for `irtps.load_dataset`.
+    method : str
+        As for `reconstruct`.
+    **options
+        The other keyword arguments of `reconstruct`.
+
+    Returns
+    -------
+    (Dataset, Reconstruction)
+        The data set (for its ground truth) and the reconstruction, whose ``timings``
+        start with ``"load"``, the seconds spent reading.
+
+    Raises
+    ------
+    DatasetError
+        If the folder is not a readable data set (see `irtps.load_dataset`).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from irtps.dataset import save_dataset
+    >>> from irtps.synth import synthesize
+    >>> data, _ = synthesize("cap", size=24, lights=6, bounces=0, environment="none")
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     save_dataset(data, folder + "/cap")
+    ...     dataset, result = load_and_reconstruct(folder + "/cap")
+    >>> list(result.timings)
+    ['load', 'photometric_stereo', 'integration']
+    """
+    start = time.perf_counter()
+    dataset = load_dataset(path)
+    loaded = time.perf_counter() - start
+    result = reconstruct(dataset, method, **options)
+    result.timings = {"load": loaded, **result.timings}
+    return dataset, result
 
 
 def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str | None = None) -> None:

@@ -1,0 +1,123 @@
+"""Batch runs on an in-process Dask cluster: outputs, failures, the summary and the command."""
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import irtps.batch
+from irtps import evaluate, load_dataset, reconstruct
+from irtps.batch import local_cluster, reconstruct_many
+from irtps.cli import main
+from irtps.reconstruct import load_reconstruction
+
+DATA = Path(__file__).parent / "data"
+IRTPS_OPTIONS = {"method": "irtps", "bounces": 2, "iterations": 2, "samples": 8, "seed": 3}
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with local_cluster(2, processes=False) as client:
+        yield client
+
+
+@pytest.fixture
+def three_sets(tmp_path):
+    """Two good data sets (irtps and DiLiGenT layouts) and one with a corrupt image."""
+    cap = shutil.copytree(DATA / "mitsuba_small" / "cap_cornell", tmp_path / "in" / "cap")
+    ball = shutil.copytree(DATA / "diligent_ball_small", tmp_path / "in" / "ball")
+    broken = shutil.copytree(DATA / "mitsuba_small" / "cap_cornell", tmp_path / "in" / "broken")
+    (broken / "images" / "001.exr").write_bytes(b"not an EXR file")
+    return cap, ball, broken
+
+
+def test_outputs_match_a_direct_reconstruction_and_a_failure_stops_nothing(cluster, three_sets, tmp_path):
+    cap, ball, broken = three_sets
+    out = tmp_path / "out"
+    results = reconstruct_many([cap, broken, ball], out, client=cluster, **IRTPS_OPTIONS)
+    assert [(r.name, r.status) for r in results] == [("cap", "ok"), ("broken", "failed"), ("ball", "ok")]
+    assert results[1].error.startswith(f"{broken / 'images' / '001.exr'}: not a readable OpenEXR file")
+    assert results[1].seconds is not None and results[1].metrics is None  # reported by the worker itself
+    assert sorted(p.name for p in out.iterdir()) == ["ball", "cap"]  # nothing, not even a temporary, for the failure
+    for folder, result in ((cap, results[0]), (ball, results[2])):
+        dataset = load_dataset(folder)
+        direct = reconstruct(dataset, **IRTPS_OPTIONS)
+        normals, albedo, height, mask = load_reconstruction(out / result.name)
+        np.testing.assert_array_equal(mask, direct.mask)
+        np.testing.assert_array_equal(normals, direct.normals)
+        np.testing.assert_array_equal(albedo, direct.albedo)
+        np.testing.assert_array_equal(height, direct.height)
+        expected = evaluate(mask=direct.mask, normals=direct.normals, albedo=direct.albedo, height=direct.height, gt=dataset.gt)
+        assert result.mean_angular_error == pytest.approx(expected.normal_mean_angular_deg)
+        assert result.source == str(folder) and result.seconds > 0
+
+
+def test_a_task_that_dies_is_reported_and_the_others_finish(cluster, three_sets, tmp_path, monkeypatch):
+    cap, ball, _ = three_sets
+    real_task = irtps.batch.reconstruct_to_folder
+
+    def task_losing_the_ball(source, destination, options):
+        if Path(source).name == "ball":
+            raise RuntimeError("worker lost")
+        return real_task(source, destination, options)
+
+    monkeypatch.setattr(irtps.batch, "reconstruct_to_folder", task_losing_the_ball)
+    results = reconstruct_many([ball, cap], tmp_path / "out", client=cluster)
+    assert [(r.status, r.error, r.seconds) for r in results][0] == ("failed", "RuntimeError: worker lost", None)
+    assert results[1].status == "ok" and (tmp_path / "out" / "cap" / "normal.exr").is_file()
+
+
+def test_unknown_options_fail_before_anything_runs(cluster, three_sets, tmp_path):
+    with pytest.raises(irtps.IrtpsError, match="bounce"):
+        reconstruct_many(three_sets, tmp_path / "out", client=cluster, bounce=2)
+    with pytest.raises(irtps.IrtpsError, match="method"):
+        reconstruct_many(three_sets, tmp_path / "out", client=cluster, method="mitsuba")
+    assert not (tmp_path / "out").exists()
+
+
+def test_command_runs_on_a_scheduler_and_writes_the_summary(cluster, three_sets, tmp_path, capsys):
+    cap, ball, broken = three_sets
+    twin = shutil.copytree(cap, tmp_path / "elsewhere" / "cap")  # same base name as `cap`
+    out = tmp_path / "out"
+    argv = ["batch", str(cap), str(twin), str(ball), str(broken), "--out", str(out), "--scheduler", cluster.scheduler.address]
+    argv += ["--method", "irtps", "--iterations", "1", "--samples", "4", "--quiet"]
+    assert main(argv) == 2
+    printed = capsys.readouterr()
+    assert printed.err == f"irtps: error: 1 of 4 data sets failed (see {out / 'batch.md'})\n"  # no progress bar
+    summary = json.loads((out / "batch.json").read_text())
+    assert [(s["name"], s["status"]) for s in summary["datasets"]] == [("cap", "ok"), ("cap-2", "ok"), ("ball", "ok"), ("broken", "failed")]
+    assert (summary["succeeded"], summary["failed"], summary["settings"]["samples"]) == (3, 1, 4)
+    assert printed.out == (out / "batch.md").read_text()
+    assert "| broken | failed |" in printed.out and "001.exr" in printed.out
+    run = json.loads((out / "cap-2" / "run.json").read_text())
+    assert run["source"] == str(twin) and run["parameters"]["samples"] == 4 and run["parameters"]["method"] == "irtps"
+
+
+def test_command_succeeds_when_every_data_set_does(cluster, three_sets, tmp_path, capsys):
+    cap, ball, _ = three_sets
+    out = tmp_path / "out"
+    assert main(["batch", str(cap), str(ball), "--out", str(out), "--scheduler", cluster.scheduler.address]) == 0
+    printed = capsys.readouterr().out
+    assert "| cap | ok |" in printed and "| ball | ok |" in printed
+    assert "2 data sets reconstructed" in printed
+
+
+def test_local_cluster_options_are_refused_with_a_scheduler(three_sets, tmp_path, capsys):
+    argv = ["batch", str(three_sets[0]), "--out", str(tmp_path / "out"), "--scheduler", "tcp://head-node:8786", "--workers", "2"]
+    assert main(argv) == 2
+    assert "--workers" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_bad_scheduler_address_is_named(three_sets, tmp_path, capsys):
+    assert main(["batch", str(three_sets[0]), "--out", str(tmp_path / "out"), "--scheduler", "nonsense://head-node"]) == 2
+    assert "nonsense://head-node: cannot reach a Dask scheduler" in capsys.readouterr().err
+
+
+def test_without_dask_the_command_says_how_to_install_it(three_sets, tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed now raises ImportError
+    assert main(["batch", str(three_sets[0]), "--out", str(tmp_path / "out")]) == 2
+    assert "pip install 'irtps[batch]'" in capsys.readouterr().err
