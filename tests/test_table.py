@@ -58,6 +58,9 @@ def test_demo_writes_everything_it_announces(tmp_path, capsys):
     for method in ("PS", "IRTPSr1", "IRTPSr2", "IRTPSr3"):
         assert (out / "cap_cornell" / method / "mesh.ply").is_file()
     assert (out / "table.md").is_file() and (out / "table.json").is_file()
+    # The reconstructions name the data set they came from, so a report finds its ground truth.
+    assert f"irtps report {out / 'cap_cornell' / 'IRTPSr3'}" in printed
+    assert json.loads((out / "cap_cornell" / "IRTPSr3" / "run.json").read_text())["source"] == str((out / "data").resolve())
 
 
 def test_table_needs_ground_truth(tmp_path, capsys):

@@ -130,7 +130,7 @@ def reconstruct_to_folder(source: str, destination: str, options: dict) -> Batch
     start = time.perf_counter()
     try:
         dataset, result = load_and_reconstruct(source, **options)
-        save_reconstruction(result, destination, source=source)
+        save_reconstruction(result, destination, source=str(Path(source).resolve()))
         metrics = None
         if dataset.gt is not None:
             metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=dataset.gt).to_dict()

@@ -84,7 +84,7 @@ def _reconstruct_options(args: argparse.Namespace) -> dict:
 
 def _cmd_reconstruct(args: argparse.Namespace) -> None:
     dataset, result = load_and_reconstruct(args.data, **_reconstruct_options(args), progress=not args.quiet)
-    save_reconstruction(result, args.out, source=str(args.data))
+    save_reconstruction(result, args.out, source=str(args.data.resolve()))
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
         print(f"reconstructed {args.data} ({args.method}; {stages}) -> {args.out}")
@@ -125,16 +125,27 @@ def _cmd_evaluate(args: argparse.Namespace) -> None:
     print(json.dumps(metrics.to_dict(), indent=2) if args.json else format_metrics(metrics))
 
 
-def _run_table(datasets, args, out: Path | None, save_reconstructions: bool) -> str:
-    """Compute the comparison table, write it (and the reconstructions) under `out`."""
+def _cmd_report(args: argparse.Namespace) -> None:
+    # Imported here: matplotlib, which the report draws with, would slow down every other command's start.
+    from irtps.report import write_report
+
+    page = write_report(args.out, args.report_out, truth=args.truth)
+    if not args.quiet:
+        figures = sorted(path.name for path in page.parent.glob("*.png"))
+        print(f"report of {args.out}: {len(figures)} figures ({', '.join(figures)}) and the page {page}")
+
+
+def _run_table(datasets, args, out: Path | None, sources: dict[str, str] | None = None) -> str:
+    """Compute the comparison table and write it under `out`; with `sources` (data set name ->
+    the path recorded as its source), the reconstructions too."""
     from tqdm import tqdm
 
     total = len(datasets) * len(method_names(args.bounces, not args.no_paper))
     with tqdm(total=total, desc="table", unit="run", disable=args.quiet, leave=False) as bar:
 
         def finished(name, method, result):
-            if save_reconstructions and out is not None:
-                save_reconstruction(result, out / name / method)
+            if sources is not None and out is not None:
+                save_reconstruction(result, out / name / method, source=sources[name])
             bar.update(1)
 
         table = comparison_table(
@@ -150,10 +161,10 @@ def _run_table(datasets, args, out: Path | None, save_reconstructions: bool) -> 
 def _cmd_table(args: argparse.Namespace) -> None:
     datasets = [(folder.name, load_dataset(folder)) for folder in args.data]
     if args.out is None:
-        print(_run_table(datasets, args, None, False), end="")
+        print(_run_table(datasets, args, None), end="")
         return
     with atomic_output_dir(args.out) as folder:
-        text = _run_table(datasets, args, folder, False)
+        text = _run_table(datasets, args, folder)
     print(text, end="")
     if not args.quiet:
         print(f"table written to {args.out / 'table.md'} and {args.out / 'table.json'}")
@@ -166,7 +177,8 @@ def _cmd_demo(args: argparse.Namespace) -> None:
             "cap", size=args.size, lights=12, environment="cornell", bounces=4, samples=256, seed=args.seed, progress=not args.quiet
         )
         save_dataset(dataset, folder / "data", extra=_bounce_files(rendering))
-        text = _run_table([("cap_cornell", dataset)], args, folder, True)
+        # Recorded as the final place of the data set, which `irtps report` reads ground truth from.
+        text = _run_table([("cap_cornell", dataset)], args, folder, {"cap_cornell": str(args.out.resolve() / "data")})
     share = rendering.indirect[:, dataset.mask].mean() / dataset.images[:, dataset.mask].mean()
     print(
         f"A {args.size}x{args.size} spherical cap on the floor of a Cornell box (red and green walls), 12 lights; "
@@ -177,9 +189,9 @@ def _cmd_demo(args: argparse.Namespace) -> None:
     print(text)
     print(
         f"Done in {time.perf_counter() - start:.0f} s. Outputs in {args.out}/: data/ (the synthetic data set with ground "
-        f"truth), cap_cornell/PS/, cap_cornell/IRTPSr*/ and cap_cornell/Paper-r*/ (normals, albedo, height, mesh.ply, "
+        f"truth), cap_cornell/PS/, cap_cornell/IRTPSr*/ and cap_cornell/Paper-r*/ (normals, albedo, height, mesh.ply, mesh.obj, "
         f"run.json), "
-        f"table.md, table.json."
+        f"table.md, table.json. See one as pictures with: irtps report {args.out / 'cap_cornell' / method_names(args.bounces, False)[-1]}"
     )
 
 
@@ -218,7 +230,7 @@ def build_parser() -> argparse.ArgumentParser:
         "with inter-reflections removed by ray tracing.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  irtps demo\n  irtps synth cavity --out cavity\n  irtps reconstruct cavity --out cavity_ps\n"
-        "  irtps evaluate cavity_ps --gt cavity\n  irtps batch cavity cap --out runs\n  irtps render cavity --out cavity_rerendered --samples 512\n\n"
+        "  irtps evaluate cavity_ps --gt cavity\n  irtps batch cavity cap --out runs\n  irtps report cavity_ps\n  irtps render cavity --out cavity_rerendered --samples 512\n\n"
         "Run 'irtps COMMAND --help' for a command's options.",
     )
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -263,7 +275,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="recover normals, albedo, a height map and a mesh from a data set",
         description="Reconstruct the object of DATA (contract layout, or DiLiGenT layout, detected) and write OUT: "
         "normal.exr (R, G, B = nx, ny, nz), albedo.exr, height.exr, mask.png, mesh.ply (the height field with "
-        "per-vertex albedo colour) and run.json (parameters, timings, versions); with --method irtps also "
+        "per-vertex albedo colour and normals), mesh.obj (the same mesh for any viewer) and run.json (parameters, "
+        "timings, versions, the data set's path); with --method irtps also "
         "indirect/NNN.exr (the estimated inter-reflected light) and the per-iteration history in run.json. "
         "When DATA has ground truth, the errors are printed too. OUT is replaced atomically.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -319,6 +332,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gt", type=Path, required=True, help="data set folder with ground truth")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(run=_cmd_evaluate)
+
+    p = commands.add_parser(
+        "report",
+        help="figures and a web page of a reconstruction",
+        description="Draw the reconstruction in OUT as PNG figures: the normal map, the albedo, a shaded relief of the "
+        "height field; with ground truth the angular, height and albedo error maps; for IRT-PS runs the estimated "
+        "inter-reflected light and the convergence of the iterations. Write them with index.html, one self-contained "
+        "page (figures embedded) that shows them beside the run's parameters and metrics, to OUT/report/ (replaced "
+        "atomically). Ground truth comes from the data set recorded in OUT/run.json, or --truth.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="examples:\n  irtps report cap_irtps\n  irtps report ball --truth shared/data/diligent/ballPNG\n"
+        "  irtps report cap_irtps --out cap_irtps_report --quiet",
+    )
+    p.add_argument("out", metavar="OUT", type=Path, help="reconstruction folder (from irtps reconstruct)")
+    p.add_argument("--truth", metavar="DATASET", type=Path, default=None, help="data set with ground truth (default: the run's own data set, if it has any)")
+    p.add_argument("--out", metavar="DIR", dest="report_out", type=Path, default=None, help="report folder (default OUT/report)")
+    p.add_argument("--quiet", action="store_true", help="print nothing")
+    p.set_defaults(run=_cmd_report)
 
     p = commands.add_parser(
         "table",

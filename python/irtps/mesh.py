@@ -5,6 +5,19 @@ pixel that some triangle uses, at the pixel centre ``x = (j + 0.5 − W/2)·s``,
 ``y = (H/2 − i − 0.5)·s``, ``z = h[i, j]``; and for each 2×2 block of masked pixels the
 triangles ``(i,j) (i+1,j) (i,j+1)`` and ``(i,j+1) (i+1,j) (i+1,j+1)``, which wind
 counter-clockwise seen from +z (they face the camera).
+
+Conventions of the files, for MeshLab, Blender and other viewers:
+
+- Coordinates are the contract's world frame, in world units (a pixel is
+  ``camera.pixel_size`` wide): x to the right, y up in the image, z (the height)
+  toward the camera. This is the "Y up" frame that OBJ importers assume by default,
+  so MeshLab's initial view and Blender's front view (importer defaults: forward −Z,
+  up Y) show the object as the camera saw it.
+- Triangles wind counter-clockwise seen from the camera (+z), so the face normals
+  that viewers compute from the winding point out of the surface, toward the camera,
+  and agree with the vertex normals written from the reconstructed normals.
+- ``mesh.ply`` also carries per-vertex albedo colours; ``mesh.obj`` has vertex
+  positions and normals only (OBJ has no standard vertex colour).
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from irtps.errors import IrtpsError
 from irtps.imageio import read_exr, read_mask, write_exr, write_png
 from irtps.integrate import integrate_normals, place_height
 from irtps.interreflection import Iteration, remove_interreflections
-from irtps.mesh import height_field_mesh, write_ply
+from irtps.mesh import height_field_mesh, write_obj, write_ply
 from irtps.ps import FLAGS, photometric_stereo
 
 METHODS = ("ps", "irtps")
@@ -242,8 +242,10 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
 
     Files: ``normal.exr`` (R, G, B = nx, ny, nz), ``albedo.exr``, ``height.exr`` (Y),
     ``mask.png``, ``mesh.ply`` (binary; the height field with per-vertex albedo colour and
-    normals), ``run.json`` (parameters, timings, versions, source, IRT-PS history) and, for
-    IRT-PS, ``indirect/NNN.exr`` (the last estimate of each image's inter-reflected light).
+    normals), ``mesh.obj`` (the same vertices, triangles and normals as Wavefront OBJ text,
+    see `irtps.mesh`), ``run.json`` (parameters, pixel size, timings, versions, source,
+    IRT-PS history) and, for IRT-PS, ``indirect/NNN.exr`` (the last estimate of each
+    image's inter-reflected light).
 
     Parameters
     ----------
@@ -262,12 +264,14 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
         write_png(folder / "mask.png", result.mask.astype(np.float32), bit_depth=8)
         vertices, faces, colors, normals = height_field_mesh(result.height, result.mask, result.pixel_size, albedo=result.albedo, normals=result.normals)
         write_ply(folder / "mesh.ply", vertices, faces, colors=colors, normals=normals)
+        write_obj(folder / "mesh.obj", vertices, faces, normals=normals)
         run = {
             "irtps": __version__,
             "python": platform.python_version(),
             "numpy": np.__version__,
             "source": source,
             "parameters": result.parameters,
+            "pixel_size": result.pixel_size,
             "timings_s": result.timings,
             "flags": {name: int((result.flags[result.mask] == value).sum()) for value, name in FLAGS.items()},
             "history": [asdict(step) for step in result.history],
@@ -297,3 +301,83 @@ def load_reconstruction(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.nd
     mask = read_mask(folder / "mask.png", normals.shape[:2])
     return normals, albedo, height, mask
 
+
+
+#: Fields of ``run.json`` that readers rely on, and the JSON types each may take.
+_RUN_FIELDS = {
+    "source": (str, type(None)),
+    "parameters": (dict,),
+    "timings_s": (dict,),
+    "flags": (dict,),
+    "history": (list,),
+}
+#: Fields that folders written by older versions of irtps lack.
+_OPTIONAL_RUN_FIELDS = {"pixel_size": (int, float)}
+_HISTORY_FIELDS = {"index": (int,), "height_change": (int, float, type(None)), "timings": (dict,), "metrics": (dict, type(None))}
+_JSON_TYPE_NAMES = {dict: "an object", list: "a list", str: "a string", int: "a number", float: "a number", type(None): "null"}
+
+
+def load_run_record(path: str | Path) -> dict:
+    """Read and check the ``run.json`` of a reconstruction folder.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The reconstruction folder (from `save_reconstruction` or ``irtps reconstruct``).
+
+    Returns
+    -------
+    dict
+        The record as written by `save_reconstruction`. ``pixel_size`` is absent from
+        folders written before irtps recorded it.
+
+    Raises
+    ------
+    IrtpsError
+        Naming the folder or the file and field: a missing folder or ``run.json``, text
+        that is not JSON, or a field missing or of the wrong type (``source`` a string or
+        null; ``parameters``, ``timings_s`` and ``flags`` objects; ``pixel_size`` a
+        number; ``history`` a list of objects with an integer ``index``, a numeric or
+        null ``height_change`` and an object or null ``metrics``).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from irtps.synth import synthesize
+    >>> data, _ = synthesize("cap", size=16, lights=4, bounces=0, environment="none")
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     save_reconstruction(reconstruct(data), folder + "/out", source="cap")
+    ...     record = load_run_record(folder + "/out")
+    >>> record["source"], record["parameters"]["method"], record["history"]
+    ('cap', 'ps', [])
+    """
+    folder = Path(path)
+    if not folder.is_dir():
+        raise IrtpsError(f"{folder}: no such reconstruction folder")
+    run_path = folder / "run.json"
+    if not run_path.is_file():
+        raise IrtpsError(f"{run_path}: missing (not a reconstruction folder written by irtps reconstruct?)")
+    try:
+        record = json.loads(run_path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise IrtpsError(f"{run_path}: not valid JSON ({error})") from None
+    _check_fields(run_path, "", record, _RUN_FIELDS, _OPTIONAL_RUN_FIELDS)
+    for k, step in enumerate(record["history"]):
+        _check_fields(run_path, f"history[{k}]", step, _HISTORY_FIELDS, {})
+    return record
+
+
+def _check_fields(run_path: Path, name: str, value, required: dict, optional: dict) -> None:
+    """Raise `IrtpsError` unless ``value`` is an object whose fields have the listed types."""
+    if not isinstance(value, dict):
+        raise IrtpsError(f"{run_path}: {name or 'the file'} must be an object, found {json.dumps(value)[:40]}")
+    prefix = f"{name}." if name else ""
+    for field_name, types in {**required, **optional}.items():
+        if field_name not in value:
+            if field_name in required:
+                raise IrtpsError(f"{run_path}: {prefix}{field_name} is missing")
+            continue
+        item = value[field_name]
+        if isinstance(item, bool) or not isinstance(item, types):
+            expected = " or ".join(dict.fromkeys(_JSON_TYPE_NAMES[t] for t in types))
+            raise IrtpsError(f"{run_path}: {prefix}{field_name} must be {expected}, found {json.dumps(item)[:40]}")

@@ -1,0 +1,181 @@
+"""PNG figures drawn with matplotlib: an image, a map of errors with its colour bar, a convergence curve.
+
+Figures are drawn on `matplotlib.figure.Figure` objects directly (no pyplot, no global
+state, no display needed) and returned as PNG bytes.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
+
+from irtps.display import BACKGROUND
+from irtps.errors import DatasetError
+
+__all__ = ["convergence_png", "error_map_png", "image_png"]
+
+#: Size of a figure in inches, and its resolution.
+FIGURE_SIZE = (4.8, 4.2)
+DPI = 120
+#: Percentile of an error map that the top of its colour scale marks.
+ERROR_SCALE_PERCENTILE = 99.0
+
+
+def image_png(rgb: np.ndarray, title: str) -> bytes:
+    """An RGB image with a title, as PNG bytes.
+
+    Parameters
+    ----------
+    rgb : numpy.ndarray
+        (H, W, 3) values in [0, 1], top row first (e.g. from `irtps.display`).
+    title : str
+
+    Returns
+    -------
+    bytes
+        A PNG file.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> image_png(np.zeros((4, 4, 3)), "black")[:8]
+    b'\\x89PNG\\r\\n\\x1a\\n'
+    """
+    rgb = np.asarray(rgb, dtype=np.float64)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise DatasetError(f"image has shape {rgb.shape}, expected (H, W, 3)")
+    figure = Figure(figsize=FIGURE_SIZE, layout="constrained")
+    axes = figure.add_subplot()
+    axes.imshow(np.clip(rgb, 0.0, 1.0))
+    _image_axes(axes, title)
+    return _png(figure)
+
+
+def error_map_png(errors: np.ndarray, title: str, unit: str) -> bytes:
+    """A map of per-pixel errors in colour, with a colour bar, as PNG bytes.
+
+    The colour scale runs from 0 to the 99th percentile of the finite errors, so a few
+    outliers do not wash out the rest; larger errors take the top colour (the bar's
+    arrow). NaN pixels (not evaluated) are drawn in the background grey.
+
+    Parameters
+    ----------
+    errors : numpy.ndarray
+        (H, W) non-negative errors, NaN where not evaluated (as `irtps.evaluate.error_maps`
+        gives).
+    title : str
+    unit : str
+        Label of the colour bar.
+
+    Returns
+    -------
+    bytes
+        A PNG file.
+
+    Raises
+    ------
+    DatasetError
+        If ``errors`` is not (H, W) or has no finite value.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> png = error_map_png(np.array([[0.0, 2.0], [np.nan, 1.0]]), "angle", "degrees")
+    >>> png[:8]
+    b'\\x89PNG\\r\\n\\x1a\\n'
+    """
+    errors = np.asarray(errors, dtype=np.float64)
+    if errors.ndim != 2:
+        raise DatasetError(f"error map has shape {errors.shape}, expected (H, W)")
+    finite = errors[np.isfinite(errors)]
+    if finite.size == 0:
+        raise DatasetError(f"error map {title!r} has no finite value")
+    top = float(np.percentile(finite, ERROR_SCALE_PERCENTILE))
+    figure = Figure(figsize=FIGURE_SIZE, layout="constrained")
+    axes = figure.add_subplot()
+    image = axes.imshow(np.ma.masked_invalid(errors), cmap=_error_colormap(), vmin=0.0, vmax=top if top > 0 else 1.0)
+    figure.colorbar(image, ax=axes, label=unit, extend="max" if finite.max() > top else "neither", shrink=0.85)
+    _image_axes(axes, title)
+    return _png(figure)
+
+
+def convergence_png(
+    passes: Sequence[int],
+    angular_error_deg: Sequence[float | None],
+    height_change: Sequence[float | None],
+) -> bytes:
+    """The convergence of the IRT-PS iterations, as PNG bytes.
+
+    Left: the mean angular error against ground truth per pass (only when some pass has
+    one). Right: the mean absolute change of the height map from the pass before, on a
+    log scale when every change is positive.
+
+    Parameters
+    ----------
+    passes : sequence of int
+        Pass numbers (0 is classic photometric stereo).
+    angular_error_deg : sequence of float or None
+        Mean angular error of each pass, None where unknown.
+    height_change : sequence of float or None
+        Mean absolute height change of each pass (world units), None for pass 0.
+
+    Returns
+    -------
+    bytes
+        A PNG file.
+
+    Raises
+    ------
+    DatasetError
+        If the sequences differ in length or no pass has a height change.
+
+    Examples
+    --------
+    >>> convergence_png([0, 1, 2], [9.0, 4.0, 3.5], [None, 2.0, 0.3])[:8]
+    b'\\x89PNG\\r\\n\\x1a\\n'
+    """
+    if not len(passes) == len(angular_error_deg) == len(height_change):
+        raise DatasetError(f"convergence: {len(passes)} passes but {len(angular_error_deg)} errors and {len(height_change)} height changes")
+    errors = [(k, e) for k, e in zip(passes, angular_error_deg) if e is not None]
+    changes = [(k, c) for k, c in zip(passes, height_change) if c is not None]
+    if not changes:
+        raise DatasetError("convergence: no pass has a height change (fewer than two passes?)")
+    figure = Figure(figsize=(FIGURE_SIZE[0] * (2 if errors else 1), FIGURE_SIZE[1] * 0.8), layout="constrained")
+    panels = figure.subplots(1, 2 if errors else 1, squeeze=False, sharex=True)[0]
+    if errors:
+        _curve(panels[0], errors, "mean angular error (°)", "Normal error against ground truth")
+    axes = panels[-1]
+    _curve(axes, changes, "mean |height change| (world units)", "Height change from the pass before")
+    if all(c > 0 for _, c in changes):
+        axes.set_yscale("log")
+    return _png(figure)
+
+
+def _curve(axes, points: list[tuple[int, float]], label: str, title: str) -> None:
+    x, y = zip(*points)
+    axes.plot(x, y, marker="o")
+    axes.set_xlabel("pass (0 = classic photometric stereo)")
+    axes.set_ylabel(label)
+    axes.set_title(title, fontsize="medium")
+    axes.xaxis.set_major_locator(MaxNLocator(integer=True))
+    axes.grid(True, alpha=0.3)
+
+
+def _error_colormap():
+    return colormaps["viridis"].with_extremes(bad=(BACKGROUND,) * 3)
+
+
+def _image_axes(axes, title: str) -> None:
+    axes.set_title(title, fontsize="medium")
+    axes.set_axis_off()
+
+
+def _png(figure: Figure) -> bytes:
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=DPI, metadata={"Software": None})
+    return buffer.getvalue()
