@@ -44,7 +44,62 @@ pub struct Mesh {
     pub panels: Vec<Panel>,
     /// Index of the height-field vertex of each pixel (`u32::MAX` when it has none).
     pub pixel_vertex: Vec<u32>,
+    /// Where the height field's and the skirt's triangles lie on the pixel grid, for tracers
+    /// that exploit it; None when the mesh was not built from a height field.
+    pub grid: Option<HeightFieldGrid>,
 }
+
+/// The height-field part of a [`Mesh`] on its pixel grid. Block (i, j) is the square between
+/// the vertices of pixels (i..=i+1, j..=j+1); a meshed block holds two triangles and, on the
+/// sides where it borders no meshed block, a skirt.
+#[derive(Debug, Clone, Default)]
+pub struct HeightFieldGrid {
+    /// Pixels per row.
+    pub width: usize,
+    /// Pixel rows.
+    pub height: usize,
+    /// World x of the vertices of each pixel column (increasing).
+    pub xs: Vec<f32>,
+    /// World y of the vertices of each pixel row (decreasing: y grows upward).
+    pub ys: Vec<f32>,
+    /// Height of each pixel's vertex, row-major (meaningful where the pixel has a vertex).
+    pub z: Vec<f32>,
+    /// Height of the skirt's bottom edge.
+    pub base: f32,
+    /// Mesh index of the first of each block's two triangles, row-major over the
+    /// (height − 1) × (width − 1) blocks, or [`NO_TRIANGLE`] for a block that is not meshed.
+    /// The triangles are (i,j) (i+1,j) (i,j+1) and (i,j+1) (i+1,j) (i+1,j+1), in that order.
+    pub block_triangles: Vec<u32>,
+    /// The skirt: one entry per boundary edge, ordered by block.
+    pub skirt: Vec<SkirtEdge>,
+}
+
+/// The side of a block along which a skirt runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BlockSide {
+    /// The edge along pixel row i (the larger y).
+    Top,
+    /// The edge along pixel row i + 1.
+    Bottom,
+    /// The edge along pixel column j (the smaller x).
+    Left,
+    /// The edge along pixel column j + 1.
+    Right,
+}
+
+/// The skirt under one boundary edge of the height field.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SkirtEdge {
+    /// Row-major index of the meshed block whose side this is.
+    pub block: u32,
+    /// Which side of the block.
+    pub side: BlockSide,
+    /// Mesh indices of the skirt's triangles.
+    pub triangles: std::ops::Range<u32>,
+}
+
+/// `block_triangles` value of a block that is not meshed.
+pub const NO_TRIANGLE: u32 = u32::MAX;
 
 /// `panel_of` value of a triangle that belongs to no panel.
 pub const NO_PANEL: u32 = u32::MAX;
@@ -213,41 +268,68 @@ impl Mesh {
         let pixel_vertex = self.pixel_vertex.clone();
         let v = |i: usize, j: usize| pixel_vertex[i * w + j];
         let up = Vec3A::Z;
-        for i in 0..h.saturating_sub(1) {
-            for j in 0..w.saturating_sub(1) {
+        let (bw, bh) = (w.saturating_sub(1), h.saturating_sub(1));
+        let mut block_triangles = vec![NO_TRIANGLE; bw * bh];
+        let mut on_grid = true;
+        for i in 0..bh {
+            for j in 0..bw {
                 if block(i as isize, j as isize) {
+                    let first = self.triangles.len();
                     let t1 = [v(i, j), v(i + 1, j), v(i, j + 1)];
                     let t2 = [v(i, j + 1), v(i + 1, j), v(i + 1, j + 1)];
                     self.add_triangle(t1, up, SurfaceKind::Object, NO_PANEL);
                     self.add_triangle(t2, up, SurfaceKind::Object, NO_PANEL);
+                    // Only a degenerate pixel size drops a block's triangle; the grid then
+                    // cannot stand for the mesh.
+                    on_grid &= self.triangles.len() == first + 2;
+                    block_triangles[i * bw + j] = first as u32;
                 }
             }
         }
         // Skirt under every boundary edge: an edge shared by exactly one meshed block.
         let base = scene.base_height();
+        let mut skirt = Vec::new();
         for i in 0..h {
             for j in 0..w {
                 let (ii, jj) = (i as isize, j as isize);
                 // Horizontal edge (i, j)–(i, j+1): block (i−1, j) above it, (i, j) below it.
                 if j + 1 < w && block(ii - 1, jj) != block(ii, jj) {
-                    let outward = if block(ii, jj) { Vec3A::Y } else { -Vec3A::Y };
-                    self.add_skirt(v(i, j), v(i, j + 1), outward, base, cam.pixel_size);
+                    let (outward, owner) = if block(ii, jj) { (Vec3A::Y, (i, j, BlockSide::Top)) } else { (-Vec3A::Y, (i - 1, j, BlockSide::Bottom)) };
+                    let triangles = self.add_skirt(v(i, j), v(i, j + 1), outward, base, cam.pixel_size);
+                    skirt.push(SkirtEdge { block: (owner.0 * bw + owner.1) as u32, side: owner.2, triangles });
                 }
                 // Vertical edge (i, j)–(i+1, j): block (i, j−1) left of it, (i, j) right of it.
                 if i + 1 < h && block(ii, jj - 1) != block(ii, jj) {
-                    let outward = if block(ii, jj) { -Vec3A::X } else { Vec3A::X };
-                    self.add_skirt(v(i, j), v(i + 1, j), outward, base, cam.pixel_size);
+                    let (outward, owner) = if block(ii, jj) { (-Vec3A::X, (i, j, BlockSide::Left)) } else { (Vec3A::X, (i, j - 1, BlockSide::Right)) };
+                    let triangles = self.add_skirt(v(i, j), v(i + 1, j), outward, base, cam.pixel_size);
+                    skirt.push(SkirtEdge { block: (owner.0 * bw + owner.1) as u32, side: owner.2, triangles });
                 }
             }
         }
+        skirt.retain(|edge| !edge.triangles.is_empty());
+        skirt.sort_by_key(|edge| edge.block);
+        if on_grid && bw > 0 && bh > 0 {
+            self.grid = Some(HeightFieldGrid {
+                width: w,
+                height: h,
+                xs: (0..w).map(|j| cam.pixel_center(0, j).0).collect(),
+                ys: (0..h).map(|i| cam.pixel_center(i, 0).1).collect(),
+                z: surface.height.clone(),
+                base,
+                block_triangles,
+                skirt,
+            });
+        }
     }
 
-    fn add_skirt(&mut self, top_a: u32, top_b: u32, outward: Vec3A, base: f32, pixel_size: f32) {
+    /// Adds the skirt under the edge `top_a`–`top_b`; returns the range of its triangles.
+    fn add_skirt(&mut self, top_a: u32, top_b: u32, outward: Vec3A, base: f32, pixel_size: f32) -> std::ops::Range<u32> {
+        let first = self.triangles.len() as u32;
         let (pa, pb) = (self.positions[top_a as usize], self.positions[top_b as usize]);
         let (albedo_a, albedo_b) = (self.albedo[top_a as usize], self.albedo[top_b as usize]);
         let drop = pa.z.max(pb.z) - base;
         if drop <= 0.0 {
-            return;
+            return first..first;
         }
         let rows = ((drop / pixel_size).ceil() as usize).clamp(1, MAX_SKIRT_ROWS);
         let column = |mesh: &mut Mesh, top: Vec3A, albedo: Rgb| -> Vec<u32> {
@@ -265,6 +347,7 @@ impl Mesh {
             self.add_triangle([col_a[r], col_b[r], col_a[r + 1]], outward, SurfaceKind::Skirt, NO_PANEL);
             self.add_triangle([col_b[r], col_b[r + 1], col_a[r + 1]], outward, SurfaceKind::Skirt, NO_PANEL);
         }
+        first..self.triangles.len() as u32
     }
 
     fn add_cornell_box(&mut self, scene: &Scene, b: &crate::scene::CornellBox) {

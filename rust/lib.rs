@@ -6,6 +6,7 @@
 
 pub mod error;
 pub mod geometry;
+pub mod height_field_accel;
 pub mod image_io;
 pub mod light_cache;
 pub mod ps;

@@ -1,4 +1,6 @@
-//! Ray queries over a [`Mesh`]: one compressed wide BVH (obvhs CWBVH) over all triangles.
+//! Ray queries over a [`Mesh`]: the height field and its skirt through the grid-based
+//! [`HeightFieldAccel`], the panels of the surroundings (floor and walls) analytically as
+//! rectangles or planes, and any other triangle through a compressed wide BVH (obvhs CWBVH).
 
 use std::time::Duration;
 
@@ -10,7 +12,8 @@ use obvhs::rt_triangle::RtTriangle;
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
 
-use crate::geometry::{Mesh, NO_PANEL};
+use crate::geometry::{Mesh, SurfaceKind, NO_PANEL};
+use crate::height_field_accel::HeightFieldAccel;
 
 /// The closest intersection of a ray with the mesh.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -24,17 +27,17 @@ pub struct Hit {
     pub v: f32,
 }
 
-/// A BVH over a mesh's triangles, answering closest-hit and occlusion queries. Unbounded
-/// panels (an infinite floor) are intersected analytically, outside the BVH, so that their
-/// size does not spoil the BVH's spatial ordering.
+/// Closest-hit and occlusion queries over a mesh. The height field (when the mesh has its
+/// grid) goes to a [`HeightFieldAccel`]; the panels, a handful of rectangles, are tested
+/// directly (an unbounded one as its whole plane); the remaining triangles go to a BVH.
 pub struct Tracer {
+    height_field: Option<HeightFieldAccel>,
+    panels: Vec<PanelShape>,
     bvh: CwBvh,
     /// Triangles in BVH order, laid out for fast intersection.
     triangles: Vec<RtTriangle>,
     /// Mesh index of each triangle in BVH order.
     mesh_index: Vec<u32>,
-    /// Infinite planes: a point on the plane, its normal, and the mesh triangle reported.
-    planes: Vec<(Vec3A, Vec3A, usize)>,
     /// Number of mesh triangles.
     triangle_count: usize,
     /// BVH position of the point placed beyond the bounds (see [`Tracer::new`]).
@@ -44,19 +47,13 @@ pub struct Tracer {
 }
 
 impl Tracer {
-    /// Builds the BVH (in parallel on rayon's pool).
+    /// Builds the acceleration structures (the BVH in parallel on rayon's pool).
     pub fn new(mesh: &Mesh) -> Tracer {
-        let on_plane = |t: usize| mesh.panel_of[t] != NO_PANEL && mesh.panels[mesh.panel_of[t] as usize].unbounded;
-        let mut planes: Vec<(Vec3A, Vec3A, usize)> = Vec::new();
-        let mut in_bvh: Vec<u32> = Vec::new();
-        for t in 0..mesh.triangles.len() {
-            if !on_plane(t) {
-                in_bvh.push(t as u32);
-            } else if !planes.iter().any(|p| mesh.panel_of[p.2] == mesh.panel_of[t]) {
-                let panel = &mesh.panels[mesh.panel_of[t] as usize];
-                planes.push((panel.origin, panel.normal, t));
-            }
-        }
+        let height_field = HeightFieldAccel::new(mesh);
+        let on_grid = |t: usize| height_field.is_some() && matches!(mesh.kinds[t], SurfaceKind::Object | SurfaceKind::Skirt);
+        let panels: Vec<PanelShape> = (0..mesh.panels.len()).filter_map(|id| PanelShape::new(mesh, id)).collect();
+        let on_panel = |t: usize| mesh.panel_of[t] != NO_PANEL && panels.iter().any(|p| p.id == mesh.panel_of[t]);
+        let in_bvh: Vec<u32> = (0..mesh.triangles.len()).filter(|&t| !on_grid(t) && !on_panel(t)).map(|t| t as u32).collect();
         let mut tris: Vec<Triangle> = in_bvh
             .iter()
             .map(|&t| {
@@ -66,7 +63,7 @@ impl Tracer {
             .collect();
         let triangle_count = mesh.triangles.len();
         if tris.is_empty() {
-            return Tracer { bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), planes, triangle_count, bounds_guard: usize::MAX, avx2: false };
+            return Tracer { height_field, panels, bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), triangle_count, bounds_guard: usize::MAX, avx2: false };
         }
         // obvhs's Morton code wraps a coordinate lying exactly on the build bounds' maximum
         // to 0 (e.g. the skirt on the +x and +y sides), which spoils the BVH (2x the nodes
@@ -82,7 +79,7 @@ impl Tracer {
         let bounds_guard = bvh.primitive_indices.iter().position(|&i| i == guard_index).expect("the guard is in the BVH");
         let mesh_index = bvh.primitive_indices.iter().map(|&i| in_bvh.get(i as usize).copied().unwrap_or(u32::MAX)).collect();
         let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&tris[i as usize])).collect();
-        Tracer { bvh, triangles, mesh_index, planes, triangle_count, bounds_guard, avx2: avx2_available() }
+        Tracer { height_field, panels, bvh, triangles, mesh_index, triangle_count, bounds_guard, avx2: avx2_available() }
     }
 
     /// Distance to BVH primitive `id` along `ray` (infinite for the bounds guard).
@@ -105,14 +102,13 @@ impl Tracer {
         self.triangle_count == 0
     }
 
-    /// The nearest infinite-plane hit in (0, `t_max`), as (t, triangle).
-    #[inline]
-    fn plane_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<(f32, usize)> {
-        let mut best: Option<(f32, usize)> = None;
-        for &(point, normal, triangle) in &self.planes {
-            let t = (point - origin).dot(normal) / direction.dot(normal);
-            if t > 0.0 && t < best.map_or(t_max, |b| b.0) {
-                best = Some((t, triangle));
+    /// The nearest panel hit in (0, `t_max`).
+    #[inline(always)]
+    fn panel_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        for panel in &self.panels {
+            if let Some(hit) = panel.intersect(origin, direction, best.map_or(t_max, |b| b.t)) {
+                best = Some(hit);
             }
         }
         best
@@ -121,55 +117,66 @@ impl Tracer {
     /// The closest hit along `origin + t·direction` for `t` in (0, `t_max`).
     #[inline]
     pub fn closest_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
-        let mut best = None;
-        let mut t_limit = t_max;
-        if !self.triangles.is_empty() {
-            let ray = make_ray(origin, direction, t_max);
-            if let Some((id, t)) = self.closest_in_bvh(ray) {
-                let uv = self.triangles[id].compute_barycentric(&ray);
-                best = Some(Hit { triangle: self.mesh_index[id] as usize, t, u: uv.x, v: uv.y });
-                t_limit = t;
-            }
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is set only when the CPU has every feature the AVX2 build enables.
+            return unsafe { self.closest_hit_avx2(origin, direction, t_max) };
         }
-        // A plane's albedo is uniform, so its barycentrics do not matter.
-        match self.plane_hit(origin, direction, t_limit) {
-            Some((t, triangle)) => Some(Hit { triangle, t, u: 0.0, v: 0.0 }),
-            None => best,
-        }
+        self.closest_hit_portable(origin, direction, t_max)
     }
 
     /// Whether anything lies along `origin + t·direction` for `t` in (0, `t_max`).
     #[inline]
     pub fn occluded(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
-        if self.plane_hit(origin, direction, t_max).is_some() {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: as in `closest_hit`.
+            return unsafe { self.occluded_avx2(origin, direction, t_max) };
+        }
+        self.occluded_portable(origin, direction, t_max)
+    }
+
+    #[inline(always)]
+    fn closest_hit_portable(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
+        let mut best = None;
+        let mut t_limit = t_max;
+        if let Some(hit) = self.height_field.as_ref().and_then(|h| h.closest_hit(origin, direction, t_max)) {
+            t_limit = hit.t;
+            best = Some(hit);
+        }
+        if !self.triangles.is_empty() {
+            let ray = make_ray(origin, direction, t_limit);
+            if let Some((id, t)) = self.closest_portable(ray) {
+                let uv = self.triangles[id].compute_barycentric(&ray);
+                best = Some(Hit { triangle: self.mesh_index[id] as usize, t, u: uv.x, v: uv.y });
+                t_limit = t;
+            }
+        }
+        self.panel_hit(origin, direction, t_limit).or(best)
+    }
+
+    #[inline(always)]
+    fn occluded_portable(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
+        if self.panel_hit(origin, direction, t_max).is_some() {
             return true;
         }
-        if self.triangles.is_empty() {
-            return false;
+        if self.height_field.as_ref().is_some_and(|h| h.occluded(origin, direction, t_max)) {
+            return true;
         }
-        self.any_in_bvh(make_ray(origin, direction, t_max))
+        !self.triangles.is_empty() && self.any_portable(make_ray(origin, direction, t_max))
     }
 
-    /// The closest BVH primitive along `ray`: (BVH position, distance).
-    #[inline]
-    fn closest_in_bvh(&self, ray: Ray) -> Option<(usize, f32)> {
-        #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: `avx2` is set only when the CPU has every feature enabled below.
-            return unsafe { self.closest_avx2(ray) };
-        }
-        self.closest_portable(ray)
+    /// The same queries compiled for AVX2 (chosen at run time; the results are identical).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn closest_hit_avx2(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
+        self.closest_hit_portable(origin, direction, t_max)
     }
 
-    /// Whether any BVH primitive lies along `ray`.
-    #[inline]
-    fn any_in_bvh(&self, ray: Ray) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: as in `closest_in_bvh`.
-            return unsafe { self.any_avx2(ray) };
-        }
-        self.any_portable(ray)
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn occluded_avx2(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
+        self.occluded_portable(origin, direction, t_max)
     }
 
     #[inline(always)]
@@ -204,18 +211,64 @@ impl Tracer {
         }
         hit
     }
+}
 
-    /// The same traversal compiled for AVX2 (chosen at run time; the results are identical).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn closest_avx2(&self, ray: Ray) -> Option<(usize, f32)> {
-        self.closest_portable(ray)
+/// A panel of the mesh ready for intersection: a rectangle `origin + s·edge_u + t·edge_v`
+/// (s, t in [0, 1]) meshed as triangles (0,0) (1,0) (1,1) and (0,0) (1,1) (0,1), or, when
+/// unbounded, its whole plane.
+#[derive(Debug, Clone)]
+struct PanelShape {
+    id: u32,
+    origin: Vec3A,
+    normal: Vec3A,
+    /// `edge_u / |edge_u|²` and `edge_v / |edge_v|²`: dotted with a point's offset from the
+    /// origin they give its (s, t).
+    dual_u: Vec3A,
+    dual_v: Vec3A,
+    unbounded: bool,
+    /// Mesh index of the first of the panel's two triangles.
+    first_triangle: usize,
+}
+
+impl PanelShape {
+    /// The panel `id` of `mesh`, or None if its two triangles are not where the mesh builder
+    /// puts them (consecutive, in the order above) or its edges are not perpendicular.
+    fn new(mesh: &Mesh, id: usize) -> Option<PanelShape> {
+        let panel = &mesh.panels[id];
+        let first_triangle = mesh.panel_of.iter().position(|&p| p == id as u32)?;
+        let (u, v, o) = (panel.edge_u, panel.edge_v, panel.origin);
+        let expected = [[o, o + u, o + u + v], [o, o + u + v, o + v]];
+        let laid_out = (0..2).all(|k| mesh.panel_of.get(first_triangle + k) == Some(&(id as u32)) && mesh.corners(first_triangle + k) == expected[k]);
+        let rectangle = u.dot(v).abs() <= 1e-6 * u.length() * v.length();
+        (laid_out && rectangle).then(|| PanelShape {
+            id: id as u32,
+            origin: o,
+            normal: panel.normal,
+            dual_u: u / u.length_squared(),
+            dual_v: v / v.length_squared(),
+            unbounded: panel.unbounded,
+            first_triangle,
+        })
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn any_avx2(&self, ray: Ray) -> bool {
-        self.any_portable(ray)
+    /// The hit of the ray in (0, `t_max`), with the barycentrics of the triangle it lies in
+    /// (zero on an unbounded panel, whose albedo is uniform).
+    #[inline(always)]
+    fn intersect(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
+        let t = (self.origin - origin).dot(self.normal) / direction.dot(self.normal);
+        if !(t > 0.0 && t < t_max) {
+            return None;
+        }
+        if self.unbounded {
+            return Some(Hit { triangle: self.first_triangle, t, u: 0.0, v: 0.0 });
+        }
+        let offset = origin + direction * t - self.origin;
+        let (s, r) = (offset.dot(self.dual_u), offset.dot(self.dual_v));
+        if !((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&r)) {
+            return None;
+        }
+        // Weights of corners 1 and 2 of the triangle holding (s, r).
+        Some(if s >= r { Hit { triangle: self.first_triangle, t, u: s - r, v: r } } else { Hit { triangle: self.first_triangle + 1, t, u: s, v: r - s } })
     }
 }
 
@@ -298,14 +351,17 @@ mod tests {
             floor: Some(crate::scene::Floor { height: 0.0, albedo: [0.5; 3] }),
             cornell_box: None,
         };
-        let tracer = Tracer::new(&Mesh::from_scene(&scene));
-        let mut rng = crate::sampler::Rng::new(9);
-        for _ in 0..2000 {
-            let origin = vec3a(rng.next_f32() * 24.0 - 12.0, rng.next_f32() * 24.0 - 12.0, 9.0);
-            let direction = vec3a(rng.next_f32() - 0.5, rng.next_f32() - 0.5, -rng.next_f32()).normalize();
-            let ray = make_ray(origin, direction, f32::INFINITY);
-            assert_eq!(tracer.closest_in_bvh(ray), tracer.closest_portable(ray));
-            assert_eq!(tracer.any_in_bvh(ray), tracer.any_portable(ray));
+        // Through the height-field grid, and with the grid dropped, through the BVH.
+        let mesh = Mesh::from_scene(&scene);
+        let without_grid = Mesh { grid: None, ..mesh.clone() };
+        for tracer in [Tracer::new(&mesh), Tracer::new(&without_grid)] {
+            let mut rng = crate::sampler::Rng::new(9);
+            for _ in 0..2000 {
+                let origin = vec3a(rng.next_f32() * 24.0 - 12.0, rng.next_f32() * 24.0 - 12.0, 9.0);
+                let direction = vec3a(rng.next_f32() - 0.5, rng.next_f32() - 0.5, -rng.next_f32()).normalize();
+                assert_eq!(tracer.closest_hit(origin, direction, f32::INFINITY), tracer.closest_hit_portable(origin, direction, f32::INFINITY));
+                assert_eq!(tracer.occluded(origin, direction, f32::INFINITY), tracer.occluded_portable(origin, direction, f32::INFINITY));
+            }
         }
     }
 
