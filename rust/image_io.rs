@@ -12,6 +12,14 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 
+/// The largest image the readers accept, in pixels (2^27: e.g. 16384 x 8192). A header
+/// claiming more is rejected before any pixel memory is allocated.
+pub const MAX_IMAGE_PIXELS: usize = 1 << 27;
+
+/// How many bytes of decoded PNG pixels one byte of file can hold at most: deflate expands
+/// at most 1032 times, and expanding a 1-bit palette image to 8-bit RGBA 32 times more.
+const PNG_MAX_EXPANSION: u64 = 1032 * 32;
+
 /// An image in memory: `height` rows of `width` pixels of `channels` interleaved `f32` values.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Image {
@@ -36,6 +44,11 @@ impl Image {
 pub fn read_exr(path: &Path) -> Result<Image> {
     if !path.is_file() {
         return Err(Error::io(path, "no such file"));
+    }
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| Error::format(path, format!("not a readable OpenEXR file ({e})")))?;
+    for header in &meta.headers {
+        check_size(path, header.layer_size.width(), header.layer_size.height())?;
     }
     let image = read_first_flat_layer_from_file(path)
         .map_err(|e| Error::format(path, format!("not a readable OpenEXR file ({e})")))?;
@@ -110,14 +123,23 @@ type Image2<L> = exr::image::Image<L>;
 /// values divided by `2^bits - 1`. Returns the image and its bit depth.
 pub fn read_png(path: &Path) -> Result<(Image, u8)> {
     let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| Error::io(path, e))?.len();
     let mut decoder = png::Decoder::new(BufReader::new(file));
     decoder.set_transformations(png::Transformations::EXPAND);
     let mut reader = decoder
         .read_info()
         .map_err(|e| Error::format(path, format!("not a readable PNG file ({e})")))?;
+    let (width, height) = reader.info().size();
+    check_size(path, width as usize, height as usize)?;
     let size = reader
         .output_buffer_size()
         .ok_or_else(|| Error::format(path, "PNG dimensions are too large"))?;
+    if size as u64 > file_len.saturating_mul(PNG_MAX_EXPANSION) {
+        return Err(Error::format(
+            path,
+            format!("corrupt PNG: its header claims {width}x{height} pixels, more than its {file_len} bytes can hold"),
+        ));
+    }
     let mut buffer = vec![0u8; size];
     let info = reader
         .next_frame(&mut buffer)
@@ -227,6 +249,20 @@ pub fn read_image_stack(paths: &[PathBuf]) -> Result<(usize, usize, Vec<f32>)> {
     Ok((width, height, data))
 }
 
+/// Rejects an image size with no pixel or more than `MAX_IMAGE_PIXELS`.
+fn check_size(path: &Path, width: usize, height: usize) -> Result<()> {
+    if width == 0 || height == 0 {
+        return Err(Error::format(path, format!("size {width}x{height} has no pixel")));
+    }
+    if width.saturating_mul(height) > MAX_IMAGE_PIXELS {
+        return Err(Error::format(
+            path,
+            format!("size {width}x{height} exceeds the largest supported image ({MAX_IMAGE_PIXELS} pixels)"),
+        ));
+    }
+    Ok(())
+}
+
 fn check_data_len(image: &Image) -> Result<()> {
     if image.data.len() != image.width * image.height * image.channels {
         return Err(Error::input("image", "data length does not match width x height x channels"));
@@ -277,6 +313,45 @@ mod tests {
         assert!(message.starts_with(&path.display().to_string()), "{message}");
         let missing = temp_path("missing.png");
         assert!(read_png(&missing).unwrap_err().to_string().contains("missing.png"));
+    }
+
+    #[test]
+    fn absurd_sizes_are_rejected_before_allocating() {
+        let exr = temp_path("tiny.exr");
+        write_exr(&exr, &ramp(4, 3, 3)).unwrap();
+        let mut bytes = std::fs::read(&exr).unwrap();
+        let window = bytes.windows(11).position(|w| w == b"dataWindow\0").unwrap() + b"dataWindow\0box2i\0".len() + 4;
+        bytes[window + 8..window + 16].copy_from_slice(&[0x00, 0x00, 0x01, 0x00, 0x00, 0x00, 0x01, 0x00]);
+        std::fs::write(&exr, &bytes).unwrap();
+        let message = read_exr(&exr).unwrap_err().to_string();
+        assert!(message.contains("tiny.exr") && message.contains("65537x65537 exceeds"), "{message}");
+
+        let png = temp_path("huge.png");
+        let mut file = vec![0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
+        let header = [&1_000u32.to_be_bytes()[..], &1_000u32.to_be_bytes(), &[16, 2, 0, 0, 0]].concat();
+        file.extend(png_chunk(b"IHDR", &header));
+        file.extend(png_chunk(b"IDAT", &[0x78, 0x9c]));
+        file.extend(png_chunk(b"IEND", &[]));
+        std::fs::write(&png, &file).unwrap();
+        let message = read_png(&png).unwrap_err().to_string();
+        let expected = format!("claims 1000x1000 pixels, more than its {} bytes can hold", file.len());
+        assert!(message.contains("huge.png") && message.contains(&expected), "{message}");
+    }
+
+    fn png_chunk(kind: &[u8; 4], data: &[u8]) -> Vec<u8> {
+        let body = [&kind[..], data].concat();
+        [&(data.len() as u32).to_be_bytes()[..], &body, &crc32(&body).to_be_bytes()].concat()
+    }
+
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut crc = !0u32;
+        for &byte in bytes {
+            crc ^= u32::from(byte);
+            for _ in 0..8 {
+                crc = if crc & 1 == 1 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+            }
+        }
+        !crc
     }
 
     #[test]

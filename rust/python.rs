@@ -12,7 +12,7 @@ use rayon::prelude::*;
 
 use crate::error::Error;
 use crate::image_io::{self, Image};
-use crate::ps::{photometric_stereo as core_ps, PsSettings};
+use crate::ps::{check_lights as core_check_lights, photometric_stereo as core_ps, PsSettings};
 use crate::render::{RenderSettings, Renderer as CoreRenderer};
 use crate::scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
 
@@ -255,6 +255,14 @@ fn lights_from(directions: &PyReadonlyArray2<'_, f32>, irradiance: &PyReadonlyAr
     Ok(directions.iter().zip(&irradiance).map(|(d, e)| Light { direction: vec3a(d[0], d[1], d[2]), irradiance: *e }).collect())
 }
 
+/// Checks lights for photometric stereo: at least 3, not (nearly) coplanar, irradiance
+/// positive in every channel. Raises ValueError naming the field otherwise.
+#[pyfunction]
+fn check_lights(light_directions: PyReadonlyArray2<'_, f32>, light_irradiance: PyReadonlyArray2<'_, f32>) -> PyResult<()> {
+    let lights = lights_from(&light_directions, &light_irradiance)?;
+    core_check_lights(&lights).map(|_| ()).map_err(to_py)
+}
+
 type PsArrays<'py> = (Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<u8>>, Bound<'py, PyArrayDyn<u16>>);
 
 /// Calibrated Lambertian photometric stereo on C-contiguous float32 images (K, H, W, 3):
@@ -304,6 +312,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(write_png, m)?)?;
     m.add_function(wrap_pyfunction!(read_images, m)?)?;
     m.add_function(wrap_pyfunction!(photometric_stereo, m)?)?;
+    m.add_function(wrap_pyfunction!(check_lights, m)?)?;
     m.add_class::<Renderer>()?;
+    m.add("MAX_IMAGE_PIXELS", image_io::MAX_IMAGE_PIXELS)?;
     Ok(())
 }

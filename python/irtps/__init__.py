@@ -3,7 +3,7 @@
 from importlib.metadata import PackageNotFoundError, version
 
 from irtps.dataset import Dataset, GroundTruth, load_dataset, load_ground_truth, load_scene_object, save_dataset
-from irtps.errors import DatasetError, IrtpsError
+from irtps.errors import DatasetError, IrtpsError, IrtpsWarning
 from irtps.evaluate import Metrics, angular_error_deg, evaluate
 from irtps.integrate import integrate_normals, place_height
 from irtps.ps import PsResult, photometric_stereo
@@ -26,6 +26,7 @@ __all__ = [
     "Floor",
     "GroundTruth",
     "IrtpsError",
+    "IrtpsWarning",
     "Light",
     "Metrics",
     "PsResult",

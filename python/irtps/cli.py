@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +15,7 @@ import numpy as np
 from irtps.atomic import atomic_output_dir
 from irtps.batch import SUMMARY_JSON, SUMMARY_MARKDOWN, connect, local_cluster, reconstruct_many, summary_table, write_summary
 from irtps.dataset import Dataset, GroundTruth, load_dataset, load_ground_truth, load_scene_object, save_dataset
-from irtps.errors import IrtpsError
+from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate, format_metrics
 from irtps.integrate import METHODS as INTEGRATION_METHODS
 from irtps.interreflection import ESTIMATORS, UPDATES
@@ -40,7 +42,17 @@ def _add_render_options(parser: argparse.ArgumentParser, samples: int) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
 
 
+def _check_output(out: Path, *inputs: Path) -> None:
+    """Refuse an output folder that is an input or holds one: replacing it would delete the input."""
+    target = out.resolve()
+    for source in inputs:
+        resolved = source.resolve()
+        if resolved == target or target in resolved.parents:
+            raise IrtpsError(f"--out {out}: replacing it would delete the input {source}; choose another output folder")
+
+
 def _cmd_render(args: argparse.Namespace) -> None:
+    _check_output(args.out, args.dataset)
     scene, height, albedo, mask = load_scene_object(args.dataset)
     start = time.perf_counter()
     rendering = render(scene, height, albedo, mask, bounces=args.bounces, samples=args.samples, seed=args.seed, progress=not args.quiet)
@@ -83,6 +95,7 @@ def _reconstruct_options(args: argparse.Namespace) -> dict:
 
 
 def _cmd_reconstruct(args: argparse.Namespace) -> None:
+    _check_output(args.out, args.data)
     dataset, result = load_and_reconstruct(args.data, **_reconstruct_options(args), progress=not args.quiet)
     save_reconstruction(result, args.out, source=str(args.data.resolve()))
     if not args.quiet:
@@ -163,6 +176,7 @@ def _cmd_table(args: argparse.Namespace) -> None:
     if args.out is None:
         print(_run_table(datasets, args, None), end="")
         return
+    _check_output(args.out, *args.data)
     with atomic_output_dir(args.out) as folder:
         text = _run_table(datasets, args, folder)
     print(text, end="")
@@ -383,17 +397,45 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that every partial output is removed on the way out."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise _Terminated()
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    if issubclass(category, IrtpsWarning):
+        print(f"irtps: warning: {message}", file=sys.stderr)
+    else:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run the ``irtps`` command; returns the exit status."""
+    """Run the ``irtps`` command; returns the exit status.
+
+    0 on success; 2 on bad input, printed as ``irtps: error: ...`` naming the file or
+    field; 130 on Ctrl-C and 143 on SIGTERM, after removing any partial output.
+    """
     args = build_parser().parse_args(argv)
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
     try:
-        args.run(args)
+        with warnings.catch_warnings():
+            warnings.simplefilter("default", IrtpsWarning)  # each message once
+            warnings.showwarning = _show_warning
+            args.run(args)
     except (IrtpsError, OSError) as err:
         print(f"irtps: error: {err}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("irtps: interrupted; unfinished outputs were not written", file=sys.stderr)
-        return 130
+    except MemoryError as err:
+        print(f"irtps: error: not enough memory ({err or 'allocation failed'})", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt as interrupt:
+        print("irtps: interrupted; no partial output was left", file=sys.stderr)
+        return 128 + signal.SIGTERM if isinstance(interrupt, _Terminated) else 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     return 0
 
 

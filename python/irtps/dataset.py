@@ -15,7 +15,7 @@ import numpy as np
 
 from irtps.atomic import atomic_output_dir
 from irtps.errors import DatasetError
-from irtps.imageio import check_finite, format_size, read_exr, read_image, read_images, read_mask, write_exr, write_png
+from irtps.imageio import check_finite, clip_negative, format_size, read_exr, read_image, read_images, read_mask, write_exr, write_png
 from irtps.scene import Scene, load_scene, write_scene
 
 SCENE_FILE = "scene.json"
@@ -70,6 +70,10 @@ class Dataset:
     gt : GroundTruth or None
     source : str or None
         The folder the data set was read from.
+    saturation : float or None
+        The value at which the camera clips, where it is known: 1.0 for images read from
+        PNG files (their largest code value), None for float images. `irtps.reconstruct`
+        leaves out observations at or above it.
 
     Raises
     ------
@@ -82,6 +86,7 @@ class Dataset:
     mask: np.ndarray
     gt: GroundTruth | None = None
     source: str | None = None
+    saturation: float | None = None
 
     def __post_init__(self) -> None:
         self.images = np.asarray(self.images, dtype=np.float32)
@@ -115,6 +120,8 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True) -> Dataset:
     Returns
     -------
     Dataset
+        Negative pixel values of the images are clipped to 0. When every image is a
+        PNG file, ``saturation`` is 1.0.
 
     Raises
     ------
@@ -122,6 +129,11 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True) -> Dataset:
         Naming the file and the problem: missing files, an image count that is not
         the number of lights, sizes that disagree, non-finite pixels, too few
         lights, a light that is not a unit vector with z > 0, an unknown format.
+
+    Warns
+    -----
+    IrtpsWarning
+        Naming the first image with negative values, if any.
     """
     folder = Path(path)
     if not folder.is_dir():
@@ -237,10 +249,17 @@ def _load_irtps(folder: Path, ground_truth: bool) -> Dataset:
             f"{paths[0]}: size {format_size(images.shape[1:3])} does not match "
             f"the camera in {SCENE_FILE} ({format_size(size)})"
         )
+    clip_negative(paths, images)
     mask_path = folder / MASK_FILE
     mask = read_mask(mask_path, size) if mask_path.exists() else np.ones(size, dtype=bool)
     gt = _load_ground_truth(folder / GT_FOLDER, count, size) if ground_truth else None
-    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder))
+    saturation = png_saturation(paths)
+    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=saturation)
+
+
+def png_saturation(paths: list[Path]) -> float | None:
+    """1.0 (the largest code value, read as 1) when every image is a PNG file, else None."""
+    return 1.0 if all(path.suffix.lower() == ".png" for path in paths) else None
 
 
 def _numbered_images(folder: Path, count: int) -> list[Path]:
@@ -269,9 +288,9 @@ def _load_ground_truth(folder: Path, count: int, size: tuple[int, int], direct: 
     if not folder.is_dir():
         return None
     parts = {
-        "height": _if_file(folder / "height.exr", lambda path: _read_height(path, size)),
-        "normal": _if_file(folder / "normal.exr", lambda path: _read_normal(path, size)),
-        "albedo": _if_file(folder / "albedo.exr", lambda path: _checked_size(path, read_image(path), size)),
+        "height": _if_file(folder / "height.exr", lambda path: read_height_map(path, size)),
+        "normal": _if_file(folder / "normal.exr", lambda path: read_normal_map(path, size)),
+        "albedo": _if_file(folder / "albedo.exr", lambda path: read_albedo_map(path, size)),
     }
     direct_folder = folder / "direct"
     if direct and direct_folder.is_dir():
@@ -282,7 +301,14 @@ def _load_ground_truth(folder: Path, count: int, size: tuple[int, int], direct: 
     return GroundTruth(**parts)
 
 
-def _read_height(path: Path, size: tuple[int, int]) -> np.ndarray:
+def read_height_map(path: Path, size: tuple[int, int]) -> np.ndarray:
+    """A finite (H, W) height map of size ``size`` from an EXR file (Y, or R = G = B).
+
+    Raises
+    ------
+    DatasetError
+        Naming ``path``: unreadable, non-finite, channels that differ, another size.
+    """
     height = read_exr(path)
     check_finite(path, height)
     if height.ndim == 3:
@@ -295,12 +321,31 @@ def _read_height(path: Path, size: tuple[int, int]) -> np.ndarray:
     return _checked_size(path, height, size)
 
 
-def _read_normal(path: Path, size: tuple[int, int]) -> np.ndarray:
+def read_normal_map(path: Path, size: tuple[int, int] | None = None) -> np.ndarray:
+    """A finite (H, W, 3) normal map (R, G, B = nx, ny, nz) from an EXR file.
+
+    Raises
+    ------
+    DatasetError
+        Naming ``path``: unreadable, a single channel, non-finite, not of size ``size``
+        (when given).
+    """
     normal = read_exr(path)
     if normal.ndim != 3:
         raise DatasetError(f"{path}: has a single Y channel; a normal map needs R, G, B = nx, ny, nz")
     check_finite(path, normal)
-    return _checked_size(path, normal, size)
+    return normal if size is None else _checked_size(path, normal, size)
+
+
+def read_albedo_map(path: Path, size: tuple[int, int]) -> np.ndarray:
+    """A finite (H, W, 3) RGB albedo map of size ``size`` (a Y channel is replicated).
+
+    Raises
+    ------
+    DatasetError
+        Naming ``path``: unreadable, non-finite, another size.
+    """
+    return _checked_size(path, read_image(path), size)
 
 
 def _checked_size(path: Path, array: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -385,20 +430,26 @@ def load_scene_object(path: str | Path) -> tuple[Scene, np.ndarray, np.ndarray, 
     Raises
     ------
     DatasetError
-        Naming the missing or malformed file.
+        Naming the missing or malformed file, e.g. an albedo outside [0, 1] in the mask.
     """
     folder = Path(path)
     if not folder.is_dir():
         raise DatasetError(f"{folder}: no such folder")
     scene = load_scene(folder / SCENE_FILE)
     size = (scene.camera.height, scene.camera.width)
-    mask_path = folder / MASK_FILE
-    mask = read_mask(mask_path, size) if mask_path.is_file() else np.ones(size, dtype=bool)
     height_path, albedo_path = folder / GT_FOLDER / "height.exr", folder / GT_FOLDER / "albedo.exr"
     for required in (height_path, albedo_path):
         if not required.is_file():
             raise DatasetError(f"{required}: missing (rendering needs the true height and albedo)")
-    height = _read_height(height_path, size)
-    albedo = _checked_size(albedo_path, read_image(albedo_path), size)
-    check_finite(albedo_path, albedo)
+    height = read_height_map(height_path, size)
+    albedo = read_albedo_map(albedo_path, size)
+    mask_path = folder / MASK_FILE
+    mask = read_mask(mask_path, size) if mask_path.is_file() else np.ones(size, dtype=bool)
+    outside = (albedo < 0.0) | (albedo > 1.0)
+    outside[~mask] = False
+    if outside.any():
+        row, column, channel = np.argwhere(outside)[0]
+        raise DatasetError(
+            f"{albedo_path}: albedo {albedo[row, column, channel]:g} at row {row}, column {column} of the mask is outside [0, 1]"
+        )
     return scene, height, albedo, mask

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import scipy.io
 
-from irtps.dataset import Dataset, GroundTruth
+from irtps.dataset import Dataset, GroundTruth, png_saturation
 from irtps.errors import DatasetError
 from irtps.imageio import check_finite, format_size, read_images, read_mask
 from irtps.scene import MIN_LIGHTS, Camera, Light, Scene
@@ -45,6 +45,7 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
         ``2^bits - 1``. Each light's irradiance is its line of
         ``light_intensities.txt``. The camera is orthographic with the images'
         size and ``pixel_size`` 1; there is no floor and no environment.
+        ``saturation`` is 1.0: a PNG value of ``2^bits - 1`` is clipped.
         ``mask.png`` is optional (absent means every pixel).
 
     Raises
@@ -88,7 +89,7 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
         camera=Camera(width=size[1], height=size[0], pixel_size=1.0),
         lights=tuple(Light(direction=d, irradiance=e) for d, e in zip(directions, intensities, strict=True)),
     )
-    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder))
+    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=png_saturation(image_paths))
 
 
 def load_diligent_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | None:

@@ -7,16 +7,20 @@ PNG values are linear, divided by ``2^bits - 1``. Errors raised by the core
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from irtps import _core
-from irtps.errors import DatasetError
+from irtps.errors import DatasetError, IrtpsWarning
 
 PNG_BIT_DEPTHS = (8, 16)
 """Bit depths of PNG files that can be written."""
+
+MAX_IMAGE_PIXELS = _core.MAX_IMAGE_PIXELS
+"""The largest image irtps reads or makes, in pixels (width x height): 2^27."""
 
 
 def read_exr(path: str | Path) -> np.ndarray:
@@ -137,6 +141,38 @@ def read_images(paths: Sequence[str | Path]) -> np.ndarray:
         return _core.read_images([str(path) for path in paths])
     except (ValueError, OSError) as error:
         raise DatasetError(str(error)) from error
+
+
+def clip_negative(paths: Sequence[str | Path], images: np.ndarray) -> None:
+    """Set the negative values of a stack of images to 0, in place, warning if there are any.
+
+    Radiance cannot be negative, but dark-frame subtraction and denoising leave small
+    negative values in real captures; photometric stereo reads them as no light.
+
+    Parameters
+    ----------
+    paths : sequence of str or pathlib.Path
+        The file of each image, for the warning.
+    images : numpy.ndarray
+        (K, ...) float array.
+
+    Warns
+    -----
+    IrtpsWarning
+        Naming the first image with negative values, their count and the lowest one.
+    """
+    negative = (images < 0).reshape(len(images), -1).sum(axis=1)
+    if not negative.any():
+        return
+    first = int(np.flatnonzero(negative)[0])
+    others = int(np.count_nonzero(negative)) - 1
+    more = f" (and {others} more images have some)" if others else ""
+    warnings.warn(
+        f"{paths[first]}: {negative[first]} negative values (down to {images[first].min():g}) clipped to 0{more}",
+        IrtpsWarning,
+        stacklevel=2,
+    )
+    np.maximum(images, 0, out=images)
 
 
 def read_mask(path: str | Path, shape: tuple[int, int]) -> np.ndarray:

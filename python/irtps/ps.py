@@ -35,6 +35,28 @@ class PsResult:
     used: np.ndarray
 
 
+def check_lights(light_directions: np.ndarray, light_irradiance: np.ndarray) -> None:
+    """Check that lights determine a normal: at least 3, not (nearly) coplanar, irradiance
+    positive in every channel.
+
+    Parameters
+    ----------
+    light_directions, light_irradiance : numpy.ndarray
+        (K, 3) each, as for `photometric_stereo`.
+
+    Raises
+    ------
+    IrtpsError
+        Naming the field (``lights`` or ``lights[k].irradiance``) and the problem.
+    """
+    directions = np.ascontiguousarray(light_directions, dtype=np.float32)
+    irradiance = np.ascontiguousarray(light_irradiance, dtype=np.float32)
+    try:
+        _core.check_lights(directions, irradiance)
+    except ValueError as err:
+        raise IrtpsError(str(err)) from None
+
+
 def photometric_stereo(
     images: np.ndarray,
     light_directions: np.ndarray,
@@ -77,7 +99,8 @@ def photometric_stereo(
     Raises
     ------
     IrtpsError
-        Fewer than 3 lights, coplanar lights, or shapes that disagree.
+        Fewer than 3 lights, coplanar lights, shapes that disagree, a
+        ``shadow_fraction`` outside [0, 1) or a ``saturation`` that is not positive.
 
     Examples
     --------
@@ -97,6 +120,8 @@ def photometric_stereo(
     irradiance = np.ascontiguousarray(light_irradiance, dtype=np.float32)
     if not 0 <= shadow_fraction < 1:
         raise IrtpsError(f"shadow_fraction: {shadow_fraction} is not in [0, 1)")
+    if saturation is not None and not (np.isfinite(saturation) and saturation > 0):
+        raise IrtpsError(f"saturation: {saturation} is not a positive number")
     try:
         normals, albedo, flags, used = _core.photometric_stereo(images, mask, directions, irradiance, robust, shadow_fraction, saturation)
     except ValueError as err:

@@ -5,19 +5,20 @@ from __future__ import annotations
 import json
 import platform
 import time
+import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from irtps.atomic import atomic_output_dir
-from irtps.dataset import Dataset, load_dataset
-from irtps.errors import IrtpsError
-from irtps.imageio import read_exr, read_mask, write_exr, write_png
+from irtps.dataset import Dataset, load_dataset, read_albedo_map, read_height_map, read_normal_map
+from irtps.errors import DatasetError, IrtpsError, IrtpsWarning
+from irtps.imageio import read_mask, write_exr, write_png
 from irtps.integrate import integrate_normals, place_height
 from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
-from irtps.ps import FLAGS, photometric_stereo
+from irtps.ps import FLAGS, check_lights, photometric_stereo
 
 METHODS = ("ps", "irtps")
 
@@ -96,8 +97,11 @@ def reconstruct(
         ``"ps"``: classic calibrated Lambertian photometric stereo; ``"irtps"``: the same,
         iterated with the inter-reflections estimated by ray tracing and removed
         (`irtps.interreflection.remove_interreflections`).
-    robust, shadow_fraction, saturation
+    robust, shadow_fraction
         As for `irtps.ps.photometric_stereo`.
+    saturation : float, optional
+        As for `irtps.ps.photometric_stereo`; default ``dataset.saturation`` (1.0 for
+        PNG images, else none).
     integration : str, optional
         Normal integration method of `irtps.integrate.integrate_normals`; default
         ``"ls"`` for ``"ps"`` and ``"footprint"`` for ``"irtps"``.
@@ -110,6 +114,19 @@ def reconstruct(
     -------
     Reconstruction
 
+    Raises
+    ------
+    DatasetError
+        Naming ``dataset.source``: lights that are (nearly) coplanar or have a zero
+        irradiance, or images black on the whole object.
+    IrtpsError
+        If a parameter is out of range.
+
+    Warns
+    -----
+    IrtpsWarning
+        When observations are saturated, with their count.
+
     Examples
     --------
     >>> from irtps.synth import synthesize
@@ -121,6 +138,8 @@ def reconstruct(
     if method not in METHODS:
         raise IrtpsError(f"method: unknown {method!r} (choose from {', '.join(METHODS)})")
     scene = dataset.scene
+    saturation = dataset.saturation if saturation is None else saturation
+    _check_input(dataset, saturation, robust)
     if base_height is None:
         base_height = scene.floor.height if scene.floor is not None else 0.0
     integration = DEFAULT_INTEGRATION[method] if integration is None else integration
@@ -237,6 +256,31 @@ def load_and_reconstruct(path: str | Path, method: str = "ps", **options) -> tup
     return dataset, result
 
 
+def _check_input(dataset: Dataset, saturation: float | None, robust: bool) -> None:
+    """Refuse lights that cannot determine a normal and images black on the whole object;
+    warn about saturated observations."""
+    source = dataset.source or "the data set"
+    try:
+        check_lights(dataset.scene.light_directions, dataset.scene.light_irradiance)
+    except IrtpsError as err:
+        raise DatasetError(f"{source}: {err}") from None
+    observed = dataset.images[:, dataset.mask]
+    if not (observed > 0).any():
+        raise DatasetError(f"{source}: every image is black on the object (no value above 0 in the mask)")
+    if saturation is None:
+        return
+    saturated = (observed >= saturation).any(axis=2)
+    count = int(saturated.sum())
+    if count:
+        fate = "left out of the fit" if robust else "used as they are (robust mode is off)"
+        images = int(saturated.any(axis=1).sum())
+        warnings.warn(
+            f"{source}: {count} observations in {images} images are saturated (a channel at or above {saturation:g}); {fate}",
+            IrtpsWarning,
+            stacklevel=3,
+        )
+
+
 def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str | None = None) -> None:
     """Write a reconstruction folder atomically.
 
@@ -289,16 +333,22 @@ def load_reconstruction(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.nd
     Returns
     -------
     (normals (H, W, 3), albedo (H, W, 3), height (H, W), mask (H, W) bool)
+
+    Raises
+    ------
+    DatasetError
+        Naming the file: missing, unreadable, non-finite, or of another size than
+        ``normal.exr``.
     """
     folder = Path(path)
     normal_path = folder / "normal.exr"
     if not normal_path.is_file():
-        raise IrtpsError(f"{normal_path}: missing (not a reconstruction folder?)")
-    normals = read_exr(normal_path)
-    albedo = read_exr(folder / "albedo.exr")
-    height = read_exr(folder / "height.exr")
-    height = height if height.ndim == 2 else height[..., 0]
-    mask = read_mask(folder / "mask.png", normals.shape[:2])
+        raise DatasetError(f"{normal_path}: missing (not a reconstruction folder?)")
+    normals = read_normal_map(normal_path)
+    size = normals.shape[:2]
+    albedo = read_albedo_map(folder / "albedo.exr", size)
+    height = read_height_map(folder / "height.exr", size)
+    mask = read_mask(folder / "mask.png", size)
     return normals, albedo, height, mask
 
 

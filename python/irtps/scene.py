@@ -17,6 +17,7 @@ import numpy as np
 
 from irtps.atomic import atomic_write_text
 from irtps.errors import DatasetError
+from irtps.imageio import MAX_IMAGE_PIXELS
 
 FORMAT = "irtps.scene/1"
 """The value of the ``format`` field this version reads and writes."""
@@ -258,6 +259,8 @@ def load_scene(path: str | Path) -> Scene:
         obj = json.loads(text, object_pairs_hook=lambda pairs: _unique_keys(pairs, path))
     except json.JSONDecodeError as error:
         raise DatasetError(f"{path}: invalid JSON at line {error.lineno}, column {error.colno}: {error.msg}") from None
+    except RecursionError:
+        raise DatasetError(f"{path}: JSON nested too deeply to be a scene") from None
     return parse_scene(obj, str(path))
 
 
@@ -283,11 +286,11 @@ def _parse_camera(fields: _Fields, value: object) -> Camera:
     camera = fields.mapping(value, "camera", required=("projection", "width", "height", "pixel_size"))
     if camera["projection"] != "orthographic":
         fields.fail("camera.projection", f"is {camera['projection']!r}: only 'orthographic' is supported")
-    return Camera(
-        width=fields.positive_int(camera["width"], "camera.width"),
-        height=fields.positive_int(camera["height"], "camera.height"),
-        pixel_size=fields.positive_number(camera["pixel_size"], "camera.pixel_size"),
-    )
+    width = fields.positive_int(camera["width"], "camera.width")
+    height = fields.positive_int(camera["height"], "camera.height")
+    if width * height > MAX_IMAGE_PIXELS:
+        fields.fail("camera", f"size {width}x{height} exceeds the largest supported image ({MAX_IMAGE_PIXELS} pixels)")
+    return Camera(width=width, height=height, pixel_size=fields.positive_number(camera["pixel_size"], "camera.pixel_size"))
 
 
 def _parse_lights(fields: _Fields, value: object) -> tuple[Light, ...]:

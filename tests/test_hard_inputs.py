@@ -1,0 +1,585 @@
+"""Hard inputs, run through the ``irtps`` command as a user would.
+
+Every malformed input must end with exit status 2 and one line ``irtps: error: ...``
+naming the offending file or field, no traceback, and no output: neither OUT nor a
+temporary folder is left behind. The inputs that irtps accepts on purpose (negative
+pixels, saturated pixels) are checked for their documented behaviour, and interrupted
+runs (Ctrl-C, SIGTERM, a full disk) for leaving the previous output intact.
+"""
+
+import errno
+import json
+import shutil
+import signal
+import struct
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from irtps import _core
+from irtps.cli import main
+
+DATA = Path(__file__).parent / "data"
+MITSUBA = DATA / "mitsuba_small" / "cap_cornell"  # 96x96, 3 lights, floor and Cornell box
+BALL = DATA / "diligent_ball_small"  # DiLiGenT layout, 48x44, 8 lights, 16-bit PNG
+SIZE = 96
+
+
+# Damage done to a copy of a fixture folder ----------------------------------------
+
+
+def _edit_scene(folder, edit):
+    scene = json.loads((folder / "scene.json").read_text())
+    edit(scene)
+    (folder / "scene.json").write_text(json.dumps(scene))
+
+
+def _edit_exr(path, edit):
+    image = _core.read_exr(str(path))
+    edit(image)
+    _core.write_exr(str(path), image)
+
+
+def _set_pixels(value, where=(slice(3, 5), slice(4, 6))):
+    return lambda image: image.__setitem__(where, value)
+
+
+def _directions(*directions):
+    def edit(scene):
+        for light, direction in zip(scene["lights"], directions, strict=True):
+            light["direction"] = direction
+
+    return edit
+
+
+def _two_lights(folder):
+    _edit_scene(folder, lambda scene: scene.update(lights=scene["lights"][:2]))
+    (folder / "images" / "002.exr").unlink()
+
+
+def _truncate(path, keep):
+    path.write_bytes(path.read_bytes()[:keep])
+
+
+def _rename_exr_channel(path, old, new):
+    """Rename a channel in the header of an EXR file (same length, so the file stays valid)."""
+    data = path.read_bytes()
+    start = data.index(b"chlist")
+    at = data.index(old + b"\0", start)
+    path.write_bytes(data[:at] + new + data[at + len(old) :])
+
+
+def _claim_exr_size(path, width, height):
+    """Rewrite the data window of an EXR header to claim width x height pixels."""
+    data = bytearray(path.read_bytes())
+    window = data.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4
+    data[window + 8 : window + 16] = struct.pack("<ii", width - 1, height - 1)
+    path.write_bytes(bytes(data))
+
+
+def _claim_png_size(path, width, height):
+    """Rewrite the IHDR of a PNG to claim width x height pixels (with a valid CRC)."""
+    data = bytearray(path.read_bytes())
+    data[16:24] = struct.pack(">II", width, height)
+    data[29:33] = struct.pack(">I", zlib.crc32(bytes(data[12:29])))
+    path.write_bytes(bytes(data))
+
+
+def _ball_image(folder, index):
+    return folder / (folder / "filenames.txt").read_text().split()[index]
+
+
+def _write_png(path, array, bits=8):
+    _core.write_png(str(path), np.asarray(array, dtype=np.float32), bits)
+
+
+def _coplanar_diligent(folder):
+    lines = ["0.6 0 0.8", "-0.6 0 0.8", "0 0 1", "0.28 0 0.96"] * 2
+    (folder / "light_directions.txt").write_text("\n".join(lines) + "\n")
+
+
+def _out_under_a_file(tmp_path):
+    (tmp_path / "blocker").write_text("a file, not a folder")
+    return tmp_path / "blocker" / "out"
+
+
+# The matrix ------------------------------------------------------------------------
+#
+# Each case: (command, fixture, damage, extra arguments, expected parts of the message).
+# fixture is "mitsuba" or "ball" (a copy of that fixture to damage), "reconstruction"
+# (a reconstruction of BALL, for evaluate) or None (then the data argument names a path
+# that does not exist). {data} in a message stands for the data argument, {tmp} for the
+# test's temporary folder. An "--out" in the extra arguments may be a callable of tmp_path.
+
+CASES = {
+    # wrong or missing files
+    "no such data folder": ("reconstruct", None, None, [], ["{tmp}/nowhere: no such data set folder"]),
+    "data is a file": (
+        "reconstruct",
+        None,
+        lambda f: f.write_text("a file, not a folder"),
+        [],
+        ["{data}: not a folder"],
+    ),
+    "neither layout": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: (f / "scene.json").rename(f / "scene.txt"),
+        [],
+        ["{data}: not a data set: it holds neither scene.json", "nor light_directions.txt"],
+    ),
+    "missing image": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: (f / "images" / "001.exr").unlink(),
+        [],
+        ["{data}/images/001.exr: missing (scene.json has 3 lights, one image each)"],
+    ),
+    "image without a light": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: shutil.copy(f / "images" / "000.exr", f / "images" / "003.exr"),
+        [],
+        ["{data}/images: 4 images for 3 lights in scene.json (003.exr has no light)"],
+    ),
+    "render without true height": (
+        "render",
+        "mitsuba",
+        lambda f: (f / "gt" / "height.exr").unlink(),
+        [],
+        ["{data}/gt/height.exr: missing (rendering needs the true height and albedo)"],
+    ),
+    "listed DiLiGenT image missing": (
+        "reconstruct",
+        "ball",
+        lambda f: _ball_image(f, 5).unlink(),
+        [],
+        ["{data}/052.png: missing (listed on line 6 of filenames.txt)"],
+    ),
+    "evaluate without albedo.exr": (
+        "evaluate",
+        "reconstruction",
+        lambda f: (f / "albedo.exr").unlink(),
+        ["--gt", str(BALL)],
+        ["{data}/albedo.exr: no such file"],
+    ),
+    # mismatched sizes
+    "image of another size": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _core.write_exr(str(f / "images" / "002.exr"), np.ones((8, 8, 3), np.float32)),
+        [],
+        ["{data}/images/002.exr: size 8x8 differs from {data}/images/000.exr (96x96)"],
+    ),
+    "camera disagrees with images": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _edit_scene(f, lambda s: s["camera"].update(width=95)),
+        [],
+        ["{data}/images/000.exr: size 96x96 does not match the camera in scene.json (95x96)"],
+    ),
+    "mask of another size": (
+        "render",
+        "mitsuba",
+        lambda f: _write_png(f / "mask.png", np.ones((SIZE, SIZE + 1))),
+        [],
+        ["{data}/mask.png: size 97x96 does not match the images (96x96)"],
+    ),
+    "reconstruction parts of different sizes": (
+        "evaluate",
+        "reconstruction",
+        lambda f: _core.write_exr(str(f / "height.exr"), np.zeros((5, 5), np.float32)),
+        ["--gt", str(BALL)],
+        ["{data}/height.exr: size 5x5 does not match"],
+    ),
+    # NaN / Inf pixels
+    "NaN pixel": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _edit_exr(f / "images" / "001.exr", _set_pixels(np.nan)),
+        [],
+        ["{data}/images/001.exr: non-finite value NaN at row 3, column 4"],
+    ),
+    "infinite true height": (
+        "render",
+        "mitsuba",
+        lambda f: _edit_exr(f / "gt" / "height.exr", _set_pixels(np.inf)),
+        [],
+        ["{data}/gt/height.exr: non-finite value inf at row 3, column 4"],
+    ),
+    "NaN reconstructed normals": (
+        "evaluate",
+        "reconstruction",
+        lambda f: _edit_exr(f / "normal.exr", _set_pixels(np.nan)),
+        ["--gt", str(BALL)],
+        ["{data}/normal.exr: non-finite value nan at row 3, column 4"],
+    ),
+    # black images, albedo out of range
+    "every image black": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: [_edit_exr(f / "images" / f"{k:03d}.exr", _set_pixels(0.0, ...)) for k in range(3)],
+        [],
+        ["{data}: every image is black on the object"],
+    ),
+    "true albedo above 1": (
+        "render",
+        "mitsuba",
+        lambda f: _edit_exr(f / "gt" / "albedo.exr", _set_pixels(1.5, (48, 50))),
+        [],
+        ["{data}/gt/albedo.exr: albedo 1.5 at row 48, column 50 of the mask is outside [0, 1]"],
+    ),
+    # too few or coplanar lights
+    "two lights": ("reconstruct", "mitsuba", _two_lights, [], ["{data}/scene.json: lights has 2 lights"]),
+    "coplanar lights": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _edit_scene(f, _directions([0.6, 0.0, 0.8], [-0.6, 0.0, 0.8], [0.0, 0.0, 1.0])),
+        [],
+        ["{data}: lights: directions are (nearly) coplanar"],
+    ),
+    "coplanar DiLiGenT lights": (
+        "reconstruct",
+        "ball",
+        _coplanar_diligent,
+        [],
+        ["{data}: lights: directions are (nearly) coplanar"],
+    ),
+    "light without irradiance": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _edit_scene(f, lambda s: s["lights"][1].update(irradiance=[0.0, 0.0, 0.0])),
+        [],
+        ["{data}: lights[1].irradiance: must be positive in every channel"],
+    ),
+    # non-unit or downward light directions
+    "non-unit light direction": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _edit_scene(f, lambda s: s["lights"][1].update(direction=[0.0, 0.0, 1.1])),
+        [],
+        ["{data}/scene.json: lights[1].direction is not a unit vector (norm 1.1)"],
+    ),
+    "downward light": (
+        "render",
+        "mitsuba",
+        lambda f: _edit_scene(f, lambda s: s["lights"][2].update(direction=[0.0, 0.6, -0.8])),
+        [],
+        ["{data}/scene.json: lights[2].direction must point toward the camera side (z > 0)"],
+    ),
+    # empty mask
+    "empty mask": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _write_png(f / "mask.png", np.zeros((SIZE, SIZE))),
+        [],
+        ["{data}/mask.png: the mask is empty"],
+    ),
+    "empty reconstruction mask": (
+        "evaluate",
+        "reconstruction",
+        lambda f: _write_png(f / "mask.png", np.zeros((44, 48))),
+        ["--gt", str(BALL)],
+        ["{data}/mask.png: the mask is empty"],
+    ),
+    # corrupt EXR / PNG
+    "EXR of garbage": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: (f / "images" / "000.exr").write_bytes(bytes(range(256)) * 16),
+        [],
+        ["{data}/images/000.exr: not a readable OpenEXR file"],
+    ),
+    "truncated EXR": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _truncate(f / "images" / "001.exr", 20_000),
+        [],
+        ["{data}/images/001.exr: not a readable OpenEXR file"],
+    ),
+    "EXR with other channels": (
+        "render",
+        "mitsuba",
+        lambda f: _rename_exr_channel(f / "gt" / "albedo.exr", b"R", b"S"),
+        [],
+        ["{data}/gt/albedo.exr: channels", "expected R, G, B (optionally A) or a single Y"],
+    ),
+    "truncated 16-bit PNG": (
+        "reconstruct",
+        "ball",
+        lambda f: _truncate(_ball_image(f, 1), 3000),
+        [],
+        ["{data}/009.png: corrupt PNG data"],
+    ),
+    # wrong JSON
+    "camera width as a string": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _edit_scene(f, lambda s: s["camera"].update(width="96")),
+        [],
+        ["{data}/scene.json: camera.width must be a positive integer, got the string '96'"],
+    ),
+    "lights as an object": (
+        "render",
+        "mitsuba",
+        lambda f: _edit_scene(f, lambda s: s.update(lights={"0": s["lights"][0]})),
+        [],
+        ["{data}/scene.json: lights must be an array, got an object"],
+    ),
+    "scene.json not JSON": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: (f / "scene.json").write_text('{"format": "irtps.scene/1",\n  "camera": }'),
+        [],
+        ["{data}/scene.json: invalid JSON at line 2, column 13"],
+    ),
+    "scene.json not UTF-8": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: (f / "scene.json").write_bytes(b'{"format": "\xff\xfe"}'),
+        [],
+        ["{data}/scene.json: not UTF-8 text"],
+    ),
+    "scene.json nested too deeply": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: (f / "scene.json").write_text("[" * 100_000),
+        [],
+        ["{data}/scene.json: JSON nested too deeply to be a scene"],
+    ),
+    # absurd sizes
+    "absurd camera": (
+        "render",
+        "mitsuba",
+        lambda f: ((f / "mask.png").unlink(), _edit_scene(f, lambda s: s["camera"].update(width=10**7, height=10**7))),
+        [],
+        ["{data}/scene.json: camera size 10000000x10000000 exceeds the largest supported image"],
+    ),
+    "EXR header claiming an absurd size": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _claim_exr_size(f / "images" / "002.exr", 1 << 20, 1 << 20),
+        [],
+        ["{data}/images/002.exr: size 1048576x1048576 exceeds the largest supported image"],
+    ),
+    "PNG header claiming an absurd size": (
+        "reconstruct",
+        "ball",
+        lambda f: _claim_png_size(_ball_image(f, 2), 10_000, 10_000),
+        [],
+        ["{data}/021.png: corrupt PNG: its header claims 10000x10000 pixels, more than its"],
+    ),
+    "absurd synthetic size": ("synth", None, None, ["cap", "--size", "1000000"], ["size: 1000000 is too large"]),
+    "no samples": ("render", "mitsuba", None, ["--samples", "0"], ["samples: 0 must be at least 1"]),
+    "saturation not a number": (
+        "reconstruct",
+        "mitsuba",
+        None,
+        ["--saturation", "nan"],
+        ["saturation: nan is not a positive number"],
+    ),
+    # unwritable or dangerous output folders
+    "output under a file": (
+        "reconstruct",
+        "mitsuba",
+        None,
+        ["--out", _out_under_a_file],
+        ["{tmp}/blocker: cannot create the output folder"],
+    ),
+    "output is the input": (
+        "reconstruct",
+        "mitsuba",
+        None,
+        ["--out", lambda tmp: tmp / "data"],
+        ["--out {tmp}/data: replacing it would delete the input {tmp}/data"],
+    ),
+    "output holds the input": (
+        "render",
+        "mitsuba",
+        None,
+        ["--out", lambda tmp: tmp],
+        ["--out {tmp}: replacing it would delete the input {tmp}/data"],
+    ),
+}
+
+
+@pytest.fixture(scope="module")
+def reconstruction(tmp_path_factory):
+    out = tmp_path_factory.mktemp("reconstruction") / "ball"
+    assert main(["reconstruct", str(BALL), "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def _prepare(name, tmp_path, reconstruction):
+    """The argument list of case `name`, its damaged data folder and its output folder."""
+    command, fixture, damage, extra, _ = CASES[name]
+    data = tmp_path / ("data" if fixture else "nowhere")
+    if fixture:
+        source = {"mitsuba": MITSUBA, "ball": BALL, "reconstruction": reconstruction}[fixture]
+        shutil.copytree(source, data)
+    if damage:
+        damage(data)
+    extra = [str(value(tmp_path)) if callable(value) else value for value in extra]
+    out = Path(extra[extra.index("--out") + 1]) if "--out" in extra else tmp_path / "out"
+    if command == "evaluate":
+        return [command, str(data), *extra], data, None
+    if command == "synth":
+        return [command, *extra, "--out", str(out), "--quiet"], data, out
+    outside = [] if "--out" in extra else ["--out", str(out)]
+    return [command, str(data), *extra, *outside, "--quiet"], data, out
+
+
+def _snapshot(folder):
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_the_matrix_has_at_least_30_cases():
+    assert len(CASES) >= 30
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_malformed_input_is_a_clear_error_with_no_output(name, tmp_path, reconstruction, capsys):
+    argv, data, out = _prepare(name, tmp_path, reconstruction)
+    before = _snapshot(tmp_path)
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.startswith("irtps: error: ") and captured.err.count("\n") == 1, captured.err
+    for part in CASES[name][4]:
+        assert part.format(data=data, tmp=tmp_path) in captured.err, captured.err
+    assert "Traceback" not in captured.err
+    assert _snapshot(tmp_path) == before  # no output, no temporary folder, inputs untouched
+    if out is not None and out not in (data, tmp_path):
+        assert not out.exists()
+
+
+@pytest.mark.parametrize("name", ["truncated EXR", "scene.json nested too deeply", "absurd camera"])
+def test_a_real_process_exits_2_without_traceback(name, tmp_path, reconstruction):
+    argv, data, out = _prepare(name, tmp_path, reconstruction)
+    result = subprocess.run([sys.executable, "-m", "irtps.cli", *argv], capture_output=True, text=True, check=False)
+    assert result.returncode == 2
+    assert result.stderr.startswith("irtps: error: ")
+    assert str(data) in result.stderr
+    assert "Traceback" not in result.stderr + result.stdout
+    assert not out.exists()
+
+
+def test_running_out_of_memory_is_a_clear_error(tmp_path, monkeypatch, capsys):
+    def allocate(path):
+        raise MemoryError("Unable to allocate 90.9 TiB for an array with shape (10000000, 10000000)")
+
+    monkeypatch.setattr(sys.modules["irtps.reconstruct"], "load_dataset", allocate)
+    assert main(["reconstruct", str(BALL), "--out", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err == (
+        "irtps: error: not enough memory (Unable to allocate 90.9 TiB for an array with shape (10000000, 10000000))\n"
+    )
+    assert list(tmp_path.iterdir()) == []
+
+
+# Inputs accepted on purpose ---------------------------------------------------------
+
+
+def test_negative_pixels_are_clipped_to_zero_with_a_warning(tmp_path, capsys):
+    data, clipped = tmp_path / "data", tmp_path / "clipped"
+    shutil.copytree(MITSUBA, data)
+    shutil.copytree(MITSUBA, clipped)
+    _edit_exr(data / "images" / "001.exr", _set_pixels(-0.25, (slice(40, 50), slice(40, 50))))
+    _edit_exr(clipped / "images" / "001.exr", _set_pixels(0.0, (slice(40, 50), slice(40, 50))))
+    assert main(["reconstruct", str(data), "--out", str(tmp_path / "out"), "--quiet"]) == 0
+    warning = capsys.readouterr().err
+    assert warning == f"irtps: warning: {data}/images/001.exr: 300 negative values (down to -0.25) clipped to 0\n"
+    assert main(["reconstruct", str(clipped), "--out", str(tmp_path / "reference"), "--quiet"]) == 0
+    for name in ("normal.exr", "albedo.exr", "height.exr"):
+        assert (tmp_path / "out" / name).read_bytes() == (tmp_path / "reference" / name).read_bytes(), name
+
+
+def _saturate(folder, images=6):
+    """Set a 6x6 patch of the object to the PNG maximum in the first `images` images."""
+    for index in range(images):
+        path = _ball_image(folder, index)
+        image, bits = _core.read_png(str(path))
+        image[20:26, 20:26] = 1.0
+        _core.write_png(str(path), image, bits)
+
+
+FULL_FIT = "full fit kept (too few non-coplanar lit observations)"
+
+
+def test_saturated_png_pixels_are_left_out_and_flagged(tmp_path, reconstruction, capsys):
+    data, out = tmp_path / "data", tmp_path / "out"
+    shutil.copytree(BALL, data)
+    _saturate(data)
+    assert main(["reconstruct", str(data), "--out", str(out), "--quiet"]) == 0
+    assert capsys.readouterr().err == (
+        f"irtps: warning: {data}: 216 observations in 6 images are saturated (a channel at or above 1); "
+        "left out of the fit\n"
+    )
+    run = json.loads((out / "run.json").read_text())
+    assert run["parameters"]["saturation"] == 1.0
+    # 2 unsaturated lights are too few: the 36 pixels of the patch keep the full fit, flagged
+    unsaturated = json.loads((reconstruction / "run.json").read_text())
+    assert run["flags"][FULL_FIT] == unsaturated["flags"][FULL_FIT] + 36
+
+
+def test_saturated_png_pixels_are_reported_when_not_robust(tmp_path, capsys):
+    data = tmp_path / "data"
+    shutil.copytree(BALL, data)
+    _saturate(data)
+    assert main(["reconstruct", str(data), "--out", str(tmp_path / "out"), "--no-robust", "--quiet"]) == 0
+    assert capsys.readouterr().err.endswith("are saturated (a channel at or above 1); used as they are (robust mode is off)\n")
+
+
+# Interrupted runs -------------------------------------------------------------------
+
+
+@pytest.fixture
+def previous_output(tmp_path):
+    """An output folder from an earlier run, which a failed run must leave as it is."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "run.json").write_text('{"earlier": true}')
+    return out
+
+
+def _fail_on_third_exr(monkeypatch, error):
+    real, calls = _core.write_exr, []
+
+    def write_exr(path, array):
+        calls.append(path)
+        if len(calls) == 3:
+            raise error
+        real(path, array)
+
+    monkeypatch.setattr(_core, "write_exr", write_exr)
+    return calls
+
+
+def test_ctrl_c_while_writing_leaves_the_previous_output(tmp_path, previous_output, monkeypatch, capsys):
+    calls = _fail_on_third_exr(monkeypatch, KeyboardInterrupt())
+    assert main(["reconstruct", str(BALL), "--out", str(previous_output), "--quiet"]) == 130
+    assert len(calls) == 3 and calls[0].startswith(str(tmp_path / ".out.tmp-"))
+    assert capsys.readouterr().err == "irtps: interrupted; no partial output was left\n"
+    assert _snapshot(tmp_path) == {"out/run.json": b'{"earlier": true}'}
+
+
+def test_a_full_disk_while_writing_leaves_the_previous_output(tmp_path, previous_output, monkeypatch, capsys):
+    calls = _fail_on_third_exr(monkeypatch, OSError(errno.ENOSPC, "No space left on device"))
+    assert main(["reconstruct", str(BALL), "--out", str(previous_output), "--quiet"]) == 2
+    assert capsys.readouterr().err == f"irtps: error: {calls[2]}: [Errno 28] No space left on device\n"
+    assert _snapshot(tmp_path) == {"out/run.json": b'{"earlier": true}'}
+
+
+@pytest.mark.parametrize("signum, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_killed_process_leaves_the_previous_output(tmp_path, previous_output, signum, status):
+    command = [sys.executable, "-m", "irtps.cli", "render", str(MITSUBA), "--out", str(previous_output), "--samples", "8192"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert process.stderr.read(1)  # the progress bar has started: rendering is under way
+    process.send_signal(signum)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == status
+    assert b"irtps: interrupted; no partial output was left\n" in err
+    assert b"Traceback" not in err
+    assert _snapshot(tmp_path) == {"out/run.json": b'{"earlier": true}'}
