@@ -56,3 +56,22 @@ def test_reconstruct_cli_writes_indirect_images_and_history(tmp_path, grooves):
 def test_bad_settings_are_named(grooves, argument, value):
     with pytest.raises(IrtpsError, match=argument):
         remove_interreflections(grooves, **{argument: value})
+
+
+def test_footprint_normals_of_a_plane_are_its_normal():
+    rows, cols = np.mgrid[0:6, 0:7].astype(float)
+    height = 0.5 * cols - 0.25 * rows  # dz/dx = 0.5, dz/dy = +0.25 (y grows against rows)
+    n = irtps.surface.footprint_normals(height, np.ones((6, 7), bool), pixel_size=1.0)
+    expected = np.array([-0.5, -0.25, 1.0]) / np.linalg.norm([-0.5, -0.25, 1.0])
+    np.testing.assert_allclose(n[1:-1, 1:-1], np.broadcast_to(expected, (4, 5, 3)), atol=1e-12)
+
+
+def test_surface_albedo_undoes_the_crease_bias_of_photometric_stereo(grooves):
+    fit = irtps.photometric_stereo(grooves.gt.direct, grooves.scene.light_directions, grooves.scene.light_irradiance, grooves.mask)
+    mask, truth = grooves.mask, grooves.gt.albedo
+    inner = mask & ~np.isnan(fit.albedo[..., 0])
+    fitted_bias = np.mean(fit.albedo[inner] - truth[inner])
+    corrected = irtps.interreflection.surface_albedo(fit.albedo, grooves.gt.height, mask, grooves.scene.camera.pixel_size)
+    corrected_bias = np.mean(corrected[inner] - truth[inner])
+    assert fitted_bias < -0.02  # crease pixels read dark
+    assert abs(corrected_bias) < 0.6 * abs(fitted_bias)  # the rest: cast shadows in the narrow grooves

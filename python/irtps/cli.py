@@ -378,7 +378,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("data", type=Path, nargs="+", help="data set folders with ground truth")
     p.add_argument("--out", type=Path, help="folder for table.md and table.json")
-    _add_table_options(p, iterations=6, samples=256)
+    _add_table_options(p, iterations=8, samples=256)
     p.set_defaults(run=_cmd_table)
 
     p = commands.add_parser(

@@ -176,7 +176,7 @@ def reconstruct(
         timings["irtps"] = time.perf_counter() - start
         return Reconstruction(
             normals=loop.fit.normals,
-            albedo=loop.fit.albedo,
+            albedo=loop.albedo,
             height=loop.height,
             mask=dataset.mask,
             flags=loop.fit.flags,

@@ -44,6 +44,67 @@ def height_to_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 
     return normals.astype(np.float32)
 
 
+def footprint_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0) -> np.ndarray:
+    """Mean unit normal over each pixel's footprint on the contract's triangulated surface.
+
+    A pixel's value averages radiance over its square footprint (contract §1), which straddles
+    the eight triangle pieces around its vertex. Without shadows, a Lambertian pixel then
+    reads ``ρ·E·(l · n̄)/π`` with ``n̄`` this mean of unit normals, whose length is below 1
+    where the surface bends inside the footprint (a crease). Photometric stereo measures
+    ``ρ·n̄``, so ``|ρ·n̄| / |n̄|`` recovers the albedo there.
+
+    Parameters
+    ----------
+    height : numpy.ndarray
+        (H, W) heights in world units.
+    mask : numpy.ndarray
+        (H, W) bool, the object's pixels.
+    pixel_size : float
+        World size of a pixel.
+
+    Returns
+    -------
+    numpy.ndarray
+        float64 (H, W, 3) mean normals (length at most 1) over the meshed part of each
+        footprint; 0 where a pixel touches no meshed 2×2 block.
+
+    Examples
+    --------
+    A V-groove along the columns: the crease pixel's footprint is half on each facet.
+
+    >>> import numpy as np
+    >>> height = np.tile(np.abs(np.arange(5.0) - 2), (3, 1))
+    >>> n = footprint_normals(height, np.ones((3, 5), bool))
+    >>> np.round(n[1, 2], 4).tolist(), round(float(np.linalg.norm(n[1, 1])), 4)
+    ([0.0, 0.0, 0.7071], 1.0)
+    """
+    height = np.asarray(height, dtype=np.float64)
+    mask = np.asarray(mask, dtype=bool)
+    rows, cols = height.shape
+    normals = np.zeros((rows, cols, 3))
+    if rows < 2 or cols < 2:
+        return normals
+    # Block (i, j): triangle 1 is (i,j) (i+1,j) (i,j+1), triangle 2 (i,j+1) (i+1,j) (i+1,j+1).
+    meshed = mask[:-1, :-1] & mask[1:, :-1] & mask[:-1, 1:] & mask[1:, 1:]
+    h00, h10, h01, h11 = height[:-1, :-1], height[1:, :-1], height[:-1, 1:], height[1:, 1:]
+    first = _unit_normals((h01 - h00) / pixel_size, (h10 - h00) / pixel_size)
+    second = _unit_normals((h11 - h10) / pixel_size, (h11 - h01) / pixel_size)
+    split = (first + second) / 2.0
+    weight = np.zeros((rows, cols))
+    # The quarter of block (i, j) nearest its corner (i, j) lies in triangle 1, the one
+    # nearest (i+1, j+1) in triangle 2, and the other two quarters half in each.
+    for (r, c), part in (((slice(None, -1), slice(None, -1)), first), ((slice(1, None), slice(1, None)), second), ((slice(1, None), slice(None, -1)), split), ((slice(None, -1), slice(1, None)), split)):
+        normals[r, c] += np.where(meshed[..., None], part, 0.0)
+        weight[r, c] += meshed
+    return normals / np.maximum(weight, 1.0)[..., None]
+
+
+def _unit_normals(dz_dx: np.ndarray, dz_drow: np.ndarray) -> np.ndarray:
+    """Unit normals from the slope along x and along the row index (y grows against it)."""
+    normals = np.stack([-dz_dx, dz_drow, np.ones_like(dz_dx)], axis=-1)
+    return normals / np.linalg.norm(normals, axis=-1, keepdims=True)
+
+
 def _masked_derivative(values: np.ndarray, mask: np.ndarray, axis: int) -> np.ndarray:
     """Derivative along `axis` per pixel step, using only masked neighbours."""
     padded_v = np.pad(values, [(1, 1) if a == axis else (0, 0) for a in range(2)])

@@ -41,7 +41,7 @@ def comparison_table(
     datasets: Sequence[tuple[str, Dataset]],
     *,
     bounces: Sequence[int] = (1, 2, 3),
-    iterations: int = 6,
+    iterations: int = 8,
     samples: int = 256,
     seed: int = 0,
     paper: bool = True,
