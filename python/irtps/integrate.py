@@ -455,7 +455,11 @@ def _integrate_fc(gc, gr):
 # --------------------------------------------------------------------------- footprint
 
 #: Weight of the forward differences that couple odd and even pixels in ``"footprint"``.
-_FOOTPRINT_COUPLING = 0.05
+#: Central differences leave the odd and even pixels free to drift apart: on a 512-pixel
+#: object, 0.05 let a pixel-scale ripple grow (a quarter of DiLiGenT ball's pixels came out
+#: locally concave, then bright with false inter-reflections inside IRT-PS). 0.3 keeps the
+#: ripple down (94 % convex, as against 97 % with ``"ls"``) and creases still sharp.
+_FOOTPRINT_COUPLING = 0.3
 
 
 def _integrate_footprint(mask, gc, gr, tolerance):

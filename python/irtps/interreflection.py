@@ -180,6 +180,9 @@ def remove_interreflections(
     if base_height is None:
         base_height = scene.floor.height if scene.floor is not None else 0.0
     original = dataset.images
+    # Observations saturated in the input stay saturated: subtracting the estimate would bring
+    # them under the threshold and into the fit with a clipped value.
+    saturated = None if saturation is None else (original >= saturation).any(axis=-1, keepdims=True)
     images = original
     indirect = None
     previous_height = None
@@ -214,9 +217,14 @@ def remove_interreflections(
             timings["indirect_estimate"] = time.perf_counter() - start
             if update == "original":
                 indirect = estimate if indirect is None else indirect + relaxation * (estimate - indirect)
-                images = np.maximum(original - indirect, 0.0)
+                images = _keep_saturated(np.maximum(original - indirect, 0.0), original, saturated)
             else:
                 indirect = estimate
-                images = np.maximum(images - relaxation * estimate, 0.0)
+                images = _keep_saturated(np.maximum(images - relaxation * estimate, 0.0), original, saturated)
             previous_height = height
     return InterreflectionResult(fit=fit, albedo=albedo, height=height, indirect=indirect, history=history)
+
+
+def _keep_saturated(corrected: np.ndarray, original: np.ndarray, saturated: np.ndarray | None) -> np.ndarray:
+    """`corrected`, with the observations saturated in `original` put back as they were."""
+    return corrected if saturated is None else np.where(saturated, original, corrected)
