@@ -4,6 +4,8 @@
 //! Large flat surfaces are tessellated to about a pixel so that per-vertex light caching
 //! (see [`crate::light_cache`]) resolves shadows on them.
 
+use std::sync::Arc;
+
 use glam::{vec3a, Vec3A};
 
 use crate::scene::{Rgb, Scene};
@@ -45,8 +47,9 @@ pub struct Mesh {
     /// Index of the height-field vertex of each pixel (`u32::MAX` when it has none).
     pub pixel_vertex: Vec<u32>,
     /// Where the height field's and the skirt's triangles lie on the pixel grid, for tracers
-    /// that exploit it; None when the mesh was not built from a height field.
-    pub grid: Option<HeightFieldGrid>,
+    /// that exploit it (shared with them, not copied); None when the mesh was not built from
+    /// a height field.
+    pub grid: Option<Arc<HeightFieldGrid>>,
 }
 
 /// The height-field part of a [`Mesh`] on its pixel grid. Block (i, j) is the square between
@@ -309,7 +312,7 @@ impl Mesh {
         skirt.retain(|edge| !edge.triangles.is_empty());
         skirt.sort_by_key(|edge| edge.block);
         if on_grid && bw > 0 && bh > 0 {
-            self.grid = Some(HeightFieldGrid {
+            self.grid = Some(Arc::new(HeightFieldGrid {
                 width: w,
                 height: h,
                 xs: (0..w).map(|j| cam.pixel_center(0, j).0).collect(),
@@ -318,7 +321,7 @@ impl Mesh {
                 base,
                 block_triangles,
                 skirt,
-            });
+            }));
         }
     }
 

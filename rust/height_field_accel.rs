@@ -10,6 +10,7 @@
 //! what makes it faster than a general BVH over the same triangles.
 
 use std::mem::MaybeUninit;
+use std::sync::Arc;
 
 use glam::{Vec3A, Vec4};
 
@@ -93,7 +94,7 @@ struct GridRay {
 /// Closest-hit and occlusion queries over the triangles of a [`HeightFieldGrid`].
 #[derive(Debug, Clone)]
 pub struct HeightFieldAccel {
-    grid: HeightFieldGrid,
+    grid: Arc<HeightFieldGrid>,
     /// Blocks per row.
     block_cols: usize,
     /// Level L + 1 of the quadtree is `levels[L]` (level 0 are the blocks themselves).

@@ -217,14 +217,19 @@ def remove_interreflections(
             timings["indirect_estimate"] = time.perf_counter() - start
             if update == "original":
                 indirect = estimate if indirect is None else indirect + relaxation * (estimate - indirect)
-                images = _keep_saturated(np.maximum(original - indirect, 0.0), original, saturated)
+                images = _corrected(original, indirect, original, saturated)
             else:
                 indirect = estimate
-                images = _keep_saturated(np.maximum(images - relaxation * estimate, 0.0), original, saturated)
+                images = _corrected(images, relaxation * estimate, original, saturated)
             previous_height = height
     return InterreflectionResult(fit=fit, albedo=albedo, height=height, indirect=indirect, history=history)
 
 
-def _keep_saturated(corrected: np.ndarray, original: np.ndarray, saturated: np.ndarray | None) -> np.ndarray:
-    """`corrected`, with the observations saturated in `original` put back as they were."""
-    return corrected if saturated is None else np.where(saturated, original, corrected)
+def _corrected(images: np.ndarray, estimate: np.ndarray, original: np.ndarray, saturated: np.ndarray | None) -> np.ndarray:
+    """``images − estimate``, clipped at 0, with the observations saturated in `original` put
+    back as they were; one new array, the rest in place."""
+    corrected = images - estimate
+    np.maximum(corrected, 0.0, out=corrected)
+    if saturated is not None:
+        np.copyto(corrected, original, where=saturated)
+    return corrected

@@ -38,8 +38,7 @@ def height_to_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 
     mask = np.asarray(mask, dtype=bool)
     dz_dcol = _masked_derivative(height, mask, axis=1)
     dz_drow = _masked_derivative(height, mask, axis=0)
-    normals = np.stack([-dz_dcol / pixel_size, dz_drow / pixel_size, np.ones_like(height)], axis=-1)
-    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals = _unit_normals(dz_dcol / pixel_size, dz_drow / pixel_size)
     normals[~mask] = 0.0
     return normals.astype(np.float32)
 
