@@ -63,7 +63,7 @@ impl Tracer {
             .collect();
         let triangle_count = mesh.triangles.len();
         if tris.is_empty() {
-            return Tracer { height_field, panels, bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), triangle_count, bounds_guard: usize::MAX, avx2: false };
+            return Tracer { height_field, panels, bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), triangle_count, bounds_guard: usize::MAX, avx2: avx2_available() };
         }
         // obvhs's Morton code wraps a coordinate lying exactly on the build bounds' maximum
         // to 0 (e.g. the skirt on the +x and +y sides), which spoils the BVH (2x the nodes
