@@ -268,6 +268,12 @@ impl HeightFieldAccel {
         Some(HeightFieldAccel { block_cols: ci, block_rows: ri, block_flags, pyramid, level_info, top: levels.len(), field, xs, ys, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
     }
 
+    /// Corners of the box holding every triangle of the field and its skirt.
+    pub fn bounds(&self) -> (Vec3A, Vec3A) {
+        let g = &self.grid;
+        (Vec3A::new(g.xs[0], g.ys[g.height - 1], self.field.min), Vec3A::new(g.xs[g.width - 1], g.ys[0], self.field.max))
+    }
+
     /// The closest hit along `origin + t·direction` for `t` in [0, `t_max`].
     #[inline(always)]
     pub fn closest_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {

@@ -44,6 +44,9 @@ pub struct Tracer {
     bounds_guard: usize,
     /// Whether this CPU runs the AVX2 build of the traversal.
     avx2: bool,
+    /// The height field's box, when every panel lies outside it: a ray starting inside the
+    /// box that hits the field meets no panel before.
+    field_box: Option<(Vec3A, Vec3A)>,
 }
 
 impl Tracer {
@@ -62,8 +65,15 @@ impl Tracer {
             })
             .collect();
         let triangle_count = mesh.triangles.len();
+        let field_box = height_field.as_ref().map(HeightFieldAccel::bounds).filter(|&(lo, hi)| {
+            panels.iter().all(|p| {
+                let (a, b) = p.bounds();
+                // Separated along some axis (touching a face is allowed).
+                (0..3).any(|k| b[k] <= lo[k] || a[k] >= hi[k])
+            })
+        });
         if tris.is_empty() {
-            return Tracer { height_field, panels, bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), triangle_count, bounds_guard: usize::MAX, avx2: avx2_available() };
+            return Tracer { field_box, height_field, panels, bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), triangle_count, bounds_guard: usize::MAX, avx2: avx2_available() };
         }
         // obvhs's Morton code wraps a coordinate lying exactly on the build bounds' maximum
         // to 0 (e.g. the skirt on the +x and +y sides), which spoils the BVH (2x the nodes
@@ -79,7 +89,7 @@ impl Tracer {
         let bounds_guard = bvh.primitive_indices.iter().position(|&i| i == guard_index).expect("the guard is in the BVH");
         let mesh_index = bvh.primitive_indices.iter().map(|&i| in_bvh.get(i as usize).copied().unwrap_or(u32::MAX)).collect();
         let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&tris[i as usize])).collect();
-        Tracer { height_field, panels, bvh, triangles, mesh_index, triangle_count, bounds_guard, avx2: avx2_available() }
+        Tracer { field_box, height_field, panels, bvh, triangles, mesh_index, triangle_count, bounds_guard, avx2: avx2_available() }
     }
 
     /// Distance to BVH primitive `id` along `ray` (infinite for the bounds guard).
@@ -143,6 +153,9 @@ impl Tracer {
         if let Some(hit) = self.height_field.as_ref().and_then(|h| h.closest_hit(origin, direction, t_max)) {
             t_limit = hit.t;
             best = Some(hit);
+            if self.triangles.is_empty() && self.field_box.is_some_and(|(lo, hi)| origin.cmpge(lo).all() && origin.cmple(hi).all()) {
+                return best;
+            }
         }
         if !self.triangles.is_empty() {
             let ray = make_ray(origin, direction, t_limit);
@@ -225,6 +238,8 @@ struct PanelShape {
     /// origin they give its (s, t).
     dual_u: Vec3A,
     dual_v: Vec3A,
+    edge_u: Vec3A,
+    edge_v: Vec3A,
     unbounded: bool,
     /// Mesh index of the first of the panel's two triangles.
     first_triangle: usize,
@@ -246,9 +261,22 @@ impl PanelShape {
             normal: panel.normal,
             dual_u: u / u.length_squared(),
             dual_v: v / v.length_squared(),
+            edge_u: u,
+            edge_v: v,
             unbounded: panel.unbounded,
             first_triangle,
         })
+    }
+
+    /// Corners of the panel's box (a whole plane stands for an unbounded panel).
+    fn bounds(&self) -> (Vec3A, Vec3A) {
+        if self.unbounded {
+            let far = Vec3A::splat(f32::INFINITY);
+            let flat = self.normal.abs().cmpgt(Vec3A::splat(0.999));
+            return (Vec3A::select(flat, self.origin, -far), Vec3A::select(flat, self.origin, far));
+        }
+        let corners = [self.origin, self.origin + self.edge_u, self.origin + self.edge_v, self.origin + self.edge_u + self.edge_v];
+        (corners.iter().fold(Vec3A::INFINITY, |a, &c| a.min(c)), corners.iter().fold(Vec3A::NEG_INFINITY, |a, &c| a.max(c)))
     }
 
     /// The hit of the ray in (0, `t_max`), with the barycentrics of the triangle it lies in
