@@ -336,6 +336,7 @@ impl HeightFieldAccel {
             if (x0..=x1).contains(&ox) && (y1..=y0).contains(&oy) {
                 entry = x_entry | y_entry;
             }
+            self.prefetch_around(row, col);
         }
         loop {
             // Where the ray leaves the cell (along x or along y), and the stretch within the
@@ -403,6 +404,31 @@ impl HeightFieldAccel {
             row >>= up;
             col >>= up;
             t_in = t_out;
+        }
+    }
+
+    /// Asks for the memory the walk from block (`row`, `col`) reads first (its heights and
+    /// flags, the pyramid cells above it), so that the cache misses of an incoherent ray
+    /// overlap instead of following one another.
+    #[inline(always)]
+    fn prefetch_around(&self, row: i32, col: i32) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            let g = &self.grid;
+            let (i, j) = (row as usize, col as usize);
+            let vertex = i * g.width + j;
+            // SAFETY: prefetching is a hint; the addresses are within the arrays.
+            unsafe {
+                _mm_prefetch::<_MM_HINT_T0>(g.z.as_ptr().add(vertex).cast());
+                _mm_prefetch::<_MM_HINT_T0>(g.z.as_ptr().add(vertex + g.width).cast());
+                _mm_prefetch::<_MM_HINT_T0>(self.block_flags.as_ptr().add(i * self.block_cols as usize + j).cast());
+                for level in 1..=self.top.min(4) {
+                    let info = self.level_info[level];
+                    let cell = info.origin + (row >> level) as isize * info.stride + (col >> level) as isize;
+                    _mm_prefetch::<_MM_HINT_T0>(self.pyramid.as_ptr().offset(cell).cast());
+                }
+            }
         }
     }
 

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use glam::vec3a;
-use numpy::ndarray::{Array, Array1, Array2, IxDyn};
+use numpy::ndarray::{Array, Array2, IxDyn};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
@@ -82,6 +82,18 @@ fn rows_of_3(array: &PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<Vec<[f32
         return Err(PyValueError::new_err(format!("{name}: expected shape (N, 3), got {:?}", a.shape())));
     }
     Ok(a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
+}
+
+/// The rows of an (N, 3) array as one flat slice: borrowed when the array is C-contiguous,
+/// copied otherwise.
+fn flat_rows_of_3<'a>(array: &'a PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<std::borrow::Cow<'a, [f32]>> {
+    if array.shape()[1] != 3 {
+        return Err(PyValueError::new_err(format!("{name}: expected shape (N, 3), got {:?}", array.shape())));
+    }
+    Ok(match array.as_slice() {
+        Ok(flat) => std::borrow::Cow::Borrowed(flat),
+        Err(_) => std::borrow::Cow::Owned(array.as_array().iter().copied().collect()),
+    })
 }
 
 /// Distances (inf on a miss) and triangle indices (−1 on a miss) of a batch of rays.
@@ -216,33 +228,32 @@ impl Renderer {
     /// (distance (N,) float32, inf on a miss; triangle (N,) int64, −1 on a miss).
     #[pyo3(signature = (origins, directions, threads=None))]
     fn intersect<'py>(&self, py: Python<'py>, origins: PyReadonlyArray2<'_, f32>, directions: PyReadonlyArray2<'_, f32>, threads: Option<usize>) -> PyResult<HitArrays<'py>> {
-        let o = rows_of_3(&origins, "origins")?;
-        let d = rows_of_3(&directions, "directions")?;
+        let o = flat_rows_of_3(&origins, "origins")?;
+        let d = flat_rows_of_3(&directions, "directions")?;
         if o.len() != d.len() {
             return Err(PyValueError::new_err("directions: needs one row per origin"));
         }
         let tracer = self.inner.tracer();
-        let trace = || -> Vec<(f32, i64)> {
-            o.par_iter()
-                .zip(&d)
-                .map(|(o, d)| match tracer.closest_hit(vec3a(o[0], o[1], o[2]), vec3a(d[0], d[1], d[2]), f32::INFINITY) {
-                    Some(hit) => (hit.t, hit.triangle as i64),
-                    None => (f32::INFINITY, -1),
-                })
-                .collect()
+        let mut t = vec![f32::INFINITY; o.len() / 3];
+        let mut id = vec![-1i64; o.len() / 3];
+        let trace = |t: &mut [f32], id: &mut [i64]| {
+            t.par_iter_mut().zip(id.par_iter_mut()).zip(o.par_chunks_exact(3).zip(d.par_chunks_exact(3))).for_each(|((t, id), (o, d))| {
+                if let Some(hit) = tracer.closest_hit(vec3a(o[0], o[1], o[2]), vec3a(d[0], d[1], d[2]), f32::INFINITY) {
+                    (*t, *id) = (hit.t, hit.triangle as i64);
+                }
+            })
         };
-        let hits = py.detach(|| -> PyResult<Vec<(f32, i64)>> {
+        py.detach(|| -> PyResult<()> {
             match threads {
-                None => Ok(trace()),
+                None => trace(&mut t, &mut id),
                 Some(n) => {
                     let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| PyValueError::new_err(format!("threads: {e}")))?;
-                    Ok(pool.install(trace))
+                    pool.install(|| trace(&mut t, &mut id));
                 }
             }
+            Ok(())
         })?;
-        let t: Array1<f32> = hits.iter().map(|h| h.0).collect();
-        let id: Array1<i64> = hits.iter().map(|h| h.1).collect();
-        Ok((t.into_pyarray(py), id.into_pyarray(py)))
+        Ok((PyArray1::from_vec(py, t), PyArray1::from_vec(py, id)))
     }
 }
 
