@@ -329,11 +329,12 @@ impl HeightFieldAccel {
         let (mut level, mut row, mut col, mut entry) = (self.top, 0, 0, 0u8);
         if t_in == 0.0 {
             (level, row, col) = (0, Self::block_of(ray.origin.y, &g.ys, self.inv_step.1, self.block_rows), Self::block_of(ray.origin.x, &g.xs, self.inv_step.0, self.block_cols));
-            // Going away from a side of the block its origin lies in, the ray cannot meet the
-            // block behind that side: treat it as the side the ray came in through.
+            // Going away from a side of the block its origin lies strictly inside, the ray
+            // cannot meet the block behind that side: treat it as the side the ray came in
+            // through. (An origin on a side may lie on that block's skirt.)
             let (x0, x1, y0, y1) = (g.xs[col as usize], g.xs[col as usize + 1], g.ys[row as usize], g.ys[row as usize + 1]);
             let (ox, oy) = (ray.origin.x, ray.origin.y);
-            if (x0..=x1).contains(&ox) && (y1..=y0).contains(&oy) {
+            if x0 < ox && ox < x1 && y1 < oy && oy < y0 {
                 entry = x_entry | y_entry;
             }
             self.prefetch_around(row, col);
@@ -730,6 +731,38 @@ mod tests {
                 }
             }
             assert!(hits > 1500 && skirt_hits > 200, "{w}x{h}: {hits} hits, {skirt_hits} on the skirt");
+        }
+    }
+
+    /// Rays as a renderer casts them: from points on the surface (inside triangles and at
+    /// vertices, where four blocks meet), just off it, in every direction of the upper
+    /// hemisphere and some below it.
+    #[test]
+    fn rays_leaving_the_surface_agree_with_testing_every_triangle() {
+        for (w, h, seed) in [(24, 19, 11), (40, 40, 12)] {
+            let scene = ragged_scene(w, h, seed);
+            let mesh = Mesh::from_scene(&scene);
+            let accel = HeightFieldAccel::new(&mesh).expect("a height-field mesh has a grid");
+            let object: Vec<usize> = (0..mesh.triangles.len()).filter(|&t| mesh.kinds[t] == crate::geometry::SurfaceKind::Object).collect();
+            let mut rng = Rng::new(seed);
+            let mut hits = 0;
+            for k in 0..6000 {
+                let t = object[(rng.next_f32() * object.len() as f32) as usize % object.len()];
+                let [a, b, c] = mesh.corners(t);
+                let (u, v) = (rng.next_f32(), rng.next_f32());
+                let (u, v) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
+                // Every third ray starts at a vertex of the grid.
+                let on_surface = if k % 3 == 0 { a } else { a + (b - a) * u + (c - a) * v };
+                let origin = on_surface + mesh.normals[t] * 1e-3;
+                let direction = vec3a(rng.next_f32() * 2.0 - 1.0, rng.next_f32() * 2.0 - 1.0, rng.next_f32() * 1.6 - 0.3).normalize();
+                let ray = GridRay::new(&accel, origin, direction);
+                let expected = brute_force(&mesh, &ray);
+                let got = accel.closest_hit(origin, direction, f32::INFINITY);
+                assert_eq!(got.map(|g| (g.triangle, g.t)), expected, "ray {origin:?} {direction:?} in {w}x{h}");
+                assert_eq!(accel.occluded(origin, direction, f32::INFINITY), expected.is_some());
+                hits += usize::from(expected.is_some());
+            }
+            assert!(hits > 1000, "{w}x{h}: only {hits} hits");
         }
     }
 
