@@ -191,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
         ratio = per_thread_i / rate_e
         print(f"order {order}: {hit_i.mean():.1%} hit; agreement: hit/miss {agree:.4%}, "
               f"distance within 1e-3 rel. {within:.4%} of common hits, same triangle {same_triangle:.4%}")
-        rows.append((order, "irtps (quadtree)", args.threads, med_i, rate_i, per_thread_i, statistics.median(c_i) / med_i, ratio))
+        rows.append((order, "irtps (pyramid walk)", args.threads, med_i, rate_i, per_thread_i, statistics.median(c_i) / med_i, ratio))
         rows.append((order, "Embree (embreex)", 1, med_e, rate_e, rate_e, statistics.median(c_e) / med_e, None))
         results[order] = {
             "hit_fraction": float(hit_i.mean()),

@@ -15,7 +15,7 @@
 
 use std::sync::Arc;
 
-use glam::{Vec3A, Vec4};
+use glam::Vec3A;
 
 use crate::geometry::{BlockSide, HeightFieldGrid, Mesh, NO_TRIANGLE};
 use crate::tracer::Hit;
@@ -126,9 +126,12 @@ struct GridRay {
     margin: f32,
     /// origin.z · inv.z: height z is reached at `z·inv.z − z_offset`.
     z_offset: f32,
-    /// (x, x, y, y) of the origin and the direction.
-    origin_xxyy: Vec4,
-    direction_xxyy: Vec4,
+    /// Distance the ray takes to cross a block column (row), and to move twice the slack
+    /// along x (y).
+    x_width: f32,
+    y_width: f32,
+    x_graze: f32,
+    y_graze: f32,
     forward_x: bool,
     forward_y: bool,
 }
@@ -150,10 +153,6 @@ pub struct HeightFieldAccel {
     top: usize,
     /// Height range of the whole field.
     field: Range,
-    /// Vertex x of the grid's columns (y of its rows) with one more on each side, for the
-    /// ring of blocks outside the field: block column j spans `xs[j + 1]..xs[j + 2]`.
-    xs: Vec<f32>,
-    ys: Vec<f32>,
     /// Index into `skirt` of each block's first skirt edge, or `u32::MAX`.
     first_skirt: Vec<u32>,
     skirt: Vec<SkirtQuad>,
@@ -263,9 +262,7 @@ impl HeightFieldAccel {
         // Block boundaries are computed as k·step + start: allow for its rounding.
         let extent = grid.xs[0].abs().max(grid.xs[cols].abs()).max(grid.ys[0].abs()).max(grid.ys[rows].abs());
         let slack = step.0.abs() * 1e-4 + extent * 4.0 * f32::EPSILON;
-        let ringed = |v: &[f32], d: f32| -> Vec<f32> { std::iter::once(v[0] - d).chain(v.iter().copied()).chain(std::iter::once(v[v.len() - 1] + d)).collect() };
-        let (xs, ys) = (ringed(&grid.xs, step.0), ringed(&grid.ys, step.1));
-        Some(HeightFieldAccel { block_cols: ci, block_rows: ri, block_flags, pyramid, level_info, top: levels.len(), field, xs, ys, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
+        Some(HeightFieldAccel { block_cols: ci, block_rows: ri, block_flags, pyramid, level_info, top: levels.len(), field, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
     }
 
     /// Corners of the box holding every triangle of the field and its skirt.
@@ -375,7 +372,22 @@ impl HeightFieldAccel {
                     }
                 }
                 let exit = if along_x { x_exit } else { y_exit };
-                let sides = self.sides_grazed(ray, row, col, t_in, t_out) & !(entry | exit);
+                // Sides the ray runs within twice the slack of: before it passes the entry
+                // side's line plus the slack, or after the exit side's line minus it.
+                let mut sides = 0;
+                if t_in < tx - ray.x_width + ray.x_graze {
+                    sides |= x_entry;
+                }
+                if t_out > tx - ray.x_graze {
+                    sides |= x_exit;
+                }
+                if t_in < ty - ray.y_width + ray.y_graze {
+                    sides |= y_entry;
+                }
+                if t_out > ty - ray.y_graze {
+                    sides |= y_exit;
+                }
+                let sides = sides & !(entry | exit);
                 if sides != 0 && self.visit_neighbours(row, col, sides, (span.0 - ray.margin, span.1 + ray.margin), t_limit, &mut visit) {
                     return;
                 }
@@ -409,7 +421,7 @@ impl HeightFieldAccel {
     }
 
     /// Asks for the memory the walk from block (`row`, `col`) reads first (its heights and
-    /// flags, the pyramid cells above it), so that the cache misses of an incoherent ray
+    /// flags, the pyramid cell above it), so that the cache misses of an incoherent ray
     /// overlap instead of following one another.
     #[inline(always)]
     fn prefetch_around(&self, row: i32, col: i32) {
@@ -424,10 +436,9 @@ impl HeightFieldAccel {
                 _mm_prefetch::<_MM_HINT_T0>(g.z.as_ptr().add(vertex).cast());
                 _mm_prefetch::<_MM_HINT_T0>(g.z.as_ptr().add(vertex + g.width).cast());
                 _mm_prefetch::<_MM_HINT_T0>(self.block_flags.as_ptr().add(i * self.block_cols as usize + j).cast());
-                for level in 1..=self.top.min(4) {
-                    let info = self.level_info[level];
-                    let cell = info.origin + (row >> level) as isize * info.stride + (col >> level) as isize;
-                    _mm_prefetch::<_MM_HINT_T0>(self.pyramid.as_ptr().offset(cell).cast());
+                if self.top > 0 {
+                    let info = self.level_info[1];
+                    _mm_prefetch::<_MM_HINT_T0>(self.pyramid.as_ptr().offset(info.origin + (row >> 1) as isize * info.stride + (col >> 1) as isize).cast());
                 }
             }
         }
@@ -446,25 +457,6 @@ impl HeightFieldAccel {
             k -= 1;
         }
         k
-    }
-
-    /// Sides of block (`row`, `col`) (of the field or its ring) that the ray's stretch
-    /// [`t_in`, `t_out`] runs within twice the slack of, as [`LEFT`] | [`RIGHT`] | [`TOP`] |
-    /// [`BOTTOM`] bits.
-    #[inline(always)]
-    fn sides_grazed(&self, ray: &GridRay, row: i32, col: i32, t_in: f32, t_out: f32) -> u8 {
-        let (row, col) = ((row + 1) as usize, (col + 1) as usize);
-        debug_assert!(col + 1 < self.xs.len() && row + 1 < self.ys.len());
-        // SAFETY: the walk visits blocks of the field and its ring only, whose vertex
-        // coordinates `xs` and `ys` hold.
-        let (x0, x1, y0, y1) = unsafe { (*self.xs.get_unchecked(col), *self.xs.get_unchecked(col + 1), *self.ys.get_unchecked(row), *self.ys.get_unchecked(row + 1)) };
-        // x and y where the stretch starts and ends.
-        let p = ray.origin_xxyy + Vec4::new(t_in, t_out, t_in, t_out) * ray.direction_xxyy;
-        let e2 = Vec4::splat(2.0 * self.slack);
-        let below = p.cmplt(Vec4::new(x0, x0, y1, y1) + e2).bitmask();
-        let above = p.cmpgt(Vec4::new(x1, x1, y0, y0) - e2).bitmask();
-        let side = |mask: u32, low: u8, high: u8| (if mask & 3 != 0 { low } else { 0 }) | (if mask & 12 != 0 { high } else { 0 });
-        side(below, LEFT, BOTTOM) | side(above, RIGHT, TOP)
     }
 
     /// Visits the neighbours of block (`row`, `col`) across `sides` that exist; true if a
@@ -510,8 +502,8 @@ impl HeightFieldAccel {
         if !ray.meets(Range { min: lo, max: hi }, span) {
             return None;
         }
-        // SAFETY: as above; `self.xs` and `self.ys` hold the field's coordinates one place on.
-        let (x0, x1, y0, y1) = unsafe { (*self.xs.get_unchecked(j + 1), *self.xs.get_unchecked(j + 2), *self.ys.get_unchecked(i + 1), *self.ys.get_unchecked(i + 2)) };
+        // SAFETY: as above.
+        let (x0, x1, y0, y1) = unsafe { (*g.xs.get_unchecked(j), *g.xs.get_unchecked(j + 1), *g.ys.get_unchecked(i), *g.ys.get_unchecked(i + 1)) };
         let (p00, p10, p01, p11) = (Vec3A::new(x0, y0, z00), Vec3A::new(x0, y1, z10), Vec3A::new(x1, y0, z01), Vec3A::new(x1, y1, z11));
         let mut best: Option<BlockHit> = None;
         let mut limit = t_limit;
@@ -595,8 +587,10 @@ impl GridRay {
             y_start: (g.ys[0] - origin.y) * inv.y,
             margin: e * inv.x.abs().max(inv.y.abs()),
             z_offset: origin.z * inv.z,
-            origin_xxyy: Vec4::new(origin.x, origin.x, origin.y, origin.y),
-            direction_xxyy: Vec4::new(direction.x, direction.x, direction.y, direction.y),
+            x_width: (accel.step.0 * inv.x).abs(),
+            y_width: (accel.step.1 * inv.y).abs(),
+            x_graze: 2.0 * e * inv.x.abs(),
+            y_graze: 2.0 * e * inv.y.abs(),
             forward_x: accel.step.0 * inv.x > 0.0,
             forward_y: accel.step.1 * inv.y > 0.0,
         }
