@@ -70,9 +70,9 @@ struct LevelInfo {
 /// More levels than any grid that fits in memory needs.
 const MAX_LEVELS: usize = 32;
 
-/// `block_flags` bit: the block holds its two surface triangles.
+/// Block flag: the block holds its two surface triangles.
 const SURFACE: u8 = 1;
-/// `block_flags` bit: the block has skirt edges.
+/// Block flag: the block has skirt edges.
 const SKIRT: u8 = 2;
 
 /// Sides of a block, as bits (see [`HeightFieldAccel::neighbours`]).
@@ -143,8 +143,9 @@ pub struct HeightFieldAccel {
     /// Blocks per row and block rows.
     block_cols: i32,
     block_rows: i32,
-    /// [`SURFACE`] and [`SKIRT`] bits of each block, row-major.
-    block_flags: Vec<u8>,
+    /// [`SURFACE`] and [`SKIRT`] bits of each block, row-major, four blocks to a byte
+    /// (block b in bits 2·(b mod 4) and up).
+    packed_flags: Vec<u8>,
     /// Ranges of the pyramid's levels 1 to `top`, each with its ring and one more cell of
     /// nothing on every side, so that the walk's indices need no bounds check; cell (0, 0) of
     /// level `top` covers the whole field.
@@ -262,7 +263,11 @@ impl HeightFieldAccel {
         // Block boundaries are computed as k·step + start: allow for its rounding.
         let extent = grid.xs[0].abs().max(grid.xs[cols].abs()).max(grid.ys[0].abs()).max(grid.ys[rows].abs());
         let slack = step.0.abs() * 1e-4 + extent * 4.0 * f32::EPSILON;
-        Some(HeightFieldAccel { block_cols: ci, block_rows: ri, block_flags, pyramid, level_info, top: levels.len(), field, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
+        let mut packed_flags = vec![0u8; block_flags.len().div_ceil(4)];
+        for (b, &f) in block_flags.iter().enumerate() {
+            packed_flags[b / 4] |= f << (2 * (b % 4));
+        }
+        Some(HeightFieldAccel { block_cols: ci, block_rows: ri, packed_flags, pyramid, level_info, top: levels.len(), field, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
     }
 
     /// Corners of the box holding every triangle of the field and its skirt.
@@ -435,7 +440,7 @@ impl HeightFieldAccel {
             unsafe {
                 _mm_prefetch::<_MM_HINT_T0>(g.z.as_ptr().add(vertex).cast());
                 _mm_prefetch::<_MM_HINT_T0>(g.z.as_ptr().add(vertex + g.width).cast());
-                _mm_prefetch::<_MM_HINT_T0>(self.block_flags.as_ptr().add(i * self.block_cols as usize + j).cast());
+                _mm_prefetch::<_MM_HINT_T0>(self.packed_flags.as_ptr().add((i * self.block_cols as usize + j) / 4).cast());
                 if self.top > 0 {
                     let info = self.level_info[1];
                     _mm_prefetch::<_MM_HINT_T0>(self.pyramid.as_ptr().offset(info.origin + (row >> 1) as isize * info.stride + (col >> 1) as isize).cast());
@@ -488,7 +493,7 @@ impl HeightFieldAccel {
         let w = g.width;
         debug_assert!(row < self.block_rows && col < self.block_cols);
         // SAFETY: (row, col) is a block of the field: its flags and four vertices exist.
-        let flags = unsafe { *self.block_flags.get_unchecked(block) };
+        let flags = unsafe { *self.packed_flags.get_unchecked(block / 4) } >> (2 * (block % 4)) & 3;
         if flags == 0 {
             return None;
         }
