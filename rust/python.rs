@@ -236,16 +236,17 @@ impl Renderer {
         let tracer = self.inner.tracer();
         let mut t = vec![f32::INFINITY; o.len() / 3];
         let mut id = vec![-1i64; o.len() / 3];
-        let trace = |t: &mut [f32], id: &mut [i64]| {
-            t.par_iter_mut().zip(id.par_iter_mut()).zip(o.par_chunks_exact(3).zip(d.par_chunks_exact(3))).for_each(|((t, id), (o, d))| {
-                if let Some(hit) = tracer.closest_hit(vec3a(o[0], o[1], o[2]), vec3a(d[0], d[1], d[2]), f32::INFINITY) {
-                    (*t, *id) = (hit.t, hit.triangle as i64);
-                }
-            })
+        let one = |(t, id): (&mut f32, &mut i64), (o, d): (&[f32], &[f32])| {
+            if let Some(hit) = tracer.closest_hit(vec3a(o[0], o[1], o[2]), vec3a(d[0], d[1], d[2]), f32::INFINITY) {
+                (*t, *id) = (hit.t, hit.triangle as i64);
+            }
         };
+        let trace = |t: &mut [f32], id: &mut [i64]| t.par_iter_mut().zip(id.par_iter_mut()).zip(o.par_chunks_exact(3).zip(d.par_chunks_exact(3))).for_each(|(hit, ray)| one(hit, ray));
         py.detach(|| -> PyResult<()> {
             match threads {
                 None => trace(&mut t, &mut id),
+                // One thread: a plain loop, without a pool or work splitting.
+                Some(1) => t.iter_mut().zip(id.iter_mut()).zip(o.chunks_exact(3).zip(d.chunks_exact(3))).for_each(|(hit, ray)| one(hit, ray)),
                 Some(n) => {
                     let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| PyValueError::new_err(format!("threads: {e}")))?;
                     pool.install(|| trace(&mut t, &mut id));
