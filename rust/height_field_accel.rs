@@ -137,6 +137,17 @@ struct GridRay {
     forward_y: bool,
 }
 
+/// Where a walk is: cell (`row`, `col`) of pyramid level `level`, entered at distance
+/// `t_in`, through the sides in `entry` (a block's neighbours there need no visit).
+#[derive(Debug, Clone, Copy)]
+struct WalkState {
+    level: usize,
+    row: i32,
+    col: i32,
+    entry: u8,
+    t_in: f32,
+}
+
 /// Closest-hit and occlusion queries over the triangles of a [`HeightFieldGrid`].
 #[derive(Debug, Clone)]
 pub struct HeightFieldAccel {
@@ -318,112 +329,137 @@ impl HeightFieldAccel {
     /// slack of the block. A returned distance lowers the limit (below 0 ends the walk).
     #[inline(always)]
     fn walk(&self, ray: &GridRay, t_limit: &mut f32, mut visit: impl FnMut(&Self, i32, i32, (f32, f32), f32) -> Option<f32>) {
+        let Some(mut state) = self.start(ray, *t_limit) else { return };
+        loop {
+            let alive = if state.level > 0 { self.cell_step(ray, &mut state, *t_limit) } else { self.block_step(ray, &mut state, t_limit, &mut visit) };
+            if !alive {
+                return;
+            }
+        }
+    }
+
+    /// Where the walk of `ray` starts, or None if the ray misses the field's box before
+    /// `t_limit`. A ray starting inside the box starts at its block; any other at the top
+    /// cell.
+    #[inline(always)]
+    fn start(&self, ray: &GridRay, t_limit: f32) -> Option<WalkState> {
         let g = &self.grid;
         let e = self.slack;
         let x = (g.xs[0] - e, g.xs[g.width - 1] + e);
         let y = (g.ys[g.height - 1] - e, g.ys[0] + e);
-        let Some(mut t_in) = ray.box_entry(x, y, (self.field.min, self.field.max), *t_limit) else { return };
-        let (fx, fy) = (i32::from(ray.forward_x), i32::from(ray.forward_y));
-        // Sides through which the walk enters and leaves a block when it steps along x or y.
-        let (x_entry, x_exit) = if ray.forward_x { (LEFT, RIGHT) } else { (RIGHT, LEFT) };
-        let (y_entry, y_exit) = if ray.forward_y { (TOP, BOTTOM) } else { (BOTTOM, TOP) };
-        // A ray starting inside the field's box starts at its block; any other descends
-        // from the top cell.
-        let (mut level, mut row, mut col, mut entry) = (self.top, 0, 0, 0u8);
-        if t_in == 0.0 {
-            (level, row, col) = (0, Self::block_of(ray.origin.y, &g.ys, self.inv_step.1, self.block_rows), Self::block_of(ray.origin.x, &g.xs, self.inv_step.0, self.block_cols));
-            // Going away from a side of the block its origin lies strictly inside, the ray
-            // cannot meet the block behind that side: treat it as the side the ray came in
-            // through. (An origin on a side may lie on that block's skirt.)
-            let (x0, x1, y0, y1) = (g.xs[col as usize], g.xs[col as usize + 1], g.ys[row as usize], g.ys[row as usize + 1]);
-            let (ox, oy) = (ray.origin.x, ray.origin.y);
-            if x0 < ox && ox < x1 && y1 < oy && oy < y0 {
-                entry = x_entry | y_entry;
-            }
-            self.prefetch_around(row, col);
+        let t_in = ray.box_entry(x, y, (self.field.min, self.field.max), t_limit)?;
+        if t_in != 0.0 {
+            return Some(WalkState { level: self.top, row: 0, col: 0, entry: 0, t_in });
         }
-        loop {
-            // Where the ray leaves the cell (along x or along y), and the stretch within the
-            // slack of it.
-            let tx = ((col + fx) << level) as f32 * ray.x_step + ray.x_start;
-            let ty = ((row + fy) << level) as f32 * ray.y_step + ray.y_start;
-            let t_out = max(min(tx, ty), t_in);
-            let along_x = tx < ty;
-            let span = (t_in - ray.margin, t_out + ray.margin);
-            let info = self.level_info[level % MAX_LEVELS];
-            if level > 0 {
-                let cell = info.origin + row as isize * info.stride + col as isize;
-                debug_assert!((0..self.pyramid.len() as isize).contains(&cell), "cell ({row}, {col}) of level {level}");
-                // SAFETY: the walk keeps to the ring's cells and their children, which lie
-                // within the padding of one cell around the ring.
-                let range = unsafe { *self.pyramid.get_unchecked(cell as usize) };
-                if ray.meets(range, span) {
-                    // Down to the child the ray is in at t_in.
-                    level -= 1;
-                    let mx = ((2 * col + 1) << level) as f32 * ray.x_step + ray.x_start;
-                    let my = ((2 * row + 1) << level) as f32 * ray.y_step + ray.y_start;
-                    col = 2 * col + i32::from((mx <= t_in) == ray.forward_x);
-                    row = 2 * row + i32::from((my <= t_in) == ray.forward_y);
-                    continue;
-                }
-            } else if (col + 1) as u32 <= info.last_col && (row + 1) as u32 <= info.last_row {
-                // A block of the field, or of the ring around it (which has no triangles but
-                // may run along the field's side).
-                if (col as u32) < self.block_cols as u32 && (row as u32) < self.block_rows as u32 {
-                    if let Some(t) = visit(self, row, col, span, *t_limit) {
-                        if t < 0.0 {
-                            return;
-                        }
-                        *t_limit = t;
+        let (row, col) = (Self::block_of(ray.origin.y, &g.ys, self.inv_step.1, self.block_rows), Self::block_of(ray.origin.x, &g.xs, self.inv_step.0, self.block_cols));
+        // Going away from a side of the block its origin lies strictly inside, the ray
+        // cannot meet the block behind that side: treat it as the side the ray came in
+        // through. (An origin on a side may lie on that block's skirt.)
+        let (x0, x1, y0, y1) = (g.xs[col as usize], g.xs[col as usize + 1], g.ys[row as usize], g.ys[row as usize + 1]);
+        let (ox, oy) = (ray.origin.x, ray.origin.y);
+        let entry = if x0 < ox && ox < x1 && y1 < oy && oy < y0 { ray.x_entry() | ray.y_entry() } else { 0 };
+        self.prefetch_around(row, col);
+        Some(WalkState { level: 0, row, col, entry, t_in })
+    }
+
+    /// One step of the walk in a cell above the blocks: down into the child the ray is in
+    /// when the ray may meet the cell's range, else on to the next cell. False when the walk
+    /// is over.
+    #[inline(always)]
+    fn cell_step(&self, ray: &GridRay, state: &mut WalkState, t_limit: f32) -> bool {
+        let WalkState { level, row, col, t_in, .. } = *state;
+        let (tx, ty, t_out) = ray.exits(level, row, col, t_in);
+        let info = self.level_info[level % MAX_LEVELS];
+        let cell = info.origin + row as isize * info.stride + col as isize;
+        debug_assert!((0..self.pyramid.len() as isize).contains(&cell), "cell ({row}, {col}) of level {level}");
+        // SAFETY: the walk keeps to the ring's cells and their children, which lie within
+        // the padding of one cell around the ring.
+        let range = unsafe { *self.pyramid.get_unchecked(cell as usize) };
+        if ray.meets(range, (t_in - ray.margin, t_out + ray.margin)) {
+            // Down to the child the ray is in at t_in.
+            let level = level - 1;
+            let mx = ((2 * col + 1) << level) as f32 * ray.x_step + ray.x_start;
+            let my = ((2 * row + 1) << level) as f32 * ray.y_step + ray.y_start;
+            state.level = level;
+            state.col = 2 * col + i32::from((mx <= t_in) == ray.forward_x);
+            state.row = 2 * row + i32::from((my <= t_in) == ray.forward_y);
+            return true;
+        }
+        t_out - ray.margin <= t_limit && self.advance(ray, state, tx < ty, t_out)
+    }
+
+    /// One step of the walk in a block: visits it and any neighbour whose side the ray
+    /// runs along, then moves on to the next cell. False when the walk is over.
+    #[inline(always)]
+    fn block_step(&self, ray: &GridRay, state: &mut WalkState, t_limit: &mut f32, visit: &mut impl FnMut(&Self, i32, i32, (f32, f32), f32) -> Option<f32>) -> bool {
+        let WalkState { row, col, t_in, entry, .. } = *state;
+        let (tx, ty, t_out) = ray.exits(0, row, col, t_in);
+        let along_x = tx < ty;
+        let span = (t_in - ray.margin, t_out + ray.margin);
+        let info = self.level_info[0];
+        if (col + 1) as u32 <= info.last_col && (row + 1) as u32 <= info.last_row {
+            // A block of the field, or of the ring around it (which has no triangles but
+            // may run along the field's side).
+            if (col as u32) < self.block_cols as u32 && (row as u32) < self.block_rows as u32 {
+                if let Some(t) = visit(self, row, col, span, *t_limit) {
+                    if t < 0.0 {
+                        return false;
                     }
-                }
-                let exit = if along_x { x_exit } else { y_exit };
-                // Sides the ray runs within twice the slack of: before it passes the entry
-                // side's line plus the slack, or after the exit side's line minus it.
-                let mut sides = 0;
-                if t_in < tx - ray.x_width + ray.x_graze {
-                    sides |= x_entry;
-                }
-                if t_out > tx - ray.x_graze {
-                    sides |= x_exit;
-                }
-                if t_in < ty - ray.y_width + ray.y_graze {
-                    sides |= y_entry;
-                }
-                if t_out > ty - ray.y_graze {
-                    sides |= y_exit;
-                }
-                let sides = sides & !(entry | exit);
-                if sides != 0 && self.visit_neighbours(row, col, sides, (span.0 - ray.margin, span.1 + ray.margin), t_limit, &mut visit) {
-                    return;
+                    *t_limit = t;
                 }
             }
-            if t_out - ray.margin > *t_limit {
-                return;
+            let (x_entry, x_exit, y_entry, y_exit) = (ray.x_entry(), ray.x_exit(), ray.y_entry(), ray.y_exit());
+            let exit = if along_x { x_exit } else { y_exit };
+            // Sides the ray runs within twice the slack of: before it passes the entry
+            // side's line plus the slack, or after the exit side's line minus it.
+            let mut sides = 0;
+            if t_in < tx - ray.x_width + ray.x_graze {
+                sides |= x_entry;
             }
-            // Step to the next cell of this level, stopping past the ring; then up as many
-            // levels as the step crossed parent boundaries.
-            let up = if along_x {
-                col += 2 * fx - 1;
-                entry = x_entry;
-                if (col + 1) as u32 > info.last_col {
-                    return;
-                }
-                (col + 1 - fx) as u32
-            } else {
-                row += 2 * fy - 1;
-                entry = y_entry;
-                if (row + 1) as u32 > info.last_row {
-                    return;
-                }
-                (row + 1 - fy) as u32
-            };
-            let up = (up.trailing_zeros() as usize).min(self.top - level);
-            level += up;
-            row >>= up;
-            col >>= up;
-            t_in = t_out;
+            if t_out > tx - ray.x_graze {
+                sides |= x_exit;
+            }
+            if t_in < ty - ray.y_width + ray.y_graze {
+                sides |= y_entry;
+            }
+            if t_out > ty - ray.y_graze {
+                sides |= y_exit;
+            }
+            let sides = sides & !(entry | exit);
+            if sides != 0 && self.visit_neighbours(row, col, sides, (span.0 - ray.margin, span.1 + ray.margin), t_limit, visit) {
+                return false;
+            }
         }
+        t_out - ray.margin <= *t_limit && self.advance(ray, state, along_x, t_out)
+    }
+
+    /// Steps to the next cell of the state's level (along x or y), then up as many levels
+    /// as the step crossed parent boundaries. False past the ring.
+    #[inline(always)]
+    fn advance(&self, ray: &GridRay, state: &mut WalkState, along_x: bool, t_out: f32) -> bool {
+        let info = self.level_info[state.level % MAX_LEVELS];
+        let (fx, fy) = (i32::from(ray.forward_x), i32::from(ray.forward_y));
+        let up = if along_x {
+            state.col += 2 * fx - 1;
+            state.entry = ray.x_entry();
+            if (state.col + 1) as u32 > info.last_col {
+                return false;
+            }
+            (state.col + 1 - fx) as u32
+        } else {
+            state.row += 2 * fy - 1;
+            state.entry = ray.y_entry();
+            if (state.row + 1) as u32 > info.last_row {
+                return false;
+            }
+            (state.row + 1 - fy) as u32
+        };
+        let up = (up.trailing_zeros() as usize).min(self.top - state.level);
+        state.level += up;
+        state.row >>= up;
+        state.col >>= up;
+        state.t_in = t_out;
+        true
     }
 
     /// Asks for the memory the walk from block (`row`, `col`) reads first (its heights and
@@ -599,6 +635,52 @@ impl GridRay {
             y_graze: 2.0 * e * inv.y.abs(),
             forward_x: accel.step.0 * inv.x > 0.0,
             forward_y: accel.step.1 * inv.y > 0.0,
+        }
+    }
+
+    /// Distances at which the ray leaves cell (`row`, `col`) of `level` through its x side
+    /// and its y side, and the distance it leaves the cell (not before `t_in`).
+    #[inline(always)]
+    fn exits(&self, level: usize, row: i32, col: i32, t_in: f32) -> (f32, f32, f32) {
+        let tx = ((col + i32::from(self.forward_x)) << level) as f32 * self.x_step + self.x_start;
+        let ty = ((row + i32::from(self.forward_y)) << level) as f32 * self.y_step + self.y_start;
+        (tx, ty, max(min(tx, ty), t_in))
+    }
+
+    /// The block sides through which the ray enters and leaves a block along x and y.
+    #[inline(always)]
+    fn x_entry(&self) -> u8 {
+        if self.forward_x {
+            LEFT
+        } else {
+            RIGHT
+        }
+    }
+
+    #[inline(always)]
+    fn x_exit(&self) -> u8 {
+        if self.forward_x {
+            RIGHT
+        } else {
+            LEFT
+        }
+    }
+
+    #[inline(always)]
+    fn y_entry(&self) -> u8 {
+        if self.forward_y {
+            TOP
+        } else {
+            BOTTOM
+        }
+    }
+
+    #[inline(always)]
+    fn y_exit(&self) -> u8 {
+        if self.forward_y {
+            BOTTOM
+        } else {
+            TOP
         }
     }
 
