@@ -357,7 +357,8 @@ impl HeightFieldAccel {
         // through. (An origin on a side may lie on that block's skirt.)
         let (x0, x1, y0, y1) = (g.xs[col as usize], g.xs[col as usize + 1], g.ys[row as usize], g.ys[row as usize + 1]);
         let (ox, oy) = (ray.origin.x, ray.origin.y);
-        let entry = if x0 < ox && ox < x1 && y1 < oy && oy < y0 { ray.x_entry() | ray.y_entry() } else { 0 };
+        let (x_entry, _, y_entry, _) = ray.sides();
+        let entry = if x0 < ox && ox < x1 && y1 < oy && oy < y0 { x_entry | y_entry } else { 0 };
         self.prefetch_around(row, col);
         Some(WalkState { level: 0, row, col, entry, t_in })
     }
@@ -408,7 +409,7 @@ impl HeightFieldAccel {
                     *t_limit = t;
                 }
             }
-            let (x_entry, x_exit, y_entry, y_exit) = (ray.x_entry(), ray.x_exit(), ray.y_entry(), ray.y_exit());
+            let (x_entry, x_exit, y_entry, y_exit) = ray.sides();
             let exit = if along_x { x_exit } else { y_exit };
             // Sides the ray runs within twice the slack of: before it passes the entry
             // side's line plus the slack, or after the exit side's line minus it.
@@ -439,16 +440,17 @@ impl HeightFieldAccel {
     fn advance(&self, ray: &GridRay, state: &mut WalkState, along_x: bool, t_out: f32) -> bool {
         let info = self.level_info[state.level % MAX_LEVELS];
         let (fx, fy) = (i32::from(ray.forward_x), i32::from(ray.forward_y));
+        let (x_entry, _, y_entry, _) = ray.sides();
         let up = if along_x {
             state.col += 2 * fx - 1;
-            state.entry = ray.x_entry();
+            state.entry = x_entry;
             if (state.col + 1) as u32 > info.last_col {
                 return false;
             }
             (state.col + 1 - fx) as u32
         } else {
             state.row += 2 * fy - 1;
-            state.entry = ray.y_entry();
+            state.entry = y_entry;
             if (state.row + 1) as u32 > info.last_row {
                 return false;
             }
@@ -647,41 +649,13 @@ impl GridRay {
         (tx, ty, max(min(tx, ty), t_in))
     }
 
-    /// The block sides through which the ray enters and leaves a block along x and y.
+    /// The block sides through which the ray enters and leaves a block: (entry along x,
+    /// exit along x, entry along y, exit along y).
     #[inline(always)]
-    fn x_entry(&self) -> u8 {
-        if self.forward_x {
-            LEFT
-        } else {
-            RIGHT
-        }
-    }
-
-    #[inline(always)]
-    fn x_exit(&self) -> u8 {
-        if self.forward_x {
-            RIGHT
-        } else {
-            LEFT
-        }
-    }
-
-    #[inline(always)]
-    fn y_entry(&self) -> u8 {
-        if self.forward_y {
-            TOP
-        } else {
-            BOTTOM
-        }
-    }
-
-    #[inline(always)]
-    fn y_exit(&self) -> u8 {
-        if self.forward_y {
-            BOTTOM
-        } else {
-            TOP
-        }
+    fn sides(&self) -> (u8, u8, u8, u8) {
+        let (x_entry, x_exit) = if self.forward_x { (LEFT, RIGHT) } else { (RIGHT, LEFT) };
+        let (y_entry, y_exit) = if self.forward_y { (TOP, BOTTOM) } else { (BOTTOM, TOP) };
+        (x_entry, x_exit, y_entry, y_exit)
     }
 
     /// Whether the ray's stretch [`t_in`, `t_out`] may meet heights in `range`.
