@@ -1,28 +1,32 @@
 //! Ray queries over a height field and its skirt, exploiting the pixel grid: a walk along
-//! the ray over a min/max pyramid of the grid's blocks.
+//! the ray over a pyramid of slabs bounding the grid's blocks.
 //!
 //! Level L of the pyramid splits the grid into cells of 2^L × 2^L blocks and stores, per
-//! cell, the lowest and highest point of the triangles (surface and skirt) of its blocks
-//! *and of the ring of blocks around it*. The walk visits the cells the ray passes through in
-//! order, like a line-drawing DDA: a cell the ray passes wholly above or below is stepped
-//! over, going up as many levels as the step crossed parent boundaries; a cell the ray may
-//! meet is entered a level down. A ray that starts inside the field starts at its own block.
-//! At level 0 the block's two triangles are built from the height grid and tested (after its
-//! own height range), its skirt when it has one, and any neighbouring block whose side the
-//! ray runs along within rounding distance. The ring in each range is what makes stepping
-//! over a cell safe for a ray that grazes its border. The walk needs no stack, follows no
-//! pointer and stores 8 bytes a cell (a third of the blocks' count in all): on fields larger
-//! than the caches it beats a quadtree over the same grid (see benches/README.md).
+//! cell, a slab between two parallel planes z = a·x + b·y + c (a [`Band`]) that holds the
+//! triangles (surface and skirt) of its blocks *and of the ring of blocks around it*. The
+//! planes follow the least-squares slope of the cell, so on a smooth surface the slab is far
+//! thinner than the cell's height range and a ray leaving the surface is found to pass above
+//! it after a short way. The walk visits the cells the ray passes through in order, like a
+//! line-drawing DDA: a cell the ray passes wholly above or below is stepped over, going up as
+//! many levels as the step crossed parent boundaries; a cell the ray may meet is entered a
+//! level down; the walk ends where the ray leaves the field's box. A ray that starts inside
+//! the field starts at its own block. At level 0 the block's two triangles are built from the
+//! height grid and tested (after its own height range), its skirt when it has one, and any
+//! neighbouring block whose side the ray runs along within rounding distance. The ring in
+//! each slab is what makes stepping over a cell safe for a ray that grazes its border, and
+//! each slab test allows for the rounding of the ray's points. The walk needs no stack,
+//! follows no pointer and stores 16 bytes a cell (a third of the blocks' count in all).
 
 use std::sync::Arc;
 
 use glam::Vec3A;
+use rayon::prelude::*;
 
 use crate::geometry::{BlockSide, HeightFieldGrid, Mesh, NO_TRIANGLE};
 use crate::tracer::Hit;
 
-/// Height range of a pyramid cell and the ring of blocks around it. A cell with nothing in
-/// reach is stored as `min = max = +∞`, which every ray passes below.
+/// A height range (of a block, or of the whole field). Nothing is `min = max = +∞`, which
+/// every ray passes below.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[repr(C, align(8))]
 struct Range {
@@ -32,26 +36,144 @@ struct Range {
 
 const NOTHING: Range = Range { min: f32::INFINITY, max: f32::INFINITY };
 
-/// One level of the pyramid while it is built, with a ring of cells outside the field: cell
-/// (`row`, `col`) for `row` in −1..`rows` − 1 (and likewise columns) sits at
-/// `(row + 1)·cols + col + 1`.
-#[derive(Debug, Clone)]
-struct Level {
-    cols: i32,
-    rows: i32,
-    ranges: Vec<Range>,
+/// Bounds of the triangles of a pyramid cell and the ring of blocks around it between two
+/// parallel planes: every point of them has `c_lo <= z − a·x − b·y <= c_hi`. The planes follow
+/// the surface's mean slope over the cell, so on a smooth surface the slab is much thinner than
+/// the cell's height range and rays leaving the surface pass above it sooner. A cell with
+/// nothing in reach has `c_lo = c_hi = +∞`, which every ray passes below.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C, align(16))]
+struct Band {
+    a: f32,
+    b: f32,
+    c_lo: f32,
+    c_hi: f32,
 }
 
-impl Level {
-    /// The range of cell (`row`, `col`); nothing outside the ring.
-    #[inline(always)]
-    fn range(&self, row: i32, col: i32) -> Range {
-        let (r, c) = (row + 1, col + 1);
-        if (0..self.rows).contains(&r) && (0..self.cols).contains(&c) {
-            self.ranges[(r * self.cols + c) as usize]
-        } else {
-            NOTHING
+const EMPTY: Band = Band { a: 0.0, b: 0.0, c_lo: f32::INFINITY, c_hi: f32::INFINITY };
+
+/// Steepest slope a band's planes may have: it bounds the rounding of `z − a·x − b·y` (see
+/// [`GridRay::z_slack`]); a steeper cell gets a thicker band, never a wrong one.
+const MAX_BAND_SLOPE: f64 = 8.0;
+
+/// Vertex flag: the vertex is a corner of a meshed block.
+const MESHED_VERTEX: u8 = 1;
+/// Vertex flag: the vertex is a corner of a block with skirt edges (the skirt under it
+/// reaches down to the base).
+const SKIRT_VERTEX: u8 = 2;
+
+/// [`MESHED_VERTEX`] and [`SKIRT_VERTEX`] of each vertex of a `width`×`height` grid, from
+/// the flags of its (width − 1)×(height − 1) blocks.
+fn vertex_flags(block_flags: &[u8], width: usize, height: usize) -> Vec<u8> {
+    let cols = width - 1;
+    let mut flags = vec![0u8; width * height];
+    for (b, &f) in block_flags.iter().enumerate() {
+        if f == 0 {
+            continue;
         }
+        let v = if f & SKIRT != 0 { MESHED_VERTEX | SKIRT_VERTEX } else { MESHED_VERTEX };
+        let (i, j) = (b / cols, b % cols);
+        for k in [i * width + j, i * width + j + 1, (i + 1) * width + j, (i + 1) * width + j + 1] {
+            flags[k] |= v;
+        }
+    }
+    flags
+}
+
+/// The band of cell (`row`, `col`) of pyramid `level`: the blocks of rows
+/// `row·2^level − 1 ..= (row + 1)·2^level` (and likewise columns), that is the cell's blocks
+/// and a ring of one block, bounded between the least-squares plane of their vertices' heights
+/// and its parallels (or between horizontal planes when those are closer). Triangles are flat,
+/// so bounding their vertices (and the base under skirt vertices) bounds them.
+fn cell_band(grid: &HeightFieldGrid, vertex_flags: &[u8], level: usize, row: i32, col: i32) -> Band {
+    let size = 1i64 << level;
+    let (w, h) = (grid.width as i64, grid.height as i64);
+    let rows = ((row as i64 * size - 1).max(0) as usize)..=(((row as i64 + 1) * size + 1).min(h - 1) as usize);
+    let (c0, c1) = ((col as i64 * size - 1).max(0) as usize, ((col as i64 + 1) * size + 1).min(w - 1) as usize);
+    let row_of = |i: usize| {
+        let k = i * grid.width;
+        (&grid.z[k + c0..=k + c1], &vertex_flags[k + c0..=k + c1])
+    };
+    // Least-squares plane z = a·u + b·v + c in offsets (u, v) from the region's first vertex,
+    // from sums over each row (v is constant along a row).
+    let (x0, y0) = (grid.xs[c0] as f64, grid.ys[*rows.start()] as f64);
+    let us: Vec<f64> = grid.xs[c0..=c1].iter().map(|&x| x as f64 - x0).collect();
+    let (mut n, mut su, mut sv, mut sz) = (0.0f64, 0.0, 0.0, 0.0);
+    let (mut suu, mut suv, mut svv, mut suz, mut svz) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+    for i in rows.clone() {
+        let (zs, flags) = row_of(i);
+        let (mut rn, mut ru, mut ruu, mut rz, mut ruz) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+        for ((&z, &f), &u) in zs.iter().zip(flags).zip(&us) {
+            if f != 0 {
+                let z = z as f64;
+                rn += 1.0;
+                ru += u;
+                ruu += u * u;
+                rz += z;
+                ruz += u * z;
+            }
+        }
+        let v = grid.ys[i] as f64 - y0;
+        n += rn;
+        su += ru;
+        suu += ruu;
+        sz += rz;
+        suz += ruz;
+        sv += rn * v;
+        svv += rn * v * v;
+        suv += ru * v;
+        svz += rz * v;
+    }
+    if n == 0.0 {
+        return EMPTY;
+    }
+    let (cuu, cuv, cvv) = (suu - su * su / n, suv - su * sv / n, svv - sv * sv / n);
+    let (cuz, cvz) = (suz - su * sz / n, svz - sv * sz / n);
+    let det = cuu * cvv - cuv * cuv;
+    let (a, b) = if n >= 3.0 && det > 1e-9 * cuu * cvv {
+        let a = ((cvv * cuz - cuv * cvz) / det).clamp(-MAX_BAND_SLOPE, MAX_BAND_SLOPE);
+        let b = ((cuu * cvz - cuv * cuz) / det).clamp(-MAX_BAND_SLOPE, MAX_BAND_SLOPE);
+        (a as f32, b as f32)
+    } else {
+        (0.0, 0.0)
+    };
+    // The planes' offsets over every vertex (and the base under skirt vertices), with the
+    // stored (f32) slopes, and the horizontal bounds.
+    let (a64, b64, base) = (a as f64, b as f64, grid.base as f64);
+    let xs: Vec<f64> = grid.xs[c0..=c1].iter().map(|&x| a64 * x as f64).collect();
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let (mut z_lo, mut z_hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for i in rows {
+        let (zs, flags) = row_of(i);
+        let by = b64 * grid.ys[i] as f64;
+        for ((&z, &f), &ax) in zs.iter().zip(flags).zip(&xs) {
+            if f != 0 {
+                let top = z as f64;
+                let bottom = if f & SKIRT_VERTEX != 0 { base } else { top };
+                let (low, high) = if bottom < top { (bottom, top) } else { (top, bottom) };
+                let plane = ax + by;
+                if low - plane < lo {
+                    lo = low - plane;
+                }
+                if high - plane > hi {
+                    hi = high - plane;
+                }
+                if low < z_lo {
+                    z_lo = low;
+                }
+                if high > z_hi {
+                    z_hi = high;
+                }
+            }
+        }
+    }
+    let outward = |lo: f64, hi: f64| ((lo as f32).next_down(), (hi as f32).next_up());
+    if hi - lo < z_hi - z_lo {
+        let (c_lo, c_hi) = outward(lo, hi);
+        Band { a, b, c_lo, c_hi }
+    } else {
+        let (c_lo, c_hi) = outward(z_lo, z_hi);
+        Band { a: 0.0, b: 0.0, c_lo, c_hi }
     }
 }
 
@@ -135,6 +257,12 @@ struct GridRay {
     y_graze: f32,
     forward_x: bool,
     forward_y: bool,
+    /// Distances at which the ray enters (0 if it starts inside) and leaves the field's box,
+    /// NaN if it misses it: nothing lies beyond `t_far`.
+    t_near: f32,
+    t_far: f32,
+    /// Bound on the rounding of `z − a·x − b·y` at points of the ray up to `t_far`.
+    z_slack: f32,
 }
 
 /// Where a walk is: cell (`row`, `col`) of pyramid level `level`, entered at distance
@@ -158,10 +286,10 @@ pub struct HeightFieldAccel {
     /// [`SURFACE`] and [`SKIRT`] bits of each block, row-major, four blocks to a byte
     /// (block b in bits 2·(b mod 4) and up).
     packed_flags: Vec<u8>,
-    /// Ranges of the pyramid's levels 1 to `top`, each with its ring and one more cell of
+    /// Bands of the pyramid's levels 1 to `top`, each with its ring and one more cell of
     /// nothing on every side, so that the walk's indices need no bounds check; cell (0, 0) of
     /// level `top` covers the whole field.
-    pyramid: Vec<Range>,
+    pyramid: Vec<Band>,
     level_info: [LevelInfo; MAX_LEVELS],
     top: usize,
     /// Height range of the whole field.
@@ -214,62 +342,38 @@ impl HeightFieldAccel {
                 Range { min: lo, max: hi }
             })
             .collect();
-        // Each block's range widened to its 3 × 3 neighbourhood, for the blocks of the field
-        // and a ring of one block around it: the range of a cell and its ring is the union of
-        // its blocks' neighbourhoods.
-        let union = |a: Range, b: Range| -> Range {
-            match (a == NOTHING, b == NOTHING) {
-                (true, _) => b,
-                (_, true) => a,
-                _ => Range { min: a.min.min(b.min), max: a.max.max(b.max) },
-            }
-        };
-        let field = own.iter().fold(NOTHING, |a, &b| union(a, b));
+        let field = own.iter().fold(NOTHING, |a, &b| if a == NOTHING { b } else if b == NOTHING { a } else { Range { min: a.min.min(b.min), max: a.max.max(b.max) } });
         let (ci, ri) = (cols as i32, rows as i32);
-        let mut below = Level { cols: ci + 2, rows: ri + 2, ranges: Vec::with_capacity((cols + 2) * (rows + 2)) };
-        for r in -1..=ri {
-            for c in -1..=ci {
-                let mut range = NOTHING;
-                for rr in (r - 1).max(0)..(r + 2).min(ri) {
-                    for cc in (c - 1).max(0)..(c + 2).min(ci) {
-                        range = union(range, own[(rr * ci + cc) as usize]);
-                    }
-                }
-                below.ranges.push(range);
-            }
+        let vertex_flags = vertex_flags(&block_flags, w, grid.height);
+        let mut top = 0;
+        while (ci - 1) >> top > 0 || (ri - 1) >> top > 0 {
+            top += 1;
         }
-        let mut levels = Vec::new();
-        let mut level = 0;
-        while (ci - 1) >> level > 0 || (ri - 1) >> level > 0 {
-            level += 1;
-            // Cells −1..=(blocks >> level) of this level.
-            let (up_cols, up_rows) = ((ci >> level) + 2, (ri >> level) + 2);
-            let mut up = Level { cols: up_cols, rows: up_rows, ranges: vec![NOTHING; (up_cols * up_rows) as usize] };
-            for r in -1..up_rows - 1 {
-                for c in -1..up_cols - 1 {
-                    let mut range = NOTHING;
-                    for (rr, cc) in [(2 * r, 2 * c), (2 * r, 2 * c + 1), (2 * r + 1, 2 * c), (2 * r + 1, 2 * c + 1)] {
-                        range = union(range, below.range(rr, cc));
-                    }
-                    up.ranges[((r + 1) * up_cols + c + 1) as usize] = range;
-                }
-            }
-            levels.push(up.clone());
-            below = up;
-        }
-        assert!(levels.len() < MAX_LEVELS, "height field too large for the pyramid");
+        assert!(top < MAX_LEVELS, "height field too large for the pyramid");
         let mut pyramid = Vec::new();
         let mut level_info = [LevelInfo::default(); MAX_LEVELS];
         level_info[0] = LevelInfo { origin: 0, stride: 0, last_col: ci as u32 + 1, last_row: ri as u32 + 1 };
-        for (k, level) in levels.iter().enumerate() {
-            let stride = level.cols as isize + 2;
+        for (level, info) in level_info.iter_mut().enumerate().take(top + 1).skip(1) {
+            // Cells −1..=(blocks >> level) of this level, and one more of nothing each side.
+            let (level_cols, level_rows) = ((ci >> level) + 2, (ri >> level) + 2);
+            let stride = level_cols as isize + 2;
             let start = pyramid.len() as isize;
-            for r in -2..level.rows {
-                for c in -2..level.cols {
-                    pyramid.push(level.range(r, c));
-                }
-            }
-            level_info[k + 1] = LevelInfo { origin: start + 2 * stride + 2, stride, last_col: level.cols as u32 - 1, last_row: level.rows as u32 - 1 };
+            let bands: Vec<Band> = (-2..level_rows)
+                .into_par_iter()
+                .flat_map_iter(|r| {
+                    let (grid, vertex_flags) = (&grid, &vertex_flags);
+                    (-2..level_cols).map(move |c| {
+                        let in_ring = (-1..level_rows - 1).contains(&r) && (-1..level_cols - 1).contains(&c);
+                        if in_ring {
+                            cell_band(grid, vertex_flags, level, r, c)
+                        } else {
+                            EMPTY
+                        }
+                    })
+                })
+                .collect();
+            pyramid.extend(bands);
+            *info = LevelInfo { origin: start + 2 * stride + 2, stride, last_col: level_cols as u32 - 1, last_row: level_rows as u32 - 1 };
         }
         let step = ((grid.xs[cols] - grid.xs[0]) / cols as f32, (grid.ys[rows] - grid.ys[0]) / rows as f32);
         // Block boundaries are computed as k·step + start: allow for its rounding.
@@ -279,7 +383,7 @@ impl HeightFieldAccel {
         for (b, &f) in block_flags.iter().enumerate() {
             packed_flags[b / 4] |= f << (2 * (b % 4));
         }
-        Some(HeightFieldAccel { block_cols: ci, block_rows: ri, packed_flags, pyramid, level_info, top: levels.len(), field, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
+        Some(HeightFieldAccel { block_cols: ci, block_rows: ri, packed_flags, pyramid, level_info, top, field, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
     }
 
     /// Corners of the box holding every triangle of the field and its skirt.
@@ -293,14 +397,7 @@ impl HeightFieldAccel {
     pub fn closest_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
         let ray = GridRay::new(self, origin, direction);
         let mut best: Option<BlockHit> = None;
-        let mut t_best = t_max;
-        self.walk(&ray, &mut t_best, |accel, row, col, span, t_limit| {
-            let hit = accel.block_hit(&ray, row, col, span, t_limit, false);
-            if hit.is_some() {
-                best = hit;
-            }
-            hit.map(|h| h.t)
-        });
+        self.walk::<false>(&ray, t_max, &mut best);
         best.map(|h| {
             let triangle = match h.triangle {
                 Triangle::Surface { block, second } => self.grid.block_triangles[block] as usize + usize::from(second),
@@ -314,28 +411,33 @@ impl HeightFieldAccel {
     #[inline(always)]
     pub fn occluded(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
         let ray = GridRay::new(self, origin, direction);
-        let mut t_limit = t_max;
-        let mut found = false;
-        self.walk(&ray, &mut t_limit, |accel, row, col, span, t_limit| {
-            found = accel.block_hit(&ray, row, col, span, t_limit, true).is_some();
-            // A hit at distance −1 ends the walk at once.
-            found.then_some(-1.0)
-        });
-        found
+        let mut found = None;
+        self.walk::<true>(&ray, t_max, &mut found);
+        found.is_some()
     }
 
-    /// Visits, in order along the ray, the blocks it may meet before `t_limit`, calling
-    /// `visit(self, row, col, span, t_limit)`: `span` is the stretch of the ray within the
-    /// slack of the block. A returned distance lowers the limit (below 0 ends the walk).
+    /// Visits, in order along the ray, the blocks it may meet before `t_limit`, keeping in
+    /// `best` the nearest hit (with `ANY`, the first hit found, which ends the walk).
     #[inline(always)]
-    fn walk(&self, ray: &GridRay, t_limit: &mut f32, mut visit: impl FnMut(&Self, i32, i32, (f32, f32), f32) -> Option<f32>) {
-        let Some(mut state) = self.start(ray, *t_limit) else { return };
+    fn walk<const ANY: bool>(&self, ray: &GridRay, t_limit: f32, best: &mut Option<BlockHit>) {
+        let mut t_limit = t_limit;
+        let Some(mut state) = self.start(ray, t_limit) else { return };
         loop {
-            let alive = if state.level > 0 { self.cell_step(ray, &mut state, *t_limit) } else { self.block_step(ray, &mut state, t_limit, &mut visit) };
+            let alive = if state.level > 0 { self.cell_step(ray, &mut state, t_limit) } else { self.block_step::<ANY>(ray, &mut state, &mut t_limit, best) };
             if !alive {
                 return;
             }
         }
+    }
+
+    /// Tests block (`row`, `col`) over the ray's stretch `span`: a hit nearer than `t_limit`
+    /// goes to `best` and lowers the limit. True when the walk is over (`ANY` and a hit).
+    #[inline(always)]
+    fn visit<const ANY: bool>(&self, ray: &GridRay, row: i32, col: i32, span: (f32, f32), t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
+        let Some(hit) = self.block_hit(ray, row, col, span, *t_limit, ANY) else { return false };
+        *best = Some(hit);
+        *t_limit = hit.t;
+        ANY
     }
 
     /// Where the walk of `ray` starts, or None if the ray misses the field's box before
@@ -344,10 +446,11 @@ impl HeightFieldAccel {
     #[inline(always)]
     fn start(&self, ray: &GridRay, t_limit: f32) -> Option<WalkState> {
         let g = &self.grid;
-        let e = self.slack;
-        let x = (g.xs[0] - e, g.xs[g.width - 1] + e);
-        let y = (g.ys[g.height - 1] - e, g.ys[0] + e);
-        let t_in = ray.box_entry(x, y, (self.field.min, self.field.max), t_limit)?;
+        let t_in = ray.t_near;
+        // NaN: the ray misses the box.
+        if t_in.is_nan() || t_in > t_limit {
+            return None;
+        }
         if t_in != 0.0 {
             return Some(WalkState { level: self.top, row: 0, col: 0, entry: 0, t_in });
         }
@@ -375,8 +478,8 @@ impl HeightFieldAccel {
         debug_assert!((0..self.pyramid.len() as isize).contains(&cell), "cell ({row}, {col}) of level {level}");
         // SAFETY: the walk keeps to the ring's cells and their children, which lie within
         // the padding of one cell around the ring.
-        let range = unsafe { *self.pyramid.get_unchecked(cell as usize) };
-        if ray.meets(range, (t_in - ray.margin, t_out + ray.margin)) {
+        let band = unsafe { *self.pyramid.get_unchecked(cell as usize) };
+        if ray.meets_band(band, t_in - ray.margin, t_out + ray.margin) {
             // Down to the child the ray is in at t_in.
             let level = level - 1;
             let mx = ((2 * col + 1) << level) as f32 * ray.x_step + ray.x_start;
@@ -386,13 +489,13 @@ impl HeightFieldAccel {
             state.row = 2 * row + i32::from((my <= t_in) == ray.forward_y);
             return true;
         }
-        t_out - ray.margin <= t_limit && self.advance(ray, state, tx < ty, t_out)
+        t_out - ray.margin <= min(t_limit, ray.t_far) && self.advance(ray, state, tx < ty, t_out)
     }
 
     /// One step of the walk in a block: visits it and any neighbour whose side the ray
     /// runs along, then moves on to the next cell. False when the walk is over.
     #[inline(always)]
-    fn block_step(&self, ray: &GridRay, state: &mut WalkState, t_limit: &mut f32, visit: &mut impl FnMut(&Self, i32, i32, (f32, f32), f32) -> Option<f32>) -> bool {
+    fn block_step<const ANY: bool>(&self, ray: &GridRay, state: &mut WalkState, t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
         let WalkState { row, col, t_in, entry, .. } = *state;
         let (tx, ty, t_out) = ray.exits(0, row, col, t_in);
         let along_x = tx < ty;
@@ -401,13 +504,8 @@ impl HeightFieldAccel {
         if (col + 1) as u32 <= info.last_col && (row + 1) as u32 <= info.last_row {
             // A block of the field, or of the ring around it (which has no triangles but
             // may run along the field's side).
-            if (col as u32) < self.block_cols as u32 && (row as u32) < self.block_rows as u32 {
-                if let Some(t) = visit(self, row, col, span, *t_limit) {
-                    if t < 0.0 {
-                        return false;
-                    }
-                    *t_limit = t;
-                }
+            if (col as u32) < self.block_cols as u32 && (row as u32) < self.block_rows as u32 && self.visit::<ANY>(ray, row, col, span, t_limit, best) {
+                return false;
             }
             let (x_entry, x_exit, y_entry, y_exit) = ray.sides();
             let exit = if along_x { x_exit } else { y_exit };
@@ -427,11 +525,11 @@ impl HeightFieldAccel {
                 sides |= y_exit;
             }
             let sides = sides & !(entry | exit);
-            if sides != 0 && self.visit_neighbours(row, col, sides, (span.0 - ray.margin, span.1 + ray.margin), t_limit, visit) {
+            if sides != 0 && self.visit_neighbours::<ANY>(ray, row, col, sides, (span.0 - ray.margin, span.1 + ray.margin), t_limit, best) {
                 return false;
             }
         }
-        t_out - ray.margin <= *t_limit && self.advance(ray, state, along_x, t_out)
+        t_out - ray.margin <= min(*t_limit, ray.t_far) && self.advance(ray, state, along_x, t_out)
     }
 
     /// Steps to the next cell of the state's level (along x or y), then up as many levels
@@ -505,17 +603,13 @@ impl HeightFieldAccel {
 
     /// Visits the neighbours of block (`row`, `col`) across `sides` that exist; true if a
     /// visit ended the walk.
-    #[cold]
-    fn visit_neighbours(&self, row: i32, col: i32, sides: u8, span: (f32, f32), t_limit: &mut f32, visit: &mut impl FnMut(&Self, i32, i32, (f32, f32), f32) -> Option<f32>) -> bool {
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn visit_neighbours<const ANY: bool>(&self, ray: &GridRay, row: i32, col: i32, sides: u8, span: (f32, f32), t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
         for (side, (dr, dc)) in [(LEFT, (0, -1)), (RIGHT, (0, 1)), (TOP, (-1, 0)), (BOTTOM, (1, 0))] {
             let (r, c) = (row + dr, col + dc);
-            if sides & side != 0 && (0..self.block_rows).contains(&r) && (0..self.block_cols).contains(&c) {
-                if let Some(t) = visit(self, r, c, span, *t_limit) {
-                    if t < 0.0 {
-                        return true;
-                    }
-                    *t_limit = t;
-                }
+            if sides & side != 0 && (0..self.block_rows).contains(&r) && (0..self.block_cols).contains(&c) && self.visit::<ANY>(ray, r, c, span, t_limit, best) {
+                return true;
             }
         }
         false
@@ -621,7 +715,7 @@ impl GridRay {
         let safe = |d: f32| if d.abs() < 1e-30 { 1e-30 } else { d };
         let inv = Vec3A::new(1.0 / safe(direction.x), 1.0 / safe(direction.y), 1.0 / safe(direction.z));
         let (g, e) = (&accel.grid, accel.slack);
-        GridRay {
+        let mut ray = GridRay {
             origin,
             direction,
             inv,
@@ -637,7 +731,21 @@ impl GridRay {
             y_graze: 2.0 * e * inv.y.abs(),
             forward_x: accel.step.0 * inv.x > 0.0,
             forward_y: accel.step.1 * inv.y > 0.0,
+            t_near: f32::NAN,
+            t_far: f32::NAN,
+            z_slack: 0.0,
+        };
+        let x = (g.xs[0] - e, g.xs[g.width - 1] + e);
+        let y = (g.ys[g.height - 1] - e, g.ys[0] + e);
+        if let Some((near, far)) = ray.box_span(x, y, (accel.field.min, accel.field.max)) {
+            ray.t_near = near;
+            ray.t_far = far * (1.0 + 8.0 * f32::EPSILON);
+            // |z − a·x − b·y| at a point within t_far: the point's rounding (2 ulps of its
+            // largest coordinate, times 1 + |a| + |b|) and the expression's own (3 ulps).
+            let reach = origin.abs().max_element() + ray.t_far;
+            ray.z_slack = (5.0 * (1.0 + 2.0 * MAX_BAND_SLOPE as f32) + 8.0) * f32::EPSILON * reach;
         }
+        ray
     }
 
     /// Distances at which the ray leaves cell (`row`, `col`) of `level` through its x side
@@ -668,17 +776,31 @@ impl GridRay {
         near <= far * (1.0 + 4.0 * f32::EPSILON)
     }
 
-    /// Distance at which the ray enters the box `x` × `y` × `z` before `t_limit`, if it does.
+    /// Distances at which the ray enters (0 if it starts inside) and leaves the box
+    /// `x` × `y` × `z`, if it meets it.
     #[inline(always)]
-    fn box_entry(&self, x: (f32, f32), y: (f32, f32), z: (f32, f32), t_limit: f32) -> Option<f32> {
+    fn box_span(&self, x: (f32, f32), y: (f32, f32), z: (f32, f32)) -> Option<(f32, f32)> {
         if z.0 > z.1 {
             return None;
         }
         let lo = (Vec3A::new(x.0, y.0, z.0) - self.origin) * self.inv;
         let hi = (Vec3A::new(x.1, y.1, z.1) - self.origin) * self.inv;
         let near = lo.min(hi).max_element().max(0.0);
-        let far = lo.max(hi).min_element() * (1.0 + 4.0 * f32::EPSILON);
-        (near <= far && near <= t_limit).then_some(near)
+        let far = lo.max(hi).min_element();
+        (near <= far * (1.0 + 4.0 * f32::EPSILON)).then_some((near, far))
+    }
+
+    /// Whether the ray's stretch [`t_in`, `t_out`] may meet `band` (it does not when it passes
+    /// above or below it at both ends).
+    #[inline(always)]
+    fn meets_band(&self, band: Band, t_in: f32, t_out: f32) -> bool {
+        let t_out = min(t_out, self.t_far);
+        let (p, q) = (self.origin + self.direction * t_in, self.origin + self.direction * t_out);
+        let hp = p.z - band.a * p.x - band.b * p.y;
+        let hq = q.z - band.a * q.x - band.b * q.y;
+        let above = min(hp, hq) - self.z_slack > band.c_hi;
+        let below = max(hp, hq) + self.z_slack < band.c_lo;
+        !(above || below)
     }
 }
 
@@ -761,6 +883,28 @@ mod tests {
         best
     }
 
+    /// A ray from a random point of a random object triangle (from its first corner, a
+    /// grid vertex, when `at_vertex`), `offset` off it along its normal, in a direction of
+    /// the upper hemisphere or a little below it.
+    fn ray_off_the_surface(mesh: &Mesh, object: &[usize], rng: &mut Rng, at_vertex: bool, offset: f32) -> (Vec3A, Vec3A) {
+        let t = object[(rng.next_f32() * object.len() as f32) as usize % object.len()];
+        let [a, b, c] = mesh.corners(t);
+        let (u, v) = (rng.next_f32(), rng.next_f32());
+        let (u, v) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
+        let on_surface = if at_vertex { a } else { a + (b - a) * u + (c - a) * v };
+        let direction = vec3a(rng.next_f32() * 2.0 - 1.0, rng.next_f32() * 2.0 - 1.0, rng.next_f32() * 1.6 - 0.3).normalize();
+        (on_surface + mesh.normals[t] * offset, direction)
+    }
+
+    /// Asserts that both queries agree with testing every triangle; whether the ray hits.
+    fn assert_agrees(mesh: &Mesh, accel: &HeightFieldAccel, origin: Vec3A, direction: Vec3A, what: &str) -> bool {
+        let expected = brute_force(mesh, &GridRay::new(accel, origin, direction));
+        let got = accel.closest_hit(origin, direction, f32::INFINITY);
+        assert_eq!(got.map(|g| (g.triangle, g.t)), expected, "ray {origin:?} {direction:?} in {what}");
+        assert_eq!(accel.occluded(origin, direction, f32::INFINITY), expected.is_some(), "ray {origin:?} {direction:?} in {what}");
+        expected.is_some()
+    }
+
     #[test]
     fn agrees_with_testing_every_triangle() {
         for (w, h, seed) in [(13, 9, 1), (32, 32, 2), (7, 20, 3), (2, 2, 4)] {
@@ -803,22 +947,51 @@ mod tests {
             let mut rng = Rng::new(seed);
             let mut hits = 0;
             for k in 0..6000 {
-                let t = object[(rng.next_f32() * object.len() as f32) as usize % object.len()];
-                let [a, b, c] = mesh.corners(t);
-                let (u, v) = (rng.next_f32(), rng.next_f32());
-                let (u, v) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
                 // Every third ray starts at a vertex of the grid.
-                let on_surface = if k % 3 == 0 { a } else { a + (b - a) * u + (c - a) * v };
-                let origin = on_surface + mesh.normals[t] * 1e-3;
-                let direction = vec3a(rng.next_f32() * 2.0 - 1.0, rng.next_f32() * 2.0 - 1.0, rng.next_f32() * 1.6 - 0.3).normalize();
-                let ray = GridRay::new(&accel, origin, direction);
-                let expected = brute_force(&mesh, &ray);
-                let got = accel.closest_hit(origin, direction, f32::INFINITY);
-                assert_eq!(got.map(|g| (g.triangle, g.t)), expected, "ray {origin:?} {direction:?} in {w}x{h}");
-                assert_eq!(accel.occluded(origin, direction, f32::INFINITY), expected.is_some());
-                hits += usize::from(expected.is_some());
+                let (origin, direction) = ray_off_the_surface(&mesh, &object, &mut rng, k % 3 == 0, 1e-3);
+                hits += usize::from(assert_agrees(&mesh, &accel, origin, direction, &format!("{w}x{h}")));
             }
             assert!(hits > 1000, "{w}x{h}: only {hits} hits");
+        }
+    }
+
+    /// Steep ramps (steeper than a band's planes may be), spikes and flat steps, at pixel
+    /// sizes far from 1 and heights far from 0: the bands' slopes, offsets and rounding
+    /// allowance must hold at every scale.
+    #[test]
+    fn steep_and_scaled_fields_agree_with_testing_every_triangle() {
+        for (w, h, pixel_size, lift, seed) in [(37, 29, 0.013f32, 0.0f32, 21u64), (33, 41, 3.7, 900.0, 22), (64, 16, 1.0, -40.0, 23)] {
+            let mut scene = ragged_scene(w, h, seed);
+            scene.camera.pixel_size = pixel_size;
+            let mut rng = Rng::new(seed);
+            for (p, z) in scene.surface.height.iter_mut().enumerate() {
+                let (i, j) = ((p / w) as f32, (p % w) as f32);
+                let ramp = if j < w as f32 / 2.0 { 15.0 * j } else { 4.0 * (i * 0.8).sin() };
+                let spike = if rng.next_f32() < 0.03 { 25.0 } else { 0.0 };
+                *z = (ramp + spike + (i * 0.3).floor() * 3.0) * pixel_size + lift;
+            }
+            if let Some(floor) = scene.floor.as_mut() {
+                floor.height = lift;
+            }
+            let mesh = Mesh::from_scene(&scene);
+            let accel = HeightFieldAccel::new(&mesh).expect("a height-field mesh has a grid");
+            let object: Vec<usize> = (0..mesh.triangles.len()).filter(|&t| mesh.kinds[t] == crate::geometry::SurfaceKind::Object).collect();
+            let (lo, hi) = accel.bounds();
+            let span = hi - lo;
+            let mut hits = 0;
+            for k in 0..8000 {
+                let (origin, direction) = if k % 2 == 0 {
+                    ray_off_the_surface(&mesh, &object, &mut rng, k % 6 == 0, 1e-3 * pixel_size)
+                } else {
+                    // From around the field's box toward a point inside it.
+                    let mut around = |k: usize| lo[k] - span[k] + rng.next_f32() * 3.0 * span[k];
+                    let origin = vec3a(around(0), around(1), around(2));
+                    let target = lo + span * vec3a(rng.next_f32(), rng.next_f32(), rng.next_f32());
+                    (origin, (target - origin).normalize())
+                };
+                hits += usize::from(assert_agrees(&mesh, &accel, origin, direction, &format!("{w}x{h} at pixel size {pixel_size}")));
+            }
+            assert!(hits > 2500, "{w}x{h}: only {hits} hits");
         }
     }
 
