@@ -247,8 +247,6 @@ struct GridRay {
     y_step: f32,
     y_start: f32,
     margin: f32,
-    /// origin.z · inv.z: height z is reached at `z·inv.z − z_offset`.
-    z_offset: f32,
     /// Distance the ray takes to cross a block column (row), and to move twice the slack
     /// along x (y).
     x_width: f32,
@@ -378,7 +376,7 @@ impl HeightFieldAccel {
         let step = ((grid.xs[cols] - grid.xs[0]) / cols as f32, (grid.ys[rows] - grid.ys[0]) / rows as f32);
         // Block boundaries are computed as k·step + start: allow for its rounding.
         let extent = grid.xs[0].abs().max(grid.xs[cols].abs()).max(grid.ys[0].abs()).max(grid.ys[rows].abs());
-        let slack = step.0.abs() * 1e-4 + extent * 4.0 * f32::EPSILON;
+        let slack = step.0.abs() * 1e-6 + extent * 4.0 * f32::EPSILON;
         let mut packed_flags = vec![0u8; block_flags.len().div_ceil(4)];
         for (b, &f) in block_flags.iter().enumerate() {
             packed_flags[b / 4] |= f << (2 * (b % 4));
@@ -647,6 +645,8 @@ impl HeightFieldAccel {
         let mut limit = t_limit;
         for (second, corners) in [(false, [p00, p10, p01]), (true, [p01, p10, p11])] {
             if let Some((t, u, v)) = intersect_triangle(ray, &corners, limit) {
+                // The hit's mesh index is looked up when the walk ends: load it meanwhile.
+                prefetch(&g.block_triangles[block]);
                 best = Some(BlockHit { triangle: Triangle::Surface { block, second }, t, u, v });
                 limit = t;
                 if any {
@@ -724,7 +724,6 @@ impl GridRay {
             y_step: accel.step.1 * inv.y,
             y_start: (g.ys[0] - origin.y) * inv.y,
             margin: e * inv.x.abs().max(inv.y.abs()),
-            z_offset: origin.z * inv.z,
             x_width: (accel.step.0 * inv.x).abs(),
             y_width: (accel.step.1 * inv.y).abs(),
             x_graze: 2.0 * e * inv.x.abs(),
@@ -769,11 +768,11 @@ impl GridRay {
     /// Whether the ray's stretch [`t_in`, `t_out`] may meet heights in `range`.
     #[inline(always)]
     fn meets(&self, range: Range, (t_in, t_out): (f32, f32)) -> bool {
-        let ta = range.min * self.inv.z - self.z_offset;
-        let tb = range.max * self.inv.z - self.z_offset;
-        let near = max(t_in, min(ta, tb));
-        let far = min(t_out, max(ta, tb));
-        near <= far * (1.0 + 4.0 * f32::EPSILON)
+        let t_out = min(t_out, self.t_far);
+        let (za, zb) = (self.origin.z + self.direction.z * t_in, self.origin.z + self.direction.z * t_out);
+        let above = min(za, zb) - self.z_slack > range.max;
+        let below = max(za, zb) + self.z_slack < range.min;
+        !(above || below)
     }
 
     /// Distances at which the ray enters (0 if it starts inside) and leaves the box
@@ -801,6 +800,16 @@ impl GridRay {
         let above = min(hp, hq) - self.z_slack > band.c_hi;
         let below = max(hp, hq) + self.z_slack < band.c_lo;
         !(above || below)
+    }
+}
+
+/// Asks for the cache line holding `value` (a hint: no effect on results).
+#[inline(always)]
+fn prefetch<T>(value: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: prefetching a valid reference's address has no effect but on the caches.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((value as *const T).cast());
     }
 }
 
@@ -837,14 +846,16 @@ fn intersect_triangle(ray: &GridRay, corners: &[Vec3A; 3], t_limit: f32) -> Opti
     }
     let inv_det = 1.0 / det;
     let c = v0 - ray.origin;
+    // The distance first: a ray leaving the triangle's plane (the common case for rays
+    // leaving the surface) is rejected before the barycentrics are computed.
+    let t = ng.dot(c) * inv_det;
+    if !(t >= 0.0 && t <= t_limit) {
+        return None;
+    }
     let r = ray.direction.cross(c);
     let u = r.dot(e2) * inv_det;
     let v = -r.dot(e1) * inv_det;
-    if !(u >= 0.0 && v >= 0.0 && u + v <= 1.0) {
-        return None;
-    }
-    let t = ng.dot(c) * inv_det;
-    (t >= 0.0 && t <= t_limit).then_some((t, u, v))
+    (u >= 0.0 && v >= 0.0 && u + v <= 1.0).then_some((t, u, v))
 }
 
 #[cfg(test)]
@@ -957,10 +968,12 @@ mod tests {
 
     /// Steep ramps (steeper than a band's planes may be), spikes and flat steps, at pixel
     /// sizes far from 1 and heights far from 0: the bands' slopes, offsets and rounding
-    /// allowance must hold at every scale.
+    /// allowance must hold at every scale. (Heights of 5 over a field 0.02 wide caught the
+    /// blocks' height test losing a hit 1.7e-6 away when it compared distances instead of
+    /// heights.)
     #[test]
     fn steep_and_scaled_fields_agree_with_testing_every_triangle() {
-        for (w, h, pixel_size, lift, seed) in [(37, 29, 0.013f32, 0.0f32, 21u64), (33, 41, 3.7, 900.0, 22), (64, 16, 1.0, -40.0, 23)] {
+        for (w, h, pixel_size, lift, seed) in [(37, 29, 0.013f32, 0.0f32, 21u64), (33, 41, 3.7, 900.0, 22), (64, 16, 1.0, -40.0, 23), (20, 20, 1e-3, 5.0, 54), (30, 25, 250.0, -3e4, 55)] {
             let mut scene = ragged_scene(w, h, seed);
             scene.camera.pixel_size = pixel_size;
             let mut rng = Rng::new(seed);
@@ -979,7 +992,7 @@ mod tests {
             let (lo, hi) = accel.bounds();
             let span = hi - lo;
             let mut hits = 0;
-            for k in 0..8000 {
+            for k in 0..5000 {
                 let (origin, direction) = if k % 2 == 0 {
                     ray_off_the_surface(&mesh, &object, &mut rng, k % 6 == 0, 1e-3 * pixel_size)
                 } else {
@@ -991,7 +1004,7 @@ mod tests {
                 };
                 hits += usize::from(assert_agrees(&mesh, &accel, origin, direction, &format!("{w}x{h} at pixel size {pixel_size}")));
             }
-            assert!(hits > 2500, "{w}x{h}: only {hits} hits");
+            assert!(hits > 1500, "{w}x{h}: only {hits} hits");
         }
     }
 
