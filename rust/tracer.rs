@@ -115,9 +115,10 @@ impl Tracer {
     /// The nearest panel hit in (0, `t_max`).
     #[inline(always)]
     fn panel_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
+        let inverse = direction.recip();
         let mut best: Option<Hit> = None;
         for panel in &self.panels {
-            if let Some(hit) = panel.intersect(origin, direction, best.map_or(t_max, |b| b.t)) {
+            if let Some(hit) = panel.intersect(origin, direction, inverse, best.map_or(t_max, |b| b.t)) {
                 best = Some(hit);
             }
         }
@@ -243,6 +244,9 @@ struct PanelShape {
     unbounded: bool,
     /// Mesh index of the first of the panel's two triangles.
     first_triangle: usize,
+    /// The axis the normal lies along, if it does (walls and floors): the plane's distance
+    /// along a ray is then one product with the direction's inverse.
+    axis: Option<usize>,
 }
 
 impl PanelShape {
@@ -265,6 +269,7 @@ impl PanelShape {
             edge_v: v,
             unbounded: panel.unbounded,
             first_triangle,
+            axis: (0..3).find(|&k| panel.normal[k].abs() == 1.0),
         })
     }
 
@@ -279,11 +284,15 @@ impl PanelShape {
         (corners.iter().fold(Vec3A::INFINITY, |a, &c| a.min(c)), corners.iter().fold(Vec3A::NEG_INFINITY, |a, &c| a.max(c)))
     }
 
-    /// The hit of the ray in (0, `t_max`), with the barycentrics of the triangle it lies in
+    /// The hit of the ray in (0, `t_max`) (`inverse` is the direction's componentwise
+    /// inverse), with the barycentrics of the triangle it lies in
     /// (zero on an unbounded panel, whose albedo is uniform).
     #[inline(always)]
-    fn intersect(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
-        let t = (self.origin - origin).dot(self.normal) / direction.dot(self.normal);
+    fn intersect(&self, origin: Vec3A, direction: Vec3A, inverse: Vec3A, t_max: f32) -> Option<Hit> {
+        let t = match self.axis {
+            Some(k) => (self.origin[k] - origin[k]) * inverse[k],
+            None => (self.origin - origin).dot(self.normal) / direction.dot(self.normal),
+        };
         if !(t > 0.0 && t < t_max) {
             return None;
         }
