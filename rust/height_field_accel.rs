@@ -794,9 +794,11 @@ impl GridRay {
     #[inline(always)]
     fn meets_band(&self, band: Band, t_in: f32, t_out: f32) -> bool {
         let t_out = min(t_out, self.t_far);
-        let (p, q) = (self.origin + self.direction * t_in, self.origin + self.direction * t_out);
-        let hp = p.z - band.a * p.x - band.b * p.y;
-        let hq = q.z - band.a * q.x - band.b * q.y;
+        // z − a·x − b·y along the ray is linear in t.
+        let (o, d) = (self.origin, self.direction);
+        let h0 = o.z - band.a * o.x - band.b * o.y;
+        let dh = d.z - band.a * d.x - band.b * d.y;
+        let (hp, hq) = (h0 + dh * t_in, h0 + dh * t_out);
         let above = min(hp, hq) - self.z_slack > band.c_hi;
         let below = max(hp, hq) + self.z_slack < band.c_lo;
         !(above || below)
