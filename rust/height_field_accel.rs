@@ -460,7 +460,6 @@ impl HeightFieldAccel {
         let (ox, oy) = (ray.origin.x, ray.origin.y);
         let (x_entry, _, y_entry, _) = ray.sides();
         let entry = if x0 < ox && ox < x1 && y1 < oy && oy < y0 { x_entry | y_entry } else { 0 };
-        self.prefetch_around(row, col);
         Some(WalkState { level: 0, row, col, entry, t_in })
     }
 
@@ -558,30 +557,6 @@ impl HeightFieldAccel {
         state.col >>= up;
         state.t_in = t_out;
         true
-    }
-
-    /// Asks for the memory the walk from block (`row`, `col`) reads first (its heights and
-    /// flags, the pyramid cell above it), so that the cache misses of an incoherent ray
-    /// overlap instead of following one another.
-    #[inline(always)]
-    fn prefetch_around(&self, row: i32, col: i32) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            let g = &self.grid;
-            let (i, j) = (row as usize, col as usize);
-            let vertex = i * g.width + j;
-            // SAFETY: prefetching is a hint; the addresses are within the arrays.
-            unsafe {
-                _mm_prefetch::<_MM_HINT_T0>(g.z.as_ptr().add(vertex).cast());
-                _mm_prefetch::<_MM_HINT_T0>(g.z.as_ptr().add(vertex + g.width).cast());
-                _mm_prefetch::<_MM_HINT_T0>(self.packed_flags.as_ptr().add((i * self.block_cols as usize + j) / 4).cast());
-                if self.top > 0 {
-                    let info = self.level_info[1];
-                    _mm_prefetch::<_MM_HINT_T0>(self.pyramid.as_ptr().offset(info.origin + (row >> 1) as isize * info.stride + (col >> 1) as isize).cast());
-                }
-            }
-        }
     }
 
     /// The block column (row) whose vertex columns `vertices` (increasing or decreasing)
