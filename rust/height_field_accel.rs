@@ -452,7 +452,7 @@ impl HeightFieldAccel {
         if t_in != 0.0 {
             return Some(WalkState { level: self.top, row: 0, col: 0, entry: 0, t_in });
         }
-        let (row, col) = (Self::block_of(ray.origin.y, &g.ys, self.inv_step.1, self.block_rows), Self::block_of(ray.origin.x, &g.xs, self.inv_step.0, self.block_cols));
+        let (row, col) = (Self::block_of::<false>(ray.origin.y, &g.ys, self.inv_step.1, self.block_rows), Self::block_of::<true>(ray.origin.x, &g.xs, self.inv_step.0, self.block_cols));
         // Going away from a side of the block its origin lies strictly inside, the ray
         // cannot meet the block behind that side: treat it as the side the ray came in
         // through. (An origin on a side may lie on that block's skirt.)
@@ -559,16 +559,22 @@ impl HeightFieldAccel {
         true
     }
 
-    /// The block column (row) whose vertex columns `vertices` (increasing or decreasing)
+    /// The block column (row) whose vertex columns `vertices` (`INCREASING` or decreasing)
     /// enclose coordinate `v`, clamped to the `blocks` of the field.
     #[inline(always)]
-    fn block_of(v: f32, vertices: &[f32], inv_step: f32, blocks: i32) -> i32 {
-        let mut k = (((v - vertices[0]) * inv_step) as i32).clamp(0, blocks - 1);
+    fn block_of<const INCREASING: bool>(v: f32, vertices: &[f32], inv_step: f32, blocks: i32) -> i32 {
+        let last = (blocks - 1) as f32;
+        let k = (v - vertices[0]) * inv_step;
+        // Clamped (NaN to 0) in floats, so that the conversion needs no saturation.
+        let k = if k > 0.0 { min(k, last) } else { 0.0 };
+        // SAFETY: k is finite, in [0, blocks − 1].
+        let mut k = unsafe { k.to_int_unchecked::<i32>() };
         // Rounding can put v one block off; the vertex coordinates decide.
-        let ahead = |bound: f32| if inv_step > 0.0 { v >= bound } else { v <= bound };
-        if k + 1 < blocks && ahead(vertices[k as usize + 1]) {
+        let ahead = |bound: f32| if INCREASING { v >= bound } else { v <= bound };
+        // SAFETY: k and k + 1 (when below `blocks`) index vertices of the grid.
+        if k + 1 < blocks && ahead(unsafe { *vertices.get_unchecked(k as usize + 1) }) {
             k += 1;
-        } else if k > 0 && !ahead(vertices[k as usize]) {
+        } else if k > 0 && !ahead(unsafe { *vertices.get_unchecked(k as usize) }) {
             k -= 1;
         }
         k
