@@ -292,6 +292,8 @@ pub struct HeightFieldAccel {
     top: usize,
     /// Height range of the whole field.
     field: Range,
+    /// Corners of the field's box, widened by the slack in x and y.
+    field_box: (Vec3A, Vec3A),
     /// Index into `skirt` of each block's first skirt edge, or `u32::MAX`.
     first_skirt: Vec<u32>,
     skirt: Vec<SkirtQuad>,
@@ -381,7 +383,8 @@ impl HeightFieldAccel {
         for (b, &f) in block_flags.iter().enumerate() {
             packed_flags[b / 4] |= f << (2 * (b % 4));
         }
-        Some(HeightFieldAccel { block_cols: ci, block_rows: ri, packed_flags, pyramid, level_info, top, field, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
+        let field_box = (Vec3A::new(grid.xs[0] - slack, grid.ys[rows] - slack, field.min), Vec3A::new(grid.xs[cols] + slack, grid.ys[0] + slack, field.max));
+        Some(HeightFieldAccel { block_cols: ci, block_rows: ri, packed_flags, pyramid, level_info, top, field, field_box, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
     }
 
     /// Corners of the box holding every triangle of the field and its skirt.
@@ -693,8 +696,8 @@ impl GridRay {
     fn new(accel: &HeightFieldAccel, origin: Vec3A, direction: Vec3A) -> GridRay {
         // A zero component gets a tiny one instead, so that slab distances stay finite and
         // ordered (a ray along a slab's plane is inside it).
-        let safe = |d: f32| if d.abs() < 1e-30 { 1e-30 } else { d };
-        let inv = Vec3A::new(1.0 / safe(direction.x), 1.0 / safe(direction.y), 1.0 / safe(direction.z));
+        let tiny = Vec3A::splat(1e-30);
+        let inv = Vec3A::select(direction.abs().cmplt(tiny), tiny, direction).recip();
         let (g, e) = (&accel.grid, accel.slack);
         let mut ray = GridRay {
             origin,
@@ -715,9 +718,7 @@ impl GridRay {
             t_far: f32::NAN,
             z_slack: 0.0,
         };
-        let x = (g.xs[0] - e, g.xs[g.width - 1] + e);
-        let y = (g.ys[g.height - 1] - e, g.ys[0] + e);
-        if let Some((near, far)) = ray.box_span(x, y, (accel.field.min, accel.field.max)) {
+        if let Some((near, far)) = ray.box_span(accel.field_box) {
             ray.t_near = near;
             ray.t_far = far * (1.0 + 8.0 * f32::EPSILON);
             // |z − a·x − b·y| at a point within t_far: the point's rounding (2 ulps of its
@@ -756,15 +757,14 @@ impl GridRay {
         !(above || below)
     }
 
-    /// Distances at which the ray enters (0 if it starts inside) and leaves the box
-    /// `x` × `y` × `z`, if it meets it.
+    /// Distances at which the ray enters (0 if it starts inside) and leaves the box with
+    /// corners `lo` and `hi`, if it meets it.
     #[inline(always)]
-    fn box_span(&self, x: (f32, f32), y: (f32, f32), z: (f32, f32)) -> Option<(f32, f32)> {
-        if z.0 > z.1 {
+    fn box_span(&self, (lo, hi): (Vec3A, Vec3A)) -> Option<(f32, f32)> {
+        if lo.z > hi.z {
             return None;
         }
-        let lo = (Vec3A::new(x.0, y.0, z.0) - self.origin) * self.inv;
-        let hi = (Vec3A::new(x.1, y.1, z.1) - self.origin) * self.inv;
+        let (lo, hi) = ((lo - self.origin) * self.inv, (hi - self.origin) * self.inv);
         let near = lo.min(hi).max_element().max(0.0);
         let far = lo.max(hi).min_element();
         (near <= far * (1.0 + 4.0 * f32::EPSILON)).then_some((near, far))
