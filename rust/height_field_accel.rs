@@ -97,15 +97,15 @@ fn cell_band(grid: &HeightFieldGrid, vertex_flags: &[u8], level: usize, row: i32
     // Least-squares plane z = a·u + b·v + c in offsets (u, v) from the region's first vertex,
     // from sums over each row (v is constant along a row).
     let (x0, y0) = (grid.xs[c0] as f64, grid.ys[*rows.start()] as f64);
-    let us: Vec<f64> = grid.xs[c0..=c1].iter().map(|&x| x as f64 - x0).collect();
+    let xs = &grid.xs[c0..=c1];
     let (mut n, mut su, mut sv, mut sz) = (0.0f64, 0.0, 0.0, 0.0);
     let (mut suu, mut suv, mut svv, mut suz, mut svz) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
     for i in rows.clone() {
         let (zs, flags) = row_of(i);
         let (mut rn, mut ru, mut ruu, mut rz, mut ruz) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
-        for ((&z, &f), &u) in zs.iter().zip(flags).zip(&us) {
+        for ((&z, &f), &x) in zs.iter().zip(flags).zip(xs) {
             if f != 0 {
-                let z = z as f64;
+                let (u, z) = (x as f64 - x0, z as f64);
                 rn += 1.0;
                 ru += u;
                 ruu += u * u;
@@ -140,14 +140,14 @@ fn cell_band(grid: &HeightFieldGrid, vertex_flags: &[u8], level: usize, row: i32
     // The planes' offsets over every vertex (and the base under skirt vertices), with the
     // stored (f32) slopes, and the horizontal bounds.
     let (a64, b64, base) = (a as f64, b as f64, grid.base as f64);
-    let xs: Vec<f64> = grid.xs[c0..=c1].iter().map(|&x| a64 * x as f64).collect();
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     let (mut z_lo, mut z_hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for i in rows {
         let (zs, flags) = row_of(i);
         let by = b64 * grid.ys[i] as f64;
-        for ((&z, &f), &ax) in zs.iter().zip(flags).zip(&xs) {
+        for ((&z, &f), &x) in zs.iter().zip(flags).zip(xs) {
             if f != 0 {
+                let ax = a64 * x as f64;
                 let top = z as f64;
                 let bottom = if f & SKIRT_VERTEX != 0 { base } else { top };
                 let (low, high) = if bottom < top { (bottom, top) } else { (top, bottom) };
@@ -420,8 +420,7 @@ impl HeightFieldAccel {
     /// Visits, in order along the ray, the blocks it may meet before `t_limit`, keeping in
     /// `best` the nearest hit (with `ANY`, the first hit found, which ends the walk).
     #[inline(always)]
-    fn walk<const ANY: bool>(&self, ray: &GridRay, t_limit: f32, best: &mut Option<BlockHit>) {
-        let mut t_limit = t_limit;
+    fn walk<const ANY: bool>(&self, ray: &GridRay, mut t_limit: f32, best: &mut Option<BlockHit>) {
         let Some(mut state) = self.start(ray, t_limit) else { return };
         loop {
             let alive = if state.level > 0 { self.cell_step(ray, &mut state, t_limit) } else { self.block_step::<ANY>(ray, &mut state, &mut t_limit, best) };
@@ -750,11 +749,7 @@ impl GridRay {
     /// Whether the ray's stretch [`t_in`, `t_out`] may meet heights in `range`.
     #[inline(always)]
     fn meets(&self, range: Range, (t_in, t_out): (f32, f32)) -> bool {
-        let t_out = min(t_out, self.t_far);
-        let (za, zb) = (self.origin.z + self.direction.z * t_in, self.origin.z + self.direction.z * t_out);
-        let above = min(za, zb) - self.z_slack > range.max;
-        let below = max(za, zb) + self.z_slack < range.min;
-        !(above || below)
+        self.meets_linear(self.origin.z, self.direction.z, (t_in, t_out), (range.min, range.max))
     }
 
     /// Distances at which the ray enters (0 if it starts inside) and leaves the box with
@@ -774,14 +769,21 @@ impl GridRay {
     /// above or below it at both ends).
     #[inline(always)]
     fn meets_band(&self, band: Band, t_in: f32, t_out: f32) -> bool {
-        let t_out = min(t_out, self.t_far);
         // z − a·x − b·y along the ray is linear in t.
         let (o, d) = (self.origin, self.direction);
         let h0 = o.z - band.a * o.x - band.b * o.y;
         let dh = d.z - band.a * d.x - band.b * d.y;
+        self.meets_linear(h0, dh, (t_in, t_out), (band.c_lo, band.c_hi))
+    }
+
+    /// Whether `h0 + dh·t` may lie in [`lo`, `hi`] for some t of [`t_in`, `t_out`] (cut at
+    /// `t_far`), allowing for rounding: it does not when it is above or below at both ends.
+    #[inline(always)]
+    fn meets_linear(&self, h0: f32, dh: f32, (t_in, t_out): (f32, f32), (lo, hi): (f32, f32)) -> bool {
+        let t_out = min(t_out, self.t_far);
         let (hp, hq) = (h0 + dh * t_in, h0 + dh * t_out);
-        let above = min(hp, hq) - self.z_slack > band.c_hi;
-        let below = max(hp, hq) + self.z_slack < band.c_lo;
+        let above = min(hp, hq) - self.z_slack > hi;
+        let below = max(hp, hq) + self.z_slack < lo;
         !(above || below)
     }
 }
