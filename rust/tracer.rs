@@ -32,7 +32,11 @@ pub struct Hit {
 /// directly (an unbounded one as its whole plane); the remaining triangles go to a BVH.
 pub struct Tracer {
     height_field: Option<HeightFieldAccel>,
+    /// The panels, those along x first, then along y, then along z, then any other (each
+    /// group in mesh order).
     panels: Vec<PanelShape>,
+    /// Where the groups along x, y and z end in `panels`.
+    axis_ends: [usize; 3],
     bvh: CwBvh,
     /// Triangles in BVH order, laid out for fast intersection.
     triangles: Vec<RtTriangle>,
@@ -54,7 +58,9 @@ impl Tracer {
     pub fn new(mesh: &Mesh) -> Tracer {
         let height_field = HeightFieldAccel::new(mesh);
         let on_grid = |t: usize| height_field.is_some() && matches!(mesh.kinds[t], SurfaceKind::Object | SurfaceKind::Skirt);
-        let panels: Vec<PanelShape> = (0..mesh.panels.len()).filter_map(|id| PanelShape::new(mesh, id)).collect();
+        let mut panels: Vec<PanelShape> = (0..mesh.panels.len()).filter_map(|id| PanelShape::new(mesh, id)).collect();
+        panels.sort_by_key(|p| p.axis.unwrap_or(3));
+        let axis_ends = [0, 1, 2].map(|k| panels.iter().filter(|p| p.axis.is_some_and(|a| a <= k)).count());
         let on_panel = |t: usize| mesh.panel_of[t] != NO_PANEL && panels.iter().any(|p| p.id == mesh.panel_of[t]);
         let in_bvh: Vec<u32> = (0..mesh.triangles.len()).filter(|&t| !on_grid(t) && !on_panel(t)).map(|t| t as u32).collect();
         let mut tris: Vec<Triangle> = in_bvh
@@ -73,7 +79,7 @@ impl Tracer {
             })
         });
         if tris.is_empty() {
-            return Tracer { field_box, height_field, panels, bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), triangle_count, bounds_guard: usize::MAX, avx2: avx2_available() };
+            return Tracer { field_box, height_field, panels, axis_ends, bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), triangle_count, bounds_guard: usize::MAX, avx2: avx2_available() };
         }
         // obvhs's Morton code wraps a coordinate lying exactly on the build bounds' maximum
         // to 0 (e.g. the skirt on the +x and +y sides), which spoils the BVH (2x the nodes
@@ -89,7 +95,7 @@ impl Tracer {
         let bounds_guard = bvh.primitive_indices.iter().position(|&i| i == guard_index).expect("the guard is in the BVH");
         let mesh_index = bvh.primitive_indices.iter().map(|&i| in_bvh.get(i as usize).copied().unwrap_or(u32::MAX)).collect();
         let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&tris[i as usize])).collect();
-        Tracer { field_box, height_field, panels, bvh, triangles, mesh_index, triangle_count, bounds_guard, avx2: avx2_available() }
+        Tracer { field_box, height_field, panels, axis_ends, bvh, triangles, mesh_index, triangle_count, bounds_guard, avx2: avx2_available() }
     }
 
     /// Distance to BVH primitive `id` along `ray` (infinite for the bounds guard).
@@ -112,17 +118,23 @@ impl Tracer {
         self.triangle_count == 0
     }
 
-    /// The nearest panel hit in (0, `t_max`).
+    /// The nearest panel hit in (0, `t_max`) (of equal ones, the first in mesh order).
     #[inline(always)]
     fn panel_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
         let inverse = direction.recip();
-        let mut best: Option<Hit> = None;
-        for panel in &self.panels {
-            if let Some(hit) = panel.intersect(origin, direction, inverse, best.map_or(t_max, |b| b.t)) {
-                best = Some(hit);
+        let mut best = PanelHit { hit: None, t: t_max, id: 0 };
+        let [x_end, y_end, z_end] = self.axis_ends;
+        // Along an axis, the plane's distance is one product with the direction's inverse.
+        for (k, group) in [(0, 0..x_end), (1, x_end..y_end), (2, y_end..z_end)] {
+            let (o, i) = (origin[k], inverse[k]);
+            for panel in &self.panels[group] {
+                panel.consider((panel.plane - o) * i, origin, direction, &mut best);
             }
         }
-        best
+        for panel in &self.panels[z_end..] {
+            panel.consider((panel.origin - origin).dot(panel.normal) / direction.dot(panel.normal), origin, direction, &mut best);
+        }
+        best.hit
     }
 
     /// The closest hit along `origin + t·direction` for `t` in (0, `t_max`).
@@ -244,9 +256,18 @@ struct PanelShape {
     unbounded: bool,
     /// Mesh index of the first of the panel's two triangles.
     first_triangle: usize,
-    /// The axis the normal lies along, if it does (walls and floors): the plane's distance
-    /// along a ray is then one product with the direction's inverse.
+    /// The axis the normal lies along, if it does (walls and floors), and the plane's
+    /// coordinate along it.
     axis: Option<usize>,
+    plane: f32,
+}
+
+/// The nearest panel hit so far: its distance (the limit while there is none) and panel.
+#[derive(Debug, Clone, Copy)]
+struct PanelHit {
+    hit: Option<Hit>,
+    t: f32,
+    id: u32,
 }
 
 impl PanelShape {
@@ -270,6 +291,7 @@ impl PanelShape {
             unbounded: panel.unbounded,
             first_triangle,
             axis: (0..3).find(|&k| panel.normal[k].abs() == 1.0),
+            plane: (0..3).find(|&k| panel.normal[k].abs() == 1.0).map_or(0.0, |k| o[k]),
         })
     }
 
@@ -284,28 +306,31 @@ impl PanelShape {
         (corners.iter().fold(Vec3A::INFINITY, |a, &c| a.min(c)), corners.iter().fold(Vec3A::NEG_INFINITY, |a, &c| a.max(c)))
     }
 
-    /// The hit of the ray in (0, `t_max`) (`inverse` is the direction's componentwise
-    /// inverse), with the barycentrics of the triangle it lies in
-    /// (zero on an unbounded panel, whose albedo is uniform).
+    /// Makes the ray's crossing of the panel's plane at distance `t` the `best` hit if it is
+    /// positive, nearer (or as near, and the panel earlier in mesh order) and on the panel,
+    /// with the barycentrics of the triangle it lies in (zero on an unbounded panel, whose
+    /// albedo is uniform).
     #[inline(always)]
-    fn intersect(&self, origin: Vec3A, direction: Vec3A, inverse: Vec3A, t_max: f32) -> Option<Hit> {
-        let t = match self.axis {
-            Some(k) => (self.origin[k] - origin[k]) * inverse[k],
-            None => (self.origin - origin).dot(self.normal) / direction.dot(self.normal),
+    fn consider(&self, t: f32, origin: Vec3A, direction: Vec3A, best: &mut PanelHit) {
+        if !(t > 0.0 && (t < best.t || (t == best.t && self.id < best.id))) {
+            return;
+        }
+        let hit = if self.unbounded {
+            Hit { triangle: self.first_triangle, t, u: 0.0, v: 0.0 }
+        } else {
+            let offset = origin + direction * t - self.origin;
+            let (s, r) = (offset.dot(self.dual_u), offset.dot(self.dual_v));
+            if !((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&r)) {
+                return;
+            }
+            // Weights of corners 1 and 2 of the triangle holding (s, r).
+            if s >= r {
+                Hit { triangle: self.first_triangle, t, u: s - r, v: r }
+            } else {
+                Hit { triangle: self.first_triangle + 1, t, u: s, v: r - s }
+            }
         };
-        if !(t > 0.0 && t < t_max) {
-            return None;
-        }
-        if self.unbounded {
-            return Some(Hit { triangle: self.first_triangle, t, u: 0.0, v: 0.0 });
-        }
-        let offset = origin + direction * t - self.origin;
-        let (s, r) = (offset.dot(self.dual_u), offset.dot(self.dual_v));
-        if !((0.0..=1.0).contains(&s) && (0.0..=1.0).contains(&r)) {
-            return None;
-        }
-        // Weights of corners 1 and 2 of the triangle holding (s, r).
-        Some(if s >= r { Hit { triangle: self.first_triangle, t, u: s - r, v: r } } else { Hit { triangle: self.first_triangle + 1, t, u: s, v: r - s } })
+        *best = PanelHit { hit: Some(hit), t, id: self.id };
     }
 }
 
