@@ -19,7 +19,7 @@
 
 use std::sync::Arc;
 
-use glam::Vec3A;
+use glam::{Vec3A, Vec4};
 use rayon::prelude::*;
 
 use crate::geometry::{BlockSide, HeightFieldGrid, Mesh, NO_TRIANGLE};
@@ -198,11 +198,13 @@ const SURFACE: u8 = 1;
 /// Block flag: the block has skirt edges.
 const SKIRT: u8 = 2;
 
-/// Sides of a block, as bits (see [`HeightFieldAccel::visit_neighbours`]).
-const LEFT: u8 = 1;
-const RIGHT: u8 = 2;
-const TOP: u8 = 4;
-const BOTTOM: u8 = 8;
+/// Sides of a block as the ray sees them, as bits (see [`HeightFieldAccel::visit_neighbours`]):
+/// the x side it enters through, the y side it enters through, the x side it leaves through,
+/// the y side it leaves through.
+const X_ENTRY: u8 = 1;
+const Y_ENTRY: u8 = 2;
+const X_EXIT: u8 = 4;
+const Y_EXIT: u8 = 8;
 
 /// A skirt edge ready for intersection.
 #[derive(Debug, Clone)]
@@ -247,12 +249,12 @@ struct GridRay {
     y_step: f32,
     y_start: f32,
     margin: f32,
-    /// Distance the ray takes to cross a block column (row), and to move twice the slack
-    /// along x (y).
-    x_width: f32,
-    y_width: f32,
-    x_graze: f32,
-    y_graze: f32,
+    /// Within a block entered at `t_in` and left along x (y) at `tx` (`ty`), the ray runs
+    /// within twice the slack of its entry x (y) side while `t_in + reach.x < tx` (`.y`, `ty`),
+    /// and of its exit side while `t_out + reach.z > tx` (`.w`, `ty`): `reach` holds the
+    /// distance the ray takes to cross a block column (row) less that to move twice the
+    /// slack along x (y), then the latter.
+    reach: Vec4,
     forward_x: bool,
     forward_y: bool,
     /// Distances at which the ray enters (0 if it starts inside) and leaves the field's box,
@@ -460,8 +462,7 @@ impl HeightFieldAccel {
         // through. (An origin on a side may lie on that block's skirt.)
         let (x0, x1, y0, y1) = (g.xs[col as usize], g.xs[col as usize + 1], g.ys[row as usize], g.ys[row as usize + 1]);
         let (ox, oy) = (ray.origin.x, ray.origin.y);
-        let (x_entry, _, y_entry, _) = ray.sides();
-        let entry = if x0 < ox && ox < x1 && y1 < oy && oy < y0 { x_entry | y_entry } else { 0 };
+        let entry = if x0 < ox && ox < x1 && y1 < oy && oy < y0 { X_ENTRY | Y_ENTRY } else { 0 };
         Some(WalkState { level: 0, row, col, entry, t_in })
     }
 
@@ -506,24 +507,12 @@ impl HeightFieldAccel {
             if (col as u32) < self.block_cols as u32 && (row as u32) < self.block_rows as u32 && self.visit::<ANY>(ray, row, col, span, t_limit, best) {
                 return false;
             }
-            let (x_entry, x_exit, y_entry, y_exit) = ray.sides();
-            let exit = if along_x { x_exit } else { y_exit };
+            let exit = if along_x { X_EXIT } else { Y_EXIT };
             // Sides the ray runs within twice the slack of: before it passes the entry
-            // side's line plus the slack, or after the exit side's line minus it.
-            let mut sides = 0;
-            if t_in < tx - ray.x_width + ray.x_graze {
-                sides |= x_entry;
-            }
-            if t_out > tx - ray.x_graze {
-                sides |= x_exit;
-            }
-            if t_in < ty - ray.y_width + ray.y_graze {
-                sides |= y_entry;
-            }
-            if t_out > ty - ray.y_graze {
-                sides |= y_exit;
-            }
-            let sides = sides & !(entry | exit);
+            // side's line plus the slack, or after the exit side's line minus it (the signs
+            // of the four differences, the exits' negated, say it lane by lane).
+            let behind = Vec4::new(t_in, t_in, t_out, t_out) + ray.reach - Vec4::new(tx, ty, tx, ty);
+            let sides = (behind * Vec4::new(1.0, 1.0, -1.0, -1.0)).is_negative_bitmask() as u8 & !(entry | exit);
             if sides != 0 && self.visit_neighbours::<ANY>(ray, row, col, sides, (span.0 - ray.margin, span.1 + ray.margin), t_limit, best) {
                 return false;
             }
@@ -537,17 +526,16 @@ impl HeightFieldAccel {
     fn advance(&self, ray: &GridRay, state: &mut WalkState, along_x: bool, t_out: f32) -> bool {
         let info = self.level_info[state.level % MAX_LEVELS];
         let (fx, fy) = (i32::from(ray.forward_x), i32::from(ray.forward_y));
-        let (x_entry, _, y_entry, _) = ray.sides();
         let up = if along_x {
             state.col += 2 * fx - 1;
-            state.entry = x_entry;
+            state.entry = X_ENTRY;
             if (state.col + 1) as u32 > info.last_col {
                 return false;
             }
             (state.col + 1 - fx) as u32
         } else {
             state.row += 2 * fy - 1;
-            state.entry = y_entry;
+            state.entry = Y_ENTRY;
             if (state.row + 1) as u32 > info.last_row {
                 return false;
             }
@@ -587,7 +575,8 @@ impl HeightFieldAccel {
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn visit_neighbours<const ANY: bool>(&self, ray: &GridRay, row: i32, col: i32, sides: u8, span: (f32, f32), t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
-        for (side, (dr, dc)) in [(LEFT, (0, -1)), (RIGHT, (0, 1)), (TOP, (-1, 0)), (BOTTOM, (1, 0))] {
+        let (dc, dr) = (2 * i32::from(ray.forward_x) - 1, 2 * i32::from(ray.forward_y) - 1);
+        for (side, (dr, dc)) in [(X_ENTRY, (0, -dc)), (Y_ENTRY, (-dr, 0)), (X_EXIT, (0, dc)), (Y_EXIT, (dr, 0))] {
             let (r, c) = (row + dr, col + dc);
             if sides & side != 0 && (0..self.block_rows).contains(&r) && (0..self.block_cols).contains(&c) && self.visit::<ANY>(ray, r, c, span, t_limit, best) {
                 return true;
@@ -707,10 +696,11 @@ impl GridRay {
             y_step: accel.step.1 * inv.y,
             y_start: (g.ys[0] - origin.y) * inv.y,
             margin: e * inv.x.abs().max(inv.y.abs()),
-            x_width: (accel.step.0 * inv.x).abs(),
-            y_width: (accel.step.1 * inv.y).abs(),
-            x_graze: 2.0 * e * inv.x.abs(),
-            y_graze: 2.0 * e * inv.y.abs(),
+            reach: {
+                let (x_width, y_width) = ((accel.step.0 * inv.x).abs(), (accel.step.1 * inv.y).abs());
+                let (x_graze, y_graze) = (2.0 * e * inv.x.abs(), 2.0 * e * inv.y.abs());
+                Vec4::new(x_width - x_graze, y_width - y_graze, x_graze, y_graze)
+            },
             forward_x: accel.step.0 * inv.x > 0.0,
             forward_y: accel.step.1 * inv.y > 0.0,
             t_near: f32::NAN,
@@ -735,15 +725,6 @@ impl GridRay {
         let tx = ((col + i32::from(self.forward_x)) << level) as f32 * self.x_step + self.x_start;
         let ty = ((row + i32::from(self.forward_y)) << level) as f32 * self.y_step + self.y_start;
         (tx, ty, max(min(tx, ty), t_in))
-    }
-
-    /// The block sides through which the ray enters and leaves a block: (entry along x,
-    /// exit along x, entry along y, exit along y).
-    #[inline(always)]
-    fn sides(&self) -> (u8, u8, u8, u8) {
-        let (x_entry, x_exit) = if self.forward_x { (LEFT, RIGHT) } else { (RIGHT, LEFT) };
-        let (y_entry, y_exit) = if self.forward_y { (TOP, BOTTOM) } else { (BOTTOM, TOP) };
-        (x_entry, x_exit, y_entry, y_exit)
     }
 
     /// Whether the ray's stretch [`t_in`, `t_out`] may meet heights in `range`.
