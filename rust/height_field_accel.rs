@@ -460,7 +460,9 @@ impl HeightFieldAccel {
         // Going away from a side of the block its origin lies strictly inside, the ray
         // cannot meet the block behind that side: treat it as the side the ray came in
         // through. (An origin on a side may lie on that block's skirt.)
-        let (x0, x1, y0, y1) = (g.xs[col as usize], g.xs[col as usize + 1], g.ys[row as usize], g.ys[row as usize + 1]);
+        // SAFETY: `block_of` gives a block of the field: its vertex column and row and the
+        // next exist.
+        let (x0, x1, y0, y1) = unsafe { (*g.xs.get_unchecked(col as usize), *g.xs.get_unchecked(col as usize + 1), *g.ys.get_unchecked(row as usize), *g.ys.get_unchecked(row as usize + 1)) };
         let (ox, oy) = (ray.origin.x, ray.origin.y);
         let entry = if x0 < ox && ox < x1 && y1 < oy && oy < y0 { X_ENTRY | Y_ENTRY } else { 0 };
         Some(WalkState { level: 0, row, col, entry, t_in })
@@ -695,7 +697,7 @@ impl GridRay {
             x_start: (g.xs[0] - origin.x) * inv.x,
             y_step: accel.step.1 * inv.y,
             y_start: (g.ys[0] - origin.y) * inv.y,
-            margin: e * inv.x.abs().max(inv.y.abs()),
+            margin: e * max(inv.x.abs(), inv.y.abs()),
             reach: {
                 let (x_width, y_width) = ((accel.step.0 * inv.x).abs(), (accel.step.1 * inv.y).abs());
                 let (x_graze, y_graze) = (2.0 * e * inv.x.abs(), 2.0 * e * inv.y.abs());
