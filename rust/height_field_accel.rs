@@ -240,7 +240,7 @@ struct BlockHit {
 /// the ray goes toward higher column (row) indices; within `margin` of distance of a
 /// boundary, the ray is within the slack of it.
 #[derive(Debug, Clone, Copy)]
-struct GridRay {
+struct GridRay<const FUSED: bool> {
     origin: Vec3A,
     direction: Vec3A,
     inv: Vec3A,
@@ -395,12 +395,15 @@ impl HeightFieldAccel {
         (Vec3A::new(g.xs[0], g.ys[g.height - 1], self.field.min), Vec3A::new(g.xs[g.width - 1], g.ys[0], self.field.max))
     }
 
-    /// The closest hit along `origin + t·direction` for `t` in [0, `t_max`].
+    /// The closest hit along `origin + t·direction` for `t` in [0, `t_max`]. With `FUSED`,
+    /// the walk's distances and heights use fused multiply-adds (for a build with FMA
+    /// instructions): the same hit, but for which triangle a ray through an edge or vertex
+    /// several share gets.
     #[inline(always)]
-    pub fn closest_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
-        let ray = GridRay::new(self, origin, direction);
+    pub fn closest_hit<const FUSED: bool>(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
+        let ray = GridRay::<FUSED>::new(self, origin, direction);
         let mut best: Option<BlockHit> = None;
-        self.walk::<false>(&ray, t_max, &mut best);
+        self.walk::<false, FUSED>(&ray, t_max, &mut best);
         best.map(|h| {
             let triangle = match h.triangle {
                 Triangle::Surface { block, second } => self.grid.block_triangles[block] as usize + usize::from(second),
@@ -410,22 +413,23 @@ impl HeightFieldAccel {
         })
     }
 
-    /// Whether anything lies along `origin + t·direction` for `t` in [0, `t_max`].
+    /// Whether anything lies along `origin + t·direction` for `t` in [0, `t_max`] (`FUSED` as
+    /// in [`HeightFieldAccel::closest_hit`]).
     #[inline(always)]
-    pub fn occluded(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
-        let ray = GridRay::new(self, origin, direction);
+    pub fn occluded<const FUSED: bool>(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
+        let ray = GridRay::<FUSED>::new(self, origin, direction);
         let mut found = None;
-        self.walk::<true>(&ray, t_max, &mut found);
+        self.walk::<true, FUSED>(&ray, t_max, &mut found);
         found.is_some()
     }
 
     /// Visits, in order along the ray, the blocks it may meet before `t_limit`, keeping in
     /// `best` the nearest hit (with `ANY`, the first hit found, which ends the walk).
     #[inline(always)]
-    fn walk<const ANY: bool>(&self, ray: &GridRay, mut t_limit: f32, best: &mut Option<BlockHit>) {
+    fn walk<const ANY: bool, const F: bool>(&self, ray: &GridRay<F>, mut t_limit: f32, best: &mut Option<BlockHit>) {
         let Some(mut state) = self.start(ray, t_limit) else { return };
         loop {
-            let alive = if state.level > 0 { self.cell_step(ray, &mut state, t_limit) } else { self.block_step::<ANY>(ray, &mut state, &mut t_limit, best) };
+            let alive = if state.level > 0 { self.cell_step(ray, &mut state, t_limit) } else { self.block_step::<ANY, F>(ray, &mut state, &mut t_limit, best) };
             if !alive {
                 return;
             }
@@ -435,7 +439,7 @@ impl HeightFieldAccel {
     /// Tests block (`row`, `col`) over the ray's stretch `span`: a hit nearer than `t_limit`
     /// goes to `best` and lowers the limit. True when the walk is over (`ANY` and a hit).
     #[inline(always)]
-    fn visit<const ANY: bool>(&self, ray: &GridRay, row: i32, col: i32, span: (f32, f32), t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
+    fn visit<const ANY: bool, const F: bool>(&self, ray: &GridRay<F>, row: i32, col: i32, span: (f32, f32), t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
         let Some(hit) = self.block_hit(ray, row, col, span, *t_limit, ANY) else { return false };
         *best = Some(hit);
         *t_limit = hit.t;
@@ -446,7 +450,7 @@ impl HeightFieldAccel {
     /// `t_limit`. A ray starting inside the box starts at its block; any other at the top
     /// cell.
     #[inline(always)]
-    fn start(&self, ray: &GridRay, t_limit: f32) -> Option<WalkState> {
+    fn start<const F: bool>(&self, ray: &GridRay<F>, t_limit: f32) -> Option<WalkState> {
         let g = &self.grid;
         let t_in = ray.t_near;
         // NaN: the ray misses the box.
@@ -472,7 +476,7 @@ impl HeightFieldAccel {
     /// when the ray may meet the cell's range, else on to the next cell. False when the walk
     /// is over.
     #[inline(always)]
-    fn cell_step(&self, ray: &GridRay, state: &mut WalkState, t_limit: f32) -> bool {
+    fn cell_step<const F: bool>(&self, ray: &GridRay<F>, state: &mut WalkState, t_limit: f32) -> bool {
         let WalkState { level, row, col, t_in, .. } = *state;
         let (tx, ty, t_out) = ray.exits(level, row, col, t_in);
         let info = self.level_info[level % MAX_LEVELS];
@@ -484,8 +488,7 @@ impl HeightFieldAccel {
         if ray.meets_band(band, t_in - ray.margin, t_out + ray.margin) {
             // Down to the child the ray is in at t_in.
             let level = level - 1;
-            let mx = ((2 * col + 1) << level) as f32 * ray.x_step + ray.x_start;
-            let my = ((2 * row + 1) << level) as f32 * ray.y_step + ray.y_start;
+            let (mx, my) = ray.boundaries((2 * row + 1) << level, (2 * col + 1) << level);
             state.level = level;
             state.col = 2 * col + i32::from((mx <= t_in) == ray.forward_x);
             state.row = 2 * row + i32::from((my <= t_in) == ray.forward_y);
@@ -497,7 +500,7 @@ impl HeightFieldAccel {
     /// One step of the walk in a block: visits it and any neighbour whose side the ray
     /// runs along, then moves on to the next cell. False when the walk is over.
     #[inline(always)]
-    fn block_step<const ANY: bool>(&self, ray: &GridRay, state: &mut WalkState, t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
+    fn block_step<const ANY: bool, const F: bool>(&self, ray: &GridRay<F>, state: &mut WalkState, t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
         let WalkState { row, col, t_in, entry, .. } = *state;
         let (tx, ty, t_out) = ray.exits(0, row, col, t_in);
         let along_x = tx < ty;
@@ -506,7 +509,7 @@ impl HeightFieldAccel {
         if (col + 1) as u32 <= info.last_col && (row + 1) as u32 <= info.last_row {
             // A block of the field, or of the ring around it (which has no triangles but
             // may run along the field's side).
-            if (col as u32) < self.block_cols as u32 && (row as u32) < self.block_rows as u32 && self.visit::<ANY>(ray, row, col, span, t_limit, best) {
+            if (col as u32) < self.block_cols as u32 && (row as u32) < self.block_rows as u32 && self.visit::<ANY, F>(ray, row, col, span, t_limit, best) {
                 return false;
             }
             let exit = if along_x { X_EXIT } else { Y_EXIT };
@@ -515,7 +518,7 @@ impl HeightFieldAccel {
             // of the four differences, the exits' negated, say it lane by lane).
             let behind = Vec4::new(t_in, t_in, t_out, t_out) + ray.reach - Vec4::new(tx, ty, tx, ty);
             let sides = (behind * Vec4::new(1.0, 1.0, -1.0, -1.0)).is_negative_bitmask() as u8 & !(entry | exit);
-            if sides != 0 && self.visit_neighbours::<ANY>(ray, row, col, sides, (span.0 - ray.margin, span.1 + ray.margin), t_limit, best) {
+            if sides != 0 && self.visit_neighbours::<ANY, F>(ray, row, col, sides, (span.0 - ray.margin, span.1 + ray.margin), t_limit, best) {
                 return false;
             }
         }
@@ -525,7 +528,7 @@ impl HeightFieldAccel {
     /// Steps to the next cell of the state's level (along x or y), then up as many levels
     /// as the step crossed parent boundaries. False past the ring.
     #[inline(always)]
-    fn advance(&self, ray: &GridRay, state: &mut WalkState, along_x: bool, t_out: f32) -> bool {
+    fn advance<const F: bool>(&self, ray: &GridRay<F>, state: &mut WalkState, along_x: bool, t_out: f32) -> bool {
         let info = self.level_info[state.level % MAX_LEVELS];
         let (fx, fy) = (i32::from(ray.forward_x), i32::from(ray.forward_y));
         let up = if along_x {
@@ -576,11 +579,11 @@ impl HeightFieldAccel {
     /// visit ended the walk.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn visit_neighbours<const ANY: bool>(&self, ray: &GridRay, row: i32, col: i32, sides: u8, span: (f32, f32), t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
+    fn visit_neighbours<const ANY: bool, const F: bool>(&self, ray: &GridRay<F>, row: i32, col: i32, sides: u8, span: (f32, f32), t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
         let (dc, dr) = (2 * i32::from(ray.forward_x) - 1, 2 * i32::from(ray.forward_y) - 1);
         for (side, (dr, dc)) in [(X_ENTRY, (0, -dc)), (Y_ENTRY, (-dr, 0)), (X_EXIT, (0, dc)), (Y_EXIT, (dr, 0))] {
             let (r, c) = (row + dr, col + dc);
-            if sides & side != 0 && (0..self.block_rows).contains(&r) && (0..self.block_cols).contains(&c) && self.visit::<ANY>(ray, r, c, span, t_limit, best) {
+            if sides & side != 0 && (0..self.block_rows).contains(&r) && (0..self.block_cols).contains(&c) && self.visit::<ANY, F>(ray, r, c, span, t_limit, best) {
                 return true;
             }
         }
@@ -591,7 +594,7 @@ impl HeightFieldAccel {
     /// `any`). With a `span`, the block is skipped when the ray passes above or below it
     /// over that stretch.
     #[inline(always)]
-    fn block_hit(&self, ray: &GridRay, row: i32, col: i32, span: (f32, f32), t_limit: f32, any: bool) -> Option<BlockHit> {
+    fn block_hit<const F: bool>(&self, ray: &GridRay<F>, row: i32, col: i32, span: (f32, f32), t_limit: f32, any: bool) -> Option<BlockHit> {
         let g = &self.grid;
         let (i, j) = (row as usize, col as usize);
         let block = i * self.block_cols as usize + j;
@@ -647,7 +650,7 @@ impl HeightFieldAccel {
 
     /// The nearest hit of `ray` on a skirt edge of block (`i`, `j`) before `t_limit`.
     #[inline(always)]
-    fn skirt_hit(&self, ray: &GridRay, quad: &SkirtQuad, (i, j): (usize, usize), t_limit: f32) -> Option<BlockHit> {
+    fn skirt_hit<const F: bool>(&self, ray: &GridRay<F>, quad: &SkirtQuad, (i, j): (usize, usize), t_limit: f32) -> Option<BlockHit> {
         let g = &self.grid;
         // The skirt lies in a vertical plane; test its trapezoid's box before its triangles.
         let (t, along, range) = match quad.side {
@@ -681,9 +684,9 @@ impl HeightFieldAccel {
 }
 
 
-impl GridRay {
+impl<const FUSED: bool> GridRay<FUSED> {
     #[inline(always)]
-    fn new(accel: &HeightFieldAccel, origin: Vec3A, direction: Vec3A) -> GridRay {
+    fn new(accel: &HeightFieldAccel, origin: Vec3A, direction: Vec3A) -> GridRay<FUSED> {
         // A zero component gets a tiny one instead, so that slab distances stay finite and
         // ordered (a ray along a slab's plane is inside it).
         let tiny = Vec3A::splat(1e-30);
@@ -720,12 +723,28 @@ impl GridRay {
         ray
     }
 
+    /// `a·b + c`, fused with `FUSED`.
+    #[inline(always)]
+    fn madd(a: f32, b: f32, c: f32) -> f32 {
+        if FUSED {
+            a.mul_add(b, c)
+        } else {
+            a * b + c
+        }
+    }
+
+    /// Distances at which the ray meets the line of vertex column `col` and of vertex row
+    /// `row`.
+    #[inline(always)]
+    fn boundaries(&self, row: i32, col: i32) -> (f32, f32) {
+        (Self::madd(col as f32, self.x_step, self.x_start), Self::madd(row as f32, self.y_step, self.y_start))
+    }
+
     /// Distances at which the ray leaves cell (`row`, `col`) of `level` through its x side
     /// and its y side, and the distance it leaves the cell (not before `t_in`).
     #[inline(always)]
     fn exits(&self, level: usize, row: i32, col: i32, t_in: f32) -> (f32, f32, f32) {
-        let tx = ((col + i32::from(self.forward_x)) << level) as f32 * self.x_step + self.x_start;
-        let ty = ((row + i32::from(self.forward_y)) << level) as f32 * self.y_step + self.y_start;
+        let (tx, ty) = self.boundaries((row + i32::from(self.forward_y)) << level, (col + i32::from(self.forward_x)) << level);
         (tx, ty, max(min(tx, ty), t_in))
     }
 
@@ -754,8 +773,8 @@ impl GridRay {
     fn meets_band(&self, band: Band, t_in: f32, t_out: f32) -> bool {
         // z − a·x − b·y along the ray is linear in t.
         let (o, d) = (self.origin, self.direction);
-        let h0 = o.z - band.a * o.x - band.b * o.y;
-        let dh = d.z - band.a * d.x - band.b * d.y;
+        let h0 = Self::madd(-band.b, o.y, Self::madd(-band.a, o.x, o.z));
+        let dh = Self::madd(-band.b, d.y, Self::madd(-band.a, d.x, d.z));
         self.meets_linear(h0, dh, (t_in, t_out), (band.c_lo, band.c_hi))
     }
 
@@ -764,7 +783,7 @@ impl GridRay {
     #[inline(always)]
     fn meets_linear(&self, h0: f32, dh: f32, (t_in, t_out): (f32, f32), (lo, hi): (f32, f32)) -> bool {
         let t_out = min(t_out, self.t_far);
-        let (hp, hq) = (h0 + dh * t_in, h0 + dh * t_out);
+        let (hp, hq) = (Self::madd(dh, t_in, h0), Self::madd(dh, t_out, h0));
         let above = min(hp, hq) - self.z_slack > hi;
         let below = max(hp, hq) + self.z_slack < lo;
         !(above || below)
@@ -804,7 +823,7 @@ fn max(a: f32, b: f32) -> f32 {
 /// Möller–Trumbore intersection with triangle `corners` for t in [0, `t_limit`]: (t, u, v),
 /// with u and v the weights of corners 1 and 2. Points on an edge count as inside.
 #[inline(always)]
-fn intersect_triangle(ray: &GridRay, corners: &[Vec3A; 3], t_limit: f32) -> Option<(f32, f32, f32)> {
+fn intersect_triangle<const F: bool>(ray: &GridRay<F>, corners: &[Vec3A; 3], t_limit: f32) -> Option<(f32, f32, f32)> {
     let [v0, v1, v2] = *corners;
     let (e1, e2) = (v1 - v0, v2 - v0);
     let ng = e2.cross(e1);
@@ -849,7 +868,7 @@ mod tests {
     }
 
     /// The nearest hit over every height-field and skirt triangle, one by one.
-    fn brute_force(mesh: &Mesh, ray: &GridRay) -> Option<(usize, f32)> {
+    fn brute_force(mesh: &Mesh, ray: &GridRay<false>) -> Option<(usize, f32)> {
         let mut best: Option<(usize, f32)> = None;
         for t in 0..mesh.triangles.len() {
             if !matches!(mesh.kinds[t], crate::geometry::SurfaceKind::Object | crate::geometry::SurfaceKind::Skirt) {
@@ -877,10 +896,14 @@ mod tests {
 
     /// Asserts that both queries agree with testing every triangle; whether the ray hits.
     fn assert_agrees(mesh: &Mesh, accel: &HeightFieldAccel, origin: Vec3A, direction: Vec3A, what: &str) -> bool {
-        let expected = brute_force(mesh, &GridRay::new(accel, origin, direction));
-        let got = accel.closest_hit(origin, direction, f32::INFINITY);
+        let expected = brute_force(mesh, &GridRay::<false>::new(accel, origin, direction));
+        let got = accel.closest_hit::<false>(origin, direction, f32::INFINITY);
         assert_eq!(got.map(|g| (g.triangle, g.t)), expected, "ray {origin:?} {direction:?} in {what}");
-        assert_eq!(accel.occluded(origin, direction, f32::INFINITY), expected.is_some(), "ray {origin:?} {direction:?} in {what}");
+        assert_eq!(accel.closest_hit::<true>(origin, direction, f32::INFINITY), got, "fused walk, ray {origin:?} {direction:?} in {what}");
+        for fused in [false, true] {
+            let occluded = if fused { accel.occluded::<true>(origin, direction, f32::INFINITY) } else { accel.occluded::<false>(origin, direction, f32::INFINITY) };
+            assert_eq!(occluded, expected.is_some(), "ray {origin:?} {direction:?} in {what} (fused walk: {fused})");
+        }
         expected.is_some()
     }
 
@@ -898,15 +921,17 @@ mod tests {
                 let origin = vec3a((rng.next_f32() - 0.5) * sx * 2.0, (rng.next_f32() - 0.5) * sy * 2.0, rng.next_f32() * 12.0 - 1.0);
                 let target = vec3a((rng.next_f32() - 0.5) * sx, (rng.next_f32() - 0.5) * sy, rng.next_f32() * 8.0);
                 let direction = (target - origin).normalize();
-                let ray = GridRay::new(&accel, origin, direction);
+                let ray = GridRay::<false>::new(&accel, origin, direction);
                 let expected = brute_force(&mesh, &ray);
-                let got = accel.closest_hit(origin, direction, f32::INFINITY);
+                let got = accel.closest_hit::<false>(origin, direction, f32::INFINITY);
                 assert_eq!(got.map(|g| (g.triangle, g.t)), expected, "ray {origin:?} {direction:?} in {w}x{h}");
-                assert_eq!(accel.occluded(origin, direction, f32::INFINITY), expected.is_some());
+                assert_eq!(accel.closest_hit::<true>(origin, direction, f32::INFINITY), got, "fused walk, ray {origin:?} {direction:?} in {w}x{h}");
+                assert_eq!(accel.occluded::<false>(origin, direction, f32::INFINITY), expected.is_some());
+                assert_eq!(accel.occluded::<true>(origin, direction, f32::INFINITY), expected.is_some());
                 if let Some((t, d)) = expected {
                     hits += 1;
                     skirt_hits += usize::from(mesh.kinds[t] == crate::geometry::SurfaceKind::Skirt);
-                    assert!(!accel.occluded(origin, direction, d * 0.999));
+                    assert!(!accel.occluded::<false>(origin, direction, d * 0.999) && !accel.occluded::<true>(origin, direction, d * 0.999));
                 }
             }
             assert!(hits > 1500 && skirt_hits > 200, "{w}x{h}: {hits} hits, {skirt_hits} on the skirt");
@@ -988,7 +1013,14 @@ mod tests {
         for i in 0..16 {
             for j in 0..16 {
                 for (x, y) in [(g.xs[j], g.ys[i]), (g.xs[j], g.ys[i] - 0.35), (g.xs[j] + 0.35, g.ys[i])] {
-                    let hit = accel.closest_hit(vec3a(x, y, 50.0), -Vec3A::Z, f32::INFINITY);
+                    let hit = accel.closest_hit::<false>(vec3a(x, y, 50.0), -Vec3A::Z, f32::INFINITY);
+                    // Through a vertex or an edge, the fused walk may meet another of the
+                    // triangles there first: the same point, to their rounding.
+                    let fused = accel.closest_hit::<true>(vec3a(x, y, 50.0), -Vec3A::Z, f32::INFINITY);
+                    assert_eq!(fused.is_some(), hit.is_some(), "({x}, {y})");
+                    if let (Some(a), Some(b)) = (fused, hit) {
+                        assert!((a.t - b.t).abs() <= 1e-5 * b.t, "({x}, {y}): {a:?} {b:?}");
+                    }
                     let inside = x <= g.xs[15] && y >= g.ys[15];
                     assert_eq!(hit.is_some(), inside, "({x}, {y})");
                 }

@@ -159,11 +159,24 @@ impl Tracer {
         self.occluded_portable(origin, direction, t_max)
     }
 
+    /// The closest hit, for a CPU without the AVX2 build's features.
     #[inline(always)]
     fn closest_hit_portable(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
+        self.closest_hit_with::<false>(origin, direction, t_max)
+    }
+
+    /// Whether anything lies along the ray, for a CPU without the AVX2 build's features.
+    #[inline(always)]
+    fn occluded_portable(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
+        self.occluded_with::<false>(origin, direction, t_max)
+    }
+
+    /// The closest hit; with `FUSED`, the height-field walk uses fused multiply-adds.
+    #[inline(always)]
+    fn closest_hit_with<const FUSED: bool>(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
         let mut best = None;
         let mut t_limit = t_max;
-        if let Some(hit) = self.height_field.as_ref().and_then(|h| h.closest_hit(origin, direction, t_max)) {
+        if let Some(hit) = self.height_field.as_ref().and_then(|h| h.closest_hit::<FUSED>(origin, direction, t_max)) {
             t_limit = hit.t;
             best = Some(hit);
             if self.triangles.is_empty() && self.field_box.is_some_and(|(lo, hi)| origin.cmpge(lo).all() && origin.cmple(hi).all()) {
@@ -181,28 +194,30 @@ impl Tracer {
         self.panel_hit(origin, direction, t_limit).or(best)
     }
 
+    /// Whether anything lies along the ray (`FUSED` as in [`Tracer::closest_hit_with`]).
     #[inline(always)]
-    fn occluded_portable(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
+    fn occluded_with<const FUSED: bool>(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
         if self.panel_hit(origin, direction, t_max).is_some() {
             return true;
         }
-        if self.height_field.as_ref().is_some_and(|h| h.occluded(origin, direction, t_max)) {
+        if self.height_field.as_ref().is_some_and(|h| h.occluded::<FUSED>(origin, direction, t_max)) {
             return true;
         }
         !self.triangles.is_empty() && self.any_portable(make_ray(origin, direction, t_max))
     }
 
-    /// The same queries compiled for AVX2 (chosen at run time; the results are identical).
+    /// The same queries compiled for AVX2 and FMA (chosen at run time; the same hits, but
+    /// for which triangle a ray through an edge or vertex several share gets).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
     unsafe fn closest_hit_avx2(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
-        self.closest_hit_portable(origin, direction, t_max)
+        self.closest_hit_with::<true>(origin, direction, t_max)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
     unsafe fn occluded_avx2(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
-        self.occluded_portable(origin, direction, t_max)
+        self.occluded_with::<true>(origin, direction, t_max)
     }
 
     #[inline(always)]
