@@ -16,6 +16,9 @@ use crate::ps::{check_lights as core_check_lights, photometric_stereo as core_ps
 use crate::render::{RenderSettings, Renderer as CoreRenderer};
 use crate::scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
 
+/// Rays a parallel task of `Renderer.intersect` traces as one batch.
+const RAYS_PER_TASK: usize = 4096;
+
 fn to_py(err: Error) -> PyErr {
     match err {
         Error::Io { .. } => PyOSError::new_err(err.to_string()),
@@ -224,7 +227,8 @@ impl Renderer {
         (positions.into_pyarray(py), triangles.into_pyarray(py), albedo.into_pyarray(py), normals.into_pyarray(py))
     }
 
-    /// Closest hits of a batch of rays, traced on `threads` threads (all cores if None):
+    /// Closest hits of a batch of rays, traced on `threads` threads (all cores if None) in
+    /// tasks of [`RAYS_PER_TASK`] rays:
     /// (distance (N,) float32, inf on a miss; triangle (N,) int64, −1 on a miss).
     #[pyo3(signature = (origins, directions, threads=None))]
     fn intersect<'py>(&self, py: Python<'py>, origins: PyReadonlyArray2<'_, f32>, directions: PyReadonlyArray2<'_, f32>, threads: Option<usize>) -> PyResult<HitArrays<'py>> {
@@ -236,20 +240,27 @@ impl Renderer {
         let tracer = self.inner.tracer();
         let mut t = vec![f32::INFINITY; o.len() / 3];
         let mut id = vec![-1i64; o.len() / 3];
-        let one = |(t, id): (&mut f32, &mut i64), (o, d): (&[f32], &[f32])| {
-            if let Some(hit) = tracer.closest_hit(vec3a(o[0], o[1], o[2]), vec3a(d[0], d[1], d[2]), f32::INFINITY) {
-                (*t, *id) = (hit.t, hit.triangle as i64);
-            }
+        // A batch of rays (flat xyz rows) into its outputs.
+        let batch = |t: &mut [f32], id: &mut [i64], o: &[f32], d: &[f32]| {
+            let mut out = t.iter_mut().zip(id.iter_mut());
+            let rays = o.chunks_exact(3).zip(d.chunks_exact(3)).map(|(o, d)| (vec3a(o[0], o[1], o[2]), vec3a(d[0], d[1], d[2])));
+            tracer.closest_hits(rays, f32::INFINITY, |hit| {
+                if let (Some((t, id)), Some(hit)) = (out.next(), hit) {
+                    (*t, *id) = (hit.t, hit.triangle as i64);
+                }
+            });
         };
-        let trace = |t: &mut [f32], id: &mut [i64]| t.par_iter_mut().zip(id.par_iter_mut()).zip(o.par_chunks_exact(3).zip(d.par_chunks_exact(3))).for_each(|(hit, ray)| one(hit, ray));
+        let parallel = |t: &mut [f32], id: &mut [i64]| {
+            t.par_chunks_mut(RAYS_PER_TASK).zip(id.par_chunks_mut(RAYS_PER_TASK)).zip(o.par_chunks(3 * RAYS_PER_TASK).zip(d.par_chunks(3 * RAYS_PER_TASK))).for_each(|((t, id), (o, d))| batch(t, id, o, d))
+        };
         py.detach(|| -> PyResult<()> {
             match threads {
-                None => trace(&mut t, &mut id),
-                // One thread: a plain loop, without a pool or work splitting.
-                Some(1) => t.iter_mut().zip(id.iter_mut()).zip(o.chunks_exact(3).zip(d.chunks_exact(3))).for_each(|(hit, ray)| one(hit, ray)),
+                None => parallel(&mut t, &mut id),
+                // One thread: one batch, without a pool or work splitting.
+                Some(1) => batch(&mut t, &mut id, &o, &d),
                 Some(n) => {
                     let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| PyValueError::new_err(format!("threads: {e}")))?;
-                    pool.install(|| trace(&mut t, &mut id));
+                    pool.install(|| parallel(&mut t, &mut id));
                 }
             }
             Ok(())

@@ -148,6 +148,21 @@ impl Tracer {
         self.closest_hit_portable(origin, direction, t_max)
     }
 
+    /// The closest hits of a batch of rays `(origin, direction)`, each for `t` in (0, `t_max`),
+    /// handed to `each` in order. The same hits as [`Tracer::closest_hit`] ray by ray, with
+    /// the CPU's features checked once for the batch and the tracer's set-up shared.
+    #[inline]
+    pub fn closest_hits(&self, rays: impl Iterator<Item = (Vec3A, Vec3A)>, t_max: f32, mut each: impl FnMut(Option<Hit>)) {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: as in `closest_hit`.
+            return unsafe { self.closest_hits_avx2(rays, t_max, &mut each) };
+        }
+        for (origin, direction) in rays {
+            each(self.closest_hit_portable(origin, direction, t_max));
+        }
+    }
+
     /// Whether anything lies along `origin + t·direction` for `t` in (0, `t_max`).
     #[inline]
     pub fn occluded(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
@@ -212,6 +227,14 @@ impl Tracer {
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
     unsafe fn closest_hit_avx2(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
         self.closest_hit_with::<true>(origin, direction, t_max)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn closest_hits_avx2(&self, rays: impl Iterator<Item = (Vec3A, Vec3A)>, t_max: f32, each: &mut impl FnMut(Option<Hit>)) {
+        for (origin, direction) in rays {
+            each(self.closest_hit_with::<true>(origin, direction, t_max));
+        }
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -440,6 +463,30 @@ mod tests {
                 assert_eq!(tracer.occluded(origin, direction, f32::INFINITY), tracer.occluded_portable(origin, direction, f32::INFINITY));
             }
         }
+    }
+
+    #[test]
+    fn a_batch_gets_the_same_hits_as_one_ray_at_a_time() {
+        let scene = crate::scene::Scene {
+            camera: crate::scene::Camera { width: 20, height: 16, pixel_size: 0.5 },
+            surface: crate::scene::HeightField {
+                height: (0..320).map(|p| ((p % 20) as f32 * 0.5).cos() * 2.0 + (p / 20) as f32 * 0.2).collect(),
+                mask: (0..320).map(|p| p % 7 != 3).collect(),
+                albedo: vec![[0.5; 3]; 320],
+            },
+            floor: Some(crate::scene::Floor { height: -1.0, albedo: [0.5; 3] }),
+            cornell_box: Some(crate::scene::CornellBox { x: [-8.0, 8.0], y: [-7.0, 7.0], z_top: 9.0, left: [0.5; 3], right: [0.5; 3], back: [0.5; 3], front: [0.5; 3] }),
+        };
+        let tracer = Tracer::new(&Mesh::from_scene(&scene));
+        let mut rng = crate::sampler::Rng::new(3);
+        let rays: Vec<(Vec3A, Vec3A)> = (0..3000)
+            .map(|_| (vec3a(rng.next_f32() * 12.0 - 6.0, rng.next_f32() * 10.0 - 5.0, rng.next_f32() * 8.0 - 1.0), vec3a(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5).normalize()))
+            .collect();
+        let mut batch = Vec::new();
+        tracer.closest_hits(rays.iter().copied(), 20.0, |hit| batch.push(hit));
+        let one_by_one: Vec<Option<Hit>> = rays.iter().map(|&(o, d)| tracer.closest_hit(o, d, 20.0)).collect();
+        assert_eq!(batch, one_by_one);
+        assert!(batch.iter().filter(|h| h.is_some()).count() > 1500 && batch.iter().any(|h| h.is_none()));
     }
 
     #[test]
