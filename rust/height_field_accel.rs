@@ -427,8 +427,10 @@ impl HeightFieldAccel {
     /// Visits, in order along the ray, the blocks it may meet before `t_limit`, keeping in
     /// `best` the nearest hit (with `ANY`, the first hit found, which ends the walk).
     #[inline(always)]
-    fn walk<const ANY: bool, const F: bool>(&self, ray: &GridRay<F>, mut t_limit: f32, best: &mut Option<BlockHit>) {
+    fn walk<const ANY: bool, const F: bool>(&self, ray: &GridRay<F>, t_limit: f32, best: &mut Option<BlockHit>) {
         let Some(mut state) = self.start(ray, t_limit) else { return };
+        // Nothing lies beyond the field's box.
+        let mut t_limit = min(t_limit, ray.t_far);
         loop {
             let alive = if state.level > 0 { self.cell_step(ray, &mut state, t_limit) } else { self.block_step::<ANY, F>(ray, &mut state, &mut t_limit, best) };
             if !alive {
@@ -495,7 +497,7 @@ impl HeightFieldAccel {
             state.row = 2 * row + i32::from((my <= t_in) == ray.forward_y);
             return true;
         }
-        t_out - ray.margin <= min(t_limit, ray.t_far) && self.advance(ray, state, tx < ty, t_out)
+        t_out - ray.margin <= t_limit && self.advance(ray, state, tx < ty, t_out)
     }
 
     /// One step of the walk in a block: visits it and any neighbour whose side the ray
@@ -523,7 +525,7 @@ impl HeightFieldAccel {
                 return false;
             }
         }
-        t_out - ray.margin <= min(*t_limit, ray.t_far) && self.advance(ray, state, along_x, t_out)
+        t_out - ray.margin <= *t_limit && self.advance(ray, state, along_x, t_out)
     }
 
     /// Steps to the next cell of the state's level (along x or y), then up as many levels
