@@ -16,6 +16,11 @@
 //! each slab is what makes stepping over a cell safe for a ray that grazes its border, and
 //! each slab test allows for the rounding of the ray's points. The walk needs no stack,
 //! follows no pointer and stores 16 bytes a cell (a third of the blocks' count in all).
+//!
+//! Each block also stores (in a byte) the slope of a cone that clears every triangle beyond
+//! its ring of 3×3 blocks: a ray that starts in the block no lower than its lowest vertex
+//! and rises more steeply than that walks only across the ring (most rays leaving a smooth
+//! surface toward the sky).
 
 use std::sync::Arc;
 
@@ -177,6 +182,110 @@ fn cell_band(grid: &HeightFieldGrid, vertex_flags: &[u8], level: usize, row: i32
     }
 }
 
+/// Escape slopes (squared) that [`escape_cones`] rounds up to: 0, then a geometric series
+/// from 1e-6 to 1e6 (slopes 1e-3 to 1e3, 5.6 % apart), then +∞ (no escape).
+fn escape_slopes() -> [f32; 256] {
+    let ratio = 1e12f64.powf(1.0 / 253.0);
+    std::array::from_fn(|c| match c {
+        0 => 0.0,
+        255 => f32::INFINITY,
+        c => ((1e-6 * ratio.powi(c as i32 - 1)) as f32).next_up(),
+    })
+}
+
+/// For each block, the index in `slopes` (see [`escape_slopes`]) of a `k²` such that a ray
+/// that starts in the block's column (or within `slack` of it) no lower than its lowest
+/// vertex and rises at least `k` in height for every unit it moves across (`dz > 0`,
+/// `dz² ≥ k²·(dx² + dy²)`) passes above every triangle outside the ring of 3×3 blocks around
+/// it (255: no such ray; unmeshed blocks). `own` holds the blocks' height ranges; `step` the
+/// vertex spacing.
+///
+/// The bound `k` is the steepest slope from the block's lowest vertex up to the highest
+/// point of a pyramid cell, over a set of cells that covers the field outside the ring: at
+/// each level the cells within the 3×3 parents around the block's own parent that are not
+/// within the 3×3 cells around its own cell (at most 27), each at its least distance from
+/// the block.
+fn escape_cones(grid: &HeightFieldGrid, own: &[Range], block_flags: &[u8], top: usize, step: (f32, f32), slack: f32, slopes: &[f32; 256]) -> Vec<u8> {
+    let (cols, rows) = (grid.width - 1, grid.height - 1);
+    let dims = |level: usize| (((cols - 1) >> level) + 1, ((rows - 1) >> level) + 1);
+    // Highest point of every cell of every level (−∞ where there is nothing).
+    let mut maxima: Vec<Vec<f32>> = vec![own.iter().map(|r| if r.max.is_finite() { r.max } else { f32::NEG_INFINITY }).collect()];
+    for level in 1..=top {
+        let ((w, h), (child_w, child_h)) = (dims(level), dims(level - 1));
+        let child = &maxima[level - 1];
+        let cells = (0..w * h)
+            .map(|c| {
+                let (r, q) = (c / w, c % w);
+                let mut z = f32::NEG_INFINITY;
+                for (cr, cq) in [(2 * r, 2 * q), (2 * r, 2 * q + 1), (2 * r + 1, 2 * q), (2 * r + 1, 2 * q + 1)] {
+                    if cr < child_h && cq < child_w {
+                        z = z.max(child[cr * child_w + cq]);
+                    }
+                }
+                z
+            })
+            .collect();
+        maxima.push(cells);
+    }
+    let (sx, sy) = (step.0.abs() as f64, step.1.abs() as f64);
+    let highest = maxima[top][0] as f64;
+    let w = grid.width;
+    (0..cols * rows)
+        .into_par_iter()
+        .map(|b| {
+            if block_flags[b] & SURFACE == 0 {
+                return 255;
+            }
+            let (i, j) = (b / cols, b % cols);
+            let z_ref = [grid.z[i * w + j], grid.z[i * w + j + 1], grid.z[(i + 1) * w + j], grid.z[(i + 1) * w + j + 1]].into_iter().fold(f32::INFINITY, f32::min);
+            let mut k2 = 0.0f64;
+            for (level, cells) in maxima.iter().enumerate().take(top) {
+                // The cells of this level and above lie at least a cell away and no higher
+                // than the field's top: once that cannot raise the slope, none can.
+                let (nearest, highest) = (((1u64 << level) as f64 * sx.min(sy) - 2.0 * slack as f64).max(0.0), highest - z_ref as f64);
+                if highest * highest <= k2 * nearest * nearest {
+                    break;
+                }
+                let (level_w, level_h) = dims(level);
+                let (own_r, own_c) = ((i >> level) as i64, (j >> level) as i64);
+                let (parent_r, parent_c) = (own_r >> 1, own_c >> 1);
+                // Nor can this level's cells if none of the 3×3 parents holding them can.
+                let (parent_w, parent_h) = dims(level + 1);
+                let parents = &maxima[level + 1];
+                let mut region = f32::NEG_INFINITY;
+                for r in (parent_r - 1).max(0)..(parent_r + 2).min(parent_h as i64) {
+                    for c in (parent_c - 1).max(0)..(parent_c + 2).min(parent_w as i64) {
+                        region = region.max(parents[r as usize * parent_w + c as usize]);
+                    }
+                }
+                let rise = region as f64 - z_ref as f64;
+                if rise <= 0.0 || rise * rise <= k2 * nearest * nearest {
+                    continue;
+                }
+                for r in (2 * parent_r - 2).max(0)..(2 * parent_r + 4).min(level_h as i64) {
+                    for c in (2 * parent_c - 2).max(0)..(2 * parent_c + 4).min(level_w as i64) {
+                        let rise = cells[r as usize * level_w + c as usize] as f64 - z_ref as f64;
+                        if ((r - own_r).abs() <= 1 && (c - own_c).abs() <= 1) || rise <= 0.0 {
+                            continue;
+                        }
+                        // The gap between the block and the cell along x and y, less the
+                        // origin's allowance off the block.
+                        let gap = |own: usize, cell: i64, spacing: f64| ((cell << level).saturating_sub(own as i64 + 1).max(own as i64 - ((cell + 1) << level)).max(0) as f64 * spacing - 2.0 * slack as f64).max(0.0);
+                        let (gx, gy) = (gap(j, c, sx), gap(i, r, sy));
+                        let d2 = gx * gx + gy * gy;
+                        if rise * rise > k2 * d2 {
+                            k2 = rise * rise / d2;
+                        }
+                    }
+                }
+            }
+            // Far more than the rounding of the ray's test, and of its heights.
+            let k2 = k2 * (1.0 + 1e-4);
+            slopes.partition_point(|&s| (s as f64) < k2).min(255) as u8
+        })
+        .collect()
+}
+
 /// Where level L of the pyramid lies in [`HeightFieldAccel::pyramid`] (level 0, the blocks,
 /// only has its ring limits).
 #[derive(Debug, Clone, Copy, Default)]
@@ -297,6 +406,10 @@ pub struct HeightFieldAccel {
     field: Range,
     /// Corners of the field's box, widened by the slack in x and y.
     field_box: (Vec3A, Vec3A),
+    /// [`escape_cones`] of each block (which rays from it meet nothing beyond its ring), as
+    /// indices into `escape_slopes`.
+    escape: Vec<u8>,
+    escape_slopes: [f32; 256],
     /// Index into `skirt` of each block's first skirt edge, or `u32::MAX`.
     first_skirt: Vec<u32>,
     skirt: Vec<SkirtQuad>,
@@ -387,7 +500,9 @@ impl HeightFieldAccel {
             packed_flags[b / 4] |= f << (2 * (b % 4));
         }
         let field_box = (Vec3A::new(grid.xs[0] - slack, grid.ys[rows] - slack, field.min), Vec3A::new(grid.xs[cols] + slack, grid.ys[0] + slack, field.max));
-        Some(HeightFieldAccel { block_cols: ci, block_rows: ri, packed_flags, pyramid, level_info, top, field, field_box, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
+        let escape_slopes = escape_slopes();
+        let escape = escape_cones(&grid, &own, &block_flags, top, step, slack, &escape_slopes);
+        Some(HeightFieldAccel { block_cols: ci, block_rows: ri, packed_flags, pyramid, level_info, top, field, field_box, escape, escape_slopes, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
     }
 
     /// Corners of the box holding every triangle of the field and its skirt.
@@ -428,9 +543,9 @@ impl HeightFieldAccel {
     /// `best` the nearest hit (with `ANY`, the first hit found, which ends the walk).
     #[inline(always)]
     fn walk<const ANY: bool, const F: bool>(&self, ray: &GridRay<F>, t_limit: f32, best: &mut Option<BlockHit>) {
-        let Some(mut state) = self.start(ray, t_limit) else { return };
-        // Nothing lies beyond the field's box.
-        let mut t_limit = min(t_limit, ray.t_far);
+        let Some((mut state, reach)) = self.start(ray, t_limit) else { return };
+        // Nothing lies beyond the field's box, nor beyond `reach`.
+        let mut t_limit = min(min(t_limit, ray.t_far), reach);
         loop {
             let alive = if state.level > 0 { self.cell_step(ray, &mut state, t_limit) } else { self.block_step::<ANY, F>(ray, &mut state, &mut t_limit, best) };
             if !alive {
@@ -449,11 +564,12 @@ impl HeightFieldAccel {
         ANY
     }
 
-    /// Where the walk of `ray` starts, or None if the ray misses the field's box before
-    /// `t_limit`. A ray starting inside the box starts at its block; any other at the top
-    /// cell.
+    /// Where the walk of `ray` starts, and how far it needs to go (+∞: to the field box's
+    /// exit), or None if the ray misses the field's box before `t_limit`. A ray starting
+    /// inside the box starts at its block; any other at the top cell. A ray that rises
+    /// out of its block's escape cone meets nothing beyond the block's ring.
     #[inline(always)]
-    fn start<const F: bool>(&self, ray: &GridRay<F>, t_limit: f32) -> Option<WalkState> {
+    fn start<const F: bool>(&self, ray: &GridRay<F>, t_limit: f32) -> Option<(WalkState, f32)> {
         let g = &self.grid;
         let t_in = ray.t_near;
         // NaN: the ray misses the box.
@@ -461,7 +577,7 @@ impl HeightFieldAccel {
             return None;
         }
         if t_in != 0.0 {
-            return Some(WalkState { level: self.top, row: 0, col: 0, entry: 0, t_in });
+            return Some((WalkState { level: self.top, row: 0, col: 0, entry: 0, t_in }, f32::INFINITY));
         }
         let (row, col) = (Self::block_of::<false>(ray.origin.y, &g.ys, self.inv_step.1, self.block_rows), Self::block_of::<true>(ray.origin.x, &g.xs, self.inv_step.0, self.block_cols));
         // Going away from a side of the block its origin lies strictly inside, the ray
@@ -472,7 +588,17 @@ impl HeightFieldAccel {
         let (x0, x1, y0, y1) = unsafe { (*g.xs.get_unchecked(col as usize), *g.xs.get_unchecked(col as usize + 1), *g.ys.get_unchecked(row as usize), *g.ys.get_unchecked(row as usize + 1)) };
         let (ox, oy) = (ray.origin.x, ray.origin.y);
         let entry = if x0 < ox && ox < x1 && y1 < oy && oy < y0 { X_ENTRY | Y_ENTRY } else { 0 };
-        Some(WalkState { level: 0, row, col, entry, t_in })
+        // SAFETY: as above; a code indexes the 256 slopes.
+        let k2 = unsafe { *self.escape_slopes.get_unchecked(*self.escape.get_unchecked(row as usize * self.block_cols as usize + col as usize) as usize) };
+        let d = ray.direction;
+        if d.z > 0.0 && d.z * d.z >= k2 * (d.x * d.x + d.y * d.y) && ray.origin.z >= self.lowest_vertex(row as usize, col as usize) {
+            // To where the ray leaves the ring, and the rounding of its points there.
+            let (fx, fy) = (i32::from(ray.forward_x), i32::from(ray.forward_y));
+            let (tx, ty) = ray.boundaries(row - 1 + 3 * fy, col - 1 + 3 * fx);
+            let t = min(tx, ty);
+            return Some((WalkState { level: 0, row, col, entry, t_in }, t + 4.0 * ray.margin + t * 1e-6));
+        }
+        Some((WalkState { level: 0, row, col, entry, t_in }, f32::INFINITY))
     }
 
     /// One step of the walk in a cell above the blocks: down into the child the ray is in
@@ -555,6 +681,15 @@ impl HeightFieldAccel {
         state.col >>= up;
         state.t_in = t_out;
         true
+    }
+
+    /// The height of the lowest of block (`i`, `j`)'s four vertices.
+    #[inline(always)]
+    fn lowest_vertex(&self, i: usize, j: usize) -> f32 {
+        let (g, w) = (&self.grid, self.grid.width);
+        // SAFETY: (i, j) is a block of the field: its four vertices exist.
+        let z = |k: usize| unsafe { *g.z.get_unchecked(k) };
+        min(min(z(i * w + j), z(i * w + j + 1)), min(z((i + 1) * w + j), z((i + 1) * w + j + 1)))
     }
 
     /// The block column (row) whose vertex columns `vertices` (`INCREASING` or decreasing)
@@ -1000,6 +1135,29 @@ mod tests {
             }
             assert!(hits > 1500, "{w}x{h}: only {hits} hits");
         }
+    }
+
+    /// Rays rising from a flat field toward a far spike, under and just over its tip:
+    /// the escape cones must let the ones that clear it skip the walk and none that meet it.
+    #[test]
+    fn rays_rising_past_a_far_spike_agree_with_testing_every_triangle() {
+        let (w, h) = (40, 40);
+        let mut scene = ragged_scene(w, h, 6);
+        scene.surface.mask = vec![true; w * h];
+        scene.surface.height = (0..w * h).map(|p| if (p / w, p % w) == (30, 31) { 20.0 } else { 1.0 }).collect();
+        let mesh = Mesh::from_scene(&scene);
+        let accel = HeightFieldAccel::new(&mesh).expect("grid");
+        let g = mesh.grid.as_ref().expect("grid");
+        let top = vec3a(g.xs[31], g.ys[30], 20.0);
+        let mut rng = Rng::new(8);
+        let (mut hits, mut misses) = (0, 0);
+        for _ in 0..3000 {
+            let origin = vec3a(g.xs[3] + rng.next_f32() * 6.0 * 0.7, g.ys[4] - rng.next_f32() * 6.0 * 0.7, 1.0 + 1e-3);
+            let aim = top + vec3a((rng.next_f32() - 0.5) * 0.6, (rng.next_f32() - 0.5) * 0.6, 0.5 - rng.next_f32() * 5.0);
+            let hit = assert_agrees(&mesh, &accel, origin, (aim - origin).normalize(), "the spike field");
+            (hits, misses) = if hit { (hits + 1, misses) } else { (hits, misses + 1) };
+        }
+        assert!(hits > 300 && misses > 300, "{hits} hits, {misses} misses");
     }
 
     #[test]
