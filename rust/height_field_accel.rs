@@ -17,10 +17,10 @@
 //! each slab test allows for the rounding of the ray's points. The walk needs no stack,
 //! follows no pointer and stores 16 bytes a cell (a third of the blocks' count in all).
 //!
-//! Each block also stores (in a byte) the slope of a cone that clears every triangle beyond
-//! its ring of 3×3 blocks: a ray that starts in the block no lower than its lowest vertex
-//! and rises more steeply than that walks only across the ring (most rays leaving a smooth
-//! surface toward the sky).
+//! Each block also stores, for each quadrant of directions (a byte each), the slope of a
+//! cone that clears every triangle beyond its ring of 3×3 blocks: a ray that starts in the
+//! block no lower than its lowest vertex and rises more steeply than that walks only across
+//! the ring (most rays leaving a smooth surface toward the sky).
 
 use std::sync::Arc;
 
@@ -193,18 +193,20 @@ fn escape_slopes() -> [f32; 256] {
     })
 }
 
-/// For each block, the index in `slopes` (see [`escape_slopes`]) of a `k²` such that a ray
-/// that starts in the block's column (or within `slack` of it) no lower than its lowest
-/// vertex and rises at least `k` in height for every unit it moves across (`dz > 0`,
-/// `dz² ≥ k²·(dx² + dy²)`) passes above every triangle outside the ring of 3×3 blocks around
-/// it (255: no such ray; unmeshed blocks). `own` holds the blocks' height ranges; `step` the
-/// vertex spacing.
+/// For each block and each quadrant of directions (toward higher block columns or not, plus
+/// twice toward higher block rows or not), the index in `slopes` (see [`escape_slopes`]) of a
+/// `k²` such that a ray in that quadrant that starts in the block's column (or within `slack`
+/// of it) no lower than its lowest vertex and rises at least `k` in height for every unit it
+/// moves across (`dz > 0`, `dz² ≥ k²·(dx² + dy²)`) passes above every triangle outside the
+/// ring of 3×3 blocks around it (255: no such ray; unmeshed blocks). `own` holds the blocks'
+/// height ranges; `step` the vertex spacing.
 ///
 /// The bound `k` is the steepest slope from the block's lowest vertex up to the highest
 /// point of a pyramid cell, over a set of cells that covers the field outside the ring: at
 /// each level the cells within the 3×3 parents around the block's own parent that are not
 /// within the 3×3 cells around its own cell (at most 27), each at its least distance from
-/// the block.
+/// the block; a quadrant's rays only pass over the cells that reach the block's column
+/// (row) or beyond, on the side they go.
 fn escape_cones(grid: &HeightFieldGrid, own: &[Range], block_flags: &[u8], top: usize, step: (f32, f32), slack: f32, slopes: &[f32; 256]) -> Vec<u8> {
     let (cols, rows) = (grid.width - 1, grid.height - 1);
     let dims = |level: usize| (((cols - 1) >> level) + 1, ((rows - 1) >> level) + 1);
@@ -232,18 +234,19 @@ fn escape_cones(grid: &HeightFieldGrid, own: &[Range], block_flags: &[u8], top: 
     let w = grid.width;
     (0..cols * rows)
         .into_par_iter()
-        .map(|b| {
+        .flat_map_iter(|b| {
             if block_flags[b] & SURFACE == 0 {
-                return 255;
+                return [255; 4];
             }
             let (i, j) = (b / cols, b % cols);
             let z_ref = [grid.z[i * w + j], grid.z[i * w + j + 1], grid.z[(i + 1) * w + j], grid.z[(i + 1) * w + j + 1]].into_iter().fold(f32::INFINITY, f32::min);
-            let mut k2 = 0.0f64;
+            let mut k2 = [0.0f64; 4];
             for (level, cells) in maxima.iter().enumerate().take(top) {
+                let least = k2.iter().copied().fold(f64::INFINITY, f64::min);
                 // The cells of this level and above lie at least a cell away and no higher
                 // than the field's top: once that cannot raise the slope, none can.
                 let (nearest, highest) = (((1u64 << level) as f64 * sx.min(sy) - 2.0 * slack as f64).max(0.0), highest - z_ref as f64);
-                if highest * highest <= k2 * nearest * nearest {
+                if highest * highest <= least * nearest * nearest {
                     break;
                 }
                 let (level_w, level_h) = dims(level);
@@ -259,7 +262,7 @@ fn escape_cones(grid: &HeightFieldGrid, own: &[Range], block_flags: &[u8], top: 
                     }
                 }
                 let rise = region as f64 - z_ref as f64;
-                if rise <= 0.0 || rise * rise <= k2 * nearest * nearest {
+                if rise <= 0.0 || rise * rise <= least * nearest * nearest {
                     continue;
                 }
                 for r in (2 * parent_r - 2).max(0)..(2 * parent_r + 4).min(level_h as i64) {
@@ -273,15 +276,20 @@ fn escape_cones(grid: &HeightFieldGrid, own: &[Range], block_flags: &[u8], top: 
                         let gap = |own: usize, cell: i64, spacing: f64| ((cell << level).saturating_sub(own as i64 + 1).max(own as i64 - ((cell + 1) << level)).max(0) as f64 * spacing - 2.0 * slack as f64).max(0.0);
                         let (gx, gy) = (gap(j, c, sx), gap(i, r, sy));
                         let d2 = gx * gx + gy * gy;
-                        if rise * rise > k2 * d2 {
-                            k2 = rise * rise / d2;
+                        // Which quadrants' rays can pass over the cell.
+                        let (first_r, last_r, first_c, last_c) = (r << level, ((r + 1) << level) - 1, c << level, ((c + 1) << level) - 1);
+                        for (q, slope2) in k2.iter_mut().enumerate() {
+                            let along_c = if q & 1 != 0 { last_c >= j as i64 } else { first_c <= j as i64 };
+                            let along_r = if q & 2 != 0 { last_r >= i as i64 } else { first_r <= i as i64 };
+                            if along_c && along_r && rise * rise > *slope2 * d2 {
+                                *slope2 = rise * rise / d2;
+                            }
                         }
                     }
                 }
             }
             // Far more than the rounding of the ray's test, and of its heights.
-            let k2 = k2 * (1.0 + 1e-4);
-            slopes.partition_point(|&s| (s as f64) < k2).min(255) as u8
+            k2.map(|k2| slopes.partition_point(|&s| (s as f64) < k2 * (1.0 + 1e-4)).min(255) as u8)
         })
         .collect()
 }
@@ -406,8 +414,8 @@ pub struct HeightFieldAccel {
     field: Range,
     /// Corners of the field's box, widened by the slack in x and y.
     field_box: (Vec3A, Vec3A),
-    /// [`escape_cones`] of each block (which rays from it meet nothing beyond its ring), as
-    /// indices into `escape_slopes`.
+    /// [`escape_cones`] of each block, four quadrants a block (which rays from it meet
+    /// nothing beyond its ring), as indices into `escape_slopes`.
     escape: Vec<u8>,
     escape_slopes: [f32; 256],
     /// Index into `skirt` of each block's first skirt edge, or `u32::MAX`.
@@ -589,7 +597,8 @@ impl HeightFieldAccel {
         let (ox, oy) = (ray.origin.x, ray.origin.y);
         let entry = if x0 < ox && ox < x1 && y1 < oy && oy < y0 { X_ENTRY | Y_ENTRY } else { 0 };
         // SAFETY: as above; a code indexes the 256 slopes.
-        let k2 = unsafe { *self.escape_slopes.get_unchecked(*self.escape.get_unchecked(row as usize * self.block_cols as usize + col as usize) as usize) };
+        let quadrant = usize::from(ray.forward_x) + 2 * usize::from(ray.forward_y);
+        let k2 = unsafe { *self.escape_slopes.get_unchecked(*self.escape.get_unchecked(4 * (row as usize * self.block_cols as usize + col as usize) + quadrant) as usize) };
         let d = ray.direction;
         if d.z > 0.0 && d.z * d.z >= k2 * (d.x * d.x + d.y * d.y) && ray.origin.z >= self.lowest_vertex(row as usize, col as usize) {
             // To where the ray leaves the ring, and the rounding of its points there.
