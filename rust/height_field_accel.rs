@@ -206,7 +206,7 @@ fn escape_slopes() -> [f32; 256] {
 /// each level the cells within the 3×3 parents around the block's own parent that are not
 /// within the 3×3 cells around its own cell (at most 27), each at its least distance from
 /// the block; a quadrant's rays only pass over the cells that reach the block's column
-/// (row) or beyond, on the side they go.
+/// (row), or the one before it, or beyond, on the side they go.
 fn escape_cones(grid: &HeightFieldGrid, own: &[Range], block_flags: &[u8], top: usize, step: (f32, f32), slack: f32, slopes: &[f32; 256]) -> Vec<u8> {
     let (cols, rows) = (grid.width - 1, grid.height - 1);
     let dims = |level: usize| (((cols - 1) >> level) + 1, ((rows - 1) >> level) + 1);
@@ -276,11 +276,14 @@ fn escape_cones(grid: &HeightFieldGrid, own: &[Range], block_flags: &[u8], top: 
                         let gap = |own: usize, cell: i64, spacing: f64| ((cell << level).saturating_sub(own as i64 + 1).max(own as i64 - ((cell + 1) << level)).max(0) as f64 * spacing - 2.0 * slack as f64).max(0.0);
                         let (gx, gy) = (gap(j, c, sx), gap(i, r, sy));
                         let d2 = gx * gx + gy * gy;
-                        // Which quadrants' rays can pass over the cell.
+                        // Which quadrants' rays can pass over the cell: it reaches the block's
+                        // column (row) or beyond on their side, or the column (row) next to it,
+                        // where an origin up to `slack` off the block lies.
                         let (first_r, last_r, first_c, last_c) = (r << level, ((r + 1) << level) - 1, c << level, ((c + 1) << level) - 1);
+                        let (i, j) = (i as i64, j as i64);
                         for (q, slope2) in k2.iter_mut().enumerate() {
-                            let along_c = if q & 1 != 0 { last_c >= j as i64 } else { first_c <= j as i64 };
-                            let along_r = if q & 2 != 0 { last_r >= i as i64 } else { first_r <= i as i64 };
+                            let along_c = if q & 1 != 0 { last_c >= j - 1 } else { first_c <= j + 1 };
+                            let along_r = if q & 2 != 0 { last_r >= i - 1 } else { first_r <= i + 1 };
                             if along_c && along_r && rise * rise > *slope2 * d2 {
                                 *slope2 = rise * rise / d2;
                             }
