@@ -27,6 +27,7 @@ use std::sync::Arc;
 use glam::{Vec3A, Vec4};
 use rayon::prelude::*;
 
+use crate::escape_cone::{escape_cones, escape_slopes};
 use crate::geometry::{BlockSide, HeightFieldGrid, Mesh, NO_TRIANGLE};
 use crate::tracer::Hit;
 
@@ -180,121 +181,6 @@ fn cell_band(grid: &HeightFieldGrid, vertex_flags: &[u8], level: usize, row: i32
         let (c_lo, c_hi) = outward(z_lo, z_hi);
         Band { a: 0.0, b: 0.0, c_lo, c_hi }
     }
-}
-
-/// Escape slopes (squared) that [`escape_cones`] rounds up to: 0, then a geometric series
-/// from 1e-6 to 1e6 (slopes 1e-3 to 1e3, 5.6 % apart), then +∞ (no escape).
-fn escape_slopes() -> [f32; 256] {
-    let ratio = 1e12f64.powf(1.0 / 253.0);
-    std::array::from_fn(|c| match c {
-        0 => 0.0,
-        255 => f32::INFINITY,
-        c => ((1e-6 * ratio.powi(c as i32 - 1)) as f32).next_up(),
-    })
-}
-
-/// For each block and each quadrant of directions (toward higher block columns or not, plus
-/// twice toward higher block rows or not), the index in `slopes` (see [`escape_slopes`]) of a
-/// `k²` such that a ray in that quadrant that starts in the block's column (or within `slack`
-/// of it) no lower than its lowest vertex and rises at least `k` in height for every unit it
-/// moves across (`dz > 0`, `dz² ≥ k²·(dx² + dy²)`) passes above every triangle outside the
-/// ring of 3×3 blocks around it (255: no such ray; unmeshed blocks). `own` holds the blocks'
-/// height ranges; `step` the vertex spacing.
-///
-/// The bound `k` is the steepest slope from the block's lowest vertex up to the highest
-/// point of a pyramid cell, over a set of cells that covers the field outside the ring: at
-/// each level the cells within the 3×3 parents around the block's own parent that are not
-/// within the 3×3 cells around its own cell (at most 27), each at its least distance from
-/// the block; a quadrant's rays only pass over the cells that reach the block's column
-/// (row), or the one before it, or beyond, on the side they go.
-fn escape_cones(grid: &HeightFieldGrid, own: &[Range], block_flags: &[u8], top: usize, step: (f32, f32), slack: f32, slopes: &[f32; 256]) -> Vec<u8> {
-    let (cols, rows) = (grid.width - 1, grid.height - 1);
-    let dims = |level: usize| (((cols - 1) >> level) + 1, ((rows - 1) >> level) + 1);
-    // Highest point of every cell of every level (−∞ where there is nothing).
-    let mut maxima: Vec<Vec<f32>> = vec![own.iter().map(|r| if r.max.is_finite() { r.max } else { f32::NEG_INFINITY }).collect()];
-    for level in 1..=top {
-        let ((w, h), (child_w, child_h)) = (dims(level), dims(level - 1));
-        let child = &maxima[level - 1];
-        let cells = (0..w * h)
-            .map(|c| {
-                let (r, q) = (c / w, c % w);
-                let mut z = f32::NEG_INFINITY;
-                for (cr, cq) in [(2 * r, 2 * q), (2 * r, 2 * q + 1), (2 * r + 1, 2 * q), (2 * r + 1, 2 * q + 1)] {
-                    if cr < child_h && cq < child_w {
-                        z = z.max(child[cr * child_w + cq]);
-                    }
-                }
-                z
-            })
-            .collect();
-        maxima.push(cells);
-    }
-    let (sx, sy) = (step.0.abs() as f64, step.1.abs() as f64);
-    let highest = maxima[top][0] as f64;
-    let w = grid.width;
-    (0..cols * rows)
-        .into_par_iter()
-        .flat_map_iter(|b| {
-            if block_flags[b] & SURFACE == 0 {
-                return [255; 4];
-            }
-            let (i, j) = (b / cols, b % cols);
-            let z_ref = [grid.z[i * w + j], grid.z[i * w + j + 1], grid.z[(i + 1) * w + j], grid.z[(i + 1) * w + j + 1]].into_iter().fold(f32::INFINITY, f32::min);
-            let mut k2 = [0.0f64; 4];
-            for (level, cells) in maxima.iter().enumerate().take(top) {
-                let least = k2.iter().copied().fold(f64::INFINITY, f64::min);
-                // The cells of this level and above lie at least a cell away and no higher
-                // than the field's top: once that cannot raise the slope, none can.
-                let (nearest, highest) = (((1u64 << level) as f64 * sx.min(sy) - 2.0 * slack as f64).max(0.0), highest - z_ref as f64);
-                if highest * highest <= least * nearest * nearest {
-                    break;
-                }
-                let (level_w, level_h) = dims(level);
-                let (own_r, own_c) = ((i >> level) as i64, (j >> level) as i64);
-                let (parent_r, parent_c) = (own_r >> 1, own_c >> 1);
-                // Nor can this level's cells if none of the 3×3 parents holding them can.
-                let (parent_w, parent_h) = dims(level + 1);
-                let parents = &maxima[level + 1];
-                let mut region = f32::NEG_INFINITY;
-                for r in (parent_r - 1).max(0)..(parent_r + 2).min(parent_h as i64) {
-                    for c in (parent_c - 1).max(0)..(parent_c + 2).min(parent_w as i64) {
-                        region = region.max(parents[r as usize * parent_w + c as usize]);
-                    }
-                }
-                let rise = region as f64 - z_ref as f64;
-                if rise <= 0.0 || rise * rise <= least * nearest * nearest {
-                    continue;
-                }
-                for r in (2 * parent_r - 2).max(0)..(2 * parent_r + 4).min(level_h as i64) {
-                    for c in (2 * parent_c - 2).max(0)..(2 * parent_c + 4).min(level_w as i64) {
-                        let rise = cells[r as usize * level_w + c as usize] as f64 - z_ref as f64;
-                        if ((r - own_r).abs() <= 1 && (c - own_c).abs() <= 1) || rise <= 0.0 {
-                            continue;
-                        }
-                        // The gap between the block and the cell along x and y, less the
-                        // origin's allowance off the block.
-                        let gap = |own: usize, cell: i64, spacing: f64| ((cell << level).saturating_sub(own as i64 + 1).max(own as i64 - ((cell + 1) << level)).max(0) as f64 * spacing - 2.0 * slack as f64).max(0.0);
-                        let (gx, gy) = (gap(j, c, sx), gap(i, r, sy));
-                        let d2 = gx * gx + gy * gy;
-                        // Which quadrants' rays can pass over the cell: it reaches the block's
-                        // column (row) or beyond on their side, or the column (row) next to it,
-                        // where an origin up to `slack` off the block lies.
-                        let (first_r, last_r, first_c, last_c) = (r << level, ((r + 1) << level) - 1, c << level, ((c + 1) << level) - 1);
-                        let (i, j) = (i as i64, j as i64);
-                        for (q, slope2) in k2.iter_mut().enumerate() {
-                            let along_c = if q & 1 != 0 { last_c >= j - 1 } else { first_c <= j + 1 };
-                            let along_r = if q & 2 != 0 { last_r >= i - 1 } else { first_r <= i + 1 };
-                            if along_c && along_r && rise * rise > *slope2 * d2 {
-                                *slope2 = rise * rise / d2;
-                            }
-                        }
-                    }
-                }
-            }
-            // Far more than the rounding of the ray's test, and of its heights.
-            k2.map(|k2| slopes.partition_point(|&s| (s as f64) < k2 * (1.0 + 1e-4)).min(255) as u8)
-        })
-        .collect()
 }
 
 /// Where level L of the pyramid lies in [`HeightFieldAccel::pyramid`] (level 0, the blocks,
@@ -512,7 +398,8 @@ impl HeightFieldAccel {
         }
         let field_box = (Vec3A::new(grid.xs[0] - slack, grid.ys[rows] - slack, field.min), Vec3A::new(grid.xs[cols] + slack, grid.ys[0] + slack, field.max));
         let escape_slopes = escape_slopes();
-        let escape = escape_cones(&grid, &own, &block_flags, top, step, slack, &escape_slopes);
+        let block_top = own.iter().map(|r| if r.max.is_finite() { r.max } else { f32::NEG_INFINITY }).collect();
+        let escape = escape_cones(&grid, block_top, |b| block_flags[b] & SURFACE != 0, top, step, slack, &escape_slopes);
         Some(HeightFieldAccel { block_cols: ci, block_rows: ri, packed_flags, pyramid, level_info, top, field, field_box, escape, escape_slopes, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
     }
 
@@ -599,8 +486,8 @@ impl HeightFieldAccel {
         let (x0, x1, y0, y1) = unsafe { (*g.xs.get_unchecked(col as usize), *g.xs.get_unchecked(col as usize + 1), *g.ys.get_unchecked(row as usize), *g.ys.get_unchecked(row as usize + 1)) };
         let (ox, oy) = (ray.origin.x, ray.origin.y);
         let entry = if x0 < ox && ox < x1 && y1 < oy && oy < y0 { X_ENTRY | Y_ENTRY } else { 0 };
-        // SAFETY: as above; a code indexes the 256 slopes.
         let quadrant = usize::from(ray.forward_x) + 2 * usize::from(ray.forward_y);
+        // SAFETY: as above, four codes a block; a code indexes the 256 slopes.
         let k2 = unsafe { *self.escape_slopes.get_unchecked(*self.escape.get_unchecked(4 * (row as usize * self.block_cols as usize + col as usize) + quadrant) as usize) };
         let d = ray.direction;
         if d.z > 0.0 && d.z * d.z >= k2 * (d.x * d.x + d.y * d.y) && ray.origin.z >= self.lowest_vertex(row as usize, col as usize) {

@@ -5,6 +5,7 @@
 //! (module `irtps._core`).
 
 pub mod error;
+mod escape_cone;
 pub mod geometry;
 pub mod height_field_accel;
 pub mod image_io;
