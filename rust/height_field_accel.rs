@@ -2,7 +2,7 @@
 //! the ray over a pyramid of slabs bounding the grid's blocks.
 //!
 //! Level L of the pyramid splits the grid into cells of 2^L × 2^L blocks and stores, per
-//! cell, a slab between two parallel planes z = a·x + b·y + c (a [`Band`]) that holds the
+//! cell, a slab between two parallel planes z = a·x + b·y + c (a `Band`) that holds the
 //! triangles (surface and skirt) of its blocks *and of the ring of blocks around it*. The
 //! planes follow the least-squares slope of the cell, so on a smooth surface the slab is far
 //! thinner than the cell's height range and a ray leaving the surface is found to pass above
