@@ -64,17 +64,22 @@ pub(crate) fn escape_cones(grid: &HeightFieldGrid, block_top: Vec<f32>, meshed: 
             }
             let (i, j) = (b / cols, b % cols);
             let z_ref = [grid.z[i * w + j], grid.z[i * w + j + 1], grid.z[(i + 1) * w + j], grid.z[(i + 1) * w + j + 1]].into_iter().fold(f32::INFINITY, f32::min);
+            let headroom = highest - z_ref as f64;
+            let (i, j) = (i as i64, j as i64);
             let mut k2 = [0.0f64; 4];
             for (level, cells) in maxima.iter().enumerate().take(top) {
                 let least = k2.iter().copied().fold(f64::INFINITY, f64::min);
                 // The cells of this level and above lie at least a cell away and no higher
                 // than the field's top: once that cannot raise the slope, none can.
-                let (nearest, highest) = (((1u64 << level) as f64 * sx.min(sy) - 2.0 * slack as f64).max(0.0), highest - z_ref as f64);
-                if highest * highest <= least * nearest * nearest {
+                let nearest = ((1u64 << level) as f64 * sx.min(sy) - 2.0 * slack as f64).max(0.0);
+                if headroom * headroom <= least * nearest * nearest {
                     break;
                 }
                 let (level_w, level_h) = dims(level);
-                let (own_r, own_c) = ((i >> level) as i64, (j >> level) as i64);
+                let (own_r, own_c) = (i >> level, j >> level);
+                // The gap between the block (column or row `own`) and `cell`'s blocks, in
+                // world units, less the origin's allowance off the block.
+                let gap = |own: i64, cell: i64, spacing: f64| (((cell << level) - own - 1).max(own - ((cell + 1) << level)).max(0) as f64 * spacing - 2.0 * slack as f64).max(0.0);
                 let (parent_r, parent_c) = (own_r >> 1, own_c >> 1);
                 // Nor can this level's cells if none of the 3×3 parents holding them can.
                 let (parent_w, parent_h) = dims(level + 1);
@@ -95,16 +100,12 @@ pub(crate) fn escape_cones(grid: &HeightFieldGrid, block_top: Vec<f32>, meshed: 
                         if ((r - own_r).abs() <= 1 && (c - own_c).abs() <= 1) || rise <= 0.0 {
                             continue;
                         }
-                        // The gap between the block and the cell along x and y, less the
-                        // origin's allowance off the block.
-                        let gap = |own: usize, cell: i64, spacing: f64| ((cell << level).saturating_sub(own as i64 + 1).max(own as i64 - ((cell + 1) << level)).max(0) as f64 * spacing - 2.0 * slack as f64).max(0.0);
                         let (gx, gy) = (gap(j, c, sx), gap(i, r, sy));
                         let d2 = gx * gx + gy * gy;
                         // Which quadrants' rays can pass over the cell: it reaches the block's
                         // column (row) or beyond on their side, or the column (row) next to it,
                         // where an origin up to `slack` off the block lies.
                         let (first_r, last_r, first_c, last_c) = (r << level, ((r + 1) << level) - 1, c << level, ((c + 1) << level) - 1);
-                        let (i, j) = (i as i64, j as i64);
                         for (q, slope2) in k2.iter_mut().enumerate() {
                             let along_c = if q & 1 != 0 { last_c >= j - 1 } else { first_c <= j + 1 };
                             let along_r = if q & 2 != 0 { last_r >= i - 1 } else { first_r <= i + 1 };

@@ -582,13 +582,21 @@ impl HeightFieldAccel {
         true
     }
 
+    /// Heights of block (`i`, `j`)'s vertices: (i, j), (i, j + 1), (i + 1, j), (i + 1, j + 1).
+    #[inline(always)]
+    fn corner_heights(&self, i: usize, j: usize) -> (f32, f32, f32, f32) {
+        let (g, w) = (&self.grid, self.grid.width);
+        debug_assert!(i + 1 < g.height && j + 1 < w);
+        // SAFETY: (i, j) is a block of the field: its four vertices exist.
+        let z = |k: usize| unsafe { *g.z.get_unchecked(k) };
+        (z(i * w + j), z(i * w + j + 1), z((i + 1) * w + j), z((i + 1) * w + j + 1))
+    }
+
     /// The height of the lowest of block (`i`, `j`)'s four vertices.
     #[inline(always)]
     fn lowest_vertex(&self, i: usize, j: usize) -> f32 {
-        let (g, w) = (&self.grid, self.grid.width);
-        // SAFETY: (i, j) is a block of the field: its four vertices exist.
-        let z = |k: usize| unsafe { *g.z.get_unchecked(k) };
-        min(min(z(i * w + j), z(i * w + j + 1)), min(z((i + 1) * w + j), z((i + 1) * w + j + 1)))
+        let (z00, z01, z10, z11) = self.corner_heights(i, j);
+        min(min(z00, z01), min(z10, z11))
     }
 
     /// The block column (row) whose vertex columns `vertices` (`INCREASING` or decreasing)
@@ -635,15 +643,13 @@ impl HeightFieldAccel {
         let g = &self.grid;
         let (i, j) = (row as usize, col as usize);
         let block = i * self.block_cols as usize + j;
-        let w = g.width;
         debug_assert!(row < self.block_rows && col < self.block_cols);
-        // SAFETY: (row, col) is a block of the field: its flags and four vertices exist.
+        // SAFETY: (row, col) is a block of the field: its flags exist.
         let flags = unsafe { *self.packed_flags.get_unchecked(block / 4) } >> (2 * (block % 4)) & 3;
         if flags == 0 {
             return None;
         }
-        let z = |k: usize| unsafe { *g.z.get_unchecked(k) };
-        let (z00, z01, z10, z11) = (z(i * w + j), z(i * w + j + 1), z((i + 1) * w + j), z((i + 1) * w + j + 1));
+        let (z00, z01, z10, z11) = self.corner_heights(i, j);
         let mut lo = min(min(z00, z01), min(z10, z11));
         if flags & SKIRT != 0 {
             lo = min(lo, g.base);

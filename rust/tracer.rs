@@ -318,6 +318,7 @@ impl PanelShape {
         let expected = [[o, o + u, o + u + v], [o, o + u + v, o + v]];
         let laid_out = (0..2).all(|k| mesh.panel_of.get(first_triangle + k) == Some(&(id as u32)) && mesh.corners(first_triangle + k) == expected[k]);
         let rectangle = u.dot(v).abs() <= 1e-6 * u.length() * v.length();
+        let axis = (0..3).find(|&k| panel.normal[k].abs() == 1.0);
         (laid_out && rectangle).then(|| PanelShape {
             id: id as u32,
             origin: o,
@@ -328,8 +329,8 @@ impl PanelShape {
             edge_v: v,
             unbounded: panel.unbounded,
             first_triangle,
-            axis: (0..3).find(|&k| panel.normal[k].abs() == 1.0),
-            plane: (0..3).find(|&k| panel.normal[k].abs() == 1.0).map_or(0.0, |k| o[k]),
+            axis,
+            plane: axis.map_or(0.0, |k| o[k]),
         })
     }
 
