@@ -15,7 +15,9 @@ import numpy as np
 
 from irtps.atomic import atomic_output_dir
 from irtps.errors import DatasetError
-from irtps.imageio import check_finite, clip_negative, format_size, read_exr, read_image, read_images, read_mask, write_exr, write_png
+from irtps.imageio import check_finite, clip_negative, format_size, image_size, read_exr, read_image, read_images, read_mask, write_exr, write_png
+from irtps.paths import check_file, check_folder, exists, optional_file, optional_folder
+from irtps.resources import check_memory
 from irtps.scene import Scene, load_scene, write_scene
 
 SCENE_FILE = "scene.json"
@@ -126,22 +128,25 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True) -> Dataset:
     Raises
     ------
     DatasetError
-        Naming the file and the problem: missing files, an image count that is not
-        the number of lights, sizes that disagree, non-finite pixels, too few
-        lights, a light that is not a unit vector with z > 0, an unknown format.
+        Naming the file and the problem: missing files, a path that is not a readable
+        regular file (a directory, a FIFO, a symlink loop or a broken symlink; an
+        optional file such as ``mask.png`` is absent only when nothing is at its path),
+        an image count that is not the number of lights, sizes that disagree,
+        non-finite pixels, too few lights, a light that is not a unit vector with
+        z > 0, an unknown format.
+    IrtpsError
+        If decoding the images would need more memory than is available (checked from
+        the first image's header before decoding any), naming the images' folder.
 
     Warns
     -----
     IrtpsWarning
         Naming the first image with negative values, if any.
     """
-    folder = Path(path)
-    if not folder.is_dir():
-        problem = "not a folder" if folder.exists() else "no such data set folder"
-        raise DatasetError(f"{folder}: {problem}")
-    if (folder / SCENE_FILE).is_file():
+    folder = check_folder(path)
+    if exists(folder / SCENE_FILE):
         return _load_irtps(folder, ground_truth)
-    if (folder / DILIGENT_MARKER).is_file():
+    if exists(folder / DILIGENT_MARKER):
         from irtps.diligent import load_diligent
 
         return load_diligent(folder, ground_truth=ground_truth)
@@ -220,10 +225,8 @@ def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | 
     DatasetError
         Naming the file: not a data set, a camera of another size, malformed ground truth.
     """
-    folder = Path(path)
-    if not folder.is_dir():
-        raise DatasetError(f"{folder}: no such data set folder")
-    if (folder / SCENE_FILE).is_file():
+    folder = check_folder(path)
+    if exists(folder / SCENE_FILE):
         scene = load_scene(folder / SCENE_FILE)
         camera_size = (scene.camera.height, scene.camera.width)
         if camera_size != tuple(size):
@@ -231,7 +234,7 @@ def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | 
                 f"{folder / SCENE_FILE}: camera size {format_size(camera_size)} differs from the reconstruction's ({format_size(size)})"
             )
         return _load_ground_truth(folder / GT_FOLDER, len(scene.lights), camera_size, direct=False)
-    if (folder / DILIGENT_MARKER).is_file():
+    if exists(folder / DILIGENT_MARKER):
         from irtps.diligent import load_diligent_ground_truth
 
         return load_diligent_ground_truth(folder, tuple(size))
@@ -243,6 +246,7 @@ def _load_irtps(folder: Path, ground_truth: bool) -> Dataset:
     count = len(scene.lights)
     size = (scene.camera.height, scene.camera.width)
     paths = _numbered_images(folder / IMAGES_FOLDER, count)
+    check_stack_memory(paths, size)
     images = read_images(paths)
     if images.shape[1:3] != size:
         raise DatasetError(
@@ -251,10 +255,40 @@ def _load_irtps(folder: Path, ground_truth: bool) -> Dataset:
         )
     clip_negative(paths, images)
     mask_path = folder / MASK_FILE
-    mask = read_mask(mask_path, size) if mask_path.exists() else np.ones(size, dtype=bool)
+    mask = read_mask(mask_path, size) if optional_file(mask_path) else np.ones(size, dtype=bool)
     gt = _load_ground_truth(folder / GT_FOLDER, count, size) if ground_truth else None
     saturation = png_saturation(paths)
     return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=saturation)
+
+
+def check_stack_memory(paths: list[Path], size: tuple[int, int] | None = None) -> None:
+    """Refuse, before decoding any, a stack of images that would not fit in memory.
+
+    Parameters
+    ----------
+    paths : list of pathlib.Path
+        The images, all of the first one's size.
+    size : tuple of int, optional
+        The (H, W) expected, used when the first image's header cannot be parsed.
+
+    Raises
+    ------
+    IrtpsError
+        ``"FOLDER: K images of WxH decoded as float32 RGB need X GB, more than the Y GB
+        available"``.
+    DatasetError
+        If the first image is not a readable regular file.
+    """
+    claimed = image_size(paths[0])
+    if claimed is not None and size is not None:
+        claimed = max(claimed, tuple(size), key=lambda shape: shape[0] * shape[1])
+    shape = claimed or size
+    if shape is None:
+        return
+    check_memory(
+        len(paths) * shape[0] * shape[1] * 3 * np.dtype(np.float32).itemsize,
+        f"{paths[0].parent}: {len(paths)} images of {format_size(shape)} decoded as float32 RGB",
+    )
 
 
 def png_saturation(paths: list[Path]) -> float | None:
@@ -264,17 +298,17 @@ def png_saturation(paths: list[Path]) -> float | None:
 
 def _numbered_images(folder: Path, count: int) -> list[Path]:
     """``folder/000.exr`` (or ``.png``) ... for ``count`` lights; no more, no fewer."""
-    if not folder.is_dir():
-        raise DatasetError(f"{folder}: missing folder ({SCENE_FILE} has {count} lights, one image each)")
+    context = f"{SCENE_FILE} has {count} lights, one image each"
+    check_folder(folder, missing="missing folder", context=context)
     paths = []
     for k in range(count):
         candidates = [folder / _image_name(k, suffix) for suffix in (".exr", ".png")]
-        present = [candidate for candidate in candidates if candidate.is_file()]
+        present = [candidate for candidate in candidates if exists(candidate)]
         if not present:
-            raise DatasetError(f"{candidates[0]}: missing ({SCENE_FILE} has {count} lights, one image each)")
+            raise DatasetError(f"{candidates[0]}: missing ({context})")
         if len(present) > 1:
             raise DatasetError(f"{folder}: both {present[0].name} and {present[1].name} exist; keep one")
-        paths.append(present[0])
+        paths.append(check_file(present[0], context))
     numbered = sorted(entry.name for entry in folder.iterdir() if _NUMBERED_IMAGE.fullmatch(entry.name))
     if len(numbered) > count:
         unexpected = sorted(set(numbered) - {path.name for path in paths})
@@ -285,7 +319,7 @@ def _numbered_images(folder: Path, count: int) -> list[Path]:
 
 
 def _load_ground_truth(folder: Path, count: int, size: tuple[int, int], direct: bool = True) -> GroundTruth | None:
-    if not folder.is_dir():
+    if not optional_folder(folder):
         return None
     parts = {
         "height": _if_file(folder / "height.exr", lambda path: read_height_map(path, size)),
@@ -293,8 +327,9 @@ def _load_ground_truth(folder: Path, count: int, size: tuple[int, int], direct: 
         "albedo": _if_file(folder / "albedo.exr", lambda path: read_albedo_map(path, size)),
     }
     direct_folder = folder / "direct"
-    if direct and direct_folder.is_dir():
+    if direct and optional_folder(direct_folder):
         paths = _numbered_images(direct_folder, count)
+        check_stack_memory(paths, size)
         parts["direct"] = _checked_size(paths[0], read_images(paths), size)
     if all(part is None for part in parts.values()):
         return None
@@ -363,7 +398,8 @@ def _image_size(shape: tuple[int, ...]) -> tuple[int, int]:
 
 
 def _if_file(path: Path, read):
-    return read(path) if path.is_file() else None
+    """``read(path)`` if an optional file is there, None if nothing is at ``path``."""
+    return read(path) if optional_file(path) else None
 
 
 def _gt_shapes(count: int, size: tuple[int, int]) -> dict[str, tuple[int, ...]]:
@@ -420,7 +456,8 @@ def load_scene_object(path: str | Path) -> tuple[Scene, np.ndarray, np.ndarray, 
     ----------
     path : str or pathlib.Path
         A folder with ``scene.json``, ``gt/height.exr``, ``gt/albedo.exr`` and optionally
-        ``mask.png`` (absent: every pixel). Images are not needed.
+        ``mask.png`` (absent: every pixel; anything else at that path that is not a
+        readable file is an error, as for `load_dataset`). Images are not needed.
 
     Returns
     -------
@@ -432,19 +469,16 @@ def load_scene_object(path: str | Path) -> tuple[Scene, np.ndarray, np.ndarray, 
     DatasetError
         Naming the missing or malformed file, e.g. an albedo outside [0, 1] in the mask.
     """
-    folder = Path(path)
-    if not folder.is_dir():
-        raise DatasetError(f"{folder}: no such folder")
+    folder = check_folder(path)
     scene = load_scene(folder / SCENE_FILE)
     size = (scene.camera.height, scene.camera.width)
     height_path, albedo_path = folder / GT_FOLDER / "height.exr", folder / GT_FOLDER / "albedo.exr"
     for required in (height_path, albedo_path):
-        if not required.is_file():
-            raise DatasetError(f"{required}: missing (rendering needs the true height and albedo)")
+        check_file(required, "rendering needs the true height and albedo")
     height = read_height_map(height_path, size)
     albedo = read_albedo_map(albedo_path, size)
     mask_path = folder / MASK_FILE
-    mask = read_mask(mask_path, size) if mask_path.is_file() else np.ones(size, dtype=bool)
+    mask = read_mask(mask_path, size) if optional_file(mask_path) else np.ones(size, dtype=bool)
     outside = (albedo < 0.0) | (albedo > 1.0)
     outside[~mask] = False
     if outside.any():

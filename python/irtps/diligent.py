@@ -13,9 +13,10 @@ from pathlib import Path
 import numpy as np
 import scipy.io
 
-from irtps.dataset import Dataset, GroundTruth, png_saturation
+from irtps.dataset import Dataset, GroundTruth, check_stack_memory, png_saturation
 from irtps.errors import DatasetError
 from irtps.imageio import check_finite, format_size, read_images, read_mask
+from irtps.paths import check_file, check_folder, optional_file
 from irtps.scene import MIN_LIGHTS, Camera, Light, Scene
 
 FILENAMES_FILE = "filenames.txt"
@@ -46,15 +47,20 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
         ``light_intensities.txt``. The camera is orthographic with the images'
         size and ``pixel_size`` 1; there is no floor and no environment.
         ``saturation`` is 1.0: a PNG value of ``2^bits - 1`` is clipped.
-        ``mask.png`` is optional (absent means every pixel).
+        ``mask.png`` is optional (absent means every pixel; anything else at that path
+        that is not a readable file is an error).
 
     Raises
     ------
     DatasetError
-        Naming the file (and line) and the problem: a missing file, line counts
+        Naming the file (and line) and the problem: a missing file or one that is
+        not a readable regular file (a directory, a FIFO, a symlink loop), line counts
         that disagree, a direction that is not a unit vector (beyond 1e-2) or
         has z <= 0, a negative intensity, fewer than 3 lights, images of
         different sizes or with non-finite values.
+    IrtpsError
+        If decoding the images would need more memory than is available (checked from
+        the first image's header and the image count, before decoding any).
 
     Notes
     -----
@@ -62,7 +68,7 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
     image model ``L = rho * E * (n . l) / pi`` makes irtps albedos pi times
     DiLiGenT's convention ``I = rho * e * (n . l)``.
     """
-    folder = Path(path)
+    folder = check_folder(path)
     names, name_lines = _read_filenames(folder / FILENAMES_FILE)
     directions, direction_lines = _read_table(folder / DIRECTIONS_FILE)
     intensities, intensity_lines = _read_table(folder / INTENSITIES_FILE)
@@ -77,14 +83,14 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
     _check_non_negative(folder / INTENSITIES_FILE, intensities, intensity_lines)
     image_paths = [folder / name for name in names]
     for image_path, line in zip(image_paths, name_lines, strict=True):
-        if not image_path.is_file():
-            raise DatasetError(f"{image_path}: missing (listed on line {line} of {FILENAMES_FILE})")
+        check_file(image_path, f"listed on line {line} of {FILENAMES_FILE}")
+    check_stack_memory(image_paths)
     images = read_images(image_paths)
     size = images.shape[1:3]
     mask_path = folder / MASK_FILE
-    mask = read_mask(mask_path, size) if mask_path.exists() else np.ones(size, dtype=bool)
+    mask = read_mask(mask_path, size) if optional_file(mask_path) else np.ones(size, dtype=bool)
     normals_path = folder / NORMALS_FILE
-    gt = GroundTruth(normal=_read_normals(normals_path, size)) if ground_truth and normals_path.is_file() else None
+    gt = GroundTruth(normal=_read_normals(normals_path, size)) if ground_truth and optional_file(normals_path) else None
     scene = Scene(
         camera=Camera(width=size[1], height=size[0], pixel_size=1.0),
         lights=tuple(Light(direction=d, irradiance=e) for d, e in zip(directions, intensities, strict=True)),
@@ -106,12 +112,13 @@ def load_diligent_ground_truth(path: str | Path, size: tuple[int, int]) -> Groun
     GroundTruth or None
         None when the folder has no ``Normal_gt.mat``.
     """
-    normals_path = Path(path) / NORMALS_FILE
-    return GroundTruth(normal=_read_normals(normals_path, size)) if normals_path.is_file() else None
+    normals_path = check_folder(path) / NORMALS_FILE
+    return GroundTruth(normal=_read_normals(normals_path, size)) if optional_file(normals_path) else None
 
 
 def _read_lines(path: Path) -> list[tuple[int, str]]:
     """Non-blank lines of a text file, stripped, with their 1-based line numbers."""
+    check_file(path, f"a DiLiGenT folder needs {FILENAMES_FILE}, {DIRECTIONS_FILE} and {INTENSITIES_FILE}")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:

@@ -2,7 +2,9 @@
 
 Arrays are row-major, top row first: (H, W) for one channel, (H, W, 3) for RGB.
 PNG values are linear, divided by ``2^bits - 1``. Errors raised by the core
-(``ValueError``, ``OSError``) become `DatasetError` with the same message.
+(``ValueError``, ``OSError``) become `DatasetError` with the same message. A path that
+is there but is not a readable regular file (a directory, a FIFO, a symlink loop ...) is
+refused before it is opened, so that reading never blocks (see `irtps.paths`).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import numpy as np
 
 from irtps import _core
 from irtps.errors import DatasetError, IrtpsWarning
+from irtps.paths import MISSING, file_problem
 
 PNG_BIT_DEPTHS = (8, 16)
 """Bit depths of PNG files that can be written."""
@@ -52,7 +55,7 @@ def write_exr(path: str | Path, array: np.ndarray) -> None:
     array : numpy.ndarray
         (H, W) or (H, W, 3); converted to float32.
     """
-    _core_call(_core.write_exr, path, _image_array(path, array))
+    _core_call(_core.write_exr, path, _image_array(path, array), reading=False)
 
 
 def read_png(path: str | Path) -> tuple[np.ndarray, int]:
@@ -84,7 +87,7 @@ def write_png(path: str | Path, array: np.ndarray, bit_depth: int = 8) -> None:
     """
     if bit_depth not in PNG_BIT_DEPTHS:
         raise DatasetError(f"{path}: PNG bit depth must be 8 or 16, got {bit_depth}")
-    _core_call(_core.write_png, path, _image_array(path, array), bit_depth)
+    _core_call(_core.write_png, path, _image_array(path, array), bit_depth, reading=False)
 
 
 def read_image(path: str | Path) -> np.ndarray:
@@ -137,6 +140,8 @@ def read_images(paths: Sequence[str | Path]) -> np.ndarray:
     """
     if not paths:
         raise DatasetError("no image files given")
+    for path in paths:
+        _check_readable(path)
     try:
         return _core.read_images([str(path) for path in paths])
     except (ValueError, OSError) as error:
@@ -220,6 +225,74 @@ def check_finite(path: str | Path, array: np.ndarray) -> None:
         raise DatasetError(f"{path}: non-finite value {value} at row {row}, column {column}")
 
 
+def image_size(path: str | Path) -> tuple[int, int] | None:
+    """The (H, W) an .exr or .png file claims in its header, read without decoding the pixels.
+
+    For sizing what decoding a stack of images will need before doing it. The file must be a
+    readable regular file (checked first, so that a FIFO does not block).
+
+    Returns
+    -------
+    tuple of int or None
+        None when the header cannot be parsed (an unknown type, a corrupt file): the
+        decoder then reports the problem.
+
+    Raises
+    ------
+    DatasetError
+        If ``path`` is not a readable regular file.
+    """
+    problem = file_problem(path)
+    if problem is not None:
+        raise DatasetError(f"{path}: {problem}")
+    try:
+        with open(path, "rb") as file:
+            head = file.read(_HEADER_BYTES)
+    except OSError as error:
+        raise DatasetError(f"{path}: cannot read ({error.strerror or error})") from None
+    suffix = Path(path).suffix.lower()
+    if suffix == ".png":
+        return _png_size(head)
+    if suffix == ".exr":
+        return _exr_size(head)
+    return None
+
+
+_HEADER_BYTES = 1 << 16
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_EXR_MAGIC = b"\x76\x2f\x31\x01"
+
+
+def _png_size(head: bytes) -> tuple[int, int] | None:
+    if len(head) < 24 or not head.startswith(_PNG_SIGNATURE) or head[12:16] != b"IHDR":
+        return None
+    width, height = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    return (height, width) if width > 0 and height > 0 else None
+
+
+def _exr_size(head: bytes) -> tuple[int, int] | None:
+    """The data window of the first header of an EXR file."""
+    if not head.startswith(_EXR_MAGIC) or len(head) < 8:
+        return None
+    at = 8
+    while at < len(head) and head[at] != 0:
+        name_end = head.find(b"\0", at)
+        type_end = head.find(b"\0", name_end + 1) if name_end >= 0 else -1
+        if type_end < 0 or type_end + 5 > len(head):
+            return None
+        name = head[at:name_end]
+        length = int.from_bytes(head[type_end + 1 : type_end + 5], "little", signed=True)
+        value = head[type_end + 5 : type_end + 5 + length]
+        if length < 0 or len(value) < length:
+            return None
+        if name == b"dataWindow" and length == 16:
+            x0, y0, x1, y1 = (int.from_bytes(value[i : i + 4], "little", signed=True) for i in range(0, 16, 4))
+            width, height = x1 - x0 + 1, y1 - y0 + 1
+            return (height, width) if width > 0 and height > 0 else None
+        at = type_end + 5 + length
+    return None
+
+
 def format_size(shape: Sequence[int]) -> str:
     """An image size as ``"WxH"`` (width x height) from a shape starting with (H, W)."""
     return f"{shape[1]}x{shape[0]}"
@@ -232,7 +305,19 @@ def _image_array(path: str | Path, array: np.ndarray) -> np.ndarray:
     return array
 
 
-def _core_call(function: Callable, path: str | Path, *args):
+def _check_readable(path: str | Path) -> None:
+    """Refuse, before opening it, a path that is there but is not a readable regular file.
+
+    A missing file is left to the core, whose message says so.
+    """
+    problem = file_problem(path)
+    if problem is not None and problem != MISSING:
+        raise DatasetError(f"{path}: {problem}")
+
+
+def _core_call(function: Callable, path: str | Path, *args, reading: bool = True):
+    if reading:
+        _check_readable(path)
     try:
         return function(str(path), *args)
     except (ValueError, OSError) as error:

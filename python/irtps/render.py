@@ -9,10 +9,19 @@ from tqdm import tqdm
 
 from irtps import _core
 from irtps.errors import IrtpsError
+from irtps.resources import check_memory
 from irtps.scene import Scene
 
 #: Footprint samples per pixel for the direct image (stratified; shadows are traced exactly).
 DEFAULT_DIRECT_SAMPLES = 64
+
+#: Bytes of one float32 RGB pixel.
+_PIXEL_BYTES = 3 * np.dtype(np.float32).itemsize
+
+#: Rough bytes per light and pixel of the renderer's light visibility cache (one byte per
+#: light at each cache point: the object's mesh vertices and a grid about a pixel apart on
+#: the floor and walls).
+_CACHE_BYTES_PER_PIXEL = 4
 
 
 @dataclass
@@ -59,8 +68,18 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
     Returns
     -------
     irtps._core.Renderer
+
+    Raises
+    ------
+    IrtpsError
+        If the arrays do not match the camera, or the light visibility cache (about
+        ``4 * K * H * W`` bytes) would need more memory than is available.
     """
     camera = scene.camera
+    check_memory(
+        _CACHE_BYTES_PER_PIXEL * len(scene.lights) * camera.height * camera.width,
+        f"lights: {len(scene.lights)} lights of {camera.width}x{camera.height} images (light visibility cache)",
+    )
     expected = (camera.height, camera.width)
     height = np.ascontiguousarray(height, dtype=np.float32)
     albedo = np.ascontiguousarray(albedo, dtype=np.float32)
@@ -84,6 +103,40 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
         )
     except ValueError as err:
         raise IrtpsError(str(err)) from None
+
+
+def render_memory_bytes(lights: int, size: tuple[int, int], bounces: int) -> int:
+    """The memory the images of `render` take: float32 RGB (H, W) per light for the direct
+    image, each bounce, and the indirect sum and camera images derived from them."""
+    return (1 + bounces + 2) * lights * size[0] * size[1] * _PIXEL_BYTES
+
+
+def check_render_memory(lights: int, size: tuple[int, int], bounces: int) -> None:
+    """Refuse a rendering whose images would not fit in memory, before allocating anything.
+
+    Cheap: call it before building a scene of many lights (as ``irtps.synth.synthesize``
+    should, before making its lights).
+
+    Parameters
+    ----------
+    lights : int
+        Number of lights K.
+    size : tuple of int
+        Image (H, W).
+    bounces : int
+        Number of bounces B.
+
+    Raises
+    ------
+    IrtpsError
+        ``"lights: K lights of WxH images (direct light, B bounces and their sums, float32
+        RGB) need X, more than the Y available"``.
+    """
+    height, width = size
+    check_memory(
+        render_memory_bytes(lights, size, bounces),
+        f"lights: {lights} lights of {width}x{height} images (direct light, {bounces} bounces and their sums, float32 RGB)",
+    )
 
 
 def render(
@@ -126,6 +179,12 @@ def render(
     -------
     Rendering
 
+    Raises
+    ------
+    IrtpsError
+        On a bad count, arrays that do not match the camera, or (checked before anything
+        is allocated, see `check_render_memory`) images that would not fit in memory.
+
     Examples
     --------
     >>> import numpy as np
@@ -142,6 +201,7 @@ def render(
     direct_samples = min(samples, DEFAULT_DIRECT_SAMPLES) if direct_samples is None else direct_samples
     if direct_samples < 0 or (direct_samples == 0 and bounces == 0):
         raise IrtpsError(f"direct_samples: {direct_samples} must be at least 1 (or 0 with bounces)")
+    check_render_memory(len(scene.lights), (scene.camera.height, scene.camera.width), bounces)
     renderer = make_renderer(scene, height, albedo, mask)
     planes = _render_planes(renderer, scene, bounces, samples, direct_samples, seed, True, progress)
     if direct_samples == 0:
@@ -188,6 +248,11 @@ def render_indirect(
         raise IrtpsError(f"bounces: {bounces} must be at least 1")
     if stride < 1:
         raise IrtpsError(f"stride: {stride} must be at least 1")
+    camera = scene.camera
+    check_memory(
+        len(scene.lights) * camera.height * camera.width * _PIXEL_BYTES,
+        f"lights: {len(scene.lights)} lights of {camera.width}x{camera.height} images (inter-reflected light, float32 RGB)",
+    )
     renderer = make_renderer(scene, height, albedo, mask)
     if stride == 1:
         return _render_planes(renderer, scene, bounces, samples, 0, seed, False, progress)[0]

@@ -18,6 +18,7 @@ import numpy as np
 from irtps.atomic import atomic_write_text
 from irtps.errors import DatasetError
 from irtps.imageio import MAX_IMAGE_PIXELS
+from irtps.paths import MISSING, file_problem
 
 FORMAT = "irtps.scene/1"
 """The value of the ``format`` field this version reads and writes."""
@@ -243,10 +244,14 @@ def load_scene(path: str | Path) -> Scene:
     Raises
     ------
     DatasetError
-        If the file is missing or unreadable, is not valid JSON (the message gives
+        If the file is missing, not a readable regular file (a directory, a FIFO, a
+        symlink loop ...; checked before opening it), is not valid JSON (the message gives
         the line and column), or does not follow the contract.
     """
     path = Path(path)
+    problem = file_problem(path)  # before opening: reading a FIFO would block
+    if problem is not None:
+        raise DatasetError(f"{path}: {'file not found' if problem == MISSING else problem}")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:

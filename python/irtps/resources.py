@@ -1,0 +1,137 @@
+"""Memory: refuse up front the inputs that would need more of it than the machine has.
+
+`check_memory` is called where the size of a large allocation is known before it is made
+(the images of a data set, the planes of a rendering), so that an input too large for
+the machine is a clear error naming the field instead of a crash, an exhausted swap or
+the out-of-memory killer.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from irtps.errors import IrtpsError
+
+_MEMINFO = Path("/proc/meminfo")
+_CGROUP_V2 = Path("/sys/fs/cgroup")
+_CGROUP_V1 = Path("/sys/fs/cgroup/memory")
+
+
+def available_memory_bytes() -> int | None:
+    """The memory this process can still allocate without swapping, in bytes, if known.
+
+    On Linux ``MemAvailable`` of ``/proc/meminfo``, lowered to what is left under the
+    process's control-group limit (a container's memory limit) when there is one;
+    elsewhere the free physical pages (``os.sysconf``). None when neither can be read.
+
+    Returns
+    -------
+    int or None
+    """
+    available = _meminfo_available()
+    if available is None:
+        available = _sysconf_available()
+    left = _cgroup_left()
+    if left is not None:
+        available = left if available is None else min(available, left)
+    return available
+
+
+def format_bytes(count: float) -> str:
+    """A byte count in decimal units, e.g. ``"41.2 GB"``.
+
+    Examples
+    --------
+    >>> format_bytes(41_200_000_000), format_bytes(512), format_bytes(1.5e15)
+    ('41.2 GB', '512 B', '1.5 PB')
+    """
+    if count < 1000:
+        return f"{int(count)} B"
+    for unit in ("kB", "MB", "GB", "TB", "PB", "EB"):
+        count /= 1000
+        if count < 999.95 or unit == "EB":
+            return f"{count:.1f} {unit}"
+    raise AssertionError("unreachable")
+
+
+def check_memory(nbytes: int, what: str) -> None:
+    """Raise `IrtpsError` if ``nbytes`` is more than the memory available.
+
+    Nothing is checked when the available memory is unknown.
+
+    Parameters
+    ----------
+    nbytes : int
+        The memory an allocation about to be made needs.
+    what : str
+        The field or file and what it asks for, the start of the message, e.g.
+        ``"lights: 100000000 lights of 96x96 images"``.
+
+    Raises
+    ------
+    IrtpsError
+        ``"WHAT need 41.2 GB, more than the 20.1 GB available"``.
+    """
+    available = available_memory_bytes()
+    if available is not None and nbytes > available:
+        raise IrtpsError(f"{what} need {format_bytes(nbytes)}, more than the {format_bytes(available)} available")
+
+
+def _meminfo_available() -> int | None:
+    try:
+        text = _MEMINFO.read_text()
+    except OSError:
+        return None
+    for line in text.splitlines():
+        name, _, value = line.partition(":")
+        if name == "MemAvailable":
+            fields = value.split()
+            try:
+                return int(fields[0]) * (1024 if fields[1:] == ["kB"] else 1)
+            except (ValueError, IndexError):
+                return None
+    return None
+
+
+def _sysconf_available() -> int | None:
+    try:
+        pages, page_size = os.sysconf("SC_AVPHYS_PAGES"), os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+    return pages * page_size if pages > 0 and page_size > 0 else None
+
+
+def _cgroup_left() -> int | None:
+    """The memory left under this process's cgroup limit (v2, else v1), if there is a limit."""
+    for folder, limit_name, usage_name, cache_name in (
+        (_CGROUP_V2, "memory.max", "memory.current", "inactive_file"),
+        (_CGROUP_V1, "memory.limit_in_bytes", "memory.usage_in_bytes", "total_inactive_file"),
+    ):
+        try:
+            limit_text = (folder / limit_name).read_text().strip()
+            usage = int((folder / usage_name).read_text().strip())
+        except (OSError, ValueError):
+            continue
+        usage -= _stat_field(folder / "memory.stat", cache_name)  # page cache the kernel can drop
+        if limit_text == "max":
+            return None
+        try:
+            limit = int(limit_text)
+        except ValueError:
+            return None
+        if limit >= 1 << 60:  # cgroup v1 writes a huge number for "no limit"
+            return None
+        return max(0, limit - usage)
+    return None
+
+
+def _stat_field(path: Path, name: str) -> int:
+    try:
+        for line in path.read_text().splitlines():
+            key, _, value = line.partition(" ")
+            if key == name:
+                return int(value)
+    except (OSError, ValueError):
+        pass
+    return 0
