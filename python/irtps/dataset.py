@@ -261,7 +261,7 @@ def _load_irtps(folder: Path, ground_truth: bool) -> Dataset:
     return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=saturation)
 
 
-def check_stack_memory(paths: list[Path], size: tuple[int, int] | None = None) -> None:
+def check_stack_memory(paths: list[Path], size: tuple[int, int] | None = None, where: str | Path | None = None) -> None:
     """Refuse, before decoding any, a stack of images that would not fit in memory.
 
     Parameters
@@ -270,11 +270,14 @@ def check_stack_memory(paths: list[Path], size: tuple[int, int] | None = None) -
         The images, all of the first one's size.
     size : tuple of int, optional
         The (H, W) expected, used when the first image's header cannot be parsed.
+    where : str or pathlib.Path, optional
+        The folder or file that lists the images, named in the message (by default the
+        first image's folder).
 
     Raises
     ------
     IrtpsError
-        ``"FOLDER: K images of WxH decoded as float32 RGB need X GB, more than the Y GB
+        ``"WHERE: K images of WxH decoded as float32 RGB need X GB, more than the Y GB
         available"``.
     DatasetError
         If the first image is not a readable regular file.
@@ -287,7 +290,7 @@ def check_stack_memory(paths: list[Path], size: tuple[int, int] | None = None) -
         return
     check_memory(
         len(paths) * shape[0] * shape[1] * 3 * np.dtype(np.float32).itemsize,
-        f"{paths[0].parent}: {len(paths)} images of {format_size(shape)} decoded as float32 RGB",
+        f"{paths[0].parent if where is None else where}: {len(paths)} images of {format_size(shape)} decoded as float32 RGB",
     )
 
 

@@ -84,7 +84,7 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
     image_paths = [folder / name for name in names]
     for image_path, line in zip(image_paths, name_lines, strict=True):
         check_file(image_path, f"listed on line {line} of {FILENAMES_FILE}")
-    check_stack_memory(image_paths)
+    check_stack_memory(image_paths, where=folder / FILENAMES_FILE)
     images = read_images(image_paths)
     size = images.shape[1:3]
     mask_path = folder / MASK_FILE
