@@ -235,8 +235,10 @@ def cluster():
 @_NEEDS_RESOLVE_PATH
 def test_batch_reports_a_data_folder_that_is_a_symlink_loop_as_failed(cluster, loop, tmp_path, capsys):
     out = tmp_path / "out"
-    err = _run(["batch", str(loop), "--out", str(out), "--scheduler", cluster.scheduler.address, "--quiet"], capsys)
-    assert err == f"irtps: error: 1 of 1 data sets failed (see {out / 'batch.md'})\n"
+    assert main(["batch", str(loop), "--out", str(out), "--scheduler", cluster.scheduler.address, "--quiet"]) == 2
+    printed = capsys.readouterr()
+    assert printed.err == f"irtps: error: 1 of 1 data sets failed (see {out / 'batch.md'})\n"
+    assert printed.out == (out / "batch.md").read_text()  # the summary table
     (entry,) = json.loads((out / "batch.json").read_text())["datasets"]
     assert entry["status"] == "failed" and entry["error"] == f"{loop}: a symlink loop"
     assert f"{loop}: a symlink loop" in (out / "batch.md").read_text()
