@@ -3,25 +3,42 @@
 A task receives a data set's *path* and its output folder's path: the worker reads the
 data set and writes the reconstruction itself, atomically, so the workers must see the
 same file system as the client, under the same paths. A data set that fails is reported
-with its error and the others go on.
+with its error and the others go on. The warnings of a task (e.g. saturated
+observations) travel back with its result and are issued again on the client.
+
+An interrupted batch (Ctrl-C, SIGTERM) on a `local_cluster` stops its worker processes
+before it returns: a worker writing an output folder finishes that write, then exits
+at once without waiting for the reconstruction under way; the worker processes leave
+SIGINT to the client process (a terminal sends it to them too), and the teardown logs
+nothing.
 
 Dask (``dask.distributed``) is an optional dependency: ``pip install 'irtps[batch]'``.
 """
 
 from __future__ import annotations
 
+import builtins
 import inspect
 import json
+import logging
+import multiprocessing
+import os
+import re
+import signal
+import sys
+import threading
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from irtps.atomic import atomic_write_text
-from irtps.errors import IrtpsError
+from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate
-from irtps.reconstruct import METHODS, load_and_reconstruct, reconstruct, save_reconstruction
+from irtps.options import ReconstructOptions
+from irtps.reconstruct import load_and_reconstruct, save_reconstruction
 
 __all__ = ["BatchResult", "connect", "local_cluster", "output_names", "reconstruct_many", "reconstruct_to_folder", "summary_table", "write_summary"]
 
@@ -50,6 +67,11 @@ class BatchResult:
     metrics : dict or None
         The errors against the data set's ground truth (`irtps.evaluate.Metrics.to_dict`);
         None without ground truth or on failure.
+    warnings : tuple of str
+        The warnings raised while the worker read, reconstructed and wrote the data set,
+        each once, in order: the message of an `irtps.IrtpsWarning` (which names the file
+        concerned), ``"Category: message"`` for another warning (``RuntimeWarning``, or
+        ``module.Category`` outside the builtins).
     """
 
     name: str
@@ -58,6 +80,7 @@ class BatchResult:
     seconds: float | None
     error: str | None = None
     metrics: dict | None = None
+    warnings: tuple[str, ...] = ()
 
     @property
     def failed(self) -> bool:
@@ -104,7 +127,8 @@ def reconstruct_to_folder(source: str, destination: str, options: dict) -> Batch
     """Reconstruct one data set folder into an output folder: the task of a batch.
 
     Errors are caught and reported, never raised, so that one bad data set does not
-    stop a batch.
+    stop a batch; warnings are recorded in the result (`BatchResult.warnings`), not
+    shown.
 
     Parameters
     ----------
@@ -128,15 +152,19 @@ def reconstruct_to_folder(source: str, destination: str, options: dict) -> Batch
     """
     name = Path(destination).name
     start = time.perf_counter()
-    try:
-        dataset, result = load_and_reconstruct(source, **options)
-        save_reconstruction(result, destination, source=str(Path(source).resolve()))
-        metrics = None
-        if dataset.gt is not None:
-            metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=dataset.gt).to_dict()
-    except Exception as error:  # a batch reports every failure of a data set and goes on
-        return BatchResult(name, source, "failed", time.perf_counter() - start, error=_describe(error))
-    return BatchResult(name, source, "ok", time.perf_counter() - start, metrics=metrics)
+    with _TASKS.running(), _recorded_warnings() as recorded:
+        try:
+            dataset, result = load_and_reconstruct(source, **options)
+            with _TASKS.writing():
+                save_reconstruction(result, destination, source=str(Path(source).resolve()))
+            metrics = None
+            if dataset.gt is not None:
+                metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=dataset.gt).to_dict()
+        except Exception as error:  # a batch reports every failure of a data set and goes on
+            outcome = BatchResult(name, source, "failed", time.perf_counter() - start, error=_describe(error))
+        else:
+            outcome = BatchResult(name, source, "ok", time.perf_counter() - start, metrics=metrics)
+    return _with_warnings(outcome, recorded)
 
 
 def reconstruct_many(
@@ -154,7 +182,13 @@ def reconstruct_many(
     ``out/NAME/`` (as `irtps.save_reconstruction`, atomically) itself, with ``NAME``
     from `output_names`. A failed data set is reported in its `BatchResult`; the others
     go on. Nothing is written for a failed data set: an output from an earlier run
-    stays as it was.
+    stays as it was. The warnings of each task are issued again here as it completes,
+    as ``NAME: message`` (an `irtps.IrtpsWarning`, or the worker warning's category).
+
+    Interrupted (KeyboardInterrupt, e.g. Ctrl-C), it cancels the tasks and lets the
+    interrupt through; on a `local_cluster` (given or the default one), the cluster's
+    closing then stops the workers at once, each finishing the output folder it is
+    writing, if any: ``out`` holds complete reconstruction folders only.
 
     Parameters
     ----------
@@ -214,11 +248,22 @@ def reconstruct_many(
             for name, source in zip(names, sources, strict=True)
         }
         outcomes = {}
-        with tqdm(distributed.as_completed(pending), total=len(pending), desc="batch", unit="set", disable=not progress, leave=False) as bar:
-            for future in bar:
-                name, source = pending[future]
-                outcomes[name] = _result_of(future, name, source)
-                bar.set_postfix(failed=sum(outcome.failed for outcome in outcomes.values()))
+        try:
+            with tqdm(distributed.as_completed(pending), total=len(pending), desc="batch", unit="set", disable=not progress, leave=False) as bar:
+                for future in bar:
+                    name, source = pending[future]
+                    outcomes[name] = outcome = _result_of(future, name, source)
+                    if outcome.warnings:
+                        with tqdm.external_write_mode():  # the bar steps aside for the warnings
+                            _issue_warnings(outcome)
+                    bar.set_postfix(failed=sum(outcome.failed for outcome in outcomes.values()))
+        except BaseException:  # interrupted: run nothing more; a local cluster stops its workers as it closes
+            with _quiet_logging():
+                try:
+                    active.cancel(list(pending))
+                except Exception:  # the cluster may be gone already; the interrupt is what matters
+                    pass
+            raise
     return [outcomes[name] for name in names]
 
 
@@ -238,6 +283,16 @@ def local_cluster(workers: int | None = None, threads_per_worker: int = 1, *, pr
     processes : bool
         Workers as separate processes (default); False runs them as threads of this
         process (for tests; the Rust core then uses this process's thread count).
+
+    Notes
+    -----
+    The worker processes ignore SIGINT (a terminal's Ctrl-C reaches the whole process
+    group): this process handles the interrupt and closes the cluster. A worker asked to
+    close while it runs `reconstruct_to_folder` finishes the output folder it is writing,
+    if any, and exits at once (SIGTERM does the same); the worker processes are gone when
+    the ``with`` block is left. Leaving it on an exception (e.g. KeyboardInterrupt) closes
+    the cluster with the logs of Dask, Tornado and asyncio silenced and SIGINT and SIGTERM
+    ignored (in the main thread) until it is closed.
 
     Yields
     ------
@@ -259,12 +314,46 @@ def local_cluster(workers: int | None = None, threads_per_worker: int = 1, *, pr
     if threads_per_worker < 1:
         raise IrtpsError(f"threads_per_worker: must be at least 1, not {threads_per_worker}")
     distributed = _import_distributed()
-    worker_options = {"env": {"RAYON_NUM_THREADS": str(threads_per_worker)}} if processes else {}
-    with (
-        distributed.LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker, processes=processes, dashboard_address=None, **worker_options) as cluster,
-        distributed.Client(cluster) as client,
-    ):
+    worker_options = {"env": {"RAYON_NUM_THREADS": str(threads_per_worker)}, "preload": [__name__]} if processes else {}
+    cluster = client = None
+    try:
+        cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker, processes=processes, dashboard_address=None, **worker_options)
+        client = distributed.Client(cluster)
         yield client
+    except BaseException:
+        with _shielded(), _quiet_logging():
+            _close(client, cluster)
+        raise
+    _close(client, cluster)
+
+
+def dask_setup(worker) -> None:
+    """Set up a worker process of a `local_cluster` (a Dask preload: ``--preload irtps.batch``).
+
+    The process ignores SIGINT (the client process, signalled too, closes the cluster)
+    and exits on SIGTERM or when closed while it runs `reconstruct_to_folder`, at once
+    but never in the middle of writing an output folder, with its logs silenced; it
+    creates no multiprocessing lock (for progress bars), which an abrupt exit would
+    leak. Nothing is changed in a process that is not a child process (a cluster of
+    threads).
+    """
+    if multiprocessing.parent_process() is None or threading.current_thread() is not threading.main_thread():
+        return
+    from tqdm import tqdm
+
+    if "_lock" not in vars(tqdm):
+        tqdm.set_lock(threading.RLock())  # instead of a multiprocessing lock, a semaphore that os._exit would leak
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, lambda signum, frame: _TASKS.exit_after_writes())
+    close = worker.close
+
+    async def close_now(*args, **kwargs):
+        logging.disable(logging.CRITICAL)  # a closing worker has nothing more to report
+        if _TASKS.busy:
+            _TASKS.exit_after_writes()  # not waiting for a reconstruction under way
+        return await close(*args, **kwargs)
+
+    worker.close = close_now
 
 
 @contextmanager
@@ -344,15 +433,176 @@ def write_summary(results: Sequence[BatchResult], out: str | Path, *, settings: 
 
 
 def _check_options(method: str, options: dict) -> None:
-    """Raise `IrtpsError` for what would fail every task: an unknown method or option."""
-    if method not in METHODS:
-        raise IrtpsError(f"method: unknown {method!r} (choose from {', '.join(METHODS)})")
+    """Raise `IrtpsError` for what would fail every task: an option unknown or out of range."""
     if "progress" in options:
         raise IrtpsError("progress: workers show no progress bar; use reconstruct_many(progress=...)")
+    settings = {key: value for key, value in options.items() if key != "options"}
+    ReconstructOptions.build(options.get("options"), method=method, **settings)
+
+
+class _Tasks:
+    """The `reconstruct_to_folder` calls of this process, and their writes under way."""
+
+    def __init__(self) -> None:
+        self._condition = threading.Condition()
+        self._running = self._writing = 0
+        self._exiting = False
+
+    def __reduce__(self) -> str:
+        return "_TASKS"  # this process's one instance, by reference (a task pickled by value refers to it)
+
+    @property
+    def busy(self) -> bool:
+        return self._running > 0
+
+    @contextmanager
+    def running(self) -> Iterator[None]:
+        with self._condition:
+            self._running += 1
+        try:
+            yield
+        finally:
+            with self._condition:
+                self._running -= 1
+
+    @contextmanager
+    def writing(self) -> Iterator[None]:
+        with self._condition:
+            if self._exiting:
+                raise IrtpsError("the worker is stopping")  # never reported: the process exits
+            self._writing += 1
+        try:
+            yield
+        finally:
+            with self._condition:
+                self._writing -= 1
+                self._condition.notify_all()
+
+    def exit_after_writes(self) -> None:
+        """End this process as soon as no output folder is being written (none is started)."""
+        logging.disable(logging.CRITICAL)
+        with self._condition:
+            self._exiting = True
+            self._condition.wait_for(lambda: self._writing == 0)
+        os._exit(0)
+
+
+_TASKS = _Tasks()
+
+
+def _close(client, cluster) -> None:
+    """Close a client, then its cluster (either may be None)."""
     try:
-        inspect.signature(reconstruct).bind(None, method, **options)
-    except TypeError as error:
-        raise IrtpsError(f"options: {error}") from None
+        if client is not None:
+            client.close()
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+@contextmanager
+def _quiet_logging() -> Iterator[None]:
+    """No log record at all for the duration (Dask's, Tornado's, asyncio's teardown chatter)."""
+    previous = logging.root.manager.disable
+    logging.disable(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logging.disable(previous)
+
+
+@contextmanager
+def _shielded() -> Iterator[None]:
+    """SIGINT and SIGTERM ignored for the duration, in the main thread (a second Ctrl-C
+    must not break off a teardown)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {signum: signal.signal(signum, signal.SIG_IGN) for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            if handler is not None:
+                signal.signal(signum, handler)
+
+
+# Warnings of tasks: recorded per thread (a worker may run several tasks at once) --------
+
+_recording = threading.local()
+_recording_lock = threading.Lock()
+_recording_users = 0
+_recording_saved: tuple[list, object] | None = None
+
+
+@contextmanager
+def _recorded_warnings() -> Iterator[list[tuple[type[Warning], str]]]:
+    """The warnings raised in this thread for the duration, as (category, message) pairs;
+    every one is recorded (not only the first of a kind), none is shown. Other threads'
+    warnings are shown as before."""
+    global _recording_users, _recording_saved
+    records: list[tuple[type[Warning], str]] = []
+    with _recording_lock:
+        if _recording_users == 0:
+            _recording_saved = (warnings.filters[:], warnings.showwarning)
+            warnings.simplefilter("always")
+            warnings.showwarning = _record_warning
+        _recording_users += 1
+    _recording.records = records
+    try:
+        yield records
+    finally:
+        del _recording.records
+        with _recording_lock:
+            _recording_users -= 1
+            if _recording_users == 0:
+                filters, show = _recording_saved
+                warnings.filters[:] = filters
+                warnings._filters_mutated()
+                warnings.showwarning = show
+                _recording_saved = None
+
+
+def _record_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    records = getattr(_recording, "records", None)
+    if records is not None:
+        records.append((category, str(message)))
+    elif _recording_saved is not None:
+        _recording_saved[1](message, category, filename, lineno, file, line)
+
+
+def _with_warnings(outcome: BatchResult, recorded: list[tuple[type[Warning], str]]) -> BatchResult:
+    """The outcome with the recorded warnings, each once."""
+    if not recorded:
+        return outcome
+    texts = (message if issubclass(category, IrtpsWarning) else f"{_category_name(category)}: {message}" for category, message in recorded)
+    return BatchResult(**{**asdict(outcome), "warnings": tuple(dict.fromkeys(texts))})
+
+
+def _category_name(category: type[Warning]) -> str:
+    return category.__qualname__ if category.__module__ == "builtins" else f"{category.__module__}.{category.__qualname__}"
+
+
+_CATEGORY_PREFIX = re.compile(r"([A-Za-z_][\w.]*): (.*)", re.DOTALL)
+
+
+def _warning_of(text: str) -> tuple[type[Warning], str]:
+    """The category and message of a `BatchResult.warnings` entry: a known category before
+    ``": "`` (builtin, or from a module imported here), else an `IrtpsWarning`."""
+    match = _CATEGORY_PREFIX.fullmatch(text)
+    if match:
+        module, _, name = match[1].rpartition(".")
+        category = getattr(sys.modules.get(module) if module else builtins, name, None)
+        if isinstance(category, type) and issubclass(category, Warning) and not issubclass(category, IrtpsWarning):
+            return category, match[2]
+    return IrtpsWarning, text
+
+
+def _issue_warnings(outcome: BatchResult) -> None:
+    """Issue a task's warnings here, as ``NAME: message``."""
+    for text in outcome.warnings:
+        category, message = _warning_of(text)
+        warnings.warn(f"{outcome.name}: {message}", category, stacklevel=3)
 
 
 def _result_of(future, name: str, source: str) -> BatchResult:
