@@ -372,14 +372,14 @@ CASES = {
         [],
         ["{data}/021.png: corrupt PNG: its header claims 10000x10000 pixels, more than its"],
     ),
-    "absurd synthetic size": ("synth", None, None, ["cap", "--size", "1000000"], ["size: 1000000 is too large"]),
-    "no samples": ("render", "mitsuba", None, ["--samples", "0"], ["samples: 0 must be at least 1"]),
+    "absurd synthetic size": ("synth", None, None, ["cap", "--size", "1000000"], ["--size: 1000000 is out of range: expected an integer from 8 to 11585"]),
+    "no samples": ("render", "mitsuba", None, ["--samples", "0"], ["--samples: 0 is out of range: expected an integer from 1 to 1048576"]),
     "saturation not a number": (
         "reconstruct",
         "mitsuba",
         None,
         ["--saturation", "nan"],
-        ["saturation: nan is not a positive number"],
+        ["--saturation: nan is not a finite number above 0"],
     ),
     # unwritable or dangerous output folders
     "output under a file": (
@@ -387,21 +387,21 @@ CASES = {
         "mitsuba",
         None,
         ["--out", _out_under_a_file],
-        ["{tmp}/blocker: cannot create the output folder"],
+        ["--out {tmp}/blocker/out: cannot be made: {tmp}/blocker is not a folder"],
     ),
     "output is the input": (
         "reconstruct",
         "mitsuba",
         None,
         ["--out", lambda tmp: tmp / "data"],
-        ["--out {tmp}/data: replacing it would delete the input {tmp}/data"],
+        ["--out {tmp}/data: is the input {tmp}/data; writing there would delete it"],
     ),
     "output holds the input": (
         "render",
         "mitsuba",
         None,
         ["--out", lambda tmp: tmp],
-        ["--out {tmp}: replacing it would delete the input {tmp}/data"],
+        ["--out {tmp}: holds the input {tmp}/data; writing there would delete it"],
     ),
 }
 

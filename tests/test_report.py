@@ -183,8 +183,10 @@ def test_report_is_replaced_atomically_and_a_failure_keeps_the_old_one(run_copy)
 
 
 def test_report_cannot_replace_the_reconstruction(run_copy):
-    with pytest.raises(IrtpsError, match="would replace the reconstruction folder"):
+    with pytest.raises(IrtpsError, match=r"holds the input .*/normal.exr; writing there would delete it"):
         write_report(run_copy, run_copy.parent)
+    with pytest.raises(IrtpsError, match=r"lies inside the input .*/indirect"):
+        write_report(run_copy, run_copy / "indirect" / "report")
     assert (run_copy / "normal.exr").is_file()
 
 

@@ -13,18 +13,24 @@ from pathlib import Path
 import numpy as np
 
 from irtps.atomic import atomic_output_dir
-from irtps.batch import SUMMARY_JSON, SUMMARY_MARKDOWN, connect, local_cluster, reconstruct_many, summary_table, write_summary
-from irtps.dataset import Dataset, GroundTruth, load_dataset, load_ground_truth, load_scene_object, save_dataset
+from irtps.batch import SUMMARY_JSON, SUMMARY_MARKDOWN, connect, local_cluster, output_names, reconstruct_many, summary_table, write_summary
+from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object, load_ground_truth, save_dataset
 from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate, format_metrics
-from irtps.integrate import METHODS as INTEGRATION_METHODS
-from irtps.interreflection import ESTIMATORS, UPDATES
-from irtps.reconstruct import METHODS, load_and_reconstruct, load_reconstruction, save_reconstruction
+from irtps.options import ClusterOptions, ReconstructOptions, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
+from irtps.output_rule import check_output, escaped
+from irtps.reconstruct import load_and_reconstruct, load_reconstruction, save_reconstruction
 from irtps.render import Rendering, render
 from irtps.surface import height_to_normals
 from irtps.synth import SHAPES, synthesize
 from irtps.table import comparison_table, format_table, method_names
 
+#: What only outputs of irtps hold (a rendered data set's true direct images, a
+#: reconstruction's, table's, batch's or report's record): an existing folder holding one
+#: may be replaced (see `irtps.output_rule.check_output`); a captured data set may not.
+OUTPUT_MARKERS = ("gt/direct", "run.json", "table.json", SUMMARY_JSON, "index.html")
+#: Argument groups of the reconstruction options.
+RECONSTRUCT_GROUPS = {"IRT-PS": "IRT-PS (--method irtps)"}
 
 def _bounce_files(rendering: Rendering) -> dict[str, np.ndarray]:
     """The per-bounce images as extra data-set files ``gt/bounceN/KKK.exr``."""
@@ -35,72 +41,43 @@ def _bounce_files(rendering: Rendering) -> dict[str, np.ndarray]:
     return files
 
 
-def _add_render_options(parser: argparse.ArgumentParser, samples: int) -> None:
-    parser.add_argument("--bounces", type=int, default=4, help="inter-reflection bounces to render (default 4)")
-    parser.add_argument("--samples", type=int, default=samples, help=f"camera paths per pixel (default {samples})")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
-
-
-def _check_output(out: Path, *inputs: Path) -> None:
-    """Refuse an output folder that is an input or holds one: replacing it would delete the input."""
-    target = out.resolve()
-    for source in inputs:
-        resolved = source.resolve()
-        if resolved == target or target in resolved.parents:
-            raise IrtpsError(f"--out {out}: replacing it would delete the input {source}; choose another output folder")
-
-
 def _cmd_render(args: argparse.Namespace) -> None:
-    _check_output(args.out, args.dataset)
+    options = from_arguments(RenderOptions, args)
+    check_output(args.out, [args.dataset], ours=OUTPUT_MARKERS, force=args.force)
     scene, height, albedo, mask = load_scene_object(args.dataset)
     start = time.perf_counter()
-    rendering = render(scene, height, albedo, mask, bounces=args.bounces, samples=args.samples, seed=args.seed, progress=not args.quiet)
+    rendering = render(scene, height, albedo, mask, bounces=options.bounces, samples=options.samples, seed=options.seed, progress=not args.quiet)
     seconds = time.perf_counter() - start
     truth = GroundTruth(height=np.where(mask, height, 0), normal=height_to_normals(height, mask, scene.camera.pixel_size), albedo=albedo, direct=rendering.direct)
     dataset = Dataset(scene=scene, images=rendering.images, mask=mask, gt=truth)
     save_dataset(dataset, args.out, extra=_bounce_files(rendering))
     if not args.quiet:
-        print(f"rendered {len(scene.lights)} lights x {args.bounces} bounces at {args.samples} samples/pixel in {seconds:.1f} s -> {args.out}")
+        print(f"rendered {len(scene.lights)} lights x {options.bounces} bounces at {options.samples} samples/pixel in {seconds:.1f} s -> {args.out}")
 
 
 def _cmd_synth(args: argparse.Namespace) -> None:
+    scene_options, options = from_arguments(SynthOptions, args), from_arguments(RenderOptions, args)
+    check_output(args.out, [], ours=OUTPUT_MARKERS, force=args.force)
     start = time.perf_counter()
-    dataset, rendering = synthesize(
-        args.shape,
-        size=args.size,
-        lights=args.lights,
-        albedo=args.albedo,
-        environment=args.environment,
-        floor=args.floor,
-        bounces=args.bounces,
-        samples=args.samples,
-        seed=args.seed,
-        progress=not args.quiet,
-    )
+    dataset, rendering = synthesize(args.shape, **scene_options.to_dict(), **options.to_dict(), progress=not args.quiet)
     save_dataset(dataset, args.out, extra=_bounce_files(rendering))
     if not args.quiet:
         seconds = time.perf_counter() - start
         indirect = rendering.indirect[:, dataset.mask].mean() / max(float(dataset.images[:, dataset.mask].mean()), 1e-12)
         print(
-            f"synthesized {args.shape} ({args.size}x{args.size}, {args.lights} lights, {args.environment}) in {seconds:.1f} s; "
-            f"inter-reflections are {100 * indirect:.1f}% of the object's light -> {args.out}"
+            f"synthesized {args.shape} ({scene_options.size}x{scene_options.size}, {scene_options.lights} lights, {scene_options.environment}) "
+            f"in {seconds:.1f} s; inter-reflections are {100 * indirect:.1f}% of the object's light -> {args.out}"
         )
 
 
-def _reconstruct_options(args: argparse.Namespace) -> dict:
-    """The keyword arguments of `irtps.reconstruct` given by `_add_reconstruct_options`."""
-    names = ("method", "robust", "shadow_fraction", "saturation", "integration", "base_height", "bounces", "iterations", "samples", "seed", "relaxation", "update", "stride", "estimator")
-    return {name: getattr(args, name) for name in names}
-
-
 def _cmd_reconstruct(args: argparse.Namespace) -> None:
-    _check_output(args.out, args.data)
-    dataset, result = load_and_reconstruct(args.data, **_reconstruct_options(args), progress=not args.quiet)
+    options = from_arguments(ReconstructOptions, args)
+    check_output(args.out, [args.data], ours=OUTPUT_MARKERS, force=args.force)
+    dataset, result = load_and_reconstruct(args.data, options=options, progress=not args.quiet)
     save_reconstruction(result, args.out, source=str(args.data.resolve()))
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
-        print(f"reconstructed {args.data} ({args.method}; {stages}) -> {args.out}")
+        print(f"reconstructed {args.data} ({options.method}; {stages}) -> {args.out}")
         for step in result.history:
             change = "" if step.height_change is None else f"  height change {step.height_change:.4f}"
             error = "" if step.metrics is None or step.metrics["normal_mean_angular_deg"] is None else f"  normal error {step.metrics['normal_mean_angular_deg']:.2f} deg"
@@ -111,16 +88,17 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
 
 
 def _cmd_batch(args: argparse.Namespace) -> None:
-    if args.scheduler is not None and (args.workers is not None or args.threads_per_worker is not None):
-        raise IrtpsError("--workers and --threads-per-worker set up the local cluster; with --scheduler, give them to 'dask worker' (--nworkers, --nthreads)")
-    options = _reconstruct_options(args)
-    if args.scheduler is None:
-        cluster = local_cluster(args.workers, 1 if args.threads_per_worker is None else args.threads_per_worker)
+    options, cluster_options = from_arguments(ReconstructOptions, args), from_arguments(ClusterOptions, args)
+    check_output(args.out, args.data, ours=OUTPUT_MARKERS, force=args.force)
+    if cluster_options.scheduler is None:
+        threads = cluster_options.threads_per_worker
+        cluster = local_cluster(cluster_options.workers, 1 if threads is None else threads)
     else:
-        cluster = connect(args.scheduler)
+        cluster = connect(cluster_options.scheduler)
+    settings = options.to_dict()
     with cluster as client:
-        results = reconstruct_many(args.data, args.out, client=client, progress=not args.quiet, **options)
-    write_summary(results, args.out, settings=options)
+        results = reconstruct_many(args.data, args.out, client=client, progress=not args.quiet, **settings)
+    write_summary(results, args.out, settings=settings)
     print(summary_table(results), end="")
     failed = sum(result.failed for result in results)
     if failed:
@@ -140,30 +118,30 @@ def _cmd_evaluate(args: argparse.Namespace) -> None:
 
 def _cmd_report(args: argparse.Namespace) -> None:
     # Imported here: matplotlib, which the report draws with, would slow down every other command's start.
-    from irtps.report import write_report
+    from irtps.report import REPORT_FOLDER, report_inputs, write_report
 
-    page = write_report(args.out, args.report_out, truth=args.truth)
+    out = args.out / REPORT_FOLDER if args.report_out is None else args.report_out
+    check_output(out, report_inputs(args.out, args.truth), ours=OUTPUT_MARKERS, force=args.force)
+    page = write_report(args.out, out, truth=args.truth)
     if not args.quiet:
         figures = sorted(path.name for path in page.parent.glob("*.png"))
         print(f"report of {args.out}: {len(figures)} figures ({', '.join(figures)}) and the page {page}")
 
 
-def _run_table(datasets, args, out: Path | None, sources: dict[str, str] | None = None) -> str:
+def _run_table(datasets, options: TableOptions, quiet: bool, out: Path | None, sources: dict[str, str] | None = None) -> str:
     """Compute the comparison table and write it under `out`; with `sources` (data set name ->
     the path recorded as its source), the reconstructions too."""
     from tqdm import tqdm
 
-    total = len(datasets) * len(method_names(args.bounces, not args.no_paper))
-    with tqdm(total=total, desc="table", unit="run", disable=args.quiet, leave=False) as bar:
+    total = len(datasets) * len(method_names(options.bounces, options.paper))
+    with tqdm(total=total, desc="table", unit="run", disable=quiet, leave=False) as bar:
 
         def finished(name, method, result):
             if sources is not None and out is not None:
                 save_reconstruction(result, out / name / method, source=sources[name])
             bar.update(1)
 
-        table = comparison_table(
-            datasets, bounces=args.bounces, iterations=args.iterations, samples=args.samples, seed=args.seed, paper=not args.no_paper, on_result=finished
-        )
+        table = comparison_table(datasets, options, on_result=finished)
     text = format_table(table)
     if out is not None:
         (out / "table.md").write_text(text)
@@ -172,68 +150,50 @@ def _run_table(datasets, args, out: Path | None, sources: dict[str, str] | None 
 
 
 def _cmd_table(args: argparse.Namespace) -> None:
-    datasets = [(folder.name, load_dataset(folder)) for folder in args.data]
+    options = from_arguments(TableOptions, args)
+    if args.out is not None:
+        check_output(args.out, args.data, ours=OUTPUT_MARKERS, force=args.force)
+    datasets = [(name, load_dataset(folder)) for name, folder in zip(output_names(args.data), args.data, strict=True)]
     if args.out is None:
-        print(_run_table(datasets, args, None), end="")
+        print(_run_table(datasets, options, args.quiet, None), end="")
         return
-    _check_output(args.out, *args.data)
     with atomic_output_dir(args.out) as folder:
-        text = _run_table(datasets, args, folder)
+        text = _run_table(datasets, options, args.quiet, folder)
     print(text, end="")
     if not args.quiet:
         print(f"table written to {args.out / 'table.md'} and {args.out / 'table.json'}")
 
 
 def _cmd_demo(args: argparse.Namespace) -> None:
+    options = from_arguments(TableOptions, args)
+    size = from_arguments(SynthOptions, args).size  # the demo's only scene option
+    check_output(args.out, [], ours=OUTPUT_MARKERS, force=args.force)
     start = time.perf_counter()
     with atomic_output_dir(args.out) as folder:
-        dataset, rendering = synthesize(
-            "cap", size=args.size, lights=12, environment="cornell", bounces=4, samples=256, seed=args.seed, progress=not args.quiet
-        )
+        dataset, rendering = synthesize("cap", size=size, lights=12, environment="cornell", bounces=4, samples=256, seed=options.seed, progress=not args.quiet)
         save_dataset(dataset, folder / "data", extra=_bounce_files(rendering))
         # Recorded as the final place of the data set, which `irtps report` reads ground truth from.
-        text = _run_table([("cap_cornell", dataset)], args, folder, {"cap_cornell": str(args.out.resolve() / "data")})
+        text = _run_table([("cap_cornell", dataset)], options, args.quiet, folder, {"cap_cornell": str(args.out.resolve() / "data")})
     share = rendering.indirect[:, dataset.mask].mean() / dataset.images[:, dataset.mask].mean()
     print(
-        f"A {args.size}x{args.size} spherical cap on the floor of a Cornell box (red and green walls), 12 lights; "
+        f"A {size}x{size} spherical cap on the floor of a Cornell box (red and green walls), 12 lights; "
         f"inter-reflections are "
         f"{100 * share:.0f}% of the light on the object. Errors of classic photometric stereo (PS) and of IRT-PS "
-        f"estimating r = {', '.join(map(str, args.bounces))} bounces (best in bold; lower is better):\n"
+        f"estimating r = {', '.join(map(str, options.bounces))} bounces (best in bold; lower is better):\n"
     )
     print(text)
     print(
         f"Done in {time.perf_counter() - start:.0f} s. Outputs in {args.out}/: data/ (the synthetic data set with ground "
         f"truth), cap_cornell/PS/, cap_cornell/IRTPSr*/ and cap_cornell/Paper-r*/ (normals, albedo, height, mesh.ply, mesh.obj, "
         f"run.json), "
-        f"table.md, table.json. See one as pictures with: irtps report {args.out / 'cap_cornell' / method_names(args.bounces, False)[-1]}"
+        f"table.md, table.json. See one as pictures with: irtps report {args.out / 'cap_cornell' / method_names(options.bounces, False)[-1]}"
     )
 
 
-def _add_table_options(parser: argparse.ArgumentParser, iterations: int, samples: int) -> None:
-    parser.add_argument("--bounces", type=int, nargs="+", default=[1, 2, 3], help="IRT-PS variants: bounces estimated (default 1 2 3)")
-    parser.add_argument("--iterations", type=int, default=iterations, help=f"IRT-PS corrections at most (default {iterations})")
-    parser.add_argument("--samples", type=int, default=samples, help=f"camera paths per pixel per estimate (default {samples})")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--no-paper", action="store_true", help="leave out the paper's own estimator (columns 'Paper-rN')")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
-
-
-def _add_reconstruct_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--method", choices=METHODS, default="ps", help="reconstruction method (default ps)")
-    parser.add_argument("--robust", action=argparse.BooleanOptionalAction, default=True, help="drop shadowed and saturated observations (default on)")
-    parser.add_argument("--shadow-fraction", type=float, default=0.05, help="shadow threshold relative to a pixel's brightest (default 0.05)")
-    parser.add_argument("--saturation", type=float, default=None, help="raw value at or above which an observation is saturated")
-    parser.add_argument("--integration", choices=INTEGRATION_METHODS, default=None, help="normal integration (default ls for ps, footprint for irtps)")
-    parser.add_argument("--base-height", type=float, default=None, help="height of the object's boundary (default: the floor's)")
-    irt = parser.add_argument_group("IRT-PS (--method irtps)")
-    irt.add_argument("--bounces", type=int, default=3, help="inter-reflection bounces estimated (default 3)")
-    irt.add_argument("--iterations", type=int, default=8, help="largest number of corrections (default 8)")
-    irt.add_argument("--samples", type=int, default=256, help="camera paths per pixel per estimate (default 256)")
-    irt.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    irt.add_argument("--relaxation", type=float, default=1.0, help="fraction of each new estimate taken (default 1)")
-    irt.add_argument("--update", choices=UPDATES, default="original", help="A0 - E (original, default) or the paper's A_t - E_t (previous)")
-    irt.add_argument("--stride", type=int, default=1, help="estimate at one pixel in SxS and interpolate (faster; default 1: every pixel)")
-    irt.add_argument("--estimator", choices=ESTIMATORS, default="physical", help="indirect estimate: physical (default) or the paper's heuristic")
+def _add_force(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--force", action="store_true", help="replace OUT even if it is an existing file, or a folder with content that irtps did not write (never an input)"
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -261,7 +221,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("dataset", type=Path, help="data set folder (contract layout)")
     p.add_argument("--out", type=Path, required=True, help="output data set folder")
-    _add_render_options(p, samples=256)
+    add_arguments(p, RenderOptions)
+    _add_force(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(run=_cmd_render)
 
     p = commands.add_parser(
@@ -276,12 +238,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("shape", choices=sorted(SHAPES), help="the object's shape")
     p.add_argument("--out", type=Path, required=True, help="output data set folder")
-    p.add_argument("--size", type=int, default=96, help="image width and height in pixels (default 96)")
-    p.add_argument("--lights", type=int, default=12, help="number of lights (default 12)")
-    p.add_argument("--albedo", choices=["uniform", "textured"], default="uniform", help="albedo pattern (default uniform)")
-    p.add_argument("--environment", choices=["cornell", "none"], default="cornell", help="surroundings (default cornell)")
-    p.add_argument("--floor", action=argparse.BooleanOptionalAction, default=None, help="a floor (default: only with the box)")
-    _add_render_options(p, samples=256)
+    add_arguments(p, SynthOptions)
+    add_arguments(p, RenderOptions)
+    _add_force(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(run=_cmd_synth)
 
     p = commands.add_parser(
@@ -301,7 +261,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("data", type=Path, help="data set folder")
     p.add_argument("--out", type=Path, required=True, help="output folder")
-    _add_reconstruct_options(p)
+    add_arguments(p, ReconstructOptions, groups=RECONSTRUCT_GROUPS)
+    _add_force(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.set_defaults(run=_cmd_reconstruct)
 
@@ -325,11 +286,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("data", type=Path, nargs="+", help="data set folders")
     p.add_argument("--out", type=Path, required=True, help="folder for one reconstruction folder per data set and the summary")
-    _add_reconstruct_options(p)
-    dask = p.add_argument_group("cluster")
-    dask.add_argument("--scheduler", metavar="ADDRESS", help="run on the Dask cluster of this scheduler (e.g. tcp://head-node:8786) instead of a local one")
-    dask.add_argument("--workers", type=int, default=None, metavar="N", help="local cluster: worker processes (default: cores / threads per worker)")
-    dask.add_argument("--threads-per-worker", type=int, default=None, metavar="T", help="local cluster: data sets per worker at once, and its Rust threads (default 1)")
+    add_arguments(p, ReconstructOptions, groups=RECONSTRUCT_GROUPS)
+    add_arguments(p.add_argument_group("cluster"), ClusterOptions)
+    _add_force(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_batch)
 
@@ -362,6 +321,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("out", metavar="OUT", type=Path, help="reconstruction folder (from irtps reconstruct)")
     p.add_argument("--truth", metavar="DATASET", type=Path, default=None, help="data set with ground truth (default: the run's own data set, if it has any)")
     p.add_argument("--out", metavar="DIR", dest="report_out", type=Path, default=None, help="report folder (default OUT/report)")
+    _add_force(p)
     p.add_argument("--quiet", action="store_true", help="print nothing")
     p.set_defaults(run=_cmd_report)
 
@@ -378,7 +338,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("data", type=Path, nargs="+", help="data set folders with ground truth")
     p.add_argument("--out", type=Path, help="folder for table.md and table.json")
-    _add_table_options(p, iterations=8, samples=256)
+    add_arguments(p, TableOptions)
+    _add_force(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_table)
 
     p = commands.add_parser(
@@ -392,7 +354,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", type=Path, default=Path("irtps-demo"), help="output folder (default irtps-demo)")
     p.add_argument("--size", type=int, default=64, help="image size in pixels (default 64)")
-    _add_table_options(p, iterations=5, samples=128)
+    add_arguments(p, TableOptions, defaults={"iterations": 5, "samples": 128})
+    _add_force(p)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_demo)
     return parser
 
@@ -407,7 +371,7 @@ def _raise_terminated(signum: int, frame: object) -> None:
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     if issubclass(category, IrtpsWarning):
-        print(f"irtps: warning: {message}", file=sys.stderr)
+        print(f"irtps: warning: {escaped(str(message))}", file=sys.stderr)
     else:
         sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
 
@@ -426,10 +390,10 @@ def main(argv: list[str] | None = None) -> int:
             warnings.showwarning = _show_warning
             args.run(args)
     except (IrtpsError, OSError) as err:
-        print(f"irtps: error: {err}", file=sys.stderr)
+        print(f"irtps: error: {escaped(str(err))}", file=sys.stderr)
         return 2
     except MemoryError as err:
-        print(f"irtps: error: not enough memory ({err or 'allocation failed'})", file=sys.stderr)
+        print(f"irtps: error: not enough memory ({escaped(str(err)) or 'allocation failed'})", file=sys.stderr)
         return 2
     except KeyboardInterrupt as interrupt:
         print("irtps: interrupted; no partial output was left", file=sys.stderr)

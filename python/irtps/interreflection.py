@@ -15,22 +15,15 @@ import numpy as np
 from tqdm import tqdm
 
 from irtps.dataset import Dataset
-from irtps.errors import IrtpsError
 from irtps.evaluate import evaluate
-from irtps.integrate import integrate_normals, place_height
-from irtps.paper_estimator import PAPER_SCALE, paper_indirect
-from irtps.ps import PsResult, photometric_stereo
+from irtps.options import ESTIMATORS, UPDATES, ReconstructOptions
+from irtps.paper_estimator import paper_indirect
+from irtps.pipeline import fit_photometric_stereo, resolve_options, surface_height
+from irtps.ps import PsResult
 from irtps.render import render_indirect
 from irtps.surface import footprint_normals
 
-#: Indirect-light estimators: the physically based renderer, or the paper's own heuristic
-#: (`irtps.paper_estimator`).
-ESTIMATORS = ("physical", "paper")
-
-#: Ways to form the corrected images: from the input (A₀ − E) or from the previous ones
-#: (the paper's literal Aₜ₊₁ = Aₜ − Eₜ).
-UPDATES = ("original", "previous")
-
+__all__ = ["ESTIMATORS", "UPDATES", "InterreflectionResult", "Iteration", "remove_interreflections", "surface_albedo"]
 
 @dataclass
 class Iteration:
@@ -101,22 +94,10 @@ def surface_albedo(albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, 
 
 def remove_interreflections(
     dataset: Dataset,
+    options: ReconstructOptions | None = None,
     *,
-    bounces: int = 3,
-    iterations: int = 8,
-    samples: int = 256,
-    seed: int = 0,
-    tolerance: float | None = None,
-    relaxation: float = 1.0,
-    update: str = "original",
-    integration: str = "footprint",
-    robust: bool = True,
-    shadow_fraction: float = 0.05,
-    saturation: float | None = None,
-    base_height: float | None = None,
-    stride: int = 1,
-    estimator: str = "physical",
     progress: bool = False,
+    **settings,
 ) -> InterreflectionResult:
     """Run the IRT-PS loop on a data set.
 
@@ -124,78 +105,62 @@ def remove_interreflections(
     ----------
     dataset : Dataset
         Images, lights, mask and the known surroundings (floor, Cornell box) of the scene.
-    bounces : int
-        Number r of inter-reflection bounces estimated (1, 2 or 3 in the paper).
-    iterations : int
-        Largest number of corrections.
-    samples : int
-        Camera paths per pixel of each indirect estimate.
-    seed : int
-        Seed of the first estimate; pass t uses ``seed + t``.
-    tolerance : float, optional
-        Stop when the mean absolute height change falls below it; default 0.002 pixel sizes.
-    relaxation : float
-        Fraction of each new indirect estimate taken (1 takes it whole; below 1 damps the
-        oscillation that very bright surfaces can cause).
-    update : str
-        ``"original"``: Aₜ₊₁ = A₀ − Eₜ (default); ``"previous"``: the paper's literal
-        Aₜ₊₁ = Aₜ − Eₜ. Corrected images are kept non-negative.
-    integration : str
-        Normal integration method; ``"footprint"`` (default) keeps creases, which keeps the
-        rendered concavities as deep as the real ones.
-    robust, shadow_fraction, saturation
-        As for `irtps.ps.photometric_stereo`.
-    base_height : float, optional
-        Height of the object's boundary; default the floor's (0 without a floor).
-    stride : int
-        1 estimates the indirect light at every pixel; s > 1 at one pixel in s×s,
-        interpolated to the rest (faster, slightly less accurate; see
-        `irtps.render.render_indirect`).
-    estimator : str
-        ``"physical"``: the renderer's estimate of bounces 1..r for every light (default);
-        ``"paper"``: the paper's environment-colour heuristic (`irtps.paper_estimator`),
-        for comparison.
+    options : ReconstructOptions, optional
+        The settings (`irtps.options.ReconstructOptions`); its ``method`` is ignored. Those
+        of the loop:
+
+        - ``bounces``: number r of inter-reflection bounces estimated (1, 2 or 3 in the
+          paper);
+        - ``iterations``: largest number of corrections;
+        - ``samples``: camera paths per pixel of each indirect estimate;
+        - ``seed``: seed of the first estimate; pass t uses ``seed + t``;
+        - ``tolerance``: stop when the mean absolute height change falls below it; default
+          0.002 pixel sizes;
+        - ``relaxation``: fraction of each new indirect estimate taken (1 takes it whole;
+          below 1 damps the oscillation that very bright surfaces can cause);
+        - ``update``: ``"original"``: Aₜ₊₁ = A₀ − Eₜ (default); ``"previous"``: the paper's
+          literal Aₜ₊₁ = Aₜ − Eₜ. Corrected images are kept non-negative;
+        - ``integration``: default ``"footprint"``, which keeps creases, and so the
+          rendered concavities as deep as the real ones;
+        - ``stride``: 1 estimates the indirect light at every pixel; s > 1 at one pixel in
+          s×s, interpolated to the rest (faster, slightly less accurate; see
+          `irtps.render.render_indirect`);
+        - ``estimator``: ``"physical"``: the renderer's estimate of bounces 1..r for every
+          light (default); ``"paper"``: the paper's environment-colour heuristic
+          (`irtps.paper_estimator`), for comparison.
     progress : bool
         Show a progress bar.
+    **settings
+        Fields of `ReconstructOptions` that replace those of `options`.
 
     Returns
     -------
     InterreflectionResult
+
+    Raises
+    ------
+    OptionError
+        Naming the option, for a value out of range.
     """
-    if bounces < 1:
-        raise IrtpsError(f"bounces: {bounces} must be at least 1")
-    if iterations < 0:
-        raise IrtpsError(f"iterations: {iterations} is negative")
-    if not 0 < relaxation <= 1:
-        raise IrtpsError(f"relaxation: {relaxation} is not in (0, 1]")
-    if estimator not in ESTIMATORS:
-        raise IrtpsError(f"estimator: unknown {estimator!r} (choose from {', '.join(ESTIMATORS)})")
-    if estimator == "paper" and bounces not in PAPER_SCALE:
-        raise IrtpsError(f"bounces: the paper's estimator takes 1, 2 or 3 reflections, not {bounces}")
-    if update not in UPDATES:
-        raise IrtpsError(f"update: unknown {update!r} (choose from {', '.join(UPDATES)})")
+    options = resolve_options(dataset, ReconstructOptions.build(options, method="irtps", **settings))
     scene, mask = dataset.scene, dataset.mask
     pixel_size = scene.camera.pixel_size
-    tolerance = 0.002 * pixel_size if tolerance is None else tolerance
-    if base_height is None:
-        base_height = scene.floor.height if scene.floor is not None else 0.0
     original = dataset.images
     # Observations saturated in the input stay saturated: subtracting the estimate would bring
     # them under the threshold and into the fit with a clipped value.
-    saturated = None if saturation is None else (original >= saturation).any(axis=-1, keepdims=True)
+    saturated = None if options.saturation is None else (original >= options.saturation).any(axis=-1, keepdims=True)
     images = original
     indirect = None
     previous_height = None
     history: list[Iteration] = []
-    with tqdm(total=iterations + 1, desc="IRT-PS", unit="pass", disable=not progress, leave=False) as bar:
-        for index in range(iterations + 1):
+    with tqdm(total=options.iterations + 1, desc="IRT-PS", unit="pass", disable=not progress, leave=False) as bar:
+        for index in range(options.iterations + 1):
             timings = {}
             start = time.perf_counter()
-            fit = photometric_stereo(images, scene.light_directions, scene.light_irradiance, mask, robust=robust, shadow_fraction=shadow_fraction, saturation=saturation)
+            fit = fit_photometric_stereo(dataset, images, options)
             timings["photometric_stereo"] = time.perf_counter() - start
             start = time.perf_counter()
-            height = place_height(integrate_normals(fit.normals, mask, pixel_size=pixel_size, method=integration), mask, base_height=base_height)
-            height = np.where(mask, height, 0).astype(np.float32)
+            height = surface_height(dataset, fit.normals, options)
             timings["integration"] = time.perf_counter() - start
             albedo = surface_albedo(fit.albedo, height, mask, pixel_size)
             change = None if previous_height is None else float(np.abs(height - previous_height)[mask].mean())
@@ -207,20 +172,21 @@ def remove_interreflections(
             bar.update(1)
             if metrics is not None and metrics.get("normal_mean_angular_deg") is not None:
                 bar.set_postfix(error=f"{metrics['normal_mean_angular_deg']:.2f}°", refresh=False)
-            if index == iterations or (change is not None and change < tolerance):
+            if index == options.iterations or (change is not None and change < options.tolerance):
                 break
             start = time.perf_counter()
-            if estimator == "paper":
-                estimate = paper_indirect(scene, height, albedo, mask, reflections=bounces, seed=seed + index)
+            seed = options.seed + index
+            if options.estimator == "paper":
+                estimate = paper_indirect(scene, height, albedo, mask, reflections=options.bounces, seed=seed)
             else:
-                estimate = render_indirect(scene, height, albedo, mask, bounces=bounces, samples=samples, seed=seed + index, stride=stride)
+                estimate = render_indirect(scene, height, albedo, mask, bounces=options.bounces, samples=options.samples, seed=seed, stride=options.stride)
             timings["indirect_estimate"] = time.perf_counter() - start
-            if update == "original":
-                indirect = estimate if indirect is None else indirect + relaxation * (estimate - indirect)
+            if options.update == "original":
+                indirect = estimate if indirect is None else indirect + options.relaxation * (estimate - indirect)
                 images = _corrected(original, indirect, original, saturated)
             else:
                 indirect = estimate
-                images = _corrected(images, relaxation * estimate, original, saturated)
+                images = _corrected(images, options.relaxation * estimate, original, saturated)
             previous_height = height
     return InterreflectionResult(fit=fit, albedo=albedo, height=height, indirect=indirect, history=history)
 

@@ -20,11 +20,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
 
+from irtps.options import PAPER_BOUNCES
 from irtps.render import make_renderer
 from irtps.scene import Scene
 
 #: Scale of the environment colour per reflection depth r (picked on the shared scenes).
-PAPER_SCALE = {1: 0.05, 2: 0.05, 3: 0.05}
+PAPER_SCALE = dict.fromkeys(PAPER_BOUNCES, 0.05)
 
 
 def paper_environment_colour(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np.ndarray, *, reflections: int, seed: int = 0) -> np.ndarray:

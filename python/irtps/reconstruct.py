@@ -15,16 +15,14 @@ from irtps.atomic import atomic_output_dir
 from irtps.dataset import Dataset, load_dataset, read_albedo_map, read_height_map, read_normal_map
 from irtps.errors import DatasetError, IrtpsError, IrtpsWarning
 from irtps.imageio import read_mask, write_exr, write_png
-from irtps.integrate import integrate_normals, place_height
 from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
-from irtps.ps import FLAGS, check_lights, photometric_stereo
+from irtps.options import METHODS, ReconstructOptions
+from irtps.pipeline import fit_photometric_stereo, resolve_options, surface_height
+from irtps.ps import FLAGS, check_lights
 
-METHODS = ("ps", "irtps")
-
-#: Default normal integration per method: IRT-PS renders the surface again, so it needs
-#: creases kept sharp.
-DEFAULT_INTEGRATION = {"ps": "ls", "irtps": "footprint"}
+#: What a reconstruction folder holds (`save_reconstruction`); ``indirect`` for IRT-PS only.
+RECONSTRUCTION_FILES = ("normal.exr", "albedo.exr", "height.exr", "mask.png", "mesh.ply", "mesh.obj", "run.json", "indirect")
 
 
 @dataclass
@@ -70,22 +68,11 @@ class Reconstruction:
 
 def reconstruct(
     dataset: Dataset,
-    method: str = "ps",
+    method: str | None = None,
     *,
-    robust: bool = True,
-    shadow_fraction: float = 0.05,
-    saturation: float | None = None,
-    integration: str | None = None,
-    base_height: float | None = None,
-    bounces: int = 3,
-    iterations: int = 8,
-    samples: int = 256,
-    seed: int = 0,
-    relaxation: float = 1.0,
-    update: str = "original",
-    stride: int = 1,
-    estimator: str = "physical",
+    options: ReconstructOptions | None = None,
     progress: bool = False,
+    **settings,
 ) -> Reconstruction:
     """Recover normals, albedo and a height map from a data set.
 
@@ -93,34 +80,33 @@ def reconstruct(
     ----------
     dataset : Dataset
         Images, lights and mask (`irtps.load_dataset`).
-    method : str
+    method : str, optional
         ``"ps"``: classic calibrated Lambertian photometric stereo; ``"irtps"``: the same,
         iterated with the inter-reflections estimated by ray tracing and removed
-        (`irtps.interreflection.remove_interreflections`).
-    robust, shadow_fraction
-        As for `irtps.ps.photometric_stereo`.
-    saturation : float, optional
-        As for `irtps.ps.photometric_stereo`; default ``dataset.saturation`` (1.0 for
-        PNG images, else none).
-    integration : str, optional
-        Normal integration method of `irtps.integrate.integrate_normals`; default
-        ``"ls"`` for ``"ps"`` and ``"footprint"`` for ``"irtps"``.
-    base_height : float, optional
-        Height of the mask boundary's median; default the floor's (0 without a floor).
-    bounces, iterations, samples, seed, relaxation, update, stride, estimator, progress
-        IRT-PS only, as for `irtps.interreflection.remove_interreflections`.
+        (`irtps.interreflection.remove_interreflections`). Overrides ``options.method``.
+    options : ReconstructOptions, optional
+        Every setting (`irtps.options.ReconstructOptions`: photometric stereo, integration,
+        placement, IRT-PS); default all defaults.
+    progress : bool
+        Show a progress bar (IRT-PS).
+    **settings
+        Fields of `ReconstructOptions` that replace those of `options`, e.g.
+        ``bounces=2``. ``saturation`` defaults to ``dataset.saturation`` (1.0 for PNG
+        images, else none); ``base_height`` to the floor's height (0 without a floor).
 
     Returns
     -------
     Reconstruction
+        Its ``parameters`` are the options used, with the defaults resolved.
 
     Raises
     ------
     DatasetError
         Naming ``dataset.source``: lights that are (nearly) coplanar or have a zero
         irradiance, or images black on the whole object.
-    IrtpsError
-        If a parameter is out of range.
+    OptionError
+        Naming the option: a value out of range or not among the choices (also a
+        `ValueError`).
 
     Warns
     -----
@@ -134,45 +120,20 @@ def reconstruct(
     >>> result = reconstruct(data)
     >>> result.normals.shape, sorted(result.timings)
     ((24, 24, 3), ['integration', 'photometric_stereo'])
+    >>> reconstruct(data, samples=0)
+    Traceback (most recent call last):
+    ...
+    irtps.options.OptionError: samples: 0 is out of range: expected an integer from 1 to 1048576
     """
-    if method not in METHODS:
-        raise IrtpsError(f"method: unknown {method!r} (choose from {', '.join(METHODS)})")
-    scene = dataset.scene
-    saturation = dataset.saturation if saturation is None else saturation
-    _check_input(dataset, saturation, robust)
-    if base_height is None:
-        base_height = scene.floor.height if scene.floor is not None else 0.0
-    integration = DEFAULT_INTEGRATION[method] if integration is None else integration
-    parameters = {
-        "method": method,
-        "robust": robust,
-        "shadow_fraction": shadow_fraction,
-        "saturation": saturation,
-        "integration": integration,
-        "base_height": base_height,
-    }
-    pixel_size = scene.camera.pixel_size
+    if method is not None:
+        settings["method"] = method
+    options = resolve_options(dataset, ReconstructOptions.build(options, **settings))
+    _check_input(dataset, options.saturation, options.robust)
+    parameters = options.to_dict()
     timings = {}
-    if method == "irtps":
-        parameters.update(bounces=bounces, iterations=iterations, samples=samples, seed=seed, relaxation=relaxation, update=update, stride=stride, estimator=estimator)
+    if options.method == "irtps":
         start = time.perf_counter()
-        loop = remove_interreflections(
-            dataset,
-            bounces=bounces,
-            iterations=iterations,
-            samples=samples,
-            seed=seed,
-            relaxation=relaxation,
-            update=update,
-            integration=integration,
-            robust=robust,
-            shadow_fraction=shadow_fraction,
-            saturation=saturation,
-            base_height=base_height,
-            stride=stride,
-            estimator=estimator,
-            progress=progress,
-        )
+        loop = remove_interreflections(dataset, options, progress=progress)
         timings["irtps"] = time.perf_counter() - start
         return Reconstruction(
             normals=loop.fit.normals,
@@ -180,50 +141,42 @@ def reconstruct(
             height=loop.height,
             mask=dataset.mask,
             flags=loop.fit.flags,
-            pixel_size=pixel_size,
+            pixel_size=dataset.scene.camera.pixel_size,
             timings=timings,
             parameters=parameters,
             indirect=loop.indirect,
             history=loop.history,
         )
     start = time.perf_counter()
-    fit = photometric_stereo(
-        dataset.images,
-        scene.light_directions,
-        scene.light_irradiance,
-        dataset.mask,
-        robust=robust,
-        shadow_fraction=shadow_fraction,
-        saturation=saturation,
-    )
+    fit = fit_photometric_stereo(dataset, dataset.images, options)
     timings["photometric_stereo"] = time.perf_counter() - start
     start = time.perf_counter()
-    height = integrate_normals(fit.normals, dataset.mask, pixel_size=pixel_size, method=integration)
-    height = place_height(height, dataset.mask, base_height=base_height)
+    height = surface_height(dataset, fit.normals, options)
     timings["integration"] = time.perf_counter() - start
     return Reconstruction(
         normals=fit.normals,
         albedo=fit.albedo,
-        height=np.where(dataset.mask, height, 0).astype(np.float32),
+        height=height,
         mask=dataset.mask,
         flags=fit.flags,
-        pixel_size=pixel_size,
+        pixel_size=dataset.scene.camera.pixel_size,
         timings=timings,
         parameters=parameters,
     )
 
 
-def load_and_reconstruct(path: str | Path, method: str = "ps", **options) -> tuple[Dataset, Reconstruction]:
+def load_and_reconstruct(path: str | Path, method: str | None = None, **options) -> tuple[Dataset, Reconstruction]:
     """Read a data set folder and reconstruct it, timing the reading too.
 
     Parameters
     ----------
     path : str or pathlib.Path
         A data set folder, as for `irtps.load_dataset`.
-    method : str
+    method : str, optional
         As for `reconstruct`.
     **options
-        The other keyword arguments of `reconstruct`.
+        The other keyword arguments of `reconstruct` (``options``, ``progress``, fields
+        of `ReconstructOptions`).
 
     Returns
     -------
@@ -235,6 +188,8 @@ def load_and_reconstruct(path: str | Path, method: str = "ps", **options) -> tup
     ------
     DatasetError
         If the folder is not a readable data set (see `irtps.load_dataset`).
+    OptionError
+        For an option out of range, before the data set is read.
 
     Examples
     --------
@@ -248,10 +203,14 @@ def load_and_reconstruct(path: str | Path, method: str = "ps", **options) -> tup
     >>> list(result.timings)
     ['load', 'photometric_stereo', 'integration']
     """
+    if method is not None:
+        options["method"] = method
+    settings = {key: value for key, value in options.items() if key not in ("options", "progress")}
+    ReconstructOptions.build(options.get("options"), **settings)  # a bad option fails before the data set is read
     start = time.perf_counter()
     dataset = load_dataset(path)
     loaded = time.perf_counter() - start
-    result = reconstruct(dataset, method, **options)
+    result = reconstruct(dataset, **options)
     result.timings = {"load": loaded, **result.timings}
     return dataset, result
 

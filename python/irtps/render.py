@@ -10,6 +10,7 @@ from tqdm import tqdm
 from irtps import _core
 from irtps.errors import IrtpsError
 from irtps.resources import check_memory
+from irtps.options import RenderOptions
 from irtps.scene import Scene
 
 #: Footprint samples per pixel for the direct image (stratified; shadows are traced exactly).
@@ -197,7 +198,7 @@ def render(
     >>> round(float(flat.direct[1, 4, 4, 0]), 4)  # albedo · cos θ = 0.5 · 0.8
     0.4
     """
-    _check_counts(bounces, samples)
+    _check_counts(bounces, samples, seed)
     direct_samples = min(samples, DEFAULT_DIRECT_SAMPLES) if direct_samples is None else direct_samples
     if direct_samples < 0 or (direct_samples == 0 and bounces == 0):
         raise IrtpsError(f"direct_samples: {direct_samples} must be at least 1 (or 0 with bounces)")
@@ -243,7 +244,7 @@ def render_indirect(
     numpy.ndarray
         float32 (K, H, W, 3).
     """
-    _check_counts(bounces, samples)
+    _check_counts(bounces, samples, seed)
     if bounces < 1:
         raise IrtpsError(f"bounces: {bounces} must be at least 1")
     if stride < 1:
@@ -290,11 +291,9 @@ def _render_sparse(renderer, mask: np.ndarray, bounces: int, samples: int, seed:
     return out
 
 
-def _check_counts(bounces: int, samples: int) -> None:
-    if bounces < 0:
-        raise IrtpsError(f"bounces: {bounces} is negative")
-    if samples < 1:
-        raise IrtpsError(f"samples: {samples} must be at least 1")
+def _check_counts(bounces: int, samples: int, seed: int) -> None:
+    """Raise `OptionError` naming the first of bounces, samples and seed out of range."""
+    RenderOptions(bounces=bounces, samples=samples, seed=seed)
 
 
 def _render_planes(renderer, scene: Scene, bounces: int, samples: int, direct_samples: int, seed: int, split: bool, progress: bool) -> np.ndarray:

@@ -29,10 +29,11 @@ from irtps.errors import IrtpsError
 from irtps.evaluate import ErrorMaps, Metrics, error_maps, evaluate
 from irtps.figures import convergence_png, error_map_png, image_png
 from irtps.imageio import read_exr
-from irtps.reconstruct import load_reconstruction, load_run_record
+from irtps.output_rule import check_output
+from irtps.reconstruct import RECONSTRUCTION_FILES, load_reconstruction, load_run_record
 from irtps.report_page import report_html
 
-__all__ = ["PAGE_FILE", "REPORT_FOLDER", "Report", "ReportFigure", "build_report", "write_report"]
+__all__ = ["PAGE_FILE", "REPORT_FOLDER", "Report", "ReportFigure", "build_report", "report_inputs", "write_report"]
 
 #: The report's folder inside a reconstruction folder, and its page.
 REPORT_FOLDER = "report"
@@ -187,7 +188,8 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, *, truth: s
     Raises
     ------
     IrtpsError
-        As for `build_report`, or if ``out`` would replace ``run_dir`` itself.
+        As for `build_report`; `irtps.output_rule.OutputError` if ``out`` is, holds or
+        lies inside one of `report_inputs`.
 
     Examples
     --------
@@ -204,8 +206,7 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, *, truth: s
     """
     folder = Path(run_dir)
     target = folder / REPORT_FOLDER if out is None else Path(out)
-    if folder.resolve().is_relative_to(target.resolve()):
-        raise IrtpsError(f"{target}: the report would replace the reconstruction folder {folder}; choose another --out")
+    check_output(target, report_inputs(folder, truth), ours=(PAGE_FILE,), force=True, option="out")
     report = build_report(folder, truth=truth)
     page = report_html(report)
     with atomic_output_dir(target) as temp:
@@ -262,6 +263,31 @@ def _indirect_figure(folder: Path, mask: np.ndarray, window: tuple[slice, slice]
         "Colour bled from coloured surroundings shows here."
     )
     return ReportFigure("indirect", "Estimated inter-reflections", caption, image_png(rgb, "Estimated inter-reflections"))
+
+
+def report_inputs(run_dir: str | Path, truth: str | Path | None = None) -> list[Path]:
+    """What a report of `run_dir` reads: the reconstruction's files and the data set of its
+    ground truth (`truth`, else the source recorded in ``run.json`` when it is there).
+
+    Parameters
+    ----------
+    run_dir : str or pathlib.Path
+        A folder written by ``irtps reconstruct``.
+    truth : str or pathlib.Path, optional
+
+    Returns
+    -------
+    list of pathlib.Path
+    """
+    folder = Path(run_dir)
+    inputs = [folder / name for name in RECONSTRUCTION_FILES]
+    if truth is not None:
+        return [*inputs, Path(truth)]
+    try:
+        source = load_run_record(folder)["source"]
+    except IrtpsError:
+        source = None  # the report itself says what is wrong with run.json
+    return inputs if source is None else [*inputs, Path(source)]
 
 
 def _ground_truth(record: dict, truth: str | Path | None, size: tuple[int, int]) -> tuple[GroundTruth | None, str]:

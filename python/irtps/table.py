@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -9,7 +10,7 @@ import numpy as np
 from irtps.dataset import Dataset
 from irtps.errors import IrtpsError
 from irtps.evaluate import evaluate
-from irtps.paper_estimator import PAPER_SCALE
+from irtps.options import PAPER_BOUNCES, ReconstructOptions, TableOptions
 from irtps.reconstruct import Reconstruction, reconstruct
 
 #: Rows of the table: (label, metric key); lower is better for all of them.
@@ -25,44 +26,42 @@ ROWS = (
 def method_names(bounces: Sequence[int], paper: bool = True) -> list[str]:
     """Column names: ``PS``, ``IRTPSr1`` … for each bounce count, then (with `paper`) the
     paper's estimator ``Paper-r1`` … for the counts it takes (1 to 3)."""
-    return ["PS"] + [f"IRTPSr{r}" for r in bounces] + ([f"Paper-r{r}" for r in bounces if r in PAPER_SCALE] if paper else [])
+    return ["PS"] + [f"IRTPSr{r}" for r in bounces] + ([f"Paper-r{r}" for r in bounces if r in PAPER_BOUNCES] if paper else [])
 
 
-def _runs(bounces: Sequence[int], paper: bool) -> list[tuple[str, dict | None]]:
-    """(column, reconstruct settings) for each column; None is classic PS."""
-    runs: list[tuple[str, dict | None]] = [("PS", None)]
-    runs += [(f"IRTPSr{r}", {"bounces": r}) for r in bounces]
-    if paper:
-        runs += [(f"Paper-r{r}", {"bounces": r, "estimator": "paper", "update": "previous"}) for r in bounces if r in PAPER_SCALE]
+def _runs(options: TableOptions) -> list[tuple[str, ReconstructOptions]]:
+    """(column, reconstruction options) for each column."""
+    irtps = ReconstructOptions(method="irtps", iterations=options.iterations, samples=options.samples, seed=options.seed)
+    runs = [("PS", ReconstructOptions(method="ps"))]
+    runs += [(f"IRTPSr{r}", dataclasses.replace(irtps, bounces=r)) for r in options.bounces]
+    if options.paper:
+        runs += [(f"Paper-r{r}", dataclasses.replace(irtps, bounces=r, estimator="paper", update="previous")) for r in options.bounces if r in PAPER_BOUNCES]
     return runs
 
 
 def comparison_table(
     datasets: Sequence[tuple[str, Dataset]],
+    options: TableOptions | None = None,
     *,
-    bounces: Sequence[int] = (1, 2, 3),
-    iterations: int = 8,
-    samples: int = 256,
-    seed: int = 0,
-    paper: bool = True,
     on_result: Callable[[str, str, Reconstruction], None] | None = None,
+    **settings,
 ) -> dict:
     """Reconstruct each data set with classic PS and IRT-PS r1..r3 and collect the errors.
 
     Parameters
     ----------
     datasets : sequence of (name, Dataset)
-        Data sets with ground truth.
-    bounces : sequence of int
-        The IRT-PS variants (bounces estimated).
-    iterations, samples, seed
-        IRT-PS settings, as for `irtps.reconstruct`.
-    paper : bool
-        Also run the paper's own estimator (`irtps.paper_estimator`) with its own update
-        Aₜ₊₁ = Aₜ − Eₜ, for each bounce count it takes.
+        Data sets with ground truth, under distinct names.
+    options : TableOptions, optional
+        The IRT-PS variants (``bounces``: the bounce counts estimated) and their
+        ``iterations``, ``samples`` and ``seed``; ``paper`` also runs the paper's own
+        estimator (`irtps.paper_estimator`) with its own update Aₜ₊₁ = Aₜ − Eₜ, for each
+        bounce count it takes. Default `irtps.options.TableOptions`'s defaults.
     on_result : callable, optional
         Called as ``on_result(name, method, reconstruction)`` after each reconstruction
         (e.g. to save it or to advance a progress bar).
+    **settings
+        Fields of `TableOptions` that replace those of `options`.
 
     Returns
     -------
@@ -70,20 +69,28 @@ def comparison_table(
         ``{"methods": [...], "rows": [...], "datasets": {name: {method: metrics}},
         "overall": {method: metrics}}``, metrics being `irtps.evaluate.Metrics.to_dict`;
         the overall value of a metric is its mean over the data sets that have it.
+
+    Raises
+    ------
+    IrtpsError
+        No data set, two under one name, or one without ground truth; `OptionError` for an
+        option out of range.
     """
+    options = TableOptions.build(options, **settings)
     if not datasets:
         raise IrtpsError("datasets: none given")
-    methods = method_names(bounces, paper)
+    names = [name for name, _ in datasets]
+    repeated = sorted({name for name in names if names.count(name) > 1})
+    if repeated:
+        raise IrtpsError(f"datasets: the name {repeated[0]!r} is given to more than one data set (names must be distinct)")
+    methods = method_names(options.bounces, options.paper)
     per_dataset: dict[str, dict[str, dict]] = {}
     for name, data in datasets:
         if data.gt is None:
             raise IrtpsError(f"{name}: has no ground truth to compare with")
         per_dataset[name] = {}
-        for method, settings in _runs(bounces, paper):
-            if settings is None:
-                result = reconstruct(data, "ps")
-            else:
-                result = reconstruct(data, "irtps", iterations=iterations, samples=samples, seed=seed, **settings)
+        for method, run in _runs(options):
+            result = reconstruct(data, options=run)
             metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=data.gt)
             per_dataset[name][method] = metrics.to_dict()
             if on_result is not None:
