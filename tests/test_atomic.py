@@ -3,6 +3,7 @@
 import errno
 import fcntl
 import os
+import shutil
 import signal
 import stat
 import subprocess
@@ -163,9 +164,10 @@ def test_write_bytes_under_a_file_names_the_folder(tmp_path):
 # Enters atomic_output_dir(argv[1]) (or atomic_write_bytes when argv[2] is "file"),
 # writes, prints the temporary name, then waits for a line on stdin (or to be killed)
 # before finishing. With argv[3] == "mid-replace", it stops instead right after the
-# old output was moved aside, before the new one is renamed in.
+# old output was moved aside, before the new one is renamed in; with "deleting-old",
+# when it starts deleting the old output, after the new one is in place.
 WRITER = """
-import os, sys
+import os, shutil, sys
 from pathlib import Path
 from irtps.atomic import atomic_output_dir, atomic_write_bytes
 
@@ -190,9 +192,15 @@ else:
             if ".old-" in str(target):
                 pause(target)
         os.rename = paused_rename
+    if when == "deleting-old":
+        rmtree = shutil.rmtree
+        def paused_rmtree(path, **kwargs):
+            pause(path)
+            rmtree(path, **kwargs)
+        shutil.rmtree = paused_rmtree
     with atomic_output_dir(final) as temp:
         (temp / "a.txt").write_text("from the writer")
-        if when != "mid-replace":
+        if when == "in-body":
             pause(temp)
 print("done", flush=True)
 """
@@ -267,6 +275,21 @@ def _stale_mid_replace(folder, lock):
     (folder / ".out.tmp-0123abcd" / "new.txt").write_text("new")
     if lock == "unlocked":
         (folder / ".out.lock-0123abcd").write_bytes(b"")
+
+
+def test_a_writer_killed_while_deleting_the_old_output_leaves_no_old_folder(tmp_path):
+    final = tmp_path / "out"
+    final.mkdir()
+    (final / "previous.txt").write_text("previous")
+    process, deleting = _start_writer(final, when="deleting-old")
+    _kill(process)
+    assert deleting.name.startswith(".out.tmp-")  # the old output, renamed to the free temporary name
+    assert _names(deleting) == ["previous.txt"]
+    assert _names(final) == ["a.txt"]
+    shutil.rmtree(final)  # by hand: the next write must not bring back what was being deleted
+    with pytest.raises(Boom), atomic_output_dir(final):
+        raise Boom()
+    assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize("lock", ["unlocked", "gone"])

@@ -12,7 +12,9 @@ behind: the next write to the same ``NAME`` in the same folder removes the hidde
 names whose lock is free (its owner is dead) or gone. A ``.NAME.old-TOKEN`` left that
 way is renamed back to ``NAME`` if ``NAME`` is missing (the killed write had moved the
 previous output aside but not put the new one in yet), so a failed write loses
-nothing. The hidden names of a write still running are never touched.
+nothing; a previous output being deleted is first renamed to the temporary name, so
+a half-deleted one is never brought back. The hidden names of a write still running
+are never touched.
 
 Writes racing on the same ``NAME`` each use their own hidden names; the last one to
 rename its output into place wins and none of them fails because of the others.
@@ -20,7 +22,6 @@ rename its output into place wins and none of them fails because of the others.
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import fcntl
 import os
@@ -28,7 +29,7 @@ import re
 import secrets
 import shutil
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import TypeVar
 
@@ -188,8 +189,9 @@ def _remove_stale(final: Path) -> set[str]:
         except OSError:
             stale = False  # no locks on this file system: the owner cannot be told dead
         if stale:
-            _remove(_hidden(final, "tmp", token))
-            _restore(_hidden(final, "old", token), final)
+            temp = _hidden(final, "tmp", token)
+            _remove(temp)
+            _restore(_hidden(final, "old", token), final, temp)
             _remove(lock)
         if descriptor is not None:
             os.close(descriptor)
@@ -225,21 +227,33 @@ def _replace(new: Path, final: Path, old: Path) -> None:
                 if error.errno not in _TARGET_TAKEN:
                     raise
             _remove(old)  # an output moved aside in an earlier round, already replaced by another
-            with contextlib.suppress(FileNotFoundError):
+            with suppress(FileNotFoundError):
                 os.rename(final, old)
     except OSError as error:
-        _restore(old, final)
+        _restore(old, final, new)
         raise _not_writable(final.parent, error) from None
-    _remove(old)
+    _discard(old, new)
 
 
-def _restore(old: Path, final: Path) -> None:
-    """Rename ``old`` back to ``final`` if that is missing, otherwise delete it."""
+def _restore(old: Path, final: Path, trash: Path) -> None:
+    """Rename ``old`` back to ``final`` if that is missing, otherwise discard it to ``trash``."""
     if not _exists(final):
-        with contextlib.suppress(OSError):
+        with suppress(OSError):
             os.rename(old, final)
     if _exists(final):
-        _remove(old)
+        _discard(old, trash)
+
+
+def _discard(old: Path, trash: Path) -> None:
+    """Delete ``old``, first renamed to the temporary name ``trash`` unless that is taken.
+
+    A write killed while deleting then leaves a partial temporary, which the next one
+    deletes, rather than a partial ``old``, which it could restore.
+    """
+    with suppress(OSError):
+        os.rename(old, trash)
+        old = trash
+    _remove(old)
 
 
 def _remove(path: Path) -> None:
@@ -247,7 +261,7 @@ def _remove(path: Path) -> None:
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path, ignore_errors=True)
     else:
-        with contextlib.suppress(OSError):
+        with suppress(OSError):
             path.unlink(missing_ok=True)
 
 
