@@ -69,3 +69,23 @@ def test_table_needs_ground_truth(tmp_path, capsys):
     irtps.save_dataset(data, tmp_path / "nogt")
     assert main(["table", str(tmp_path / "nogt"), "--quiet"]) == 2
     assert "ground truth" in capsys.readouterr().err
+
+
+def test_two_data_sets_of_one_name_both_get_a_block(two_scenes, tmp_path, capsys):
+    twin = tmp_path / "elsewhere" / "cap"
+    twin.parent.mkdir()
+    twin.symlink_to(two_scenes[0])  # the same folder name in another place
+    out = tmp_path / "table"
+    argv = ["table", str(two_scenes[0]), str(twin), "--out", str(out), "--bounces", "1", "--iterations", "0", "--no-paper", "--quiet"]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "| **cap** |" in printed and "| **cap-2** |" in printed
+    table = json.loads((out / "table.json").read_text())
+    assert list(table["datasets"]) == ["cap", "cap-2"]
+    assert table["datasets"]["cap"] == table["datasets"]["cap-2"]  # the same data set twice
+
+
+def test_the_api_refuses_two_data_sets_under_one_name(two_scenes):
+    data = irtps.load_dataset(two_scenes[0])
+    with pytest.raises(irtps.IrtpsError, match="datasets: the name 'cap' is given to more than one data set"):
+        comparison_table([("cap", data), ("cap", data)], bounces=(1,), iterations=0, paper=False)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
 import time
@@ -90,6 +91,8 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
 def _cmd_batch(args: argparse.Namespace) -> None:
     options, cluster_options = from_arguments(ReconstructOptions, args), from_arguments(ClusterOptions, args)
     check_output(args.out, args.data, ours=OUTPUT_MARKERS, force=args.force)
+    if args.force and os.path.lexists(args.out) and not args.out.is_dir():
+        args.out.unlink()  # OUT is a folder that the data sets' folders go into, not replaced as a whole
     if cluster_options.scheduler is None:
         threads = cluster_options.threads_per_worker
         cluster = local_cluster(cluster_options.workers, 1 if threads is None else threads)

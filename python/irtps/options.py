@@ -129,7 +129,8 @@ class _Spec:
                 raise OptionError(name, f"{value!r} is not {self.describe()}") from None
             if not items:
                 raise OptionError(name, f"no value given; expected {self.describe()}")
-            return tuple(self._one(name, item) for item in items)
+            each = dataclasses.replace(self, many=False, optional=False)
+            return tuple(each.check(name, item) for item in items)
         return self._one(name, value)
 
     def _one(self, name: str, value: Any) -> Any:
