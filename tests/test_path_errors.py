@@ -262,6 +262,7 @@ def test_the_helpers_describe_each_kind_of_path(tmp_path):
     assert folder_problem(tmp_path / "symlink_loop") == "a symlink loop"
     assert folder_problem(tmp_path / "broken_symlink") == "a broken symlink (to nowhere.exr)"
     assert file_problem("/dev/null") == "a device, not a regular file"
+    assert file_problem("a\0b") == folder_problem("a\0b") == "not a valid path (it holds a NUL character)"
     assert optional_file(tmp_path / "absent") is False and optional_file(tmp_path / "file") is True
     assert resolve_path(tmp_path / "symlink_loop") == tmp_path / "symlink_loop"
     assert resolve_path(tmp_path / "file") == (tmp_path / "file").resolve()

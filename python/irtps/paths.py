@@ -27,6 +27,9 @@ MISSING = "missing"
 NO_DATA_SET_FOLDER = "no such data set folder"
 """The problem of a data set folder path with nothing at it."""
 
+INVALID_NAME = "not a valid path (it holds a NUL character)"
+"""The problem of a path that no file can have."""
+
 
 def file_problem(path: str | Path) -> str | None:
     """Why ``path`` cannot be read as a file, or None if it is a readable regular file.
@@ -41,7 +44,8 @@ def file_problem(path: str | Path) -> str | None:
         ``"missing"``, ``"a broken symlink (to TARGET)"``, ``"a symlink loop"``,
         ``"a directory, not a file"``, ``"a FIFO (named pipe), not a regular file"``,
         ``"a socket, not a regular file"``, ``"a device, not a regular file"``,
-        ``"not readable (permission denied)"`` or ``"cannot be read (REASON)"``.
+        ``"not readable (permission denied)"``, ``"cannot be read (REASON)"`` or
+        ``"not a valid path (it holds a NUL character)"``.
 
     Examples
     --------
@@ -54,6 +58,8 @@ def file_problem(path: str | Path) -> str | None:
         mode = os.stat(path).st_mode
     except OSError as error:
         return _stat_problem(path, error, MISSING)
+    except ValueError:  # a NUL character: no file can have such a name
+        return INVALID_NAME
     if stat.S_ISREG(mode):
         return None if os.access(path, os.R_OK) else "not readable (permission denied)"
     if stat.S_ISDIR(mode):
@@ -80,13 +86,15 @@ def folder_problem(path: str | Path, missing: str = NO_DATA_SET_FOLDER) -> str |
     -------
     str or None
         ``missing``, ``"a broken symlink (to TARGET)"``, ``"a symlink loop"``,
-        ``"not a folder"``, ``"not readable (permission denied)"`` or
-        ``"cannot be read (REASON)"``.
+        ``"not a folder"``, ``"not readable (permission denied)"``,
+        ``"cannot be read (REASON)"`` or ``"not a valid path (it holds a NUL character)"``.
     """
     try:
         mode = os.stat(path).st_mode
     except OSError as error:
         return _stat_problem(path, error, missing)
+    except ValueError:
+        return INVALID_NAME
     if not stat.S_ISDIR(mode):
         return "not a folder"
     return None if os.access(path, os.R_OK | os.X_OK) else "not readable (permission denied)"
@@ -187,7 +195,7 @@ def resolve_path(path: str | Path) -> Path:
     """
     try:
         return Path(path).resolve()
-    except (RuntimeError, OSError):
+    except (RuntimeError, OSError, ValueError):  # a loop; a NUL character
         return Path(os.path.abspath(path))
 
 
