@@ -372,6 +372,20 @@ CASES = {
         [],
         ["{data}/021.png: corrupt PNG: its header claims 10000x10000 pixels, more than its"],
     ),
+    "absurd pixel size": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _edit_scene(f, lambda s: s["camera"].update(pixel_size=1e308)),
+        [],
+        ["{data}/scene.json: camera.pixel_size 1e+308 is out of range: expected a number from 1e-09 to 1e+09"],
+    ),
+    "absurd base height": (
+        "reconstruct",
+        "mitsuba",
+        None,
+        ["--base-height", "1e308"],
+        ["--base-height: 1e+308 is out of range for this data set: expected at most 1e+06 pixel sizes"],
+    ),
     "absurd synthetic size": ("synth", None, None, ["cap", "--size", "1000000"], ["--size: 1000000 is out of range: expected an integer from 8 to 11585"]),
     "no samples": ("render", "mitsuba", None, ["--samples", "0"], ["--samples: 0 is out of range: expected an integer from 1 to 1048576"]),
     "saturation not a number": (

@@ -67,7 +67,7 @@ def test_an_integer_out_of_range_is_one_named_error_with_its_range(command, opti
         (["reconstruct", str(BALL), "--shadow-fraction", "1"], "--shadow-fraction: 1.0 is out of range: expected a finite number in [0, 1)"),
         (["reconstruct", str(BALL), "--relaxation", "0"], "--relaxation: 0.0 is out of range: expected a finite number in (0, 1]"),
         (["reconstruct", str(BALL), "--base-height", "inf"], "--base-height: inf is not a finite number"),
-        (["reconstruct", str(BALL), "--base-height", "1e308"], "base_height: 1e+308 is out of range for this data set"),
+        (["reconstruct", str(BALL), "--base-height", "1e308"], "--base-height: 1e+308 is out of range for this data set"),
         (["reconstruct", str(BALL), "--tolerance", "-1"], "--tolerance: -1.0 is out of range: expected a finite number at least 0"),
         (["reconstruct", str(BALL), "--estimator", "paper", "--bounces", "4"], "--bounces: the paper's estimator takes 1, 2 or 3 reflections, not 4"),
         (["table", str(BALL), "--bounces", "1", "0"], "--bounces: 0 is out of range: expected an integer from 1 to 64"),

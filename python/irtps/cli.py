@@ -18,7 +18,7 @@ from irtps.batch import SUMMARY_JSON, SUMMARY_MARKDOWN, connect, local_cluster, 
 from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object, load_ground_truth, save_dataset
 from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate, format_metrics
-from irtps.options import ClusterOptions, ReconstructOptions, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
+from irtps.options import ClusterOptions, OptionError, ReconstructOptions, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
 from irtps.output_rule import check_output, escaped
 from irtps.reconstruct import load_and_reconstruct, load_reconstruction, save_reconstruction
 from irtps.render import Rendering, render
@@ -392,6 +392,10 @@ def main(argv: list[str] | None = None) -> int:
             warnings.simplefilter("default", IrtpsWarning)  # each message once
             warnings.showwarning = _show_warning
             args.run(args)
+    except OptionError as err:
+        flag = "--" + err.option.replace("_", "-") if hasattr(args, err.option) else err.option
+        print(f"irtps: error: {flag}: {escaped(err.problem)}", file=sys.stderr)
+        return 2
     except (IrtpsError, OSError) as err:
         print(f"irtps: error: {escaped(str(err))}", file=sys.stderr)
         return 2

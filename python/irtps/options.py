@@ -381,7 +381,7 @@ def _help(spec: _Spec, default: Any) -> str:
 
 
 def from_arguments(cls: type[T], args: argparse.Namespace) -> T:
-    """The options given on the command line; an `OptionError` names the command-line flag.
+    """The options given on the command line.
 
     Parameters
     ----------
@@ -390,8 +390,4 @@ def from_arguments(cls: type[T], args: argparse.Namespace) -> T:
         Parsed by a parser that `add_arguments` set up for `cls` (fields it lacks take
         their defaults).
     """
-    values = {item.name: getattr(args, item.name) for item in dataclasses.fields(cls) if hasattr(args, item.name)}
-    try:
-        return cls(**values)
-    except OptionError as error:
-        raise OptionError("--" + error.option.replace("_", "-"), error.problem) from None
+    return cls(**{item.name: getattr(args, item.name) for item in dataclasses.fields(cls) if hasattr(args, item.name)})

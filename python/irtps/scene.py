@@ -287,6 +287,12 @@ def write_scene(scene: Scene, path: str | Path) -> None:
     atomic_write_text(path, json.dumps(obj, indent=1) + "\n")
 
 
+#: Range of a pixel's world size: the core's geometry is float32, and the squares of its
+#: coordinates (up to the image size times this) must stay finite and above its smallest
+#: normal number.
+MIN_PIXEL_SIZE, MAX_PIXEL_SIZE = 1e-9, 1e9
+
+
 def _parse_camera(fields: _Fields, value: object) -> Camera:
     camera = fields.mapping(value, "camera", required=("projection", "width", "height", "pixel_size"))
     if camera["projection"] != "orthographic":
@@ -295,7 +301,10 @@ def _parse_camera(fields: _Fields, value: object) -> Camera:
     height = fields.positive_int(camera["height"], "camera.height")
     if width * height > MAX_IMAGE_PIXELS:
         fields.fail("camera", f"size {width}x{height} exceeds the largest supported image ({MAX_IMAGE_PIXELS} pixels)")
-    return Camera(width=width, height=height, pixel_size=fields.positive_number(camera["pixel_size"], "camera.pixel_size"))
+    pixel_size = fields.positive_number(camera["pixel_size"], "camera.pixel_size")
+    if not MIN_PIXEL_SIZE <= pixel_size <= MAX_PIXEL_SIZE:
+        fields.fail("camera.pixel_size", f"{pixel_size:g} is out of range: expected a number from {MIN_PIXEL_SIZE:g} to {MAX_PIXEL_SIZE:g} (world units per pixel)")
+    return Camera(width=width, height=height, pixel_size=pixel_size)
 
 
 def _parse_lights(fields: _Fields, value: object) -> tuple[Light, ...]:
