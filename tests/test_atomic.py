@@ -168,7 +168,6 @@ def test_write_bytes_under_a_file_names_the_folder(tmp_path):
 # when it starts deleting the old output, after the new one is in place.
 WRITER = """
 import os, shutil, sys
-from pathlib import Path
 from irtps.atomic import atomic_output_dir, atomic_write_bytes
 
 final, kind, when = sys.argv[1], sys.argv[2], sys.argv[3]
@@ -350,7 +349,7 @@ def test_the_hidden_names_of_a_live_writer_are_left_alone(tmp_path, kind):
     process, temp = _start_writer(final, kind=kind)
     try:
         hidden = _names(tmp_path)
-        for round in range(3):
+        for _ in range(3):
             if kind == "file":
                 atomic_write_bytes(final, b"mine")
             else:
