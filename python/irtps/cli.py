@@ -20,6 +20,7 @@ from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate, format_metrics
 from irtps.options import ClusterOptions, OptionError, ReconstructOptions, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
 from irtps.output_rule import check_output, escaped
+from irtps.paths import resolve_path
 from irtps.reconstruct import load_and_reconstruct, load_reconstruction, save_reconstruction
 from irtps.render import Rendering, render
 from irtps.surface import height_to_normals
@@ -75,7 +76,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
     options = from_arguments(ReconstructOptions, args)
     check_output(args.out, [args.data], ours=OUTPUT_MARKERS, force=args.force)
     dataset, result = load_and_reconstruct(args.data, options=options, progress=not args.quiet)
-    save_reconstruction(result, args.out, source=str(args.data.resolve()))
+    save_reconstruction(result, args.out, source=str(resolve_path(args.data)))
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
         print(f"reconstructed {args.data} ({options.method}; {stages}) -> {args.out}")

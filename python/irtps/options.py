@@ -24,6 +24,7 @@ from typing import Any, ClassVar, TypeVar
 import numpy as np
 
 from irtps.errors import IrtpsError
+from irtps.imageio import MAX_IMAGE_PIXELS
 from irtps.integrate import METHODS as INTEGRATION_METHODS
 
 __all__ = ["ESTIMATORS", "METHODS", "UPDATES", "ClusterOptions", "OptionError", "ReconstructOptions", "RenderOptions", "SynthOptions", "TableOptions", "add_arguments", "from_arguments"]
@@ -51,8 +52,8 @@ MAX_SAMPLES = 2**20
 MAX_ITERATIONS = 1000
 #: Largest number of lights of a synthetic scene.
 MAX_LIGHTS = 100_000
-#: Largest side of a synthetic image: its square is the largest image irtps makes (2^27).
-MAX_SYNTH_SIZE = 11585
+#: Largest side of a synthetic image: its square is the largest image irtps makes.
+MAX_SYNTH_SIZE = math.isqrt(MAX_IMAGE_PIXELS)
 #: Largest IRT-PS stride and number of cluster workers or threads: beyond any image or machine.
 MAX_STRIDE = 4096
 MAX_WORKERS = 4096

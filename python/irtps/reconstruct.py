@@ -18,6 +18,7 @@ from irtps.imageio import read_mask, write_exr, write_png
 from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
 from irtps.options import METHODS, ReconstructOptions
+from irtps.paths import check_file, check_folder
 from irtps.pipeline import fit_photometric_stereo, resolve_options, surface_height
 from irtps.ps import FLAGS, check_lights
 
@@ -299,10 +300,8 @@ def load_reconstruction(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.nd
         Naming the file: missing, unreadable, non-finite, or of another size than
         ``normal.exr``.
     """
-    folder = Path(path)
-    normal_path = folder / "normal.exr"
-    if not normal_path.is_file():
-        raise DatasetError(f"{normal_path}: missing (not a reconstruction folder?)")
+    folder = check_folder(path, missing="no such reconstruction folder")
+    normal_path = check_file(folder / "normal.exr", "not a reconstruction folder?")
     normals = read_normal_map(normal_path)
     size = normals.shape[:2]
     albedo = read_albedo_map(folder / "albedo.exr", size)
@@ -360,16 +359,14 @@ def load_run_record(path: str | Path) -> dict:
     >>> record["source"], record["parameters"]["method"], record["history"]
     ('cap', 'ps', [])
     """
-    folder = Path(path)
-    if not folder.is_dir():
-        raise IrtpsError(f"{folder}: no such reconstruction folder")
-    run_path = folder / "run.json"
-    if not run_path.is_file():
-        raise IrtpsError(f"{run_path}: missing (not a reconstruction folder written by irtps reconstruct?)")
+    folder = check_folder(path, missing="no such reconstruction folder")
+    run_path = check_file(folder / "run.json", "not a reconstruction folder written by irtps reconstruct?")
     try:
         record = json.loads(run_path.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
         raise IrtpsError(f"{run_path}: not valid JSON ({error})") from None
+    except OSError as error:
+        raise IrtpsError(f"{run_path}: cannot be read ({error.strerror or error})") from None
     _check_fields(run_path, "", record, _RUN_FIELDS, _OPTIONAL_RUN_FIELDS)
     for k, step in enumerate(record["history"]):
         _check_fields(run_path, f"history[{k}]", step, _HISTORY_FIELDS, {})

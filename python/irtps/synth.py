@@ -9,8 +9,8 @@ from scipy import ndimage
 
 from irtps.dataset import Dataset, GroundTruth
 from irtps.errors import IrtpsError
-from irtps.imageio import MAX_IMAGE_PIXELS
-from irtps.render import Rendering, render
+from irtps.options import RenderOptions, SynthOptions
+from irtps.render import Rendering, check_render_memory, render
 from irtps.scene import Camera, CornellBox, Floor, Light, Scene
 from irtps.surface import height_to_normals
 
@@ -173,12 +173,9 @@ def synthesize(
     """
     if shape not in SHAPES:
         raise IrtpsError(f"shape: unknown {shape!r} (choose from {', '.join(SHAPES)})")
-    if size < 8:
-        raise IrtpsError(f"size: {size} is too small (at least 8 pixels)")
-    if size * size > MAX_IMAGE_PIXELS:
-        raise IrtpsError(f"size: {size} is too large ({size}x{size} exceeds the largest supported image, {MAX_IMAGE_PIXELS} pixels)")
-    if environment not in ("cornell", "none"):
-        raise IrtpsError(f"environment: unknown {environment!r} (cornell, none)")
+    SynthOptions(size=size, lights=lights, albedo=albedo, environment=environment, floor=floor)
+    RenderOptions(bounces=bounces, samples=samples, seed=seed)
+    check_render_memory(lights, (size, size), bounces)
     rng = np.random.default_rng(seed)
     height, mask = SHAPES[shape](size, rng)
     height = height.astype(np.float32)
