@@ -3,6 +3,8 @@
 import json
 import shutil
 import sys
+import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -121,3 +123,69 @@ def test_without_dask_the_command_says_how_to_install_it(three_sets, tmp_path, c
     monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed now raises ImportError
     assert main(["batch", str(three_sets[0]), "--out", str(tmp_path / "out")]) == 2
     assert "pip install 'irtps[batch]'" in capsys.readouterr().err
+
+
+def _saturate(folder, images=6):
+    """Set a 6x6 patch of the object to the PNG maximum in the first `images` images of a
+    DiLiGenT-layout data set."""
+    from irtps import _core
+
+    for name in (folder / "filenames.txt").read_text().split()[:images]:
+        image, bits = _core.read_png(str(folder / name))
+        image[20:26, 20:26] = 1.0
+        _core.write_png(str(folder / name), image, bits)
+
+
+def test_warnings_of_a_task_are_printed_with_the_data_set_name_and_recorded(cluster, three_sets, tmp_path, capsys):
+    cap, ball, _ = three_sets
+    _saturate(ball)
+    out = tmp_path / "out"
+    saturated = f"{ball}: 216 observations in 6 images are saturated (a channel at or above 1); left out of the fit"
+    for run in (1, 2):  # the same warning again in the same worker thread: printed again
+        assert main(["batch", str(ball), str(cap), "--out", str(out), "--scheduler", cluster.scheduler.address, "--quiet"]) == 0
+        assert capsys.readouterr().err == f"irtps: warning: ball: {saturated}\n", run
+    summary = json.loads((out / "batch.json").read_text())
+    assert [(s["name"], s["warnings"]) for s in summary["datasets"]] == [("ball", [saturated]), ("cap", [])]
+
+
+def test_warnings_are_kept_once_and_other_categories_keep_theirs(cluster, three_sets, tmp_path, monkeypatch):
+    cap, ball, _ = three_sets
+    real = irtps.batch.load_and_reconstruct
+
+    def warning_twice(source, **options):
+        for _ in range(2):
+            warnings.warn(f"{source}: odd", irtps.IrtpsWarning)
+            warnings.warn("invalid value encountered in divide", RuntimeWarning)
+            warnings.warn("old option", np.exceptions.VisibleDeprecationWarning)
+        return real(source, **options)
+
+    monkeypatch.setattr(irtps.batch, "load_and_reconstruct", warning_twice)
+    with warnings.catch_warnings(record=True) as shown:
+        warnings.simplefilter("always")
+        results = reconstruct_many([cap, ball], tmp_path / "out", client=cluster)
+    assert [r.status for r in results] == ["ok", "ok"]
+    assert results[0].warnings == (f"{cap}: odd", "RuntimeWarning: invalid value encountered in divide", "numpy.exceptions.VisibleDeprecationWarning: old option")
+    reissued = sorted((w.category.__name__, str(w.message)) for w in shown)
+    expected = [[("IrtpsWarning", f"{name}: {folder}: odd"), ("RuntimeWarning", f"{name}: invalid value encountered in divide"), ("VisibleDeprecationWarning", f"{name}: old option")] for name, folder in (("cap", cap), ("ball", ball))]
+    assert reissued == sorted(expected[0] + expected[1])
+
+
+def test_a_task_records_its_warnings_alone_while_others_run_in_other_threads(tmp_path):
+    from concurrent.futures import ThreadPoolExecutor
+
+    from irtps.batch import _recorded_warnings
+
+    barrier = threading.Barrier(4)
+
+    def task(index):
+        with _recorded_warnings() as recorded:
+            barrier.wait()
+            warnings.warn(f"task {index}", irtps.IrtpsWarning)
+            barrier.wait()
+        return recorded
+
+    before = (warnings.filters[:], warnings.showwarning)
+    with ThreadPoolExecutor(4) as pool:
+        records = list(pool.map(task, range(4)))
+    assert records == [[(irtps.IrtpsWarning, f"task {index}")] for index in range(4)]
+    assert (warnings.filters, warnings.showwarning) == before

@@ -31,7 +31,7 @@ import time
 import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from irtps.atomic import atomic_write_text
@@ -317,7 +317,12 @@ def local_cluster(workers: int | None = None, threads_per_worker: int = 1, *, pr
     worker_options = {"env": {"RAYON_NUM_THREADS": str(threads_per_worker)}, "preload": [__name__]} if processes else {}
     cluster = client = None
     try:
-        cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=threads_per_worker, processes=processes, dashboard_address=None, **worker_options)
+        # no dashboard; the scheduler's HTTP server (health checks) on a free port: no
+        # "Port 8787 is already in use" warning when another cluster runs on this machine
+        scheduler_options = {"dashboard_address": "localhost:0"}
+        cluster = distributed.LocalCluster(
+            n_workers=workers, threads_per_worker=threads_per_worker, processes=processes, dashboard_address=None, scheduler_kwargs=scheduler_options, **worker_options
+        )
         client = distributed.Client(cluster)
         yield client
     except BaseException:
@@ -379,8 +384,13 @@ def connect(address: str) -> Iterator:
         client = distributed.Client(address)
     except (OSError, ValueError) as error:
         raise IrtpsError(f"{address}: cannot reach a Dask scheduler there ({error})") from None
-    with client:
+    try:
         yield client
+    except BaseException:
+        with _shielded(), _quiet_logging():
+            client.close()
+        raise
+    client.close()
 
 
 def summary_table(results: Sequence[BatchResult]) -> str:
@@ -567,8 +577,11 @@ def _record_warning(message, category, filename, lineno, file=None, line=None) -
     records = getattr(_recording, "records", None)
     if records is not None:
         records.append((category, str(message)))
-    elif _recording_saved is not None:
-        _recording_saved[1](message, category, filename, lineno, file, line)
+        return
+    saved = _recording_saved
+    show = warnings.showwarning if saved is None else saved[1]  # None: the recording has just ended
+    if show is not _record_warning:
+        show(message, category, filename, lineno, file, line)
 
 
 def _with_warnings(outcome: BatchResult, recorded: list[tuple[type[Warning], str]]) -> BatchResult:
@@ -576,7 +589,7 @@ def _with_warnings(outcome: BatchResult, recorded: list[tuple[type[Warning], str
     if not recorded:
         return outcome
     texts = (message if issubclass(category, IrtpsWarning) else f"{_category_name(category)}: {message}" for category, message in recorded)
-    return BatchResult(**{**asdict(outcome), "warnings": tuple(dict.fromkeys(texts))})
+    return replace(outcome, warnings=tuple(dict.fromkeys(texts)))
 
 
 def _category_name(category: type[Warning]) -> str:
