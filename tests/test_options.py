@@ -130,3 +130,20 @@ def test_the_command_line_reaches_every_reconstruction_option(tmp_path):
     args = build_parser().parse_args(["reconstruct", str(BALL), "--out", str(tmp_path), "--tolerance", "0.5", "--method", "irtps", "--no-robust"])
     options = irtps.options.from_arguments(ReconstructOptions, args)
     assert options == ReconstructOptions(method="irtps", tolerance=0.5, robust=False)
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["reconstruct", str(BALL), "--out", "o", "--samples", "1.5"], "argument --samples: invalid int value: '1.5'"),
+        (["render", str(MITSUBA), "--out", "o", "--seed", "abc"], "argument --seed: invalid int value: 'abc'"),
+        (["reconstruct", str(BALL), "--out", "o", "--method", "mitsuba"], "argument --method: invalid choice: 'mitsuba'"),
+        (["table", str(BALL), "--bounces"], "argument --bounces: expected at least one argument"),
+    ],
+)
+def test_a_value_of_the_wrong_kind_is_one_line_too(argv, message, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"irtps: error: {message}") and err.endswith("--help')\n") and err.count("\n") == 1, err

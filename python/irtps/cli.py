@@ -200,9 +200,16 @@ def _add_force(parser: argparse.ArgumentParser) -> None:
     )
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line, like every other error of irtps."""
+
+    def error(self, message: str):
+        self.exit(2, f"irtps: error: {escaped(message)} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the ``irtps`` command."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="irtps",
         description="Iterative Ray Tracing Photometric Stereo: shape and colour from photometric-stereo images, "
         "with inter-reflections removed by ray tracing.",
