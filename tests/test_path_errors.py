@@ -226,6 +226,18 @@ def test_evaluate_against_a_ground_truth_folder_that_is_a_symlink_loop(loop, tmp
     assert err == f"irtps: error: {loop}: a symlink loop\n"
 
 
+@pytest.mark.parametrize("kind", ["loop", "fifo", "missing"])
+def test_report_of_a_reconstruction_folder_that_is_not_one(kind, tmp_path, capsys):
+    path = tmp_path / kind
+    if kind == "loop":
+        os.symlink(kind, path)
+    elif kind == "fifo":
+        os.mkfifo(path)
+    problem = {"loop": "a symlink loop", "fifo": "not a folder", "missing": "no such reconstruction folder"}[kind]
+    assert _run(["report", str(path), "--quiet"], capsys) == f"irtps: error: {path}: {problem}\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ([] if kind == "missing" else [kind])
+
+
 @pytest.fixture(scope="module")
 def cluster():
     with local_cluster(1, processes=False) as client:

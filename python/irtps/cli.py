@@ -20,7 +20,7 @@ from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate, format_metrics
 from irtps.options import ClusterOptions, OptionError, ReconstructOptions, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
 from irtps.output_rule import check_output, escaped
-from irtps.paths import resolve_path
+from irtps.paths import check_folder, resolve_path
 from irtps.reconstruct import load_and_reconstruct, load_reconstruction, save_reconstruction
 from irtps.render import Rendering, render
 from irtps.surface import height_to_normals
@@ -124,6 +124,7 @@ def _cmd_report(args: argparse.Namespace) -> None:
     # Imported here: matplotlib, which the report draws with, would slow down every other command's start.
     from irtps.report import REPORT_FOLDER, report_inputs, write_report
 
+    check_folder(args.out, missing="no such reconstruction folder")
     out = args.out / REPORT_FOLDER if args.report_out is None else args.report_out
     check_output(out, report_inputs(args.out, args.truth), ours=OUTPUT_MARKERS, force=args.force)
     page = write_report(args.out, out, truth=args.truth)
