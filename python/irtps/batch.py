@@ -320,9 +320,10 @@ def local_cluster(workers: int | None = None, threads_per_worker: int = 1, *, pr
         # no dashboard; the scheduler's HTTP server (health checks) on a free port: no
         # "Port 8787 is already in use" warning when another cluster runs on this machine
         scheduler_options = {"dashboard_address": "localhost:0"}
-        cluster = distributed.LocalCluster(
-            n_workers=workers, threads_per_worker=threads_per_worker, processes=processes, dashboard_address=None, scheduler_kwargs=scheduler_options, **worker_options
-        )
+        with _signals_held(processes):
+            cluster = distributed.LocalCluster(
+                n_workers=workers, threads_per_worker=threads_per_worker, processes=processes, dashboard_address=None, scheduler_kwargs=scheduler_options, **worker_options
+            )
         client = distributed.Client(cluster)
         yield client
     except BaseException:
@@ -519,6 +520,30 @@ def _quiet_logging() -> Iterator[None]:
         yield
     finally:
         logging.disable(previous)
+
+
+@contextmanager
+def _signals_held(processes: bool) -> Iterator[None]:
+    """While a cluster of worker processes starts: SIGINT and SIGTERM held back (recorded,
+    then raised again at the end), so that a starting cluster is never left half-built
+    (Dask would close it at exit, with a traceback) but built, then closed. Only in the
+    main thread (where signals are handled)."""
+    if not processes or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+    handlers = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(signum)
+        if handler is not None and handler != signal.SIG_IGN:  # None: not set from Python, so not restorable
+            handlers[signum] = signal.signal(signum, lambda signum, frame: received.append(signum))
+    try:
+        yield
+    finally:
+        for signum, handler in handlers.items():
+            signal.signal(signum, handler)
+        if received:
+            signal.raise_signal(received[0])  # now handled as it would have been
 
 
 @contextmanager
