@@ -1,6 +1,8 @@
 """Batch runs on an in-process Dask cluster: outputs, failures, the summary and the command."""
 
+import functools
 import json
+import logging
 import shutil
 import sys
 import threading
@@ -189,3 +191,30 @@ def test_a_task_records_its_warnings_alone_while_others_run_in_other_threads(tmp
         records = list(pool.map(task, range(4)))
     assert records == [[(irtps.IrtpsWarning, f"task {index}")] for index in range(4)]
     assert (warnings.filters, warnings.showwarning) == before
+
+
+def test_a_stopping_worker_finishes_the_write_under_way_then_exits_and_starts_no_other(monkeypatch, request):
+    tasks, exits, events = irtps.batch._Tasks(), [], []
+    monkeypatch.setattr(irtps.batch.os, "_exit", exits.append)
+    request.addfinalizer(functools.partial(logging.disable, logging.root.manager.disable))  # exit_after_writes silences logging
+    writing, release = threading.Event(), threading.Event()
+
+    def write():
+        with tasks.writing():
+            writing.set()
+            release.wait()
+            events.append("written")
+
+    writer = threading.Thread(target=write)
+    writer.start()
+    writing.wait()
+    stopper = threading.Thread(target=lambda: (tasks.exit_after_writes(), events.append("exit")))
+    stopper.start()
+    stopper.join(timeout=0.2)
+    assert stopper.is_alive() and events == []  # waiting for the write
+    release.set()
+    writer.join()
+    stopper.join()
+    assert events == ["written", "exit"] and exits == [0]
+    with pytest.raises(irtps.IrtpsError, match="stopping"), tasks.writing():
+        pass
