@@ -292,7 +292,11 @@ def local_cluster(workers: int | None = None, threads_per_worker: int = 1, *, pr
     if any, and exits at once (SIGTERM does the same); the worker processes are gone when
     the ``with`` block is left. Leaving it on an exception (e.g. KeyboardInterrupt) closes
     the cluster with the logs of Dask, Tornado and asyncio silenced and SIGINT and SIGTERM
-    ignored (in the main thread) until it is closed.
+    ignored (in the main thread) until it is closed. A SIGINT or SIGTERM that comes while
+    the worker processes start is handled once they have started (then closed), so that
+    no half-started cluster is left; a worker process still starting (importing, for a
+    second or two) when a terminal's Ctrl-C reaches it may print a KeyboardInterrupt
+    traceback, since it ignores SIGINT only from `dask_setup` on.
 
     Yields
     ------
