@@ -194,14 +194,6 @@ def test_an_unreadable_image_says_permission_denied(tmp_path, capsys):
 
 # A data folder that is a symlink loop -------------------------------------------------
 
-#: Until the command resolves its paths with `irtps.paths.resolve_path`, pathlib raises
-#: RuntimeError("Symlink loop from ...") before the data set is read (cli._check_output,
-#: batch.reconstruct_many and batch.output_names, which the table uses too). The data
-#: set readers themselves name the loop (see the evaluate test).
-_NEEDS_RESOLVE_PATH = pytest.mark.xfail(
-    raises=RuntimeError, strict=False, reason="the command resolves the data path with Path.resolve (issue 13)"
-)
-
 
 @pytest.fixture
 def loop(tmp_path):
@@ -211,7 +203,6 @@ def loop(tmp_path):
 
 
 @pytest.mark.parametrize("command", ["reconstruct", "render", "table"])
-@_NEEDS_RESOLVE_PATH
 def test_a_data_folder_that_is_a_symlink_loop(command, loop, tmp_path, capsys):
     err = _run(_argv(command, loop, tmp_path / "out"), capsys)
     assert err == f"irtps: error: {loop}: a symlink loop\n"
@@ -244,7 +235,6 @@ def cluster():
         yield client
 
 
-@_NEEDS_RESOLVE_PATH
 def test_batch_reports_a_data_folder_that_is_a_symlink_loop_as_failed(cluster, loop, tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["batch", str(loop), "--out", str(out), "--scheduler", cluster.scheduler.address, "--quiet"]) == 2

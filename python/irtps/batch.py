@@ -18,7 +18,6 @@ Dask (``dask.distributed``) is an optional dependency: ``pip install 'irtps[batc
 from __future__ import annotations
 
 import builtins
-import inspect
 import json
 import logging
 import multiprocessing
@@ -38,6 +37,7 @@ from irtps.atomic import atomic_write_text
 from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
+from irtps.paths import resolve_path
 from irtps.reconstruct import load_and_reconstruct, save_reconstruction
 
 __all__ = ["BatchResult", "connect", "local_cluster", "output_names", "reconstruct_many", "reconstruct_to_folder", "summary_table", "write_summary"]
@@ -114,7 +114,7 @@ def output_names(paths: Sequence[str | Path]) -> list[str]:
     taken = {SUMMARY_JSON, SUMMARY_MARKDOWN}
     names = []
     for path in paths:
-        base = Path(path).resolve().name
+        base = resolve_path(path).name
         name, suffix = base, 2
         while name in taken:
             name, suffix = f"{base}-{suffix}", suffix + 1
@@ -156,7 +156,7 @@ def reconstruct_to_folder(source: str, destination: str, options: dict) -> Batch
         try:
             dataset, result = load_and_reconstruct(source, **options)
             with _TASKS.writing():
-                save_reconstruction(result, destination, source=str(Path(source).resolve()))
+                save_reconstruction(result, destination, source=str(resolve_path(source)))
             metrics = None
             if dataset.gt is not None:
                 metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=dataset.gt).to_dict()
@@ -239,8 +239,8 @@ def reconstruct_many(
     distributed = _import_distributed()
     from tqdm import tqdm
 
-    sources = [str(Path(path).resolve()) for path in datasets]
-    folder = Path(out).resolve()
+    sources = [str(resolve_path(path)) for path in datasets]
+    folder = resolve_path(out)
     names = output_names(sources)
     with _using(client) as active:
         pending = {
