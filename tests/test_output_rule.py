@@ -85,22 +85,23 @@ def _refused(argv, capsys):
 # The cases, for every command that reads a data set -------------------------
 
 
+#: For each command that reads a data set: one, and a part of it that --out must not replace.
 INSIDE = {
-    "reconstruct": "images_dir",
-    "render": "gt",
-    "table": "Normal_gt.mat",
-    "report": "sub",
-    "batch": "sub",
+    "reconstruct": (MITSUBA, "images"),  # the captured images
+    "render": (MITSUBA, "gt"),  # the ground truth
+    "table": (BALL, "Normal_gt.mat"),
+    "report": (BALL, "sub"),
+    "batch": (BALL, "sub"),
 }
 
 
 @pytest.mark.parametrize("command", list(INSIDE))
 def test_out_inside_equal_to_or_holding_the_input_is_refused(command, tmp_path, scheduler, run, capsys):
-    data = shutil.copytree(SOURCE[command], tmp_path / "data")
+    source, part = INSIDE[command]
+    data = shutil.copytree(source, tmp_path / "data")
     (data / "sub").mkdir()
-    (data / "images_dir").mkdir()
     before = _tree(tmp_path)
-    for out, relation in ((data / INSIDE[command], "lies inside"), (data, "is"), (tmp_path, "holds")):
+    for out, relation in ((data / part, "lies inside"), (data, "is"), (tmp_path, "holds")):
         err = _refused(_argv(command, data, out, scheduler, run), capsys)
         assert f"--out {out}: {relation} the input {data}" in err, err
         assert _tree(tmp_path) == before
