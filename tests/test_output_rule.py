@@ -8,6 +8,7 @@ checks both ways: the data set is never changed, and exactly the paths that over
 input (as the system resolves them, or as the name that would be replaced) are refused.
 """
 
+import json
 import os
 import random
 import shutil
@@ -21,9 +22,6 @@ from irtps.cli import main
 DATA = Path(__file__).parent / "data"
 BALL = DATA / "diligent_ball_small"  # DiLiGenT layout, 48x44, 8 lights, with Normal_gt.mat
 MITSUBA = DATA / "mitsuba_small" / "cap_cornell"  # contract layout with gt/, 96x96, 3 lights
-
-#: What an output of irtps holds; a folder holding one may be replaced.
-MARKERS = ("gt/direct", "run.json", "table.json", "batch.json", "index.html")
 
 
 @pytest.fixture(scope="module")
@@ -146,7 +144,26 @@ def test_a_folder_irtps_did_not_write_is_replaced_only_with_force(command, tmp_p
     (out / "chapter1.tex").write_text("the user's work")
     before = _tree(tmp_path)
     err = _refused(_argv(command, data, out, scheduler, run), capsys)
-    assert "is a folder with other content" in err and "pass --force" in err
+    assert "is a folder with content that irtps did not write" in err and "pass --force" in err
+    assert _tree(tmp_path) == before
+
+
+def test_a_data_set_is_replaced_only_if_irtps_rendered_it(tmp_path, capsys):
+    quick = ["--size", "8", "--lights", "3", "--bounces", "1", "--samples", "1", "--quiet"]
+    assert main(["synth", "cap", "--out", str(tmp_path / "mine"), *quick]) == 0
+    assert main(["synth", "relief", "--out", str(tmp_path / "mine"), *quick]) == 0  # its own output: replaced
+    assert main(["render", str(tmp_path / "mine"), "--out", str(tmp_path / "mine2"), "--bounces", "0", "--samples", "1", "--quiet"]) == 0
+    record = json.loads((tmp_path / "mine2" / "gt" / "rendering.json").read_text())
+    assert record["command"] == "render" and record["source"] == str(tmp_path / "mine") and record["samples"] == 1
+    captured = shutil.copytree(BALL, tmp_path / "captured")  # DiLiGenT layout
+    elsewhere = shutil.copytree(MITSUBA, tmp_path / "mitsuba")  # rendered elsewhere, with gt/direct/
+    contract = shutil.copytree(MITSUBA, tmp_path / "contract")  # captured, contract layout: no gt/direct
+    shutil.rmtree(contract / "gt")
+    before = _tree(tmp_path)
+    for out in (captured, elsewhere, contract):
+        err = _refused(["synth", "cap", "--out", str(out), *quick], capsys)
+        assert "is a folder with content that irtps did not write" in err
+        _refused(["render", str(tmp_path / "mine"), "--out", str(out), "--quiet"], capsys)
     assert _tree(tmp_path) == before
 
 
@@ -205,7 +222,7 @@ def _expected_refusal(root, relative, data, reads_data):
         return True
     if out.exists() and not out.is_dir():
         return True
-    if out.is_dir() and any(out.iterdir()) and not any(os.path.lexists(out / m) for m in MARKERS):
+    if out.is_dir() and any(out.iterdir()):  # no existing folder of the layout is an output of irtps
         return True
     return False
 

@@ -27,10 +27,6 @@ from irtps.surface import height_to_normals
 from irtps.synth import SHAPES, synthesize
 from irtps.table import comparison_table, format_table, method_names
 
-#: What only outputs of irtps hold (a rendered data set's true direct images, a
-#: reconstruction's, table's, batch's or report's record): an existing folder holding one
-#: may be replaced (see `irtps.output_rule.check_output`); a captured data set may not.
-OUTPUT_MARKERS = ("gt/direct", "run.json", "table.json", SUMMARY_JSON, "index.html")
 #: Argument groups of the reconstruction options.
 RECONSTRUCT_GROUPS = {"IRT-PS": "IRT-PS (--method irtps)"}
 
@@ -45,24 +41,26 @@ def _bounce_files(rendering: Rendering) -> dict[str, np.ndarray]:
 
 def _cmd_render(args: argparse.Namespace) -> None:
     options = from_arguments(RenderOptions, args)
-    check_output(args.out, [args.dataset], ours=OUTPUT_MARKERS, force=args.force)
+    check_output(args.out, [args.dataset], force=args.force)
     scene, height, albedo, mask = load_scene_object(args.dataset)
     start = time.perf_counter()
     rendering = render(scene, height, albedo, mask, bounces=options.bounces, samples=options.samples, seed=options.seed, progress=not args.quiet)
     seconds = time.perf_counter() - start
     truth = GroundTruth(height=np.where(mask, height, 0), normal=height_to_normals(height, mask, scene.camera.pixel_size), albedo=albedo, direct=rendering.direct)
     dataset = Dataset(scene=scene, images=rendering.images, mask=mask, gt=truth)
-    save_dataset(dataset, args.out, extra=_bounce_files(rendering))
+    record = {"command": "render", "source": str(resolve_path(args.dataset)), **options.to_dict()}
+    save_dataset(dataset, args.out, extra=_bounce_files(rendering), rendering=record)
     if not args.quiet:
         print(f"rendered {len(scene.lights)} lights x {options.bounces} bounces at {options.samples} samples/pixel in {seconds:.1f} s -> {args.out}")
 
 
 def _cmd_synth(args: argparse.Namespace) -> None:
     scene_options, options = from_arguments(SynthOptions, args), from_arguments(RenderOptions, args)
-    check_output(args.out, [], ours=OUTPUT_MARKERS, force=args.force)
+    check_output(args.out, [], force=args.force)
     start = time.perf_counter()
-    dataset, rendering = synthesize(args.shape, **scene_options.to_dict(), **options.to_dict(), progress=not args.quiet)
-    save_dataset(dataset, args.out, extra=_bounce_files(rendering))
+    settings = {"shape": args.shape, **scene_options.to_dict(), **options.to_dict()}
+    dataset, rendering = synthesize(**settings, progress=not args.quiet)
+    save_dataset(dataset, args.out, extra=_bounce_files(rendering), rendering={"command": "synth", **settings})
     if not args.quiet:
         seconds = time.perf_counter() - start
         indirect = rendering.indirect[:, dataset.mask].mean() / max(float(dataset.images[:, dataset.mask].mean()), 1e-12)
@@ -74,7 +72,7 @@ def _cmd_synth(args: argparse.Namespace) -> None:
 
 def _cmd_reconstruct(args: argparse.Namespace) -> None:
     options = from_arguments(ReconstructOptions, args)
-    check_output(args.out, [args.data], ours=OUTPUT_MARKERS, force=args.force)
+    check_output(args.out, [args.data], force=args.force)
     dataset, result = load_and_reconstruct(args.data, options=options, progress=not args.quiet)
     save_reconstruction(result, args.out, source=str(resolve_path(args.data)))
     if not args.quiet:
@@ -91,7 +89,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
 
 def _cmd_batch(args: argparse.Namespace) -> None:
     options, cluster_options = from_arguments(ReconstructOptions, args), from_arguments(ClusterOptions, args)
-    check_output(args.out, args.data, ours=OUTPUT_MARKERS, force=args.force)
+    check_output(args.out, args.data, force=args.force)
     if args.force and os.path.lexists(args.out) and not args.out.is_dir():
         args.out.unlink()  # OUT is a folder that the data sets' folders go into, not replaced as a whole
     if cluster_options.scheduler is None:
@@ -126,7 +124,7 @@ def _cmd_report(args: argparse.Namespace) -> None:
 
     check_folder(args.out, missing="no such reconstruction folder")
     out = args.out / REPORT_FOLDER if args.report_out is None else args.report_out
-    check_output(out, report_inputs(args.out, args.truth), ours=OUTPUT_MARKERS, force=args.force)
+    check_output(out, report_inputs(args.out, args.truth), force=args.force)
     page = write_report(args.out, out, truth=args.truth)
     if not args.quiet:
         figures = sorted(path.name for path in page.parent.glob("*.png"))
@@ -157,7 +155,7 @@ def _run_table(datasets, options: TableOptions, quiet: bool, out: Path | None, s
 def _cmd_table(args: argparse.Namespace) -> None:
     options = from_arguments(TableOptions, args)
     if args.out is not None:
-        check_output(args.out, args.data, ours=OUTPUT_MARKERS, force=args.force)
+        check_output(args.out, args.data, force=args.force)
     datasets = [(name, load_dataset(folder)) for name, folder in zip(output_names(args.data), args.data, strict=True)]
     if args.out is None:
         print(_run_table(datasets, options, args.quiet, None), end="")
@@ -172,11 +170,12 @@ def _cmd_table(args: argparse.Namespace) -> None:
 def _cmd_demo(args: argparse.Namespace) -> None:
     options = from_arguments(TableOptions, args)
     size = from_arguments(SynthOptions, args).size  # the demo's only scene option
-    check_output(args.out, [], ours=OUTPUT_MARKERS, force=args.force)
+    check_output(args.out, [], force=args.force)
     start = time.perf_counter()
+    settings = {"shape": "cap", "size": size, "lights": 12, "environment": "cornell", "bounces": 4, "samples": 256, "seed": options.seed}
     with atomic_output_dir(args.out) as folder:
-        dataset, rendering = synthesize("cap", size=size, lights=12, environment="cornell", bounces=4, samples=256, seed=options.seed, progress=not args.quiet)
-        save_dataset(dataset, folder / "data", extra=_bounce_files(rendering))
+        dataset, rendering = synthesize(**settings, progress=not args.quiet)
+        save_dataset(dataset, folder / "data", extra=_bounce_files(rendering), rendering={"command": "demo", **settings})
         # Recorded as the final place of the data set, which `irtps report` reads ground truth from.
         text = _run_table([("cap_cornell", dataset)], options, args.quiet, folder, {"cap_cornell": str(args.out.resolve() / "data")})
     share = rendering.indirect[:, dataset.mask].mean() / dataset.images[:, dataset.mask].mean()

@@ -6,6 +6,8 @@
 
 from __future__ import annotations
 
+import json
+
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -156,7 +158,11 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True) -> Dataset:
     )
 
 
-def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.ndarray] | None = None) -> None:
+#: The record of how irtps rendered a data set (`save_dataset`'s ``rendering``).
+RENDERING_RECORD = "gt/rendering.json"
+
+
+def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.ndarray] | None = None, rendering: Mapping | None = None) -> None:
     """Write a data set folder in the irtps layout, atomically.
 
     Writes ``scene.json``, ``images/000.exr`` ..., ``mask.png`` (8-bit, 0 or 255)
@@ -172,6 +178,10 @@ def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.n
         More EXR files to write in the same transaction: a relative POSIX path
         ending in ``.exr`` (e.g. ``"gt/bounce1/000.exr"``) to a (H, W) or
         (H, W, 3) array. It must not name one of the files above.
+    rendering : mapping, optional
+        How the images were rendered (e.g. bounces, samples, seed), written with the irtps
+        version as ``gt/rendering.json``: the data set's provenance, by which irtps also
+        knows a folder it may replace (`irtps.output_rule.written_by_irtps`).
 
     Raises
     ------
@@ -200,6 +210,12 @@ def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.n
                 _write_new_exr(out, relative, array)
         for relative, array in extra.items():
             _write_new_exr(out, relative, array)
+        if rendering is not None:
+            from irtps import __version__
+
+            record = out / RENDERING_RECORD
+            record.parent.mkdir(exist_ok=True)
+            record.write_text(json.dumps({"irtps": __version__, **rendering}, indent=2) + "\n", encoding="utf-8")
 
 
 def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | None:

@@ -11,20 +11,25 @@ of irtps: an existing file, or a folder with other content.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from pathlib import Path
 
+from irtps.dataset import RENDERING_RECORD
 from irtps.errors import IrtpsError
 from irtps.paths import file_problem, folder_problem
 
-__all__ = ["OutputError", "check_output", "escaped"]
+__all__ = ["OutputError", "check_output", "escaped", "written_by_irtps"]
+
+
+#: The record that each kind of output folder of irtps holds (see `written_by_irtps`).
+OUTPUT_RECORDS = ("run.json", "table.json", "batch.json", "index.html", RENDERING_RECORD)
 
 
 class OutputError(IrtpsError, ValueError):
     """An output path that would destroy an input or something else of the user's."""
 
 
-def check_output(out: str | Path, inputs: Iterable[str | Path], *, ours: Sequence[str] = (), force: bool = False, option: str = "--out") -> None:
+def check_output(out: str | Path, inputs: Iterable[str | Path], *, force: bool = False, option: str = "--out") -> None:
     """Refuse an output path that writing there would lose something by.
 
     Parameters
@@ -33,11 +38,8 @@ def check_output(out: str | Path, inputs: Iterable[str | Path], *, ours: Sequenc
         Where the command will write (a folder replaced as a whole).
     inputs : iterable of str or pathlib.Path
         Every file or folder the command reads.
-    ours : sequence of str
-        Paths, relative to `out`, that only outputs of irtps hold (e.g. ``"run.json"``):
-        an existing folder holding one of them may be replaced, as may an empty one.
     force : bool
-        Replace an existing file, or a folder without `ours`, all the same.
+        Replace an existing file, or a folder that is not `written_by_irtps`, all the same.
     option : str
         The option's name, for messages.
 
@@ -46,7 +48,8 @@ def check_output(out: str | Path, inputs: Iterable[str | Path], *, ours: Sequenc
     OutputError
         Naming the option and the path: `out` is a symbolic-link loop; it is, holds or lies
         inside an input; it is an existing file (without `force`) or something else that is
-        not a folder; it is a folder with content but none of `ours` (without `force`).
+        not a folder; it is a folder with content that is not `written_by_irtps` (without
+        `force`).
 
     Examples
     --------
@@ -79,12 +82,29 @@ def check_output(out: str | Path, inputs: Iterable[str | Path], *, ours: Sequenc
         raise OutputError(f"{option} {shown}: is an existing file; writing there would replace it: choose another path, or pass --force")
     if kind != "folder":
         raise OutputError(f"{option} {shown}: is {kind}, not a folder: choose another path")
-    if _names(Path(out), option, shown) and not any(os.path.lexists(Path(out) / name) for name in ours):
-        expected = f"no {', '.join(ours)}" if ours else "not an output of irtps"
+    if _names(Path(out), option, shown) and not written_by_irtps(out):
         raise OutputError(
-            f"{option} {shown}: is a folder with other content ({expected}); writing there would replace it: "
+            f"{option} {shown}: is a folder with content that irtps did not write; writing there would replace it: "
             "choose a new or empty folder, or pass --force"
         )
+
+
+def written_by_irtps(folder: str | Path) -> bool:
+    """Whether a folder is an output of irtps, which a later run may replace.
+
+    Each holds its record: a reconstruction ``run.json``, a table ``table.json``, a batch
+    ``batch.json``, a report ``index.html``, a data set that irtps rendered
+    ``gt/rendering.json`` (a data set captured or rendered elsewhere has none).
+
+    Parameters
+    ----------
+    folder : str or pathlib.Path
+
+    Returns
+    -------
+    bool
+    """
+    return any(os.path.lexists(Path(folder) / name) for name in OUTPUT_RECORDS)
 
 
 def _kind(path: Path, option: str, shown: str) -> str | None:

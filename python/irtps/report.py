@@ -206,7 +206,7 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, *, truth: s
     """
     folder = Path(run_dir)
     target = folder / REPORT_FOLDER if out is None else Path(out)
-    check_output(target, report_inputs(folder, truth), ours=(PAGE_FILE,), force=True, option="out")
+    check_output(target, report_inputs(folder, truth), force=True, option="out")
     report = build_report(folder, truth=truth)
     page = report_html(report)
     with atomic_output_dir(target) as temp:
