@@ -123,7 +123,7 @@ def output_names(paths: Sequence[str | Path]) -> list[str]:
     return names
 
 
-def reconstruct_to_folder(source: str, destination: str, options: dict) -> BatchResult:
+def reconstruct_to_folder(source: str, destination: str, options: ReconstructOptions) -> BatchResult:
     """Reconstruct one data set folder into an output folder: the task of a batch.
 
     Errors are caught and reported, never raised, so that one bad data set does not
@@ -136,8 +136,8 @@ def reconstruct_to_folder(source: str, destination: str, options: dict) -> Batch
         The data set folder.
     destination : str
         The reconstruction folder to write (atomically, as `irtps.save_reconstruction`).
-    options : dict
-        Keyword arguments of `irtps.reconstruct` (``method`` included).
+    options : ReconstructOptions
+        How to reconstruct (`irtps.options.ReconstructOptions`).
 
     Returns
     -------
@@ -146,7 +146,7 @@ def reconstruct_to_folder(source: str, destination: str, options: dict) -> Batch
 
     Examples
     --------
-    >>> outcome = reconstruct_to_folder("no/such/folder", "out/folder", {"method": "ps"})
+    >>> outcome = reconstruct_to_folder("no/such/folder", "out/folder", ReconstructOptions())
     >>> outcome.status, outcome.error
     ('failed', 'no/such/folder: no such data set folder')
     """
@@ -154,7 +154,7 @@ def reconstruct_to_folder(source: str, destination: str, options: dict) -> Batch
     start = time.perf_counter()
     with _TASKS.running(), _recorded_warnings() as recorded:
         try:
-            dataset, result = load_and_reconstruct(source, **options)
+            dataset, result = load_and_reconstruct(source, options=options)
             with _TASKS.writing():
                 save_reconstruction(result, destination, source=str(resolve_path(source)))
             metrics = None
@@ -170,11 +170,11 @@ def reconstruct_to_folder(source: str, destination: str, options: dict) -> Batch
 def reconstruct_many(
     datasets: Sequence[str | Path],
     out: str | Path,
+    options: ReconstructOptions | None = None,
     *,
-    method: str = "ps",
     client=None,
     progress: bool = False,
-    **options,
+    **settings,
 ) -> list[BatchResult]:
     """Reconstruct many data set folders on a Dask cluster, each into ``out/NAME/``.
 
@@ -197,16 +197,19 @@ def reconstruct_many(
         here, so the workers must see the client's file system under the same paths.
     out : str or pathlib.Path
         The folder to hold one reconstruction folder per data set.
-    method : str
-        As for `irtps.reconstruct`.
+    options : ReconstructOptions, optional
+        How to reconstruct every data set (`irtps.options.ReconstructOptions`; default
+        classic photometric stereo with the default settings). It travels to the workers
+        as it is.
     client : distributed.Client, optional
         The cluster to run on; default a `local_cluster` for this call (whose worker
         processes re-import the calling script: call from under
         ``if __name__ == "__main__":``).
     progress : bool
         Show a progress bar, advancing as data sets finish.
-    **options
-        The other keyword arguments of `irtps.reconstruct` (not ``progress``).
+    **settings
+        Fields of `ReconstructOptions` that replace those of `options`, e.g.
+        ``method="irtps"``.
 
     Returns
     -------
@@ -216,8 +219,8 @@ def reconstruct_many(
     Raises
     ------
     IrtpsError
-        Before anything runs: no data set, an unknown method or option, or dask not
-        installed.
+        Before anything runs: no data set, an option unknown or out of range
+        (`irtps.options.OptionError`), or dask not installed.
 
     Examples
     --------
@@ -235,7 +238,7 @@ def reconstruct_many(
     """
     if not datasets:
         raise IrtpsError("datasets: none given")
-    _check_options(method, options)
+    options = ReconstructOptions.build(options, **settings)
     distributed = _import_distributed()
     from tqdm import tqdm
 
@@ -244,7 +247,7 @@ def reconstruct_many(
     names = output_names(sources)
     with _using(client) as active:
         pending = {
-            active.submit(reconstruct_to_folder, source, str(folder / name), {"method": method, **options}, pure=False): (name, source)
+            active.submit(reconstruct_to_folder, source, str(folder / name), options, pure=False): (name, source)
             for name, source in zip(names, sources, strict=True)
         }
         outcomes = {}
@@ -445,14 +448,6 @@ def write_summary(results: Sequence[BatchResult], out: str | Path, *, settings: 
     summary = {"settings": settings, "succeeded": len(results) - failed, "failed": failed, "datasets": [asdict(result) for result in results]}
     atomic_write_text(folder / SUMMARY_JSON, json.dumps(summary, indent=2))
     atomic_write_text(folder / SUMMARY_MARKDOWN, summary_table(results))
-
-
-def _check_options(method: str, options: dict) -> None:
-    """Raise `IrtpsError` for what would fail every task: an option unknown or out of range."""
-    if "progress" in options:
-        raise IrtpsError("progress: workers show no progress bar; use reconstruct_many(progress=...)")
-    settings = {key: value for key, value in options.items() if key != "options"}
-    ReconstructOptions.build(options.get("options"), method=method, **settings)
 
 
 class _Tasks:

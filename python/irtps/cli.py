@@ -97,10 +97,9 @@ def _cmd_batch(args: argparse.Namespace) -> None:
         cluster = local_cluster(cluster_options.workers, 1 if threads is None else threads)
     else:
         cluster = connect(cluster_options.scheduler)
-    settings = options.to_dict()
     with cluster as client:
-        results = reconstruct_many(args.data, args.out, client=client, progress=not args.quiet, **settings)
-    write_summary(results, args.out, settings=settings)
+        results = reconstruct_many(args.data, args.out, options, client=client, progress=not args.quiet)
+    write_summary(results, args.out, settings=options.to_dict())
     print(summary_table(results), end="")
     failed = sum(result.failed for result in results)
     if failed:
