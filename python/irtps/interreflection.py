@@ -16,14 +16,14 @@ from tqdm import tqdm
 
 from irtps.dataset import Dataset
 from irtps.evaluate import evaluate
-from irtps.options import ESTIMATORS, UPDATES, ReconstructOptions
+from irtps.options import ReconstructOptions
 from irtps.paper_estimator import paper_indirect
 from irtps.pipeline import fit_photometric_stereo, resolve_options, surface_height
 from irtps.ps import PsResult
 from irtps.render import render_indirect
 from irtps.surface import footprint_normals
 
-__all__ = ["ESTIMATORS", "UPDATES", "InterreflectionResult", "Iteration", "remove_interreflections", "surface_albedo"]
+__all__ = ["InterreflectionResult", "Iteration", "remove_interreflections", "surface_albedo"]
 
 @dataclass
 class Iteration:

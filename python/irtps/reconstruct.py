@@ -17,7 +17,7 @@ from irtps.errors import DatasetError, IrtpsError, IrtpsWarning
 from irtps.imageio import read_mask, write_exr, write_png
 from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
-from irtps.options import METHODS, ReconstructOptions
+from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
 from irtps.pipeline import fit_photometric_stereo, resolve_options, surface_height
 from irtps.ps import FLAGS, check_lights
