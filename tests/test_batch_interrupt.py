@@ -135,6 +135,24 @@ def test_an_interrupted_batch_prints_one_line_and_leaves_no_worker_and_no_partia
     assert {"normal.exr", "albedo.exr", "height.exr", "mask.png", "run.json"} <= set(written) and not any(name.startswith(".") for name in written)
 
 
+def test_a_ctrl_c_while_the_workers_start_is_one_line_too(datasets, tmp_path):
+    inputs = tmp_path / "in"
+    shutil.copytree(datasets / "slow", inputs / "slow")
+    out = tmp_path / "out"
+    command = _Command("batch", inputs / "slow", "--out", out, "--method", "irtps", "--samples", "2048", "--workers", "2")
+    # the worker processes exist and are importing (a second or more) before they set themselves up
+    deadline = time.monotonic() + 300
+    while sum("spawn_main" in line for line in _session_processes(command.process.pid)) < 2:
+        assert command.process.poll() is None and time.monotonic() < deadline, command.err
+        time.sleep(0.01)
+    os.killpg(command.process.pid, signal.SIGINT)
+    returncode, printed, err = command.finish()
+    assert returncode == 130, err
+    assert printed == "" and _messages(err) == [INTERRUPTED], err  # no worker's KeyboardInterrupt traceback
+    assert command.live_processes() == []
+    assert not out.exists() or list(out.iterdir()) == []
+
+
 def test_the_warnings_of_worker_processes_are_printed_like_a_local_runs(tmp_path):
     data = shutil.copytree(DATA / "diligent_ball_small", tmp_path / "in" / "ball")
     saturate(data)

@@ -31,6 +31,7 @@ import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, replace
+from multiprocessing import resource_tracker
 from pathlib import Path
 
 from irtps.atomic import atomic_write_text
@@ -297,9 +298,8 @@ def local_cluster(workers: int | None = None, threads_per_worker: int = 1, *, pr
     the cluster with the logs of Dask, Tornado and asyncio silenced and SIGINT and SIGTERM
     ignored (in the main thread) until it is closed. A SIGINT or SIGTERM that comes while
     the worker processes start is handled once they have started (then closed), so that
-    no half-started cluster is left; a worker process still starting (importing, for a
-    second or two) when a terminal's Ctrl-C reaches it may print a KeyboardInterrupt
-    traceback, since it ignores SIGINT only from `dask_setup` on.
+    no half-started cluster is left; the worker processes start with SIGINT blocked, so
+    a terminal's Ctrl-C never reaches one still importing.
 
     Yields
     ------
@@ -536,9 +536,16 @@ def _signals_held(processes: bool) -> Iterator[None]:
         handler = signal.getsignal(signum)
         if handler is not None and handler != signal.SIG_IGN:  # None: not set from Python, so not restorable
             handlers[signum] = signal.signal(signum, lambda signum, frame: received.append(signum))
+    # SIGINT blocked too: the threads and worker processes started meanwhile inherit the
+    # block, so a terminal's Ctrl-C (sent to the whole process group) never reaches a
+    # worker still importing; here it waits, pending, until the block is lifted. The
+    # resource tracker is started first: starting it unblocks SIGINT in the calling thread.
+    resource_tracker.ensure_running()
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)  # a pending SIGINT is recorded now
         for signum, handler in handlers.items():
             signal.signal(signum, handler)
         if received:
