@@ -18,6 +18,8 @@ from irtps.batch import local_cluster, reconstruct_many
 from irtps.cli import main
 from irtps.reconstruct import load_reconstruction
 
+from cli_helpers import saturate
+
 DATA = Path(__file__).parent / "data"
 IRTPS_OPTIONS = {"method": "irtps", "bounces": 2, "iterations": 2, "samples": 8, "seed": 3}
 
@@ -127,20 +129,9 @@ def test_without_dask_the_command_says_how_to_install_it(three_sets, tmp_path, c
     assert "pip install 'irtps[batch]'" in capsys.readouterr().err
 
 
-def _saturate(folder, images=6):
-    """Set a 6x6 patch of the object to the PNG maximum in the first `images` images of a
-    DiLiGenT-layout data set."""
-    from irtps import _core
-
-    for name in (folder / "filenames.txt").read_text().split()[:images]:
-        image, bits = _core.read_png(str(folder / name))
-        image[20:26, 20:26] = 1.0
-        _core.write_png(str(folder / name), image, bits)
-
-
 def test_warnings_of_a_task_are_printed_with_the_data_set_name_and_recorded(cluster, three_sets, tmp_path, capsys):
     cap, ball, _ = three_sets
-    _saturate(ball)
+    saturate(ball)
     out = tmp_path / "out"
     saturated = f"{ball}: 216 observations in 6 images are saturated (a channel at or above 1); left out of the fit"
     for run in (1, 2):  # the same warning again in the same worker thread: printed again

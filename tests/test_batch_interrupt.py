@@ -17,6 +17,8 @@ import pytest
 from irtps.dataset import save_dataset
 from irtps.synth import synthesize
 
+from cli_helpers import saturate
+
 pytest.importorskip("distributed")
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads the process table in /proc")
 
@@ -163,14 +165,3 @@ def test_the_warnings_of_worker_processes_are_printed_like_a_local_runs(tmp_path
     assert err == f"irtps: warning: ball: {data}: 216 observations in 6 images are saturated (a channel at or above 1); left out of the fit\n"
     assert "| ball | ok |" in printed
     assert command.live_processes() == []
-
-
-def saturate(folder, images=6):
-    """Set a 6x6 patch of the object to the PNG maximum in the first `images` images of a
-    DiLiGenT-layout data set."""
-    from irtps import _core
-
-    for name in (folder / "filenames.txt").read_text().split()[:images]:
-        image, bits = _core.read_png(str(folder / name))
-        image[20:26, 20:26] = 1.0
-        _core.write_png(str(folder / name), image, bits)

@@ -22,6 +22,8 @@ import pytest
 from irtps import _core
 from irtps.cli import main
 
+from cli_helpers import saturate
+
 DATA = Path(__file__).parent / "data"
 MITSUBA = DATA / "mitsuba_small" / "cap_cornell"  # 96x96, 3 lights, floor and Cornell box
 BALL = DATA / "diligent_ball_small"  # DiLiGenT layout, 48x44, 8 lights, 16-bit PNG
@@ -510,22 +512,13 @@ def test_negative_pixels_are_clipped_to_zero_with_a_warning(tmp_path, capsys):
         assert (tmp_path / "out" / name).read_bytes() == (tmp_path / "reference" / name).read_bytes(), name
 
 
-def _saturate(folder, images=6):
-    """Set a 6x6 patch of the object to the PNG maximum in the first `images` images."""
-    for index in range(images):
-        path = _ball_image(folder, index)
-        image, bits = _core.read_png(str(path))
-        image[20:26, 20:26] = 1.0
-        _core.write_png(str(path), image, bits)
-
-
 FULL_FIT = "full fit kept (too few non-coplanar lit observations)"
 
 
 def test_saturated_png_pixels_are_left_out_and_flagged(tmp_path, reconstruction, capsys):
     data, out = tmp_path / "data", tmp_path / "out"
     shutil.copytree(BALL, data)
-    _saturate(data)
+    saturate(data)
     assert main(["reconstruct", str(data), "--out", str(out), "--quiet"]) == 0
     assert capsys.readouterr().err == (
         f"irtps: warning: {data}: 216 observations in 6 images are saturated (a channel at or above 1); "
@@ -541,7 +534,7 @@ def test_saturated_png_pixels_are_left_out_and_flagged(tmp_path, reconstruction,
 def test_saturated_png_pixels_are_reported_when_not_robust(tmp_path, capsys):
     data = tmp_path / "data"
     shutil.copytree(BALL, data)
-    _saturate(data)
+    saturate(data)
     assert main(["reconstruct", str(data), "--out", str(tmp_path / "out"), "--no-robust", "--quiet"]) == 0
     assert capsys.readouterr().err.endswith("are saturated (a channel at or above 1); used as they are (robust mode is off)\n")
 

@@ -21,6 +21,8 @@ from irtps.cli import main
 from irtps.errors import IrtpsError
 from irtps.resources import available_memory_bytes, check_memory, format_bytes
 
+from cli_helpers import refused
+
 DATA = Path(__file__).parent / "data"
 MITSUBA = DATA / "mitsuba_small" / "cap_cornell"  # 96x96, 3 lights, EXR
 BALL = DATA / "diligent_ball_small"  # DiLiGenT layout, 48x44, 8 lights, 16-bit PNG
@@ -51,15 +53,6 @@ def _snapshot(folder):
     return {str(p): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-def _refused(argv, capsys) -> str:
-    assert main(argv) == 2
-    captured = capsys.readouterr()
-    assert captured.out == ""
-    assert captured.err.startswith("irtps: error: ") and captured.err.count("\n") == 1, captured.err
-    assert "Traceback" not in captured.err
-    return captured.err
-
-
 def _claim_exr_size(path, width, height):
     """Rewrite the data window of an EXR header to claim width x height pixels."""
     data = bytearray(path.read_bytes())
@@ -77,7 +70,7 @@ def test_a_data_set_whose_images_do_not_fit_is_refused_before_decoding(command, 
     before = _snapshot(tmp_path)
     memory(300_000)  # the 3 images of 96x96 float32 RGB take 331 776 bytes
     argv = ["table", str(data), "--quiet"] if command == "table" else [command, str(data), "--out", str(tmp_path / "out"), "--quiet"]
-    err = _refused(argv, capsys)
+    err = refused(argv, capsys)
     assert err == (
         f"irtps: error: {data / 'images'}: 3 images of 96x96 decoded as float32 RGB need 331.8 kB, more than the 300.0 kB available\n"
     )
@@ -88,7 +81,7 @@ def test_a_diligent_data_set_whose_images_do_not_fit_is_refused_before_decoding(
     data = shutil.copytree(BALL, tmp_path / "ball")
     before = _snapshot(tmp_path)
     memory(200_000)  # 8 images of 48x44: 202 752 bytes
-    err = _refused(["reconstruct", str(data), "--out", str(tmp_path / "out"), "--quiet"], capsys)
+    err = refused(["reconstruct", str(data), "--out", str(tmp_path / "out"), "--quiet"], capsys)
     assert err == f"irtps: error: {data / 'filenames.txt'}: 8 images of 48x44 decoded as float32 RGB need 202.8 kB, more than the 200.0 kB available\n"
     assert _snapshot(tmp_path) == before
 
@@ -97,7 +90,7 @@ def test_an_image_header_claiming_a_huge_size_is_sized_before_decoding(memory, n
     data = shutil.copytree(MITSUBA, tmp_path / "data")
     _claim_exr_size(data / "images" / "000.exr", 10_000, 10_000)
     memory(10**9)
-    err = _refused(["reconstruct", str(data), "--out", str(tmp_path / "out"), "--quiet"], capsys)
+    err = refused(["reconstruct", str(data), "--out", str(tmp_path / "out"), "--quiet"], capsys)
     assert err == (
         f"irtps: error: {data / 'images'}: 3 images of 10000x10000 decoded as float32 RGB need 3.6 GB, more than the 1.0 GB available\n"
     )
@@ -115,7 +108,7 @@ def test_rendering_a_data_set_that_does_not_fit_is_refused(memory, tmp_path, cap
     data = shutil.copytree(MITSUBA, tmp_path / "data")
     before = _snapshot(tmp_path)
     memory(1_000_000)  # direct + 4 bounces + their sums: 7 x 3 x 96 x 96 x 12 bytes
-    err = _refused(["render", str(data), "--out", str(tmp_path / "out"), "--quiet"], capsys)
+    err = refused(["render", str(data), "--out", str(tmp_path / "out"), "--quiet"], capsys)
     assert err == (
         "irtps: error: lights: 3 lights of 96x96 images (direct light, 4 bounces and their sums, float32 RGB) "
         "need 2.3 MB, more than the 1.0 MB available\n"
@@ -125,7 +118,7 @@ def test_rendering_a_data_set_that_does_not_fit_is_refused(memory, tmp_path, cap
 
 def test_a_synthetic_scene_that_does_not_fit_is_refused(memory, tmp_path, capsys):
     memory(10_000)
-    err = _refused(["synth", "cap", "--size", "16", "--lights", "3", "--out", str(tmp_path / "out"), "--quiet"], capsys)
+    err = refused(["synth", "cap", "--size", "16", "--lights", "3", "--out", str(tmp_path / "out"), "--quiet"], capsys)
     assert err == (
         "irtps: error: lights: 3 lights of 16x16 images (direct light, 4 bounces and their sums, float32 RGB) "
         "need 64.5 kB, more than the 10.0 kB available\n"

@@ -22,6 +22,8 @@ from irtps.batch import local_cluster
 from irtps.cli import main
 from irtps.paths import file_problem, folder_problem, optional_file, resolve_path
 
+from cli_helpers import refused
+
 DATA = Path(__file__).parent / "data"
 MITSUBA = DATA / "mitsuba_small" / "cap_cornell"  # 96x96, 3 lights, gt/, mask.png
 BALL = DATA / "diligent_ball_small"  # DiLiGenT layout, 8 lights, 16-bit PNG
@@ -122,16 +124,6 @@ def _argv(command: str, data: Path, out: Path) -> list[str]:
     return [command, str(data), "--out", str(out), "--quiet"]
 
 
-def _run(argv: list[str], capsys) -> str:
-    """Run the command; check exit status 2 and a single clean error line; return it."""
-    assert main(argv) == 2
-    captured = capsys.readouterr()
-    assert captured.out == ""
-    assert captured.err.startswith("irtps: error: ") and captured.err.count("\n") == 1, captured.err
-    assert "Traceback" not in captured.err
-    return captured.err
-
-
 @pytest.mark.parametrize("kind", list(KINDS))
 @pytest.mark.parametrize("target", list(TARGETS))
 def test_a_file_that_is_not_a_regular_file_is_named_for_what_it_is(target, kind, tmp_path, capsys):
@@ -143,10 +135,10 @@ def test_a_file_that_is_not_a_regular_file_is_named_for_what_it_is(target, kind,
     before = _snapshot(tmp_path)
     if kind == "fifo":
         with _FifoWatch(path) as watch:
-            err = _run(_argv(command, data, out), capsys)
+            err = refused(_argv(command, data, out), capsys)
         assert not watch.opened, f"{path} was opened: reading a FIFO blocks"
     else:
-        err = _run(_argv(command, data, out), capsys)
+        err = refused(_argv(command, data, out), capsys)
     assert f"{path}: {KINDS[kind]}{context}" in err, err
     assert "missing" not in err
     assert _snapshot(tmp_path) == before  # data set untouched, no output, no temporary folder
@@ -157,7 +149,7 @@ def test_a_file_that_is_not_a_regular_file_is_named_for_what_it_is(target, kind,
 def test_a_mask_that_is_a_folder_is_refused_by_render_and_reconstruct_alike(command, tmp_path, capsys):
     data = shutil.copytree(MITSUBA, tmp_path / "data")
     _replace(data / "mask.png", "directory")
-    err = _run(_argv(command, data, tmp_path / "out"), capsys)
+    err = refused(_argv(command, data, tmp_path / "out"), capsys)
     assert err == f"irtps: error: {data / 'mask.png'}: a directory, not a file\n"
 
 
@@ -173,14 +165,14 @@ def test_a_gt_folder_that_is_a_file_is_an_error_not_absent(tmp_path, capsys):
     data = shutil.copytree(MITSUBA, tmp_path / "data")
     shutil.rmtree(data / "gt" / "direct")
     (data / "gt" / "direct").write_text("a file in place of a folder")
-    err = _run(_argv("reconstruct", data, tmp_path / "out"), capsys)
+    err = refused(_argv("reconstruct", data, tmp_path / "out"), capsys)
     assert f"{data / 'gt' / 'direct'}: not a folder" in err
 
 
 def test_an_images_folder_that_is_a_symlink_loop(tmp_path, capsys):
     data = shutil.copytree(MITSUBA, tmp_path / "data")
     _replace(data / "images", "symlink loop")
-    err = _run(_argv("reconstruct", data, tmp_path / "out"), capsys)
+    err = refused(_argv("reconstruct", data, tmp_path / "out"), capsys)
     assert f"{data / 'images'}: a symlink loop (scene.json has 3 lights, one image each)" in err
 
 
@@ -188,7 +180,7 @@ def test_an_images_folder_that_is_a_symlink_loop(tmp_path, capsys):
 def test_an_unreadable_image_says_permission_denied(tmp_path, capsys):
     data = shutil.copytree(MITSUBA, tmp_path / "data")
     (data / "images" / "001.exr").chmod(0)
-    err = _run(_argv("reconstruct", data, tmp_path / "out"), capsys)
+    err = refused(_argv("reconstruct", data, tmp_path / "out"), capsys)
     assert f"{data / 'images' / '001.exr'}: not readable (permission denied)" in err
 
 
@@ -204,7 +196,7 @@ def loop(tmp_path):
 
 @pytest.mark.parametrize("command", ["reconstruct", "render", "table"])
 def test_a_data_folder_that_is_a_symlink_loop(command, loop, tmp_path, capsys):
-    err = _run(_argv(command, loop, tmp_path / "out"), capsys)
+    err = refused(_argv(command, loop, tmp_path / "out"), capsys)
     assert err == f"irtps: error: {loop}: a symlink loop\n"
     assert os.readlink(loop) == "loop" and sorted(p.name for p in tmp_path.iterdir()) == ["loop"]
 
@@ -213,7 +205,7 @@ def test_evaluate_against_a_ground_truth_folder_that_is_a_symlink_loop(loop, tmp
     reconstruction = tmp_path / "ps"
     assert main(["reconstruct", str(BALL), "--out", str(reconstruction), "--quiet"]) == 0
     capsys.readouterr()
-    err = _run(["evaluate", str(reconstruction), "--gt", str(loop)], capsys)
+    err = refused(["evaluate", str(reconstruction), "--gt", str(loop)], capsys)
     assert err == f"irtps: error: {loop}: a symlink loop\n"
 
 
@@ -225,7 +217,7 @@ def test_report_of_a_reconstruction_folder_that_is_not_one(kind, tmp_path, capsy
     elif kind == "fifo":
         os.mkfifo(path)
     problem = {"loop": "a symlink loop", "fifo": "not a folder", "missing": "no such reconstruction folder"}[kind]
-    assert _run(["report", str(path), "--quiet"], capsys) == f"irtps: error: {path}: {problem}\n"
+    assert refused(["report", str(path), "--quiet"], capsys) == f"irtps: error: {path}: {problem}\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ([] if kind == "missing" else [kind])
 
 

@@ -7,7 +7,6 @@
 from __future__ import annotations
 
 import json
-
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass

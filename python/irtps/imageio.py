@@ -17,7 +17,7 @@ import numpy as np
 
 from irtps import _core
 from irtps.errors import DatasetError, IrtpsWarning
-from irtps.paths import MISSING, file_problem
+from irtps.paths import MISSING, check_file, file_problem
 
 PNG_BIT_DEPTHS = (8, 16)
 """Bit depths of PNG files that can be written."""
@@ -242,9 +242,7 @@ def image_size(path: str | Path) -> tuple[int, int] | None:
     DatasetError
         If ``path`` is not a readable regular file.
     """
-    problem = file_problem(path)
-    if problem is not None:
-        raise DatasetError(f"{path}: {problem}")
+    check_file(path)
     try:
         with open(path, "rb") as file:
             head = file.read(_HEADER_BYTES)

@@ -9,8 +9,8 @@ from tqdm import tqdm
 
 from irtps import _core
 from irtps.errors import IrtpsError
-from irtps.resources import check_memory
 from irtps.options import RenderOptions
+from irtps.resources import check_memory
 from irtps.scene import Scene
 
 #: Footprint samples per pixel for the direct image (stratified; shadows are traced exactly).

@@ -1,0 +1,24 @@
+"""Helpers shared by the tests that run the ``irtps`` command as a user would."""
+
+from irtps import _core
+from irtps.cli import main
+
+
+def refused(argv, capsys) -> str:
+    """Run the command; check exit status 2, nothing on stdout and one clean error line on
+    stderr (no traceback); return that line."""
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.startswith("irtps: error: ") and captured.err.count("\n") == 1, captured.err
+    assert "Traceback" not in captured.err
+    return captured.err
+
+
+def saturate(folder, images=6):
+    """Set a 6x6 patch of the object to the PNG maximum in the first `images` images of a
+    DiLiGenT-layout data set (216 saturated observations for 6 images)."""
+    for name in (folder / "filenames.txt").read_text().split()[:images]:
+        image, bits = _core.read_png(str(folder / name))
+        image[20:26, 20:26] = 1.0
+        _core.write_png(str(folder / name), image, bits)
