@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import TypeVar
 
 from irtps.errors import DatasetError
+from irtps.paths import exists
 
 _T = TypeVar("_T")
 
@@ -237,10 +238,10 @@ def _replace(new: Path, final: Path, old: Path) -> None:
 
 def _restore(old: Path, final: Path, trash: Path) -> None:
     """Rename ``old`` back to ``final`` if that is missing, otherwise discard it to ``trash``."""
-    if not _exists(final):
+    if not exists(final):
         with suppress(OSError):
             os.rename(old, final)
-    if _exists(final):
+    if exists(final):
         _discard(old, trash)
 
 
@@ -263,10 +264,6 @@ def _remove(path: Path) -> None:
     else:
         with suppress(OSError):
             path.unlink(missing_ok=True)
-
-
-def _exists(path: Path) -> bool:
-    return path.exists() or path.is_symlink()
 
 
 def _hidden(final: Path, kind: str, token: str) -> Path:
