@@ -373,13 +373,14 @@ def spread(count: int, total: int) -> list[int]:
 
 
 def time_iteration(case: Case, samples: int, repeats: int, seed: int) -> dict:
-    """Seconds of one IRT-PS pass (photometric stereo, integration, indirect estimate)."""
+    """Seconds of one IRT-PS pass (photometric stereo, integration, indirect estimate with the
+    residual's direct image); the placement is given, as its search runs once per data set."""
     from irtps.interreflection import remove_interreflections
 
     remove_interreflections(case.dataset, bounces=case.bounces, iterations=1, samples=1, seed=seed)  # warm-up (imports, caches)
     totals, stages = [], []
     for r in range(repeats):
-        result = remove_interreflections(case.dataset, bounces=case.bounces, iterations=1, samples=samples, seed=seed + r, tolerance=0.0)
+        result = remove_interreflections(case.dataset, bounces=case.bounces, iterations=1, samples=samples, seed=seed + r, base_height="boundary")
         timings = result.history[0].timings
         totals.append(sum(timings.values()))
         stages.append(timings)

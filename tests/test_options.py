@@ -65,10 +65,10 @@ def test_an_integer_out_of_range_is_one_named_error_with_its_range(command, opti
     "argv, message",
     [
         (["reconstruct", str(BALL), "--shadow-fraction", "1"], "--shadow-fraction: 1.0 is out of range: expected a finite number in [0, 1)"),
-        (["reconstruct", str(BALL), "--relaxation", "0"], "--relaxation: 0.0 is out of range: expected a finite number in (0, 1]"),
-        (["reconstruct", str(BALL), "--base-height", "inf"], "--base-height: inf is not a finite number"),
+        (["reconstruct", str(BALL), "--relaxation", "0"], "--relaxation: 0.0 is out of range: expected a finite number in (0, 2) or auto"),
+        (["reconstruct", str(BALL), "--base-height", "inf"], "--base-height: inf is not a finite number, auto or boundary"),
         (["reconstruct", str(BALL), "--base-height", "1e308"], "--base-height: 1e+308 is out of range for this data set"),
-        (["reconstruct", str(BALL), "--tolerance", "-1"], "--tolerance: -1.0 is out of range: expected a finite number at least 0"),
+        (["reconstruct", str(BALL), "--base-height", "nan"], "--base-height: nan is not a finite number, auto or boundary"),
         (["reconstruct", str(BALL), "--estimator", "paper", "--bounces", "4"], "--bounces: the paper's estimator takes 1, 2 or 3 reflections, not 4"),
         (["table", str(BALL), "--bounces", "1", "0"], "--bounces: 0 is out of range: expected an integer from 1 to 64"),
         (["batch", str(BALL), "--workers", "2", "--scheduler", "tcp://nowhere:1"], "--scheduler: --workers and --threads-per-worker set up the local cluster"),
@@ -106,7 +106,7 @@ def test_reconstruct_records_the_options_it_used_with_defaults_resolved():
         "shadow_fraction": 0.1,
         "saturation": 1.0,  # PNG images saturate at their maximum
         "integration": "ls",
-        "base_height": 0.0,  # no floor
+        "base_height": "auto",
     }
 
 
@@ -127,9 +127,9 @@ def _help(command):
 
 
 def test_the_command_line_reaches_every_reconstruction_option(tmp_path):
-    args = build_parser().parse_args(["reconstruct", str(BALL), "--out", str(tmp_path), "--tolerance", "0.5", "--method", "irtps", "--no-robust"])
+    args = build_parser().parse_args(["reconstruct", str(BALL), "--out", str(tmp_path), "--relaxation", "0.5", "--base-height", "boundary", "--method", "irtps", "--no-robust"])
     options = irtps.options.from_arguments(ReconstructOptions, args)
-    assert options == ReconstructOptions(method="irtps", tolerance=0.5, robust=False)
+    assert options == ReconstructOptions(method="irtps", relaxation=0.5, base_height="boundary", robust=False)
 
 
 @pytest.mark.parametrize(
@@ -137,6 +137,7 @@ def test_the_command_line_reaches_every_reconstruction_option(tmp_path):
     [
         (["reconstruct", str(BALL), "--out", "o", "--samples", "1.5"], "argument --samples: invalid int value: '1.5'"),
         (["render", str(MITSUBA), "--out", "o", "--seed", "abc"], "argument --seed: invalid int value: 'abc'"),
+        (["reconstruct", str(BALL), "--out", "o", "--base-height", "high"], "argument --base-height: 'high' is not a finite number, auto or boundary"),
         (["reconstruct", str(BALL), "--out", "o", "--method", "mitsuba"], "argument --method: invalid choice: 'mitsuba'"),
         (["table", str(BALL), "--bounces"], "argument --bounces: expected at least one argument"),
     ],

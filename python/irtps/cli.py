@@ -21,6 +21,7 @@ from irtps.evaluate import evaluate, format_metrics
 from irtps.options import ClusterOptions, OptionError, ReconstructOptions, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
 from irtps.output_rule import check_output, escaped
 from irtps.paths import check_folder, resolve_path
+from irtps.placement import format_placement
 from irtps.reconstruct import load_and_reconstruct, load_reconstruction, save_reconstruction
 from irtps.render import Rendering, render
 from irtps.surface import height_to_normals
@@ -78,10 +79,15 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
         print(f"reconstructed {args.data} ({options.method}; {stages}) -> {args.out}")
+        print(f"  placement: {format_placement(result.placement)}")
         for step in result.history:
+            residual = f"  residual {step.residual['object']:.4f}"
+            if step.residual.get("surroundings") is not None:
+                residual += f" (surroundings {step.residual['surroundings']:.4f})"
             change = "" if step.height_change is None else f"  height change {step.height_change:.4f}"
             error = "" if step.metrics is None or step.metrics["normal_mean_angular_deg"] is None else f"  normal error {step.metrics['normal_mean_angular_deg']:.2f} deg"
-            print(f"  pass {step.index}:{error}{change}")
+            chosen = "  <- result" if step.index == result.chosen else ""
+            print(f"  pass {step.index}:{residual}{error}{change}{chosen}")
         if dataset.gt is not None:
             metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=dataset.gt)
             print(format_metrics(metrics))
@@ -260,14 +266,16 @@ def build_parser() -> argparse.ArgumentParser:
         description="Reconstruct the object of DATA (contract layout, or DiLiGenT layout, detected) and write OUT: "
         "normal.exr (R, G, B = nx, ny, nz), albedo.exr, height.exr, mask.png, mesh.ply (the height field with "
         "per-vertex albedo colour and normals), mesh.obj (the same mesh for any viewer) and run.json (parameters, "
-        "timings, versions, the data set's path); with --method irtps also "
-        "indirect/NNN.exr (the estimated inter-reflected light) and the per-iteration history in run.json. "
+        "timings, versions, the data set's path, the placement); with --method irtps also "
+        "indirect/NNN.exr (the estimated inter-reflected light) and each pass's residual in run.json: the reconstruction "
+        "rendered again and compared with the images, the number to judge a run by without ground truth. The result is the "
+        "pass with the lowest residual (pass 0 is classic PS). "
         "When DATA has ground truth, the errors are printed too. OUT is replaced atomically.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  irtps reconstruct shared/data/diligent/ballPNG --out ball\n"
         "  irtps reconstruct shared/data/mitsuba/cap_cornell --out cap_irtps --method irtps --bounces 3\n"
         "  irtps reconstruct cavity --out cavity_ps --integration mestimator\n"
-        "  irtps reconstruct capture --out capture_ps --saturation 0.99 --base-height 0",
+        "  irtps reconstruct capture --out capture_ps --saturation 0.99 --base-height boundary",
     )
     p.add_argument("data", type=Path, help="data set folder")
     p.add_argument("--out", type=Path, required=True, help="output folder")

@@ -107,13 +107,14 @@ def error_map_png(errors: np.ndarray, title: str, unit: str) -> bytes:
 def convergence_png(
     passes: Sequence[int],
     angular_error_deg: Sequence[float | None],
-    height_change: Sequence[float | None],
+    residual: Sequence[float | None],
+    chosen: int | None = None,
 ) -> bytes:
     """The convergence of the IRT-PS iterations, as PNG bytes.
 
     Left: the mean angular error against ground truth per pass (only when some pass has
-    one). Right: the mean absolute change of the height map from the pass before, on a
-    log scale when every change is positive.
+    one). Right: the relative residual of each pass's reconstruction rendered again against
+    the images (`irtps.residual`), which needs no ground truth. The chosen pass is ringed.
 
     Parameters
     ----------
@@ -121,8 +122,10 @@ def convergence_png(
         Pass numbers (0 is classic photometric stereo).
     angular_error_deg : sequence of float or None
         Mean angular error of each pass, None where unknown.
-    height_change : sequence of float or None
-        Mean absolute height change of each pass (world units), None for pass 0.
+    residual : sequence of float or None
+        Relative residual on the object of each pass, None where not recorded.
+    chosen : int, optional
+        The pass returned.
 
     Returns
     -------
@@ -132,33 +135,33 @@ def convergence_png(
     Raises
     ------
     DatasetError
-        If the sequences differ in length or no pass has a height change.
+        If the sequences differ in length or no pass has a residual.
 
     Examples
     --------
-    >>> convergence_png([0, 1, 2], [9.0, 4.0, 3.5], [None, 2.0, 0.3])[:8]
+    >>> convergence_png([0, 1, 2], [9.0, 4.0, 3.5], [0.1, 0.05, 0.04], chosen=2)[:8]
     b'\\x89PNG\\r\\n\\x1a\\n'
     """
-    if not len(passes) == len(angular_error_deg) == len(height_change):
-        raise DatasetError(f"convergence: {len(passes)} passes but {len(angular_error_deg)} errors and {len(height_change)} height changes")
+    if not len(passes) == len(angular_error_deg) == len(residual):
+        raise DatasetError(f"convergence: {len(passes)} passes but {len(angular_error_deg)} errors and {len(residual)} residuals")
     errors = [(k, e) for k, e in zip(passes, angular_error_deg) if e is not None]
-    changes = [(k, c) for k, c in zip(passes, height_change) if c is not None]
-    if not changes:
-        raise DatasetError("convergence: no pass has a height change (fewer than two passes?)")
+    residuals = [(k, r) for k, r in zip(passes, residual) if r is not None]
+    if not residuals:
+        raise DatasetError("convergence: no pass has a residual")
     figure = Figure(figsize=(FIGURE_SIZE[0] * (2 if errors else 1), FIGURE_SIZE[1] * 0.8), layout="constrained")
     panels = figure.subplots(1, 2 if errors else 1, squeeze=False, sharex=True)[0]
     if errors:
-        _curve(panels[0], errors, "mean angular error (°)", "Normal error against ground truth")
-    axes = panels[-1]
-    _curve(axes, changes, "mean |height change| (world units)", "Height change from the pass before")
-    if all(c > 0 for _, c in changes):
-        axes.set_yscale("log")
+        _curve(panels[0], errors, "mean angular error (°)", "Normal error against ground truth", chosen)
+    _curve(panels[-1], residuals, "relative residual on the object", "Rendered reconstruction against the images", chosen)
     return _png(figure)
 
 
-def _curve(axes, points: list[tuple[int, float]], label: str, title: str) -> None:
+def _curve(axes, points: list[tuple[int, float]], label: str, title: str, chosen: int | None = None) -> None:
     x, y = zip(*points)
     axes.plot(x, y, marker="o")
+    if chosen in x:
+        axes.plot([chosen], [y[x.index(chosen)]], marker="o", markersize=14, markerfacecolor="none", color="C3", linestyle="none", label="result")
+        axes.legend(fontsize="small")
     axes.set_xlabel("pass (0 = classic photometric stereo)")
     axes.set_ylabel(label)
     axes.set_title(title, fontsize="medium")

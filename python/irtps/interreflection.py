@@ -1,29 +1,52 @@
 """IRT-PS: remove inter-reflections by ray tracing the recovered surface, and iterate.
 
-Stage 0 is the input images A₀. Each iteration then fits photometric stereo to the current
-images, integrates the normals into a height map, places it in its known surroundings,
-renders the light that reaches the camera after 1..r bounces (every path serves all K
-lights), and subtracts that indirect estimate from the images.
+Pass 0 is classic photometric stereo on the input images A₀. After each pass the
+reconstruction (height, albedo, placement) is rendered again in its known surroundings:
+the light that reaches the camera after 1..r bounces (every path serves all K lights) is
+the next estimate of the inter-reflections, and the rendering's residual against A₀
+(`irtps.residual`) says how well the pass explains its images. The next pass fits the
+corrected images A₀ − Eₜ. The result is the pass with the lowest residual, pass 0
+included: IRT-PS never returns worse than classic photometric stereo by its own measure.
+
+The estimate Eₜ moves toward each new rendering by a step that adapts to how the loop
+converges (a secant estimate of its contraction): above 1 where the estimates converge
+slowly in one direction, below 1 where they oscillate. The loop stops after two passes in a
+row whose residual does not fall below the best so far beyond its Monte-Carlo noise.
 """
 
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 from tqdm import tqdm
 
 from irtps.dataset import Dataset
+from irtps.errors import IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
 from irtps.paper_estimator import paper_indirect
-from irtps.pipeline import fit_photometric_stereo, resolve_options, surface_height
+from irtps.pipeline import fit_photometric_stereo, place_surface, placed, resolve_options, surface_relief
+from irtps.placement import Placement
 from irtps.ps import PsResult
-from irtps.render import render_indirect
-from irtps.surface import footprint_normals
+from irtps.residual import Residual, compared_observations, render_with_residual
+from irtps.surface import surface_albedo
 
-__all__ = ["InterreflectionResult", "Iteration", "remove_interreflections", "surface_albedo"]
+__all__ = ["InterreflectionResult", "Iteration", "remove_interreflections"]
+
+#: Bounds of the adaptive step toward each new estimate. Above 2 the Monte-Carlo noise of
+#: the estimates would grow without bound; the upper bound keeps it within √3 of one
+#: estimate's.
+STEP_BOUNDS = (0.5, 1.9)
+#: A pass improves on the best so far when its residual is lower by this many standard
+#: deviations of its Monte-Carlo noise.
+SIGNIFICANCE = 2.0
+#: The loop stops after this many passes in a row that do not improve on the best (one
+#: is not enough: an over-relaxed step can raise the residual once on the way down).
+PATIENCE = 2
+
 
 @dataclass
 class Iteration:
@@ -35,6 +58,12 @@ class Iteration:
         0 is classic photometric stereo on the input images.
     height_change : float or None
         Mean absolute change of the height map from the previous pass (world units).
+    residual : dict
+        `irtps.residual.Residual` of the pass's reconstruction, as a dict.
+    base_height : float or None
+        Where the pass's reconstruction stands (`irtps.placement.Placement.base_height`).
+    step : float or None
+        The step taken toward the estimate rendered from this pass (None on the last).
     timings : dict
         Seconds per stage.
     metrics : dict or None
@@ -43,53 +72,26 @@ class Iteration:
 
     index: int
     height_change: float | None
+    residual: dict = field(default_factory=dict)
+    base_height: float | None = None
+    step: float | None = None
     timings: dict[str, float] = field(default_factory=dict)
     metrics: dict | None = None
 
 
 @dataclass
 class InterreflectionResult:
-    """The last pass's fit, albedo (`surface_albedo` of its fit) and height, the last
-    indirect estimate, and the history."""
+    """The chosen pass (lowest residual): its fit, albedo (`irtps.surface.surface_albedo`
+    of its fit), placed height, the estimate subtracted to get its images (None for pass 0),
+    the placement, and every pass's record."""
 
     fit: PsResult
     albedo: np.ndarray
     height: np.ndarray
     indirect: np.ndarray | None
     history: list[Iteration]
-
-
-def surface_albedo(albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0) -> np.ndarray:
-    """The albedo of the triangulated surface that explains photometric stereo's fit.
-
-    Photometric stereo measures ``ρ·n̄``, with ``n̄`` the mean unit normal over the pixel's
-    footprint (`irtps.surface.footprint_normals`); where the surface bends inside a footprint,
-    ``|n̄| < 1`` and the fitted albedo reads low (by 30 % on the crease of a right-angled
-    V-groove). Rendering the surface with that albedo would darken every bounce off a crease.
-    This divides by ``|n̄|`` of the surface `height` (not below 0.5) and clips to [0, 1].
-
-    Parameters
-    ----------
-    albedo_ps : numpy.ndarray
-        (H, W, 3) albedo fitted by photometric stereo.
-    height, mask, pixel_size
-        The surface, as for `irtps.surface.footprint_normals`.
-
-    Returns
-    -------
-    numpy.ndarray
-        float32 (H, W, 3).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> height = np.tile(np.abs(np.arange(5.0) - 2), (3, 1))
-    >>> fitted = np.full((3, 5, 3), 0.5)
-    >>> np.round(surface_albedo(fitted, height, np.ones((3, 5), bool))[1, 1:4, 0].astype(float), 4).tolist()
-    [0.5, 0.7071, 0.5]
-    """
-    length = np.linalg.norm(footprint_normals(height, mask, pixel_size), axis=-1)
-    return np.clip(albedo_ps / np.maximum(length, 0.5)[..., None], 0.0, 1.0).astype(np.float32)
+    placement: Placement
+    chosen: int = 0
 
 
 def remove_interreflections(
@@ -114,10 +116,13 @@ def remove_interreflections(
         - ``iterations``: largest number of corrections;
         - ``samples``: camera paths per pixel of each indirect estimate;
         - ``seed``: seed of the first estimate; pass t uses ``seed + t``;
-        - ``tolerance``: stop when the mean absolute height change falls below it; default
-          0.002 pixel sizes;
-        - ``relaxation``: fraction of each new indirect estimate taken (1 takes it whole;
-          below 1 damps the oscillation that very bright surfaces can cause);
+        - ``base_height``: ``"auto"`` estimates the placement from the floor around the
+          object at pass 0 (`irtps.placement`) and refines it as the shape changes;
+          ``"boundary"`` or a number as for `irtps.reconstruct`;
+        - ``relaxation``: ``"auto"`` adapts the step toward each new estimate (see the
+          module); a number in (0, 2) fixes it (1 takes each new estimate whole);
+        - ``early_stop``: stop after two passes in a row whose residual does not fall
+          below the best so far by twice its Monte-Carlo noise;
         - ``update``: ``"original"``: Aₜ₊₁ = A₀ − Eₜ (default); ``"previous"``: the paper's
           literal Aₜ₊₁ = Aₜ − Eₜ. Corrected images are kept non-negative;
         - ``integration``: default ``"footprint"``, which keeps creases, and so the
@@ -136,6 +141,12 @@ def remove_interreflections(
     Returns
     -------
     InterreflectionResult
+        The pass with the lowest residual.
+
+    Warns
+    -----
+    IrtpsWarning
+        When that is pass 0 (classic photometric stereo).
 
     Raises
     ------
@@ -146,12 +157,18 @@ def remove_interreflections(
     scene, mask = dataset.scene, dataset.mask
     pixel_size = scene.camera.pixel_size
     original = dataset.images
-    # Observations saturated in the input stay saturated: subtracting the estimate would bring
-    # them under the threshold and into the fit with a clipped value.
     saturated = None if options.saturation is None else (original >= options.saturation).any(axis=-1, keepdims=True)
+    usable = compared_observations(original, scene.light_irradiance, mask, robust=options.robust, shadow_fraction=options.shadow_fraction, saturation=options.saturation)
     images = original
-    indirect = None
+    estimate_used = None
+    step = 1.0 if options.relaxation == "auto" else options.relaxation
+    steps = _AdaptiveStep(mask)
+    previous_change = None
     previous_height = None
+    previous_relief = None
+    placement = None
+    best = None
+    stalled = 0
     history: list[Iteration] = []
     with tqdm(total=options.iterations + 1, desc="IRT-PS", unit="pass", disable=not progress, leave=False) as bar:
         for index in range(options.iterations + 1):
@@ -160,35 +177,116 @@ def remove_interreflections(
             fit = fit_photometric_stereo(dataset, images, options)
             timings["photometric_stereo"] = time.perf_counter() - start
             start = time.perf_counter()
-            height = surface_height(dataset, fit.normals, options)
+            relief = surface_relief(dataset, fit.normals, options)
             timings["integration"] = time.perf_counter() - start
-            albedo = surface_albedo(fit.albedo, height, mask, pixel_size)
+            albedo = surface_albedo(fit.albedo, relief, mask, pixel_size)
+            start = time.perf_counter()
+            shape_change = 0.0 if previous_relief is None else float(np.abs(relief - previous_relief)[mask].mean())
+            placement = place_surface(dataset, relief, albedo, options, seed=options.seed, previous=placement, shape_change=shape_change)
+            timings["placement"] = time.perf_counter() - start
+            height = placed(relief, mask, placement)
+            start = time.perf_counter()
+            seed = options.seed + index
+            rerendering = render_with_residual(
+                scene, height, albedo, mask, original, bounces=options.bounces, samples=options.samples, seed=seed, stride=options.stride, usable=usable
+            )
+            residual = rerendering.residual
+            timings["rendering"] = time.perf_counter() - start
             change = None if previous_height is None else float(np.abs(height - previous_height)[mask].mean())
             metrics = None
             if dataset.gt is not None:
                 metrics = evaluate(mask=mask, normals=fit.normals, albedo=albedo, height=height, gt=dataset.gt).to_dict()
-            record = Iteration(index=index, height_change=change, timings=timings, metrics=metrics)
+            record = Iteration(index=index, height_change=change, residual=residual.to_dict(), base_height=placement.base_height, timings=timings, metrics=metrics)
             history.append(record)
+            improved = best is None or residual.object < best[0].object - SIGNIFICANCE * residual.noise
+            stalled = 0 if improved else stalled + 1
+            if best is None or residual.object < best[0].object:
+                best = (residual, index, fit, albedo, height, estimate_used, placement)
             bar.update(1)
-            if metrics is not None and metrics.get("normal_mean_angular_deg") is not None:
-                bar.set_postfix(error=f"{metrics['normal_mean_angular_deg']:.2f}°", refresh=False)
-            if index == options.iterations or (change is not None and change < options.tolerance):
+            bar.set_postfix(_postfix(residual, metrics), refresh=False)
+            if index == options.iterations or (options.early_stop and stalled == PATIENCE):
                 break
-            start = time.perf_counter()
-            seed = options.seed + index
             if options.estimator == "paper":
-                estimate = paper_indirect(scene, height, albedo, mask, reflections=options.bounces, seed=seed)
+                estimate, estimate_noise = paper_indirect(scene, height, albedo, mask, reflections=options.bounces, seed=seed), 0.0
             else:
-                estimate = render_indirect(scene, height, albedo, mask, bounces=options.bounces, samples=options.samples, seed=seed, stride=options.stride)
-            timings["indirect_estimate"] = time.perf_counter() - start
+                estimate, estimate_noise = rerendering.indirect, float(rerendering.noise_energy[mask].sum())
+            del rerendering
             if options.update == "original":
-                indirect = estimate if indirect is None else indirect + options.relaxation * (estimate - indirect)
-                images = _corrected(original, indirect, original, saturated)
+                if estimate_used is None:
+                    change_of_estimate, record.step = estimate, 1.0
+                else:
+                    change_of_estimate = estimate - estimate_used
+                    if options.relaxation == "auto":
+                        step = steps.next(change_of_estimate, previous_change)
+                    record.step = step
+                steps.taken(record.step, estimate_noise)
+                estimate_used = estimate if estimate_used is None else estimate_used + record.step * change_of_estimate
+                previous_change = change_of_estimate
+                images = _corrected(original, estimate_used, original, saturated)
             else:
-                indirect = estimate
-                images = _corrected(images, options.relaxation * estimate, original, saturated)
+                record.step = step
+                estimate_used = step * estimate
+                images = _corrected(images, estimate_used, original, saturated)
             previous_height = height
-    return InterreflectionResult(fit=fit, albedo=albedo, height=height, indirect=indirect, history=history)
+            previous_relief = relief
+    residual, chosen, fit, albedo, height, estimate_used, placement = best
+    if chosen == 0 and len(history) > 1:
+        warnings.warn(
+            f"IRT-PS: no pass explained the images better than classic photometric stereo (residual {residual.object:.4f}); "
+            "the result is classic photometric stereo's",
+            IrtpsWarning,
+            stacklevel=2,
+        )
+    return InterreflectionResult(fit=fit, albedo=albedo, height=height, indirect=estimate_used, history=history, placement=placement, chosen=chosen)
+
+
+def _postfix(residual: Residual, metrics: dict | None) -> dict:
+    """The progress bar's figures: the residual, and the error when ground truth is known."""
+    postfix = {"residual": f"{residual.object:.4f}"}
+    if metrics is not None and metrics.get("normal_mean_angular_deg") is not None:
+        postfix["error"] = f"{metrics['normal_mean_angular_deg']:.2f}°"
+    return postfix
+
+
+class _AdaptiveStep:
+    """The step toward each new estimate, from how much of the last change remains.
+
+    For a fixed-point map that contracts by ρ, a step ω leaves a fraction q = 1 − ω(1 − ρ)
+    of each change in the next; q = <change, previous> / |previous|² (on the object's
+    pixels) gives 1 − ρ, and the step that would have removed it all is ω / (1 − q),
+    within `STEP_BOUNDS`. Where the previous change is not above its noise, or the change
+    grew, the step is not raised above 1. Both products are corrected for the Monte-Carlo noise of the
+    estimates, which would otherwise pull q toward 0 (or below) once the changes are
+    mostly noise: the noise energy of each new estimate is measured (its two halves), and
+    that of the running estimate follows from the steps taken.
+    """
+
+    def __init__(self, mask: np.ndarray) -> None:
+        self.mask = mask
+        self.step = 1.0
+        self.new_noise = 0.0
+        self.running_noise = 0.0
+        self.previous_running = 0.0
+
+    def taken(self, step: float, new_noise: float) -> None:
+        """Record the step taken toward a new estimate of noise energy `new_noise`."""
+        self.previous_running, self.new_noise, self.step = self.running_noise, new_noise, step
+        self.running_noise = (1 - step) ** 2 * self.previous_running + step**2 * new_noise
+
+    def next(self, change: np.ndarray, previous_change: np.ndarray) -> float:
+        """The step for `change`, the difference between the newest estimate and the
+        running one, given the `previous_change`."""
+        now, before = change[:, self.mask], previous_change[:, self.mask]
+        # Noise shared by the two changes: the running estimate's before the last step
+        # enters both with the same sign, the last new estimate's with opposite signs.
+        shared = (1 - self.step) * self.previous_running - self.step * self.new_noise
+        noise = self.new_noise + self.previous_running
+        energy = float(np.vdot(before, before)) - noise
+        kept = (float(np.vdot(now, before)) - shared) / energy if energy > noise else 1.0
+        if kept >= 1:
+            # The change is mostly noise, or grew: no sign of a contraction to speed up.
+            return min(self.step, 1.0)
+        return float(np.clip(self.step / (1 - kept), *STEP_BOUNDS))
 
 
 def _corrected(images: np.ndarray, estimate: np.ndarray, original: np.ndarray, saturated: np.ndarray | None) -> np.ndarray:

@@ -37,6 +37,9 @@ ESTIMATORS = ("physical", "paper")
 #: Ways to form IRT-PS's corrected images: from the input (A₀ − E) or from the previous ones
 #: (the paper's literal Aₜ₊₁ = Aₜ − Eₜ).
 UPDATES = ("original", "previous")
+#: Placements besides a number: estimated from the images, or contract §6's fallback (the
+#: boundary's median on the floor).
+PLACEMENTS = ("auto", "boundary")
 #: Bounce counts the paper's estimator takes.
 PAPER_BOUNCES = (1, 2, 3)
 #: Largest seed: the Rust core's seeds are unsigned 64-bit integers, and IRT-PS's pass t
@@ -93,6 +96,7 @@ class _Spec:
     many: bool = False
     group: str | None = None
     metavar: str | None = None
+    words: tuple[str, ...] = ()
 
     def describe(self) -> str:
         """The values the option takes, e.g. ``"an integer from 1 to 64"``."""
@@ -114,6 +118,8 @@ class _Spec:
                 text = f"{noun} {'below' if self.high_open else 'at most'} {high}"
             else:
                 text = noun
+        if self.words:
+            text = f"{text}, {', '.join(self.words[:-1])} or {self.words[-1]}" if len(self.words) > 1 else f"{text} or {self.words[0]}"
         if self.many:
             text = f"one or more values, each {text}"
         return f"{text}, or none" if self.optional else text
@@ -138,7 +144,7 @@ class _Spec:
         number = self._converted(value)
         if number is None:
             raise OptionError(name, f"{_value_text(value)} is not {self.describe()}")
-        if self.kind in (bool, str):
+        if self.kind in (bool, str) or isinstance(number, str):
             return number
         below = self.low is not None and (number <= self.low if self.low_open else number < self.low)
         above = self.high is not None and (number >= self.high if self.high_open else number > self.high)
@@ -149,6 +155,8 @@ class _Spec:
 
     def _converted(self, value: Any) -> Any:
         """`value` as the option's kind, or None if it is not one (range aside)."""
+        if isinstance(value, str) and value in self.words:
+            return value
         if self.kind is bool:
             return bool(value) if isinstance(value, (bool, np.bool_)) else None
         if self.kind is str:
@@ -239,15 +247,31 @@ class ReconstructOptions(_Options):
     integration: str | None = _option(
         None, "normal integration (default ls for ps, footprint for irtps)", str, choices=INTEGRATION_METHODS, optional=True
     )
-    base_height: float | None = _option(None, "height of the object's boundary, world units (default: the floor's, 0 without a floor)", float, optional=True)
+    base_height: float | str = _option(
+        "auto",
+        "height of the object's boundary (the median of its mask's edge), world units; auto: estimated from the floor around the object, "
+        "or the floor's height where nothing in the images fixes it; boundary: the floor's height",
+        float,
+        words=PLACEMENTS,
+        metavar="H|auto|boundary",
+    )
     bounces: int = _option(3, "inter-reflection bounces estimated", int, low=1, high=MAX_BOUNCES, group="IRT-PS")
     iterations: int = _option(8, "largest number of corrections", int, low=0, high=MAX_ITERATIONS, group="IRT-PS")
     samples: int = _option(256, "camera paths per pixel per estimate", int, low=1, high=MAX_SAMPLES, group="IRT-PS")
     seed: int = _option(0, "random seed of the first estimate (pass t uses seed + t)", int, low=0, high=MAX_SEED, group="IRT-PS")
-    tolerance: float | None = _option(
-        None, "stop when the mean absolute height change falls below it, world units (default 0.002 pixel sizes)", float, low=0.0, optional=True, group="IRT-PS"
+    relaxation: float | str = _option(
+        "auto",
+        "step toward each new estimate: auto adapts it to how the estimates converge (over-relaxes a slow convergence, damps an oscillation); "
+        "a number fixes it (1 takes each new estimate whole)",
+        float,
+        low=0.0,
+        high=2.0,
+        low_open=True,
+        high_open=True,
+        words=("auto",),
+        group="IRT-PS",
     )
-    relaxation: float = _option(1.0, "fraction of each new estimate taken", float, low=0.0, high=1.0, low_open=True, group="IRT-PS")
+    early_stop: bool = _option(True, "stop after two passes in a row whose residual does not fall below the best beyond its Monte-Carlo noise", bool, group="IRT-PS")
     update: str = _option("original", "A0 - E (original) or the paper's A_t - E_t (previous)", str, choices=UPDATES, group="IRT-PS")
     stride: int = _option(1, "estimate at one pixel in SxS and interpolate (faster; 1: every pixel)", int, low=1, high=MAX_STRIDE, group="IRT-PS")
     estimator: str = _option("physical", "indirect estimate: physical, or the paper's heuristic", str, choices=ESTIMATORS, group="IRT-PS")
@@ -300,6 +324,9 @@ class SynthOptions(_Options):
     albedo: str = _option("uniform", "albedo pattern", str, choices=("uniform", "textured"))
     environment: str = _option("cornell", "surroundings", str, choices=("cornell", "none"))
     floor: bool | None = _option(None, "a floor (default: only with the box)", bool, optional=True)
+    base: float | None = _option(
+        None, "height of the object's boundary above the floor, pixel sizes, with vertical sides down to the floor (default: the shape's own)", float, low=0.0, high=float(MAX_SYNTH_SIZE), optional=True
+    )
 
 
 @dataclass(frozen=True)
@@ -360,13 +387,27 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type[_Options], *, defau
         target.add_argument(
             flag,
             dest=item.name,
-            type=spec.kind,
+            type=_word_or(spec) if spec.words else spec.kind,
             default=default,
             choices=spec.choices,
             nargs="+" if spec.many else None,
             metavar=spec.metavar,
             help=text,
         )
+
+
+def _word_or(spec: _Spec):
+    """The command-line converter of an option that takes a number or one of its words."""
+
+    def convert(text: str) -> Any:
+        if text in spec.words:
+            return text
+        try:
+            return spec.kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {dataclasses.replace(spec, optional=False).describe()}") from None
+
+    return convert
 
 
 def _help(spec: _Spec, default: Any) -> str:

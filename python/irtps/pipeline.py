@@ -1,4 +1,4 @@
-"""One pass of the reconstruction pipeline: photometric stereo, then normal integration and
+"""One pass of the reconstruction pipeline: photometric stereo, normal integration,
 placement; classic photometric stereo is one pass, IRT-PS one pass per corrected image set.
 """
 
@@ -11,35 +11,32 @@ import numpy as np
 from irtps.dataset import Dataset
 from irtps.integrate import integrate_normals, place_height
 from irtps.options import OptionError, ReconstructOptions
+from irtps.placement import PRECISION_PIXELS, Placement, estimate_placement, fallback_placement
 from irtps.ps import PsResult, photometric_stereo
 
 #: Heights are float32 (24 significant bits): a surface placed further than this many pixel
 #: sizes from the origin keeps no precision for its relief.
 MAX_BASE_HEIGHT_PIXELS = 1e6
-
-#: IRT-PS's default tolerance on the mean height change, in pixel sizes.
-DEFAULT_TOLERANCE_PIXELS = 0.002
+#: IRT-PS refines an estimated placement within this many times the mean change of the
+#: relief from the pass before.
+PLACEMENT_SEARCH_CHANGES = 3.0
 
 
 def resolve_options(dataset: Dataset, options: ReconstructOptions) -> ReconstructOptions:
     """`options` with the defaults that depend on the data set filled in.
 
     ``saturation``: the data set's (1 for PNG images); ``integration``: the method's
-    default; ``base_height``: the floor's height (0 without a floor); ``tolerance``:
-    0.002 pixel sizes.
+    default. A numeric ``base_height`` is checked against the data set's scale.
 
     Raises
     ------
     OptionError
         If ``base_height`` lies so far from the scene that float32 heights lose the relief.
     """
-    scene = dataset.scene
-    pixel_size = scene.camera.pixel_size
+    pixel_size = dataset.scene.camera.pixel_size
     base_height = options.base_height
-    if base_height is None:
-        base_height = scene.floor.height if scene.floor is not None else 0.0
     limit = MAX_BASE_HEIGHT_PIXELS * pixel_size
-    if abs(base_height) > limit:
+    if not isinstance(base_height, str) and abs(base_height) > limit:
         raise OptionError(
             "base_height",
             f"{base_height:g} is out of range for this data set: expected at most {MAX_BASE_HEIGHT_PIXELS:g} pixel sizes "
@@ -49,8 +46,6 @@ def resolve_options(dataset: Dataset, options: ReconstructOptions) -> Reconstruc
         options,
         saturation=dataset.saturation if options.saturation is None else options.saturation,
         integration=options.integration_method,
-        base_height=base_height,
-        tolerance=DEFAULT_TOLERANCE_PIXELS * pixel_size if options.tolerance is None else options.tolerance,
     )
 
 
@@ -69,10 +64,41 @@ def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: Recons
     )
 
 
-def surface_height(dataset: Dataset, normals: np.ndarray, options: ReconstructOptions) -> np.ndarray:
-    """The height map of `normals`: integrated (``options.integration``), placed at
-    ``options.base_height`` (contract §6), float32, 0 outside the mask."""
+def surface_relief(dataset: Dataset, normals: np.ndarray, options: ReconstructOptions) -> np.ndarray:
+    """The height map of `normals`, integrated (``options.integration``), with the median
+    of its mask's boundary at 0: float32, 0 outside the mask."""
     mask = dataset.mask
     height = integrate_normals(normals, mask, pixel_size=dataset.scene.camera.pixel_size, method=options.integration_method)
-    height = place_height(height, mask, base_height=0.0 if options.base_height is None else options.base_height)
-    return np.where(mask, height, 0).astype(np.float32)
+    return np.where(mask, place_height(height, mask, base_height=0.0), 0).astype(np.float32)
+
+
+def place_surface(
+    dataset: Dataset, relief: np.ndarray, albedo: np.ndarray, options: ReconstructOptions, *, seed: int = 0, previous: Placement | None = None, shape_change: float = 0.0
+) -> Placement:
+    """Where the surface `relief` (boundary median at 0) stands (contract §6).
+
+    ``options.base_height``: a number is taken as given; ``"boundary"`` is the fallback
+    (the floor's height); ``"auto"`` estimates it from the floor in the data set's images
+    (`irtps.placement.estimate_placement`), with the fallback where nothing fixes it.
+    Given the `previous` estimate, for a relief that changed by `shape_change` on average
+    (world units), the estimate is refined within three times that change of it; the
+    fallback and given placements are kept.
+    """
+    scene = dataset.scene
+    if previous is not None:
+        radius = PLACEMENT_SEARCH_CHANGES * shape_change
+        if previous.source != "images" or radius < PRECISION_PIXELS * scene.camera.pixel_size:
+            return previous
+        return estimate_placement(
+            scene, relief, albedo, dataset.mask, dataset.images, bounces=options.bounces, saturation=options.saturation, seed=seed, near=previous, radius=radius
+        )
+    if options.base_height == "boundary":
+        return fallback_placement(scene)
+    if options.base_height != "auto":
+        return Placement(base_height=float(options.base_height), source="given")
+    return estimate_placement(scene, relief, albedo, dataset.mask, dataset.images, bounces=options.bounces, saturation=options.saturation, seed=seed)
+
+
+def placed(relief: np.ndarray, mask: np.ndarray, placement: Placement) -> np.ndarray:
+    """`relief` raised to `placement` inside the mask: float32, 0 outside."""
+    return np.where(mask, relief + np.float32(placement.base_height), 0).astype(np.float32)

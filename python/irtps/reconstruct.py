@@ -19,8 +19,10 @@ from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
 from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
-from irtps.pipeline import fit_photometric_stereo, resolve_options, surface_height
+from irtps.pipeline import fit_photometric_stereo, place_surface, placed, resolve_options, surface_relief
+from irtps.placement import Placement
 from irtps.ps import FLAGS, check_lights
+from irtps.surface import surface_albedo
 
 #: What a reconstruction folder holds (`save_reconstruction`); ``indirect`` for IRT-PS only.
 RECONSTRUCTION_FILES = ("normal.exr", "albedo.exr", "height.exr", "mask.png", "mesh.ply", "mesh.obj", "run.json", "indirect")
@@ -51,8 +53,13 @@ class Reconstruction:
     indirect : numpy.ndarray or None
         IRT-PS: float32 (K, H, W, 3), the last estimate of the inter-reflected light.
     history : list of Iteration
-        IRT-PS: one entry per pass (height change, timings, errors when ground truth is
-        present); empty for classic photometric stereo.
+        IRT-PS: one entry per pass (residual, height change, step, timings, errors when
+        ground truth is present); empty for classic photometric stereo.
+    placement : Placement or None
+        Where the object stands and how that was decided (contract §6).
+    chosen : int or None
+        IRT-PS: the pass returned, the one with the lowest residual (0: classic
+        photometric stereo's).
     """
 
     normals: np.ndarray
@@ -65,6 +72,8 @@ class Reconstruction:
     parameters: dict = field(default_factory=dict)
     indirect: np.ndarray | None = None
     history: list[Iteration] = field(default_factory=list)
+    placement: Placement | None = None
+    chosen: int | None = None
 
 
 def reconstruct(
@@ -93,7 +102,8 @@ def reconstruct(
     **settings
         Fields of `ReconstructOptions` that replace those of `options`, e.g.
         ``bounces=2``. ``saturation`` defaults to ``dataset.saturation`` (1.0 for PNG
-        images, else none); ``base_height`` to the floor's height (0 without a floor).
+        images, else none); ``base_height`` to ``"auto"``: estimated from the floor around
+        the object (`irtps.placement`), the floor's height where nothing fixes it.
 
     Returns
     -------
@@ -120,7 +130,7 @@ def reconstruct(
     >>> data, _ = synthesize("cap", size=24, lights=6, bounces=0, environment="none")
     >>> result = reconstruct(data)
     >>> result.normals.shape, sorted(result.timings)
-    ((24, 24, 3), ['integration', 'photometric_stereo'])
+    ((24, 24, 3), ['integration', 'photometric_stereo', 'placement'])
     >>> reconstruct(data, samples=0)
     Traceback (most recent call last):
     ...
@@ -147,22 +157,28 @@ def reconstruct(
             parameters=parameters,
             indirect=loop.indirect,
             history=loop.history,
+            placement=loop.placement,
+            chosen=loop.chosen,
         )
     start = time.perf_counter()
     fit = fit_photometric_stereo(dataset, dataset.images, options)
     timings["photometric_stereo"] = time.perf_counter() - start
     start = time.perf_counter()
-    height = surface_height(dataset, fit.normals, options)
+    relief = surface_relief(dataset, fit.normals, options)
     timings["integration"] = time.perf_counter() - start
+    start = time.perf_counter()
+    placement = place_surface(dataset, relief, surface_albedo(fit.albedo, relief, dataset.mask, dataset.scene.camera.pixel_size), options, seed=options.seed)
+    timings["placement"] = time.perf_counter() - start
     return Reconstruction(
         normals=fit.normals,
         albedo=fit.albedo,
-        height=height,
+        height=placed(relief, dataset.mask, placement),
         mask=dataset.mask,
         flags=fit.flags,
         pixel_size=dataset.scene.camera.pixel_size,
         timings=timings,
         parameters=parameters,
+        placement=placement,
     )
 
 
@@ -202,7 +218,7 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, **options)
     ...     save_dataset(data, folder + "/cap")
     ...     dataset, result = load_and_reconstruct(folder + "/cap")
     >>> list(result.timings)
-    ['load', 'photometric_stereo', 'integration']
+    ['load', 'photometric_stereo', 'integration', 'placement']
     """
     if method is not None:
         options["method"] = method
@@ -248,8 +264,9 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
     ``mask.png``, ``mesh.ply`` (binary; the height field with per-vertex albedo colour and
     normals), ``mesh.obj`` (the same vertices, triangles and normals as Wavefront OBJ text,
     see `irtps.mesh`), ``run.json`` (parameters, pixel size, timings, versions, source,
-    IRT-PS history) and, for IRT-PS, ``indirect/NNN.exr`` (the last estimate of each
-    image's inter-reflected light).
+    placement, IRT-PS history with each pass's residual, and the pass chosen) and, for
+    IRT-PS, ``indirect/NNN.exr`` (the estimate of each image's inter-reflected light that
+    the chosen pass removed; none when that is pass 0).
 
     Parameters
     ----------
@@ -278,7 +295,9 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             "pixel_size": result.pixel_size,
             "timings_s": result.timings,
             "flags": {name: int((result.flags[result.mask] == value).sum()) for value, name in FLAGS.items()},
+            "placement": None if result.placement is None else result.placement.to_dict(),
             "history": [asdict(step) for step in result.history],
+            "chosen_pass": result.chosen,
         }
         if result.indirect is not None:
             (folder / "indirect").mkdir()
@@ -320,7 +339,7 @@ _RUN_FIELDS = {
     "history": (list,),
 }
 #: Fields that folders written by older versions of irtps lack.
-_OPTIONAL_RUN_FIELDS = {"pixel_size": (int, float)}
+_OPTIONAL_RUN_FIELDS = {"pixel_size": (int, float), "placement": (dict, type(None)), "chosen_pass": (int, type(None))}
 _HISTORY_FIELDS = {"index": (int,), "height_change": (int, float, type(None)), "timings": (dict,), "metrics": (dict, type(None))}
 _JSON_TYPE_NAMES = {dict: "an object", list: "a list", str: "a string", int: "a number", float: "a number", type(None): "null"}
 
@@ -336,8 +355,8 @@ def load_run_record(path: str | Path) -> dict:
     Returns
     -------
     dict
-        The record as written by `save_reconstruction`. ``pixel_size`` is absent from
-        folders written before irtps recorded it.
+        The record as written by `save_reconstruction`. ``pixel_size``, ``placement`` and
+        ``chosen_pass`` are absent from folders written before irtps recorded them.
 
     Raises
     ------

@@ -249,19 +249,30 @@ def render_indirect(
         raise IrtpsError(f"bounces: {bounces} must be at least 1")
     if stride < 1:
         raise IrtpsError(f"stride: {stride} must be at least 1")
-    camera = scene.camera
-    check_memory(
-        len(scene.lights) * camera.height * camera.width * _PIXEL_BYTES,
-        f"lights: {len(scene.lights)} lights of {camera.width}x{camera.height} images (inter-reflected light, float32 RGB)",
-    )
+    check_frame_memory(scene)
     renderer = make_renderer(scene, height, albedo, mask)
     if stride == 1:
         return _render_planes(renderer, scene, bounces, samples, 0, seed, False, progress)[0]
-    return _render_sparse(renderer, np.asarray(mask, dtype=bool), bounces, samples, seed, stride)
+    return render_sparse(renderer, np.asarray(mask, dtype=bool), bounces, samples, seed, stride)
 
 
-def _render_sparse(renderer, mask: np.ndarray, bounces: int, samples: int, seed: int, stride: int) -> np.ndarray:
-    """Indirect light at a sparse subset of the masked pixels, interpolated to the rest."""
+def check_frame_memory(scene: Scene, planes: int = 1) -> None:
+    """Refuse to allocate `planes` float32 RGB images per light of the scene's camera when
+    they would not fit in memory (`irtps.resources.check_memory`)."""
+    camera = scene.camera
+    check_memory(
+        planes * len(scene.lights) * camera.height * camera.width * _PIXEL_BYTES,
+        f"lights: {len(scene.lights)} lights of {camera.width}x{camera.height} images (inter-reflected light, float32 RGB)",
+    )
+
+
+def render_sparse(renderer: _core.Renderer, mask: np.ndarray, bounces: int, samples: int, seed: int, stride: int) -> np.ndarray:
+    """Inter-reflected light (bounces 1..B summed) at a sparse subset of the pixels of
+    `mask`, interpolated to the rest of them: float32 (K, H, W, 3), 0 outside `mask`.
+
+    The subset is a randomly shifted grid of one pixel in `stride`×`stride` plus the edge
+    of `mask`; the rest is filled by linear interpolation over the subset's Delaunay
+    triangulation (nearest value outside its hull)."""
     from scipy import ndimage
     from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
 

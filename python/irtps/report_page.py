@@ -12,6 +12,7 @@ from html import escape
 from typing import TYPE_CHECKING
 
 from irtps.evaluate import format_metrics
+from irtps.placement import format_placement
 
 if TYPE_CHECKING:
     from irtps.report import Report, ReportFigure
@@ -89,7 +90,7 @@ def report_html(report: Report) -> str:
         parts.append(f"<pre>{escape(format_metrics(report.metrics))}</pre>")
     parts.append("</section>")
     if record["history"]:
-        parts += ['<section id="iterations">', "<h2>Iterations</h2>", _history_table(record["history"]), "</section>"]
+        parts += ['<section id="iterations">', "<h2>Iterations</h2>", _history_table(record["history"], record.get("chosen_pass")), "</section>"]
     for anchor, title, values in (
         ("parameters", "Parameters", record["parameters"]),
         ("timings", "Timings (seconds)", {stage: f"{seconds:.3f}" for stage, seconds in record["timings_s"].items()}),
@@ -106,14 +107,17 @@ def _summary(report: Report) -> str:
     parameters = record["parameters"]
     if parameters.get("method") == "irtps":
         corrections = max(len(record["history"]) - 1, 0)
-        method = f"IRT-PS ({parameters.get('bounces')} bounces estimated, {corrections} corrections)"
+        chosen = record.get("chosen_pass")
+        result = "" if chosen is None else f"; the result is pass {chosen}" + (" (classic photometric stereo)" if chosen == 0 else "")
+        method = f"IRT-PS ({parameters.get('bounces')} bounces estimated, {corrections} corrections{result})"
     else:
         method = "Classic photometric stereo"
     source = record["source"] or "an unrecorded data set"
     rows, cols = report.size
     pixel_size = record.get("pixel_size")
     scale = "" if pixel_size is None else f", pixel size {pixel_size:g} (world units)"
-    return f"{method} of {source}: {cols}×{rows} pixels, {report.object_pixels} on the object{scale}. Folder: {report.run_dir}."
+    placement = "" if record.get("placement") is None else f" Placement: {format_placement(record['placement'])}."
+    return f"{method} of {source}: {cols}×{rows} pixels, {report.object_pixels} on the object{scale}.{placement} Folder: {report.run_dir}."
 
 
 def _figure(figure: ReportFigure) -> str:
@@ -127,13 +131,15 @@ def _figure(figure: ReportFigure) -> str:
     )
 
 
-def _history_table(history: list[dict]) -> str:
-    rows = ["<tr><th>pass</th><th>mean angular error (°)</th><th>mean |height change|</th><th>seconds</th></tr>"]
+def _history_table(history: list[dict], chosen: int | None) -> str:
+    rows = ["<tr><th>pass</th><th>residual</th><th>mean angular error (°)</th><th>mean |height change|</th><th>seconds</th></tr>"]
     for step in history:
         error = (step["metrics"] or {}).get("normal_mean_angular_deg")
+        residual = (step.get("residual") or {}).get("object")
         change = step["height_change"]
         seconds = sum(step["timings"].values())
-        cells = (str(step["index"]), "n/a" if error is None else f"{error:.2f}", "n/a" if change is None else f"{change:.4g}", f"{seconds:.2f}")
+        index = f"{step['index']} (result)" if step["index"] == chosen else str(step["index"])
+        cells = (index, "n/a" if residual is None else f"{residual:.4f}", "n/a" if error is None else f"{error:.2f}", "n/a" if change is None else f"{change:.4g}", f"{seconds:.2f}")
         rows.append("<tr>" + "".join(f"<td>{cell}</td>" for cell in cells) + "</tr>")
     return "<table>" + "".join(rows) + "</table>"
 

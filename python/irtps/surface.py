@@ -98,6 +98,39 @@ def footprint_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 
     return normals / np.maximum(weight, 1.0)[..., None]
 
 
+def surface_albedo(albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0) -> np.ndarray:
+    """The albedo of the triangulated surface that explains photometric stereo's fit.
+
+    Photometric stereo measures ``ρ·n̄``, with ``n̄`` the mean unit normal over the pixel's
+    footprint (`irtps.surface.footprint_normals`); where the surface bends inside a footprint,
+    ``|n̄| < 1`` and the fitted albedo reads low (by 30 % on the crease of a right-angled
+    V-groove). Rendering the surface with that albedo would darken every bounce off a crease.
+    This divides by ``|n̄|`` of the surface `height` (not below 0.5) and clips to [0, 1].
+
+    Parameters
+    ----------
+    albedo_ps : numpy.ndarray
+        (H, W, 3) albedo fitted by photometric stereo.
+    height, mask, pixel_size
+        The surface, as for `irtps.surface.footprint_normals`.
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 (H, W, 3).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> height = np.tile(np.abs(np.arange(5.0) - 2), (3, 1))
+    >>> fitted = np.full((3, 5, 3), 0.5)
+    >>> np.round(surface_albedo(fitted, height, np.ones((3, 5), bool))[1, 1:4, 0].astype(float), 4).tolist()
+    [0.5, 0.7071, 0.5]
+    """
+    length = np.linalg.norm(footprint_normals(height, mask, pixel_size), axis=-1)
+    return np.clip(albedo_ps / np.maximum(length, 0.5)[..., None], 0.0, 1.0).astype(np.float32)
+
+
 def _unit_normals(dz_dx: np.ndarray, dz_drow: np.ndarray) -> np.ndarray:
     """Unit normals from the slope along x and along the row index (y grows against it)."""
     normals = np.stack([-dz_dx, dz_drow, np.ones_like(dz_dx)], axis=-1)

@@ -9,7 +9,8 @@ from scipy import ndimage
 
 from irtps.dataset import Dataset, GroundTruth
 from irtps.errors import IrtpsError
-from irtps.options import RenderOptions, SynthOptions
+from irtps.integrate import place_height
+from irtps.options import OptionError, RenderOptions, SynthOptions
 from irtps.render import Rendering, check_render_memory, render
 from irtps.scene import Camera, CornellBox, Floor, Light, Scene
 from irtps.surface import height_to_normals
@@ -65,12 +66,26 @@ def _relief(size: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray
     return np.where(mask, height, 0.0), mask
 
 
+def _pedestal(size: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A round pedestal with vertical sides, a flat top well above the floor, a smooth bump
+    in its middle and a steep-walled ring trench around it (convex, concave, and a mask
+    boundary far from the floor)."""
+    r = _radius(size)
+    mask = r < 0.43 * size
+    top, bump_radius, bump_height = 0.18 * size, 0.2 * size, 0.16 * size
+    bump = np.where(r < bump_radius, bump_height * np.cos(0.5 * np.pi * r / bump_radius) ** 2, 0.0)
+    trench_radius, trench_width, trench_depth = 0.3 * size, 0.03 * size, 0.065 * size
+    trench = trench_depth * np.clip(1 - np.abs(r - trench_radius) / trench_width, 0, 1) ** 0.5
+    return np.where(mask, top + bump - trench, 0.0), mask
+
+
 #: Shape generators by name: each returns (height, mask) in pixel units.
 SHAPES: dict[str, Callable[[int, np.random.Generator], tuple[np.ndarray, np.ndarray]]] = {
     "cap": _cap,
     "cavity": _cavity,
     "grooves": _grooves,
     "relief": _relief,
+    "pedestal": _pedestal,
 }
 
 
@@ -134,6 +149,7 @@ def synthesize(
     albedo: str = "uniform",
     environment: str = "cornell",
     floor: bool | None = None,
+    base: float | None = None,
     bounces: int = 4,
     samples: int = 256,
     seed: int = 0,
@@ -144,7 +160,8 @@ def synthesize(
     Parameters
     ----------
     shape : str
-        One of `SHAPES`: ``"cap"``, ``"cavity"``, ``"grooves"``, ``"relief"``.
+        One of `SHAPES`: ``"cap"``, ``"cavity"``, ``"grooves"``, ``"relief"``,
+        ``"pedestal"``.
     size : int
         Image width and height in pixels (pixel size 1).
     lights : int
@@ -155,6 +172,10 @@ def synthesize(
         ``"cornell"`` (a box with red and green side walls) or ``"none"``.
     floor : bool, optional
         Whether there is a floor; by default only with the Cornell box.
+    base : float, optional
+        Height of the object's boundary (the median over its mask's edge) above the floor,
+        in pixel sizes; its sides run vertically down to the floor (contract §2). By
+        default, the shape's own (about 1 for the cap, 0.1–0.3 of `size` for the others).
     bounces, samples, seed, progress
         As for `irtps.render`.
 
@@ -173,12 +194,16 @@ def synthesize(
     """
     if shape not in SHAPES:
         raise IrtpsError(f"shape: unknown {shape!r} (choose from {', '.join(SHAPES)})")
-    SynthOptions(size=size, lights=lights, albedo=albedo, environment=environment, floor=floor)
+    SynthOptions(size=size, lights=lights, albedo=albedo, environment=environment, floor=floor, base=base)
     RenderOptions(bounces=bounces, samples=samples, seed=seed)
     check_render_memory(lights, (size, size), bounces)
     rng = np.random.default_rng(seed)
     height, mask = SHAPES[shape](size, rng)
-    height = height.astype(np.float32)
+    if base is not None:
+        height = place_height(height, mask, base_height=base, per_component=False)
+        if height[mask].min() < 0:
+            raise OptionError("base", f"{base:g} puts part of the {shape} below the floor (its lowest point is {-height[mask].min() + base:.3g} below its boundary)")
+    height = np.where(mask, height, 0.0).astype(np.float32)
     has_floor = environment == "cornell" if floor is None else floor
     box = None
     if environment == "cornell":

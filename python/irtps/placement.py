@@ -1,0 +1,216 @@
+"""Where the object stands: its base height, estimated from the floor around it (contract §6).
+
+Normals fix a height field only up to a constant, but the floor does not: the object's cast
+shadows on it, and the light the object sends to it, move with the object's height. The
+images are whole frames, so the floor around the object is seen under every light.
+`estimate_placement` renders that floor (direct light with the object's cast shadows, plus
+inter-reflected light) for the reconstructed shape raised by an offset, and takes the
+offset whose rendering matches the observed floor best: a coarse scan over every height the
+object can stand at, then Brent's method around the best. Where nothing in the data fixes
+the offset (no floor, no visible floor, or a floor that does not change with the offset), it
+falls back to contract §6: the median height of the mask boundary on the floor.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from irtps.render import make_renderer
+from irtps.scene import Scene
+
+__all__ = ["Placement", "estimate_placement", "fallback_placement", "format_placement"]
+
+#: Offsets tried by the coarse scan (evenly spaced over the range, ends included).
+SCAN_POINTS = 9
+#: Floor pixels rendered per offset at most (on a regular grid over the visible floor).
+MAX_FLOOR_PIXELS = 16384
+#: Camera paths per floor pixel for the inter-reflected light, and footprint samples for
+#: the direct light; the same random numbers at every offset, so the scan is smooth.
+PATH_SAMPLES = 16
+DIRECT_SAMPLES = 4
+#: Precision of the estimate, in pixel sizes.
+PRECISION_PIXELS = 0.05
+#: The floor must change with the offset by this many times its Monte-Carlo noise.
+SIGNIFICANCE = 3.0
+
+
+@dataclass(frozen=True)
+class Placement:
+    """The height at which the object's mask boundary stands (its median, contract §6).
+
+    Attributes
+    ----------
+    base_height : float
+        World units, the height the median of the mask boundary is placed at.
+    source : str
+        ``"images"`` (estimated from the floor), ``"boundary"`` (contract §6's fallback:
+        the floor's height) or ``"given"`` (by the user).
+    reason : str or None
+        Why the fallback was used, when it was used without being asked for.
+    floor_residual : float or None
+        Estimated: relative mean absolute difference between the rendered and the observed
+        floor at `base_height`.
+    floor_pixels : int
+        Floor pixels compared (0 when not estimated).
+    """
+
+    base_height: float
+    source: str
+    reason: str | None = None
+    floor_residual: float | None = None
+    floor_pixels: int = 0
+
+    def to_dict(self) -> dict:
+        """JSON-ready fields."""
+        return asdict(self)
+
+
+def format_placement(placement: Placement | dict) -> str:
+    """One line saying where the object stands and why.
+
+    Examples
+    --------
+    >>> format_placement(Placement(base_height=20.04, source="images", floor_residual=0.061, floor_pixels=6224))
+    'boundary at height 20.04, estimated from the floor around the object (6224 floor pixels, residual 0.0610)'
+    >>> format_placement(Placement(base_height=0.0, source="boundary", reason="no floor in scene.json"))
+    'boundary at height 0 (the floor): no floor in scene.json'
+    """
+    fields = placement.to_dict() if isinstance(placement, Placement) else placement
+    height = f"boundary at height {fields['base_height']:.4g}"
+    if fields["source"] == "images":
+        return f"{height}, estimated from the floor around the object ({fields['floor_pixels']} floor pixels, residual {fields['floor_residual']:.4f})"
+    if fields["source"] == "given":
+        return f"{height}, as given"
+    return f"{height} (the floor)" + (f": {fields['reason']}" if fields.get("reason") else "")
+
+
+def fallback_placement(scene: Scene, reason: str | None = None) -> Placement:
+    """Contract §6's fallback: the boundary median on the floor (0 without a floor)."""
+    return Placement(base_height=_floor_height(scene), source="boundary", reason=reason)
+
+
+def estimate_placement(
+    scene: Scene,
+    height: np.ndarray,
+    albedo: np.ndarray,
+    mask: np.ndarray,
+    images: np.ndarray,
+    *,
+    bounces: int = 3,
+    saturation: float | None = None,
+    seed: int = 0,
+    near: Placement | None = None,
+    radius: float = 0.0,
+) -> Placement:
+    """Estimate how high the object stands from the floor around it in the images.
+
+    Parameters
+    ----------
+    scene : Scene
+        Camera, lights, floor and environment.
+    height : numpy.ndarray
+        (H, W) the reconstructed shape, placed with its boundary median at 0 (any constant
+        offset; only the relief matters).
+    albedo : numpy.ndarray
+        (H, W, 3) the reconstructed albedo.
+    mask : numpy.ndarray
+        (H, W) bool, the object's pixels.
+    images : numpy.ndarray
+        (K, H, W, 3) the observed images (the floor is read outside `mask`).
+    bounces : int
+        Inter-reflection bounces rendered onto the floor.
+    saturation : float, optional
+        Observations at or above it are left out of the comparison.
+    seed : int
+        Seed of the random numbers (the same at every offset).
+    near : Placement, optional
+        An earlier estimate (``source="images"``) for a shape that has since changed: the
+        search is then only within `radius` of it (for IRT-PS's later passes). By default
+        every height from the floor up to the image's larger side is scanned.
+    radius : float
+        World units, with `near`.
+
+    Returns
+    -------
+    Placement
+        ``source="images"``, or the fallback with its reason.
+
+    Examples
+    --------
+    A 6-high block on the floor, lit from four sides at 45°: its shadows fix its height.
+
+    >>> import numpy as np
+    >>> from irtps import Camera, Floor, Light, Scene, render
+    >>> c, s = np.cos(np.radians(45)), np.sin(np.radians(45))
+    >>> lights = [Light(direction=(s * np.cos(a), s * np.sin(a), c), irradiance=(np.pi,) * 3)
+    ...           for a in np.radians([0, 90, 180, 270])]
+    >>> scene = Scene(Camera(40, 40, 1.0), lights, floor=Floor(0.0, (0.8, 0.8, 0.8)))
+    >>> mask = np.zeros((40, 40), bool)
+    >>> mask[14:26, 14:26] = True
+    >>> albedo = np.where(mask[..., None], 0.5, 0.0) * np.ones(3)
+    >>> images = render(scene, np.where(mask, 6.0, 0.0), albedo, mask, bounces=1, samples=16).images
+    >>> placement = estimate_placement(scene, np.zeros((40, 40)), albedo, mask, images, bounces=1)
+    >>> placement.source, round(placement.base_height)
+    ('images', 6)
+    """
+    if scene.floor is None:
+        return fallback_placement(scene, "no floor in scene.json: nothing in the images fixes the object's height")
+    floor_pixels = _floor_pixels(mask)
+    if floor_pixels.size == 0:
+        return fallback_placement(scene, "the mask covers the whole image: no floor is visible")
+    observed = np.asarray(images, dtype=np.float32).reshape(len(images), -1, 3)[:, floor_pixels]
+    usable = np.ones(observed.shape, dtype=bool)
+    if saturation is not None:
+        usable &= ~(observed >= saturation).any(axis=-1, keepdims=True)
+    scale = float(np.abs(observed[usable]).sum())
+    if scale <= 0:
+        return fallback_placement(scene, "the floor is black in every image: nothing fixes the object's height")
+    relief = np.where(mask, np.asarray(height, dtype=np.float64), 0.0)
+
+    def floor_residual(offset: float, path_seed: int = seed) -> float:
+        renderer = make_renderer(scene, np.where(mask, relief + offset, 0.0), albedo, mask)
+        planes = renderer.render_pixels(floor_pixels.tolist(), bounces, PATH_SAMPLES, DIRECT_SAMPLES, path_seed, False)
+        return float(np.abs(planes.sum(axis=0) - observed)[usable].sum()) / scale
+
+    low = _floor_height(scene)
+    high = low + _height_range(scene)
+    precision = PRECISION_PIXELS * scene.camera.pixel_size
+    if near is None:
+        scan = np.linspace(low, high, SCAN_POINTS)
+        values = [floor_residual(offset) for offset in scan]
+        best = int(np.argmin(values))
+        step = scan[1] - scan[0]
+        bracket = (max(low, scan[best] - step), min(high, scan[best] + step))
+    else:
+        bracket = (max(low, near.base_height - radius), min(high, near.base_height + radius))
+        values = [floor_residual(end) for end in bracket]
+        scan, best = bracket, int(np.argmin(values))
+    result = minimize_scalar(floor_residual, bounds=bracket, method="bounded", options={"xatol": precision})
+    offset, residual = (float(result.x), float(result.fun)) if result.fun <= values[best] else (float(scan[best]), values[best])
+    if near is not None:
+        return Placement(base_height=offset, source="images", floor_residual=residual, floor_pixels=int(floor_pixels.size))
+    noise = abs(floor_residual(offset, seed + 1) - residual)
+    if max(values) - residual <= SIGNIFICANCE * noise:
+        return fallback_placement(scene, "the floor looks the same whatever the object's height (no shadow or light of the object falls on it)")
+    return Placement(base_height=offset, source="images", floor_residual=residual, floor_pixels=int(floor_pixels.size))
+
+
+def _floor_height(scene: Scene) -> float:
+    return scene.floor.height if scene.floor is not None else 0.0
+
+
+def _height_range(scene: Scene) -> float:
+    """How far above the floor the boundary may stand: the image's larger side."""
+    camera = scene.camera
+    return max(camera.width, camera.height) * camera.pixel_size
+
+
+def _floor_pixels(mask: np.ndarray) -> np.ndarray:
+    """Row-major indices of the pixels outside the mask, on a regular grid of at most
+    `MAX_FLOOR_PIXELS`."""
+    pixels = np.flatnonzero(~np.asarray(mask, dtype=bool))
+    step = max(1, -(-pixels.size // MAX_FLOOR_PIXELS))
+    return pixels[::step]
