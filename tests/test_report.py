@@ -85,6 +85,11 @@ def test_irtps_run_gets_every_figure_and_a_self_contained_page(run_copy):
     assert "normal angle (deg)" in text and "n/a" not in text.split("normal angle (deg)")[1].split("\n")[0]
     assert "<th>estimator</th><td>physical</td>" in text
     assert text.count("<tr><td>") == len(run["history"])  # one row per pass
+    # The placement and how it was decided, each pass's residual, and the pass chosen.
+    assert f"Placement: boundary at height {run['placement']['base_height']:.4g}, estimated from the floor around the object" in text
+    chosen = run["chosen_pass"]
+    assert f"the result is pass {chosen}" in text
+    assert f"<tr><td>{chosen} (result)</td><td>{run['history'][chosen]['residual']['object']:.4f}</td>" in text
 
 
 def test_normal_figure_shows_the_encoded_normals(irtps_run):

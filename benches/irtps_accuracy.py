@@ -1,0 +1,110 @@
+"""IRT-PS against classic photometric stereo on every shared data set, with defaults.
+
+For each data set under ``../shared/data`` (Mitsuba renders and DiLiGenT objects) this runs
+classic photometric stereo and IRT-PS with their defaults, as ``irtps reconstruct`` does, and
+prints the mean angular error of each, the share of the gap to the floor (classic PS on the
+direct-only images, where the data set has them) that IRT-PS closes, the placement and the
+passes. ``--passes 16`` also runs 16 passes without the early stop, and the result after at
+most 5, to check how fast the loop converges.
+
+Usage::
+
+    python benches/irtps_accuracy.py                     # all shared data sets
+    python benches/irtps_accuracy.py --only pedestal_cornell --passes 16
+    python benches/irtps_accuracy.py --json accuracy.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import irtps
+from irtps.errors import IrtpsWarning
+from irtps.options import ReconstructOptions
+from irtps.pipeline import fit_photometric_stereo, resolve_options
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+def angular_error(dataset, normals) -> float:
+    return irtps.evaluate(mask=dataset.mask, normals=normals, gt=dataset.gt).normal_mean_angular_deg
+
+
+def floor_error(dataset) -> float | None:
+    """Classic (robust) PS on the direct-only images: what removing every inter-reflection
+    would reach."""
+    if dataset.gt is None or dataset.gt.direct is None:
+        return None
+    options = resolve_options(dataset, ReconstructOptions())
+    return angular_error(dataset, fit_photometric_stereo(dataset, dataset.gt.direct, options).normals)
+
+
+def measure(path: Path, passes: int | None) -> dict:
+    dataset = irtps.load_dataset(path)
+    classic = angular_error(dataset, irtps.reconstruct(dataset).normals)
+    start = time.perf_counter()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", IrtpsWarning)
+        result = irtps.reconstruct(dataset, "irtps")
+    seconds = time.perf_counter() - start
+    irtps_error = angular_error(dataset, result.normals)
+    floor = floor_error(dataset)
+    row = {
+        "data": path.name,
+        "classic_deg": classic,
+        "irtps_deg": irtps_error,
+        "floor_deg": floor,
+        "gap_closed": None if floor is None else (classic - irtps_error) / (classic - floor),
+        "worse_than_classic_deg": irtps_error - classic,
+        "passes": len(result.history),
+        "chosen_pass": result.chosen,
+        "placement": result.placement.to_dict(),
+        "residuals": [step.residual["object"] for step in result.history],
+        "seconds": seconds,
+        "warnings": [str(w.message) for w in caught],
+    }
+    if passes is not None:
+        long = irtps.reconstruct(dataset, "irtps", iterations=passes, early_stop=False)
+        short = irtps.reconstruct(dataset, "irtps", iterations=5)
+        row[f"error_{passes}_passes_deg"] = angular_error(dataset, long.normals)
+        row["error_at_most_5_passes_deg"] = angular_error(dataset, short.normals)
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--shared", type=Path, default=SHARED, help="the shared data folder (default: ../shared/data)")
+    parser.add_argument("--only", nargs="+", help="data set names to run (default: all)")
+    parser.add_argument("--passes", type=int, help="also run this many passes without the early stop, and at most 5")
+    parser.add_argument("--json", type=Path, help="write the rows here")
+    args = parser.parse_args(argv)
+    paths = sorted(p for group in ("mitsuba", "diligent") for p in (args.shared / group).glob("*") if p.is_dir())
+    if args.only:
+        paths = [p for p in paths if p.name in args.only]
+    if not paths:
+        print(f"no data sets under {args.shared}", file=sys.stderr)
+        return 1
+    rows = []
+    print("| data | classic PS | IRT-PS | floor | gap closed | passes (chosen) | placement | seconds |")
+    print("|---|---|---|---|---|---|---|---|")
+    for path in paths:
+        row = measure(path, args.passes)
+        rows.append(row)
+        floor = "n/a" if row["floor_deg"] is None else f"{row['floor_deg']:.2f}°"
+        closed = "n/a" if row["gap_closed"] is None else f"{100 * row['gap_closed']:.1f} %"
+        placement = f"{row['placement']['base_height']:.2f} ({row['placement']['source']})"
+        print(f"| {row['data']} | {row['classic_deg']:.3f}° | {row['irtps_deg']:.3f}° | {floor} | {closed} | {row['passes']} ({row['chosen_pass']}) | {placement} | {row['seconds']:.1f} |", flush=True)
+        if args.passes is not None:
+            print(f"|   | {args.passes} passes: {row[f'error_{args.passes}_passes_deg']:.3f}° | at most 5: {row['error_at_most_5_passes_deg']:.3f}° | | | | | |", flush=True)
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
