@@ -8,6 +8,13 @@ the next estimate of the inter-reflections, and the rendering's residual against
 corrected images A₀ − Eₜ. The result is the pass with the lowest residual, pass 0
 included: IRT-PS never returns worse than classic photometric stereo by its own measure.
 
+The same rendering tells which observations the reconstruction has in shadow (cast or
+attached); in robust mode the next pass leaves them out of its fit, as photometric stereo
+leaves out the dark observations of the input. After subtraction, a shadowed observation
+still holds whatever inter-reflected light the estimate missed, often above the darkness
+threshold, and would pull the normal toward the light; measured, this took pedestal_cornell
+from 8.23° to 7.85° and grooves_dark from 3.59° to 3.21° (8 passes), cap_cornell unchanged.
+
 The estimate Eₜ moves toward each new rendering by a step that adapts to how the loop
 converges (a secant estimate of its contraction): above 1 where the estimates converge
 slowly in one direction, below 1 where they oscillate. The loop stops after two passes in a
@@ -123,8 +130,10 @@ def remove_interreflections(
           module); a number in (0, 2) fixes it (1 takes each new estimate whole);
         - ``early_stop``: stop after two passes in a row whose residual does not fall
           below the best so far by twice its Monte-Carlo noise;
-        - ``update``: ``"original"``: Aₜ₊₁ = A₀ − Eₜ (default); ``"previous"``: the paper's
-          literal Aₜ₊₁ = Aₜ − Eₜ. Corrected images are kept non-negative;
+        - ``update``: ``"original"``: Aₜ₊₁ = A₀ − Eₜ (default), with the observations in
+          shadow in the rendering left out of the next fit (robust mode); ``"previous"``:
+          the paper's literal Aₜ₊₁ = Aₜ − Eₜ, without. Corrected images are kept
+          non-negative;
         - ``integration``: default ``"footprint"``, which keeps creases, and so the
           rendered concavities as deep as the real ones;
         - ``stride``: 1 estimates the indirect light at every pixel; s > 1 at one pixel in
@@ -188,7 +197,17 @@ def remove_interreflections(
             start = time.perf_counter()
             seed = options.seed + index
             rerendering = render_with_residual(
-                scene, height, albedo, mask, original, bounces=options.bounces, samples=options.samples, seed=seed, stride=options.stride, usable=usable
+                scene,
+                height,
+                albedo,
+                mask,
+                original,
+                bounces=options.bounces,
+                samples=options.samples,
+                seed=seed,
+                stride=options.stride,
+                usable=usable,
+                shadow_fraction=options.shadow_fraction if options.robust and options.update == "original" else None,
             )
             residual = rerendering.residual
             timings["rendering"] = time.perf_counter() - start
@@ -210,6 +229,7 @@ def remove_interreflections(
                 estimate, estimate_noise = paper_indirect(scene, height, albedo, mask, reflections=options.bounces, seed=seed), 0.0
             else:
                 estimate, estimate_noise = rerendering.indirect, float(rerendering.noise_energy[mask].sum())
+            shadowed = rerendering.shadowed
             del rerendering
             if options.update == "original":
                 if estimate_used is None:
@@ -223,6 +243,8 @@ def remove_interreflections(
                 estimate_used = estimate if estimate_used is None else estimate_used + record.step * change_of_estimate
                 previous_change = change_of_estimate
                 images = _corrected(original, estimate_used, original, saturated)
+                if shadowed is not None:
+                    images[np.broadcast_to(shadowed, images.shape)] = 0.0
             else:
                 record.step = step
                 estimate_used = step * estimate
@@ -255,10 +277,11 @@ class _AdaptiveStep:
     of each change in the next; q = <change, previous> / |previous|² (on the object's
     pixels) gives 1 − ρ, and the step that would have removed it all is ω / (1 − q),
     within `STEP_BOUNDS`. Where the previous change is not above its noise, or the change
-    grew, the step is not raised above 1. Both products are corrected for the Monte-Carlo noise of the
-    estimates, which would otherwise pull q toward 0 (or below) once the changes are
-    mostly noise: the noise energy of each new estimate is measured (its two halves), and
-    that of the running estimate follows from the steps taken.
+    grew, nothing says how the loop contracts, and the step is 1 (a plain fixed-point
+    iteration). Both products are corrected for the Monte-Carlo noise of the estimates,
+    which would otherwise pull q toward 0 (or below) once the changes are mostly noise: the
+    noise energy of each new estimate is measured (its two halves), and that of the running
+    estimate follows from the steps taken.
     """
 
     def __init__(self, mask: np.ndarray) -> None:
@@ -284,8 +307,8 @@ class _AdaptiveStep:
         energy = float(np.vdot(before, before)) - noise
         kept = (float(np.vdot(now, before)) - shared) / energy if energy > noise else 1.0
         if kept >= 1:
-            # The change is mostly noise, or grew: no sign of a contraction to speed up.
-            return min(self.step, 1.0)
+            # The change is mostly noise, or grew: no sign of how the loop contracts.
+            return 1.0
         return float(np.clip(self.step / (1 - kept), *STEP_BOUNDS))
 
 
