@@ -5,7 +5,8 @@ classic photometric stereo and IRT-PS with their defaults, as ``irtps reconstruc
 prints the mean angular error of each, the share of the gap to the floor (classic PS on the
 direct-only images, where the data set has them) that IRT-PS closes, the placement and the
 passes. ``--passes 16`` also runs 16 passes without the early stop, and the result after at
-most 5, to check how fast the loop converges.
+most 5, on the data sets with direct-only images (the Mitsuba renders), to check how fast
+the loop converges.
 
 Usage::
 
@@ -68,7 +69,7 @@ def measure(path: Path, passes: int | None) -> dict:
         "seconds": seconds,
         "warnings": [str(w.message) for w in caught],
     }
-    if passes is not None:
+    if passes is not None and floor is not None:
         long = irtps.reconstruct(dataset, "irtps", iterations=passes, early_stop=False)
         short = irtps.reconstruct(dataset, "irtps", iterations=5)
         row[f"error_{passes}_passes_deg"] = angular_error(dataset, long.normals)
@@ -80,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--shared", type=Path, default=SHARED, help="the shared data folder (default: ../shared/data)")
     parser.add_argument("--only", nargs="+", help="data set names to run (default: all)")
-    parser.add_argument("--passes", type=int, help="also run this many passes without the early stop, and at most 5")
+    parser.add_argument("--passes", type=int, help="also run this many passes without the early stop, and at most 5 (data sets with direct-only images)")
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
     paths = sorted(p for group in ("mitsuba", "diligent") for p in (args.shared / group).glob("*") if p.is_dir())
@@ -99,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
         closed = "n/a" if row["gap_closed"] is None else f"{100 * row['gap_closed']:.1f} %"
         placement = f"{row['placement']['base_height']:.2f} ({row['placement']['source']})"
         print(f"| {row['data']} | {row['classic_deg']:.3f}° | {row['irtps_deg']:.3f}° | {floor} | {closed} | {row['passes']} ({row['chosen_pass']}) | {placement} | {row['seconds']:.1f} |", flush=True)
-        if args.passes is not None:
+        if f"error_{args.passes}_passes_deg" in row:
             print(f"|   | {args.passes} passes: {row[f'error_{args.passes}_passes_deg']:.3f}° | at most 5: {row['error_at_most_5_passes_deg']:.3f}° | | | | | |", flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))

@@ -178,20 +178,17 @@ def estimate_placement(
     low = _floor_height(scene)
     high = low + _height_range(scene)
     precision = PRECISION_PIXELS * scene.camera.pixel_size
-    if near is None:
-        scan = np.linspace(low, high, SCAN_POINTS)
-        values = [floor_residual(offset) for offset in scan]
-        best = int(np.argmin(values))
-        step = scan[1] - scan[0]
-        bracket = (max(low, scan[best] - step), min(high, scan[best] + step))
-    else:
+    if near is not None:
         bracket = (max(low, near.base_height - radius), min(high, near.base_height + radius))
-        values = [floor_residual(end) for end in bracket]
-        scan, best = bracket, int(np.argmin(values))
+        result = minimize_scalar(floor_residual, bounds=bracket, method="bounded", options={"xatol": precision})
+        return Placement(base_height=float(result.x), source="images", floor_residual=float(result.fun), floor_pixels=int(floor_pixels.size))
+    scan = np.linspace(low, high, SCAN_POINTS)
+    values = [floor_residual(offset) for offset in scan]
+    best = int(np.argmin(values))
+    step = scan[1] - scan[0]
+    bracket = (max(low, scan[best] - step), min(high, scan[best] + step))
     result = minimize_scalar(floor_residual, bounds=bracket, method="bounded", options={"xatol": precision})
     offset, residual = (float(result.x), float(result.fun)) if result.fun <= values[best] else (float(scan[best]), values[best])
-    if near is not None:
-        return Placement(base_height=offset, source="images", floor_residual=residual, floor_pixels=int(floor_pixels.size))
     noise = abs(floor_residual(offset, seed + 1) - residual)
     if max(values) - residual <= SIGNIFICANCE * noise:
         return fallback_placement(scene, "the floor looks the same whatever the object's height (no shadow or light of the object falls on it)")
