@@ -241,7 +241,7 @@ def remove_interreflections(
                     record.step = step
                 steps.taken(record.step, estimate_noise)
                 estimate_used = estimate if estimate_used is None else estimate_used + record.step * change_of_estimate
-                previous_change = change_of_estimate
+                previous_change = change_of_estimate[:, mask]  # all the step needs of it
                 images = _corrected(original, estimate_used, original, saturated)
                 if shadowed is not None:
                     images[np.broadcast_to(shadowed, images.shape)] = 0.0
@@ -297,9 +297,9 @@ class _AdaptiveStep:
         self.running_noise = (1 - step) ** 2 * self.previous_running + step**2 * new_noise
 
     def next(self, change: np.ndarray, previous_change: np.ndarray) -> float:
-        """The step for `change`, the difference between the newest estimate and the
-        running one, given the `previous_change`."""
-        now, before = change[:, self.mask], previous_change[:, self.mask]
+        """The step for `change` (K, H, W, 3), the difference between the newest estimate
+        and the running one, given the `previous_change` on the object's pixels (K, N, 3)."""
+        now, before = change[:, self.mask], previous_change
         # Noise shared by the two changes: the running estimate's before the last step
         # enters both with the same sign, the last new estimate's with opposite signs.
         shared = (1 - self.step) * self.previous_running - self.step * self.new_noise
