@@ -184,10 +184,11 @@ def estimate_placement(
     scale = float(np.abs(observed[usable]).sum())
     if scale <= 0:
         return fallback_placement(scene, "the floor is black in every image: nothing fixes the object's height")
+    pixel_list = floor_pixels.tolist()
 
     def floor_residual(offset: float, path_seed: int = seed) -> float:
         renderer = make_renderer(scene, np.where(mask, relief + offset, 0.0), albedo, mask)
-        planes = renderer.render_pixels(floor_pixels.tolist(), bounces, PATH_SAMPLES, DIRECT_SAMPLES, path_seed, False)
+        planes = renderer.render_pixels(pixel_list, bounces, PATH_SAMPLES, DIRECT_SAMPLES, path_seed, False)
         return float(np.abs(planes.sum(axis=0) - observed)[usable].sum()) / scale
 
     low = _floor_height(scene)

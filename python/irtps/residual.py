@@ -155,7 +155,6 @@ def render_with_residual(
     indirect = np.empty(images.shape, dtype=np.float32)
     noise_energy = np.zeros(mask.shape)
     shadowed = None if shadow_fraction is None else np.empty((*images.shape[:3], 1), dtype=bool)
-    irradiance = scene.light_irradiance.astype(np.float32)[:, None, None, :]
     sums = _Sums(scene.floor is not None)
     if stride > 1:
         halves = [_sparse_frame(renderer, mask, bounces, count, half_seed, stride) for count, half_seed in zip((first, second), seeds) if count]
@@ -177,8 +176,7 @@ def render_with_residual(
             spread = np.square(parts[0] - parts[1], dtype=np.float64).sum(axis=(0, 3))
             noise_energy[start:stop] = spread * first * second / samples**2
         if shadowed is not None:
-            brightness = (direct / irradiance).sum(axis=-1, keepdims=True)
-            shadowed[:, start:stop] = brightness <= shadow_fraction * brightness.max(axis=0, keepdims=True)
+            shadowed[:, start:stop] = ~_lit(direct, scene.light_irradiance, shadow_fraction)
         sums.add(direct, parts, indirect[:, start:stop], images[:, start:stop], mask[start:stop], None if usable is None else usable[:, start:stop])
     return Rerendering(indirect=indirect, residual=sums.residual(), noise_energy=noise_energy, shadowed=shadowed)
 
@@ -206,10 +204,16 @@ def compared_observations(
     if saturation is not None:
         usable &= ~(images >= saturation).any(axis=-1, keepdims=True)
     if robust:
-        brightness = (images / np.asarray(irradiance, dtype=np.float32)[:, None, None, :]).sum(axis=-1, keepdims=True, dtype=np.float32)
-        lit = brightness > shadow_fraction * brightness.max(axis=0, keepdims=True)
-        usable &= lit | ~np.asarray(mask, dtype=bool)[None, :, :, None]
+        usable &= _lit(images, irradiance, shadow_fraction) | ~np.asarray(mask, dtype=bool)[None, :, :, None]
     return usable
+
+
+def _lit(images: np.ndarray, irradiance: np.ndarray, shadow_fraction: float) -> np.ndarray:
+    """Photometric stereo's rule for a lit observation (`irtps.ps.photometric_stereo`): its
+    channels over their irradiance, summed, above `shadow_fraction` of the pixel's
+    brightest. bool (K, H, W, 1) for (K, H, W, 3) images."""
+    brightness = (images / np.asarray(irradiance, dtype=np.float32)[:, None, None, :]).sum(axis=-1, keepdims=True, dtype=np.float32)
+    return brightness > shadow_fraction * brightness.max(axis=0, keepdims=True)
 
 
 def _sparse_frame(renderer, mask: np.ndarray, bounces: int, samples: int, seed: int, stride: int) -> np.ndarray:
