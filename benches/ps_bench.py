@@ -69,8 +69,8 @@ def main() -> None:
     figures = {
         "input": f"{name}: {images.shape[0]} lights, {images.shape[2]}x{images.shape[1]} RGB float32",
         "numpy_plain_s": median_seconds(lambda: numpy_ps(images, directions.astype(np.float32), e32), args.repeats),
-        "irtps_plain_s": median_seconds(lambda: _core.photometric_stereo(images, all_pixels, d32, e32, False), args.repeats),
-        "irtps_robust_s": median_seconds(lambda: _core.photometric_stereo(images, all_pixels, d32, e32, True), args.repeats),
+        "irtps_plain_s": median_seconds(lambda: _core.photometric_stereo(images, all_pixels, d32, e32, "none"), args.repeats),
+        "irtps_robust_s": median_seconds(lambda: _core.photometric_stereo(images, all_pixels, d32, e32, "tukey"), args.repeats),
     }
     figures["speedup_plain"] = figures["numpy_plain_s"] / figures["irtps_plain_s"]
     figures["speedup_robust_vs_numpy_plain"] = figures["numpy_plain_s"] / figures["irtps_robust_s"]

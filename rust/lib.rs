@@ -11,6 +11,7 @@ pub mod height_field_accel;
 pub mod image_io;
 pub mod light_cache;
 pub mod ps;
+pub mod robust_ps;
 pub mod render;
 pub mod sampler;
 pub mod scene;

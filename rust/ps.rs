@@ -5,14 +5,17 @@
 //! three channels (`g = (LᵀL)⁻¹ Lᵀ Σ_c b_c`, `n = g/|g|`); the albedo of each channel is then the
 //! least-squares scale `ρ_c = (Ln)·b_c / |Ln|²`.
 //!
-//! The robust mode drops, per pixel, the observations in shadow (whose summed `b` is below
-//! `shadow_fraction` of that pixel's brightest) and the saturated ones, and re-solves from the
-//! rest when at least 3 non-coplanar lights remain; otherwise it keeps the full fit and flags
-//! the pixel.
+//! Which observations a pixel's fit uses is its robust mode ([`Robust`]). Every mode but
+//! [`Robust::None`] leaves saturated observations out. The threshold mode also drops, per
+//! pixel, the observations in shadow (whose summed `b` is below `shadow_fraction` of that
+//! pixel's brightest) and re-solves from the rest when at least 3 non-coplanar lights
+//! remain; otherwise it keeps the full fit and flags the pixel. The Tukey (default) and trim
+//! modes fit each pixel from its own observations ([`crate::robust_ps`]).
 //!
-//! Work runs over tiles of pixels, streaming through each image's rows of the tile (twice in
-//! robust mode: once for each pixel's brightest, once to accumulate); the sums are kept per
-//! pixel in structure-of-arrays form so that the loops run over contiguous pixels.
+//! The plain and threshold fits run over tiles of pixels, streaming through each image's rows
+//! of the tile (twice in threshold mode: once for each pixel's brightest, once to
+//! accumulate); the sums are kept per pixel in structure-of-arrays form so that the loops run
+//! over contiguous pixels.
 
 use std::f32::consts::PI;
 
@@ -20,29 +23,45 @@ use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::robust_ps::{fit_pixels, Lights, Weighting};
 use crate::scene::Light;
 
 /// Pixels per tile.
 const TILE: usize = 256;
 /// A set of lights is coplanar when the smallest eigenvalue of LᵀL is below this fraction of
 /// the largest.
-const COPLANAR_RATIO: f32 = 1e-4;
+pub(crate) const COPLANAR_RATIO: f32 = 1e-4;
+
+/// Which observations a pixel's fit uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Robust {
+    /// Every observation (plain least squares).
+    None,
+    /// Drop shadowed (below `shadow_fraction` of the pixel's brightest) and saturated ones.
+    Threshold,
+    /// Keep those between the darkest 40 % and the brightest 20 % ([`crate::robust_ps::TRIM_DARKEST`],
+    /// [`crate::robust_ps::TRIM_BRIGHTEST`]), saturated ones counted as brightest and dropped.
+    Trim,
+    /// From the threshold fit, re-weight by Tukey's biweight of the residuals
+    /// ([`crate::robust_ps::TUKEY_SCALES`]).
+    Tukey,
+}
 
 /// How to fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PsSettings {
-    /// Drop shadowed and saturated observations per pixel.
-    pub robust: bool,
-    /// In robust mode, an observation is in shadow when its channel-summed `b` is below this
-    /// fraction of the pixel's brightest.
+    /// Which observations each pixel's fit uses.
+    pub robust: Robust,
+    /// In the threshold and Tukey modes, an observation is in shadow when its channel-summed
+    /// `b` is below this fraction of the pixel's brightest (the Tukey mode's start).
     pub shadow_fraction: f32,
-    /// In robust mode, raw values at or above this level (in any channel) are saturated.
+    /// In every robust mode, raw values at or above this level (in any channel) are saturated.
     pub saturation: Option<f32>,
 }
 
 impl Default for PsSettings {
     fn default() -> Self {
-        PsSettings { robust: true, shadow_fraction: 0.05, saturation: None }
+        PsSettings { robust: Robust::Tukey, shadow_fraction: 0.05, saturation: None }
     }
 }
 
@@ -69,6 +88,24 @@ pub struct PsOutput {
     pub flags: Vec<u8>,
     /// Number of observations used.
     pub used: Vec<u16>,
+}
+
+/// One pixel's fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct PixelFit {
+    pub normal: [f32; 3],
+    pub albedo: [f32; 3],
+    /// One of [`flag`].
+    pub flag: u8,
+    /// Observations used.
+    pub used: u16,
+}
+
+impl PixelFit {
+    /// No light reached the pixel.
+    pub fn dark(used: u16) -> PixelFit {
+        PixelFit { normal: [0.0, 0.0, 1.0], albedo: [0.0; 3], flag: flag::DARK, used }
+    }
 }
 
 /// Checks the lights for photometric stereo: at least 3, not coplanar, positive irradiance.
@@ -100,7 +137,24 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
     }
     let fit = Fit::new(lights, gram, settings);
     let mut out = PsOutput { normals: vec![[0.0; 3]; n], albedo: vec![[0.0; 3]; n], flags: vec![flag::MASKED_OUT; n], used: vec![0; n] };
-    out.normals
+    let weighting = match settings.robust {
+        Robust::Tukey => Weighting::Tukey,
+        Robust::Trim => Weighting::Trim,
+        Robust::None | Robust::Threshold => return Ok(fit.streamed(images, mask, out)),
+    };
+    let per_pixel = Lights::new(&fit.directions, &fit.scale, &fit.saturated_b, gram);
+    for (p, pixel) in fit_pixels(images, mask, &per_pixel, weighting, settings.shadow_fraction) {
+        (out.normals[p], out.albedo[p], out.flags[p], out.used[p]) = (pixel.normal, pixel.albedo, pixel.flag, pixel.used);
+    }
+    Ok(out)
+}
+
+impl Fit {
+    /// The plain or threshold fit, streamed over tiles of the images.
+    fn streamed(&self, images: &[f32], mask: &[bool], mut out: PsOutput) -> PsOutput {
+        let k_count = self.directions.len();
+        let n = mask.len();
+        out.normals
         .par_chunks_mut(TILE)
         .zip(out.albedo.par_chunks_mut(TILE))
         .zip(out.flags.par_chunks_mut(TILE))
@@ -116,9 +170,9 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
                     return;
                 }
                 let src = |k: usize| &images[(k * n + start) * 3..][..pixels * 3];
-                fit.accumulate_tile(src, sums, pixels);
+                self.accumulate_tile(src, sums, pixels);
                 for (p, _) in tile_mask.iter().enumerate().filter(|(_, &m)| m) {
-                    let (normal, rho, f, count) = fit.solve(sums, p, || (0..k_count).map(|k| fit.observation(src(k), k, p)));
+                    let (normal, rho, f, count) = self.solve(sums, p, || (0..k_count).map(|k| self.observation(src(k), k, p)));
                     normals[p] = normal;
                     albedo[p] = rho;
                     flags[p] = f;
@@ -126,7 +180,8 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
                 }
             },
         );
-    Ok(out)
+        out
+    }
 }
 
 /// Per-pixel sums of a tile, structure of arrays so that loops run over contiguous pixels.
@@ -163,7 +218,7 @@ struct Fit {
 impl Fit {
     fn new(lights: &[Light], gram: Mat3, settings: &PsSettings) -> Fit {
         let scale: Vec<[f32; 3]> = lights.iter().map(|l| l.irradiance.map(|e| PI / e)).collect();
-        let level = settings.saturation.filter(|_| settings.robust).unwrap_or(f32::INFINITY);
+        let level = settings.saturation.filter(|_| settings.robust != Robust::None).unwrap_or(f32::INFINITY);
         let saturated_b = scale.iter().map(|s| s.map(|v| v * level)).collect();
         Fit { directions: lights.iter().map(|l| l.direction.into()).collect(), scale, saturated_b, gram, settings: *settings }
     }
@@ -191,7 +246,7 @@ impl Fit {
         }
         sums.count[..pixels].fill(0.0);
         sums.brightest[..pixels].fill(0.0);
-        if self.settings.robust {
+        if self.settings.robust == Robust::Threshold {
             for k in 0..self.directions.len() {
                 self.load(sums, src(k), k, pixels);
                 let Sums { b, brightest, .. } = sums;
@@ -241,7 +296,7 @@ impl Fit {
         let count = sums.count[p] as usize;
         let (min, max) = eigen_range(kept_gram);
         let (gram, rhs, used, flag) = if count >= 3 && min >= COPLANAR_RATIO * max {
-            (kept_gram, kept_rhs, count, if count == k_count || self.settings.robust { flag::OK } else { flag::FULL_FIT })
+            (kept_gram, kept_rhs, count, if count == k_count || self.settings.robust != Robust::None { flag::OK } else { flag::FULL_FIT })
         } else {
             let mut rhs = [Vec3::ZERO; 3];
             for (b, l) in all().zip(&self.directions) {
@@ -251,24 +306,32 @@ impl Fit {
             }
             (self.gram, rhs, k_count, flag::FULL_FIT)
         };
-        let g = gram.inverse() * (rhs[0] + rhs[1] + rhs[2]);
-        if !g.is_finite() || g.length() == 0.0 {
-            return ([0.0, 0.0, 1.0], [0.0; 3], flag::DARK, used as u16);
+        match finish(gram, rhs) {
+            Some((normal, albedo)) => (normal, albedo, flag, used as u16),
+            None => ([0.0, 0.0, 1.0], [0.0; 3], flag::DARK, used as u16),
         }
-        let normal = g.normalize();
-        let denominator = normal.dot(gram * normal);
-        let albedo = [0, 1, 2].map(|c| (normal.dot(rhs[c]) / denominator).max(0.0));
-        (normal.to_array(), albedo, flag, used as u16)
     }
 }
 
-fn outer(l: Vec3) -> Mat3 {
+/// Normal and RGB albedo from least-squares sums: `n = g/|g|` for `g = G⁻¹ Σ_c rhs_c`, and
+/// each channel's albedo the scale along it. `None` when `g` is zero or not finite.
+pub(crate) fn finish(gram: Mat3, rhs: [Vec3; 3]) -> Option<([f32; 3], [f32; 3])> {
+    let g = gram.inverse() * (rhs[0] + rhs[1] + rhs[2]);
+    if !g.is_finite() || g.length() == 0.0 {
+        return None;
+    }
+    let normal = g.normalize();
+    let denominator = normal.dot(gram * normal);
+    Some((normal.to_array(), [0, 1, 2].map(|c| (normal.dot(rhs[c]) / denominator).max(0.0))))
+}
+
+pub(crate) fn outer(l: Vec3) -> Mat3 {
     Mat3::from_cols(l * l.x, l * l.y, l * l.z)
 }
 
 /// Smallest and largest eigenvalue of a symmetric positive semi-definite 3×3 matrix
 /// (closed form, Smith 1961).
-fn eigen_range(m: Mat3) -> (f32, f32) {
+pub(crate) fn eigen_range(m: Mat3) -> (f32, f32) {
     let a = m.to_cols_array_2d().map(|c| c.map(f64::from));
     let p1 = a[0][1].powi(2) + a[0][2].powi(2) + a[1][2].powi(2);
     let q = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
@@ -311,9 +374,9 @@ mod tests {
         let ls = lights(&[[0.0, 0.0, 1.0], [0.5, 0.1, 0.8], [-0.3, 0.4, 0.8], [0.1, -0.5, 0.8]]);
         let normal = Vec3::new(0.1, -0.2, 1.0).normalize();
         let images = render(normal, [0.9, 0.5, 0.2], &ls);
-        for robust in [false, true] {
+        for robust in [Robust::None, Robust::Threshold, Robust::Trim, Robust::Tukey] {
             let out = photometric_stereo(&images, &[true], &ls, &PsSettings { robust, ..Default::default() }).unwrap();
-            assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5);
+            assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5, "{robust:?} {:?}", out.normals[0]);
             for (got, want) in out.albedo[0].iter().zip([0.9, 0.5, 0.2]) {
                 assert!((got - want).abs() < 1e-5);
             }
@@ -325,11 +388,62 @@ mod tests {
         let ls = lights(&[[0.0, 0.0, 1.0], [0.7, 0.0, 0.7], [-0.7, 0.0, 0.7], [0.0, 0.7, 0.7], [0.0, -0.7, 0.7], [-0.9, -0.3, 0.3]]);
         let normal = Vec3::new(0.6, 0.2, 0.8).normalize(); // the last light is behind it
         let images = render(normal, [0.5; 3], &ls);
-        let plain = photometric_stereo(&images, &[true], &ls, &PsSettings { robust: false, ..Default::default() }).unwrap();
-        let robust = photometric_stereo(&images, &[true], &ls, &PsSettings::default()).unwrap();
-        assert!((Vec3::from(robust.normals[0]) - normal).length() < 1e-5);
+        let plain = photometric_stereo(&images, &[true], &ls, &PsSettings { robust: Robust::None, ..Default::default() }).unwrap();
         assert!((Vec3::from(plain.normals[0]) - normal).length() > 1e-2);
-        assert_eq!(robust.used[0], 5);
+        for robust in [Robust::Threshold, Robust::Tukey] {
+            let out = photometric_stereo(&images, &[true], &ls, &PsSettings { robust, ..Default::default() }).unwrap();
+            assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5);
+            assert_eq!(out.used[0], 5);
+        }
+    }
+
+    /// 24 lights around the pole; a normal lit by all of them.
+    fn ring() -> Vec<Light> {
+        let dirs: Vec<[f32; 3]> = (0..24)
+            .map(|k| {
+                let (azimuth, elevation) = (k as f32 * 0.9, 0.5 + 0.04 * k as f32);
+                [elevation.cos() * azimuth.cos(), elevation.cos() * azimuth.sin(), elevation.sin()]
+            })
+            .collect();
+        lights(&dirs)
+    }
+
+    #[test]
+    fn tukey_mode_sets_aside_soft_shadows_and_highlights_that_the_threshold_keeps() {
+        let ls = ring();
+        let normal = Vec3::new(0.1, 0.05, 1.0).normalize();
+        let mut images = render(normal, [0.6; 3], &ls);
+        for k in [2, 7, 11] {
+            images[k * 3..k * 3 + 3].iter_mut().for_each(|v| *v *= 0.3); // partial cast shadows
+        }
+        for k in [4, 15] {
+            images[k * 3..k * 3 + 3].iter_mut().for_each(|v| *v += 0.8); // highlights
+        }
+        let error = |robust| {
+            let out = photometric_stereo(&images, &[true], &ls, &PsSettings { robust, ..Default::default() }).unwrap();
+            ((Vec3::from(out.normals[0]).dot(normal)).clamp(-1.0, 1.0).acos().to_degrees(), out.used[0])
+        };
+        let (threshold, _) = error(Robust::Threshold);
+        let (tukey, used) = error(Robust::Tukey);
+        assert!(threshold > 2.0, "threshold fit {threshold}");
+        assert!(tukey < 0.1, "Tukey fit {tukey}");
+        assert_eq!(used, 19);
+    }
+
+    #[test]
+    fn trim_mode_keeps_the_middle_of_each_pixels_observations() {
+        let ls = ring();
+        let normal = Vec3::new(0.0, 0.1, 1.0).normalize();
+        let mut images = render(normal, [0.5; 3], &ls);
+        // The 5 brightest get highlights: exactly the 20 % the trim drops.
+        let mut order: Vec<usize> = (0..24).collect();
+        order.sort_by(|&a, &b| images[a * 3].total_cmp(&images[b * 3]));
+        for &k in &order[19..] {
+            images[k * 3..k * 3 + 3].iter_mut().for_each(|v| *v += 1.0);
+        }
+        let out = photometric_stereo(&images, &[true], &ls, &PsSettings { robust: Robust::Trim, ..Default::default() }).unwrap();
+        assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5);
+        assert_eq!(out.used[0], 24 - 10 - 5);
     }
 
     #[test]

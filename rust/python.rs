@@ -12,7 +12,7 @@ use rayon::prelude::*;
 
 use crate::error::Error;
 use crate::image_io::{self, Image};
-use crate::ps::{check_lights as core_check_lights, photometric_stereo as core_ps, PsSettings};
+use crate::ps::{check_lights as core_check_lights, photometric_stereo as core_ps, PsSettings, Robust};
 use crate::render::{RenderSettings, Renderer as CoreRenderer};
 use crate::scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
 
@@ -290,8 +290,9 @@ type PsArrays<'py> = (Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<f32>>, 
 
 /// Calibrated Lambertian photometric stereo on C-contiguous float32 images (K, H, W, 3):
 /// (normals (H, W, 3), albedo (H, W, 3), flags (H, W) uint8, observations used (H, W) uint16).
+/// `robust` is "none", "threshold", "trim" or "tukey".
 #[pyfunction]
-#[pyo3(signature = (images, mask, light_directions, light_irradiance, robust=true, shadow_fraction=0.05, saturation=None))]
+#[pyo3(signature = (images, mask, light_directions, light_irradiance, robust="tukey", shadow_fraction=0.05, saturation=None))]
 #[allow(clippy::too_many_arguments)]
 fn photometric_stereo<'py>(
     py: Python<'py>,
@@ -299,10 +300,17 @@ fn photometric_stereo<'py>(
     mask: PyReadonlyArray2<'_, bool>,
     light_directions: PyReadonlyArray2<'_, f32>,
     light_irradiance: PyReadonlyArray2<'_, f32>,
-    robust: bool,
+    robust: &str,
     shadow_fraction: f32,
     saturation: Option<f32>,
 ) -> PyResult<PsArrays<'py>> {
+    let robust = match robust {
+        "none" => Robust::None,
+        "threshold" => Robust::Threshold,
+        "trim" => Robust::Trim,
+        "tukey" => Robust::Tukey,
+        other => return Err(PyValueError::new_err(format!("robust: unknown mode {other:?}; expected none, threshold, trim or tukey"))),
+    };
     let shape = images.shape().to_vec();
     if shape[3] != 3 || mask.shape() != [shape[1], shape[2]] {
         return Err(PyValueError::new_err(format!("images: shape {shape:?} does not match mask {:?} x 3 channels", mask.shape())));

@@ -535,8 +535,8 @@ def test_saturated_png_pixels_are_reported_when_not_robust(tmp_path, capsys):
     data = tmp_path / "data"
     shutil.copytree(BALL, data)
     saturate(data)
-    assert main(["reconstruct", str(data), "--out", str(tmp_path / "out"), "--no-robust", "--quiet"]) == 0
-    assert capsys.readouterr().err.endswith("are saturated (a channel at or above 1); used as they are (robust mode is off)\n")
+    assert main(["reconstruct", str(data), "--out", str(tmp_path / "out"), "--robust", "none", "--quiet"]) == 0
+    assert capsys.readouterr().err.endswith("are saturated (a channel at or above 1); used as they are (robust mode none)\n")
 
 
 # Interrupted runs -------------------------------------------------------------------

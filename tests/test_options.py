@@ -102,7 +102,7 @@ def test_reconstruct_records_the_options_it_used_with_defaults_resolved():
     result = irtps.reconstruct(data, options=ReconstructOptions(shadow_fraction=0.1))
     assert result.parameters == {
         "method": "ps",
-        "robust": True,
+        "robust": "tukey",
         "shadow_fraction": 0.1,
         "saturation": 1.0,  # PNG images saturate at their maximum
         "integration": "ls",
@@ -127,9 +127,9 @@ def _help(command):
 
 
 def test_the_command_line_reaches_every_reconstruction_option(tmp_path):
-    args = build_parser().parse_args(["reconstruct", str(BALL), "--out", str(tmp_path), "--relaxation", "0.5", "--base-height", "boundary", "--method", "irtps", "--no-robust"])
+    args = build_parser().parse_args(["reconstruct", str(BALL), "--out", str(tmp_path), "--relaxation", "0.5", "--base-height", "boundary", "--method", "irtps", "--robust", "trim"])
     options = irtps.options.from_arguments(ReconstructOptions, args)
-    assert options == ReconstructOptions(method="irtps", relaxation=0.5, base_height="boundary", robust=False)
+    assert options == ReconstructOptions(method="irtps", relaxation=0.5, base_height="boundary", robust="trim")
 
 
 @pytest.mark.parametrize(

@@ -15,44 +15,58 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason="needs the shared data sets (../shared)")
 
 
-def _mean_error(data: irtps.Dataset, images: np.ndarray, robust: bool) -> float:
-    fit = photometric_stereo(images, data.scene.light_directions, data.scene.light_irradiance, data.mask, robust=robust)
+def _mean_error(data: irtps.Dataset, images: np.ndarray, robust: str) -> float:
+    fit = photometric_stereo(images, data.scene.light_directions, data.scene.light_irradiance, data.mask, robust=robust, saturation=data.saturation)
     return float(np.nanmean(angular_error_deg(fit.normals, data.gt.normal, data.mask)))
 
 
-def test_small_diligent_ball_robust_beats_least_squares():
-    data = irtps.load_dataset(DATA / "diligent_ball_small")
-    plain, robust = _mean_error(data, data.images, False), _mean_error(data, data.images, True)
-    assert robust < plain < 5.0
-    assert robust < 3.5
+@pytest.mark.parametrize(
+    "name, plain_deg, tukey_deg",
+    # Measured on the tests/data copies (8 and 24 lights, 4x smaller): least squares 4.10 and
+    # 17.09, threshold 3.07 and 17.66, trim 8.48 and 11.09, Tukey 2.21 and 10.67.
+    [("diligent_ball_small", 4.2, 2.4), ("diligent_reading_small", 17.2, 11.0)],
+)
+def test_small_diligent_copies_tukey_sets_highlights_and_shadows_aside(name, plain_deg, tukey_deg):
+    data = irtps.load_dataset(DATA / name)
+    plain, threshold, tukey = (_mean_error(data, data.images, mode) for mode in ("none", "threshold", "tukey"))
+    assert plain <= plain_deg
+    assert tukey <= tukey_deg
+    assert tukey < threshold
 
 
 @needs_shared
-def test_diligent_ball_reaches_the_published_least_squares_level():
-    data = irtps.load_dataset(SHARED / "diligent" / "ballPNG")
-    assert _mean_error(data, data.images, robust=False) <= 4.30  # published LS baseline: 4.10
-    assert _mean_error(data, data.images, robust=True) <= 4.30
+@pytest.mark.parametrize(
+    "name, published_deg, tukey_deg",
+    # DiLiGenT's published least-squares baselines; Tukey as the issue asks (measured 1.96, 11.56).
+    [("ballPNG", 4.10, 2.0), ("readingPNG", 19.80, 12.0)],
+)
+def test_diligent_objects_least_squares_as_published_and_tukey_far_below(name, published_deg, tukey_deg):
+    data = irtps.load_dataset(SHARED / "diligent" / name)
+    assert _mean_error(data, data.images, "none") <= published_deg + 0.2
+    assert _mean_error(data, data.images, "tukey") <= tukey_deg
 
 
 @needs_shared
 @pytest.mark.parametrize("scene, floor_deg", [("cap_cornell", 1.2), ("grooves_dark", 1.3)])
 def test_mitsuba_direct_images_reach_the_floor(scene, floor_deg):
     data = irtps.load_dataset(SHARED / "mitsuba" / scene)
-    assert _mean_error(data, data.gt.direct, robust=True) <= floor_deg
+    assert _mean_error(data, data.gt.direct, "threshold") <= floor_deg
+    assert _mean_error(data, data.gt.direct, "tukey") <= floor_deg
 
 
 @needs_shared
 @pytest.mark.parametrize("scene, classic_deg", [("cap_cornell", 7.4), ("grooves_dark", 14.8)])
 def test_inter_reflections_bend_classic_ps_as_documented(scene, classic_deg):
     data = irtps.load_dataset(SHARED / "mitsuba" / scene)
-    assert _mean_error(data, data.images, robust=True) == pytest.approx(classic_deg, abs=0.1)
+    assert _mean_error(data, data.images, "threshold") == pytest.approx(classic_deg, abs=0.1)
 
 
-def test_robust_mode_handles_cast_and_attached_shadows():
+@pytest.mark.parametrize("robust", ["threshold", "tukey"])
+def test_robust_modes_handle_cast_and_attached_shadows(robust):
     data, _ = irtps.synthesize("cavity", size=48, lights=12, bounces=0, environment="none", seed=1)
-    plain, robust = _mean_error(data, data.images, False), _mean_error(data, data.images, True)
-    assert robust < 0.7 * plain
-    assert robust < 1.3
+    plain, fitted = _mean_error(data, data.images, "none"), _mean_error(data, data.images, robust)
+    assert fitted < 0.7 * plain
+    assert fitted < 1.3
 
 
 def test_albedo_is_recovered_per_channel():
@@ -69,10 +83,12 @@ def test_saturated_observations_are_dropped():
     assert images[0].max() > 0.8 > images[1:].max()
     images[0] = np.minimum(images[0], 0.8)  # clipped by the sensor
     irradiance = np.full((5, 3), np.pi)
-    clipped = photometric_stereo(images, lights, irradiance, robust=True, saturation=0.8)
-    assert clipped.used[0, 0] == 4
-    np.testing.assert_allclose(clipped.normals[0, 0], normal, atol=1e-5)
-    fooled = photometric_stereo(images, lights, irradiance, robust=False)
+    for robust in ("threshold", "tukey", "trim"):
+        clipped = photometric_stereo(images, lights, irradiance, robust=robust, saturation=0.8)
+        # Trim would keep 2 of the 5: too few, so it falls back to the 4 unsaturated ones.
+        assert clipped.used[0, 0] == 4
+        np.testing.assert_allclose(clipped.normals[0, 0], normal, atol=1e-5)
+    fooled = photometric_stereo(images, lights, irradiance, robust="none")
     assert np.degrees(np.arccos(np.clip(fooled.normals[0, 0] @ normal, -1, 1))) > 0.1
 
 

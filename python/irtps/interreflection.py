@@ -167,7 +167,7 @@ def remove_interreflections(
     pixel_size = scene.camera.pixel_size
     original = dataset.images
     saturated = None if options.saturation is None else (original >= options.saturation).any(axis=-1, keepdims=True)
-    usable = compared_observations(original, scene.light_irradiance, mask, robust=options.robust, shadow_fraction=options.shadow_fraction, saturation=options.saturation)
+    usable = compared_observations(original, scene.light_irradiance, mask, robust=options.robust != "none", shadow_fraction=options.shadow_fraction, saturation=options.saturation)
     images = original
     estimate_used = None
     step = 1.0 if options.relaxation == "auto" else options.relaxation
@@ -207,7 +207,7 @@ def remove_interreflections(
                 seed=seed,
                 stride=options.stride,
                 usable=usable,
-                shadow_fraction=options.shadow_fraction if options.robust and options.update == "original" else None,
+                shadow_fraction=options.shadow_fraction if options.robust != "none" and options.update == "original" else None,
             )
             residual = rerendering.residual
             timings["rendering"] = time.perf_counter() - start

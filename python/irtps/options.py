@@ -26,8 +26,9 @@ import numpy as np
 from irtps.errors import IrtpsError
 from irtps.imageio import MAX_IMAGE_PIXELS
 from irtps.integrate import METHODS as INTEGRATION_METHODS
+from irtps.ps import ROBUST_MODES
 
-__all__ = ["ESTIMATORS", "METHODS", "UPDATES", "ClusterOptions", "OptionError", "ReconstructOptions", "RenderOptions", "SynthOptions", "TableOptions", "add_arguments", "from_arguments"]
+__all__ = ["ESTIMATORS", "METHODS", "ROBUST_MODES", "UPDATES", "ClusterOptions", "OptionError", "ReconstructOptions", "RenderOptions", "SynthOptions", "TableOptions", "add_arguments", "from_arguments"]
 
 #: Reconstruction methods: classic photometric stereo, and IRT-PS.
 METHODS = ("ps", "irtps")
@@ -239,8 +240,17 @@ class ReconstructOptions(_Options):
     """
 
     method: str = _option("ps", "reconstruction method: classic photometric stereo or IRT-PS", str, choices=METHODS)
-    robust: bool = _option(True, "drop shadowed and saturated observations", bool)
-    shadow_fraction: float = _option(0.05, "shadow threshold relative to a pixel's brightest observation", float, low=0.0, high=1.0, high_open=True)
+    robust: str = _option(
+        "tukey",
+        "observations each pixel's fit uses: tukey re-weights them by their residuals (shadows and highlights set aside), threshold drops "
+        "those below the shadow fraction, trim keeps those between the darkest two fifths and the brightest fifth, none uses all; every mode but "
+        "none drops saturated ones",
+        str,
+        choices=ROBUST_MODES,
+    )
+    shadow_fraction: float = _option(
+        0.05, "shadow threshold relative to a pixel's brightest observation (threshold mode, and the start of tukey)", float, low=0.0, high=1.0, high_open=True
+    )
     saturation: float | None = _option(
         None, "raw value at or above which an observation is saturated (default: 1 for PNG images, none for EXR)", float, low=0.0, low_open=True, optional=True
     )

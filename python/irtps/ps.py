@@ -9,6 +9,8 @@ import numpy as np
 from irtps import _core
 from irtps.errors import IrtpsError
 
+#: Robust modes of `photometric_stereo`, the default first.
+ROBUST_MODES = ("tukey", "threshold", "trim", "none")
 #: Meaning of the values of `PsResult.flags`.
 FLAGS = {0: "fitted", 1: "full fit kept (too few non-coplanar lit observations)", 2: "no light", 3: "outside the mask"}
 
@@ -63,7 +65,7 @@ def photometric_stereo(
     light_irradiance: np.ndarray,
     mask: np.ndarray | None = None,
     *,
-    robust: bool = True,
+    robust: str = "tukey",
     shadow_fraction: float = 0.05,
     saturation: float | None = None,
 ) -> PsResult:
@@ -83,14 +85,27 @@ def photometric_stereo(
         (K, 3) RGB irradiance of each light.
     mask : numpy.ndarray, optional
         (H, W) bool; default every pixel.
-    robust : bool
-        Per pixel, drop observations in shadow (channel sum below `shadow_fraction` of the
-        pixel's brightest) or saturated, and re-solve from the rest when at least 3
-        non-coplanar lights remain (else keep the full fit and flag the pixel).
+    robust : {"tukey", "threshold", "trim", "none"}
+        Which observations each pixel's fit uses. Every mode but ``"none"`` leaves saturated
+        observations out.
+
+        - ``"tukey"`` (default): from the threshold fit, re-weight every observation that
+          the fit lights by Tukey's biweight of its residual over the pixel's robust scale
+          (1.4826 × the median absolute residual; weight 0 beyond 2.5 scales), until the fit
+          settles. Soft and cast shadows fall below the fit, highlights above it.
+        - ``"threshold"``: drop observations in shadow (channel sum below `shadow_fraction`
+          of the pixel's brightest) and re-solve from the rest.
+        - ``"trim"``: keep the observations between the darkest 40 % and the brightest
+          20 % of the pixel's.
+        - ``"none"``: plain least squares on every observation.
+
+        Where a mode leaves fewer than 3 non-coplanar lights (4 for Tukey), the pixel keeps
+        the fit before it (the full fit for threshold and trim, flagged; the threshold fit
+        for Tukey).
     shadow_fraction : float
-        Shadow threshold of the robust mode.
+        Shadow threshold of the threshold mode (and the Tukey mode's start).
     saturation : float, optional
-        Raw value at or above which an observation is saturated (robust mode).
+        Raw value at or above which an observation is saturated.
 
     Returns
     -------
@@ -100,7 +115,8 @@ def photometric_stereo(
     ------
     IrtpsError
         Fewer than 3 lights, coplanar lights, shapes that disagree, a
-        ``shadow_fraction`` outside [0, 1) or a ``saturation`` that is not positive.
+        ``shadow_fraction`` outside [0, 1), a ``saturation`` that is not positive or an
+        unknown ``robust`` mode.
 
     Examples
     --------
@@ -118,6 +134,8 @@ def photometric_stereo(
     mask = np.ones(images.shape[1:3], bool) if mask is None else np.ascontiguousarray(mask, dtype=bool)
     directions = np.ascontiguousarray(light_directions, dtype=np.float32)
     irradiance = np.ascontiguousarray(light_irradiance, dtype=np.float32)
+    if robust not in ROBUST_MODES:
+        raise IrtpsError(f"robust: unknown mode {robust!r}; expected one of {', '.join(ROBUST_MODES)}")
     if not 0 <= shadow_fraction < 1:
         raise IrtpsError(f"shadow_fraction: {shadow_fraction} is not in [0, 1)")
     if saturation is not None and not (np.isfinite(saturation) and saturation > 0):

@@ -232,7 +232,7 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, **options)
     return dataset, result
 
 
-def _check_input(dataset: Dataset, saturation: float | None, robust: bool) -> None:
+def _check_input(dataset: Dataset, saturation: float | None, robust: str) -> None:
     """Refuse lights that cannot determine a normal and images black on the whole object;
     warn about saturated observations."""
     source = dataset.source or "the data set"
@@ -248,7 +248,7 @@ def _check_input(dataset: Dataset, saturation: float | None, robust: bool) -> No
     saturated = (observed >= saturation).any(axis=2)
     count = int(saturated.sum())
     if count:
-        fate = "left out of the fit" if robust else "used as they are (robust mode is off)"
+        fate = "used as they are (robust mode none)" if robust == "none" else "left out of the fit"
         images = int(saturated.any(axis=1).sum())
         warnings.warn(
             f"{source}: {count} observations in {images} images are saturated (a channel at or above {saturation:g}); {fate}",

@@ -1,0 +1,373 @@
+//! The per-pixel robust fits of photometric stereo: Tukey re-weighting and rank trimming.
+//!
+//! Unlike the streaming least-squares fit of [`crate::ps`], these need each pixel's
+//! observations together. The object's pixels are taken in tiles of [`TILE`]; a tile's
+//! observations are gathered pixel-major (each pixel's channel-summed `b` of every light,
+//! then its RGB for the albedo) and each pixel is fitted on its own:
+//!
+//! - **Tukey** starts from the threshold fit (observations above `shadow_fraction` of the
+//!   pixel's brightest) and re-weights every observation that the fit lights (`l·g > 0`) by
+//!   Tukey's biweight `(1 − u²)²` of its residual `u` in units of [`TUKEY_SCALES`] robust
+//!   scales (1.4826 × the median absolute residual of the lit observations), until the fit
+//!   moves by less than [`TUKEY_SETTLED`] of its length. Soft and cast shadows fall below
+//!   the fit, highlights above it: both lose their weight, attached shadows carry none.
+//! - **Trim** keeps the observations between the darkest [`TRIM_DARKEST`] and the brightest
+//!   [`TRIM_BRIGHTEST`] of the pixel's.
+//!
+//! Saturated observations are left out of both. The weighted sums run over the lights in
+//! groups of [`LANES`] so that they vectorise.
+
+use glam::{Mat3, Vec3};
+use rayon::prelude::*;
+
+use crate::ps::{finish, flag, PixelFit, COPLANAR_RATIO};
+
+/// Tukey's biweight constant, in robust scales: an observation whose residual is beyond
+/// 2.5 scales carries no weight. Below the 4.685 of 95 % Gaussian efficiency, because the
+/// scale is measured on the contaminated observations themselves and so overstates the
+/// noise where shadows and highlights are many.
+pub const TUKEY_SCALES: f32 = 2.5;
+/// Largest number of re-weightings.
+pub const TUKEY_ITERATIONS: usize = 20;
+/// Re-weighting stops when the fit moves by less than this fraction of its length (a
+/// step of 0.17° or less).
+pub const TUKEY_SETTLED: f32 = 3e-3;
+/// The trim mode drops this fraction of each pixel's darkest observations...
+pub const TRIM_DARKEST: f32 = 0.4;
+/// ...and this fraction of its brightest.
+pub const TRIM_BRIGHTEST: f32 = 0.2;
+/// Pixels per tile: a tile's observations stay in the core's caches.
+const TILE: usize = 64;
+/// Lights summed side by side.
+const LANES: usize = 8;
+/// Fewest observations with weight that a re-weighted fit needs.
+const TUKEY_MIN: usize = 4;
+/// Median absolute deviation to the standard deviation of a normal distribution.
+const MAD_TO_SIGMA: f32 = 1.4826;
+/// Least robust scale, as a fraction of the fit's length (noise-free data).
+const SCALE_FLOOR: f32 = 1e-4;
+
+/// How a pixel's observations are weighted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Weighting {
+    /// Tukey re-weighting from the threshold fit.
+    Tukey,
+    /// Rank trimming.
+    Trim,
+}
+
+/// The lights, structure of arrays, padded with zero directions to a multiple of [`LANES`].
+pub(crate) struct Lights {
+    /// Number of real lights.
+    count: usize,
+    /// x, y, z of each direction.
+    direction: [Vec<f32>; 3],
+    /// xx, xy, xz, yy, yz, zz of each direction.
+    outer: [Vec<f32>; 6],
+    /// π / E_kc, per light and channel.
+    scale: Vec<[f32; 3]>,
+    /// Raw saturation level times π / E_kc, per light and channel (∞ when off).
+    saturated_b: Vec<[f32; 3]>,
+    /// Σ l lᵀ over every light.
+    gram: Mat3,
+}
+
+impl Lights {
+    /// From unit `directions`, `scale` = π / E and the saturated level of `b` per light.
+    pub fn new(directions: &[Vec3], scale: &[[f32; 3]], saturated_b: &[[f32; 3]], gram: Mat3) -> Lights {
+        let padded = directions.len().div_ceil(LANES) * LANES;
+        let component = |f: &dyn Fn(Vec3) -> f32| {
+            let mut v: Vec<f32> = directions.iter().map(|&l| f(l)).collect();
+            v.resize(padded, 0.0);
+            v
+        };
+        Lights {
+            count: directions.len(),
+            direction: [component(&|l| l.x), component(&|l| l.y), component(&|l| l.z)],
+            outer: [
+                component(&|l| l.x * l.x),
+                component(&|l| l.x * l.y),
+                component(&|l| l.x * l.z),
+                component(&|l| l.y * l.y),
+                component(&|l| l.y * l.z),
+                component(&|l| l.z * l.z),
+            ],
+            scale: scale.to_vec(),
+            saturated_b: saturated_b.to_vec(),
+            gram,
+        }
+    }
+
+    fn padded(&self) -> usize {
+        self.direction[0].len()
+    }
+
+    fn direction(&self, k: usize) -> Vec3 {
+        Vec3::new(self.direction[0][k], self.direction[1][k], self.direction[2][k])
+    }
+
+    /// `g · l_k`.
+    #[inline]
+    fn predicted(&self, g: Vec3, k: usize) -> f32 {
+        g.x * self.direction[0][k] + g.y * self.direction[1][k] + g.z * self.direction[2][k]
+    }
+}
+
+/// Channel-summed `b` of a saturated observation: so large that its residual gives it no
+/// weight, finite so that a zero weight times it adds nothing.
+const SATURATED: f32 = f32::MAX;
+
+/// One pixel's observations, pixel-major.
+struct Pixel<'a> {
+    /// Channel-summed `b` of each light ([`SATURATED`] when saturated, 0 for padding).
+    grey: &'a [f32],
+    /// RGB `b` of each light.
+    rgb: &'a [[f32; 3]],
+}
+
+/// A tile's working memory.
+#[derive(Default)]
+struct Scratch {
+    grey: Vec<f32>,
+    rgb: Vec<[f32; 3]>,
+    work: Work,
+}
+
+/// One pixel's working memory, one value per (padded) light.
+#[derive(Default)]
+struct Work {
+    /// Weights of the fit kept.
+    weight: Vec<f32>,
+    /// Weights tried next.
+    candidate: Vec<f32>,
+    residual: Vec<f32>,
+    /// Bits of each absolute residual (Tukey).
+    keys: Vec<u32>,
+    /// [`order_key`] of each observation, with the light in the low half (trim).
+    order: Vec<u64>,
+}
+
+/// Fits the pixels where `mask` is true from `images` laid out `(K, pixels, 3)`: (pixel
+/// index, fit) in pixel order.
+pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, weighting: Weighting, shadow_fraction: f32) -> Vec<(usize, PixelFit)> {
+    let n = mask.len();
+    let pixels: Vec<usize> = mask.iter().enumerate().filter_map(|(i, &m)| m.then_some(i)).collect();
+    let tiles: Vec<Vec<(usize, PixelFit)>> = pixels
+        .par_chunks(TILE)
+        .map_init(
+            || Box::new(Scratch::default()),
+            |scratch, tile| {
+                gather(images, n, tile, lights, scratch);
+                let padded = lights.padded();
+                (0..tile.len())
+                    .map(|i| {
+                        let Scratch { grey, rgb, work } = &mut **scratch;
+                        let pixel = Pixel { grey: &grey[i * padded..][..padded], rgb: &rgb[i * lights.count..][..lights.count] };
+                        let fit = match weighting {
+                            Weighting::Tukey => tukey(&pixel, lights, shadow_fraction, work),
+                            Weighting::Trim => trim(&pixel, lights, work),
+                        };
+                        (tile[i], fit)
+                    })
+                    .collect()
+            },
+        )
+        .collect();
+    tiles.into_iter().flatten().collect()
+}
+
+/// Copies the tile's observations into `scratch`, pixel-major.
+fn gather(images: &[f32], n: usize, tile: &[usize], lights: &Lights, scratch: &mut Scratch) {
+    let (count, padded) = (lights.count, lights.padded());
+    scratch.grey.clear();
+    scratch.grey.resize(tile.len() * padded, 0.0);
+    scratch.rgb.resize(tile.len() * count, [0.0; 3]);
+    for k in 0..count {
+        let (s, sat) = (lights.scale[k], lights.saturated_b[k]);
+        let image = &images[k * n * 3..][..n * 3];
+        for (i, &pixel) in tile.iter().enumerate() {
+            let raw = &image[pixel * 3..pixel * 3 + 3];
+            let b = [raw[0] * s[0], raw[1] * s[1], raw[2] * s[2]];
+            scratch.rgb[i * count + k] = b;
+            let unsaturated = b[0] < sat[0] && b[1] < sat[1] && b[2] < sat[2];
+            scratch.grey[i * padded + k] = if unsaturated { b[0] + b[1] + b[2] } else { SATURATED };
+        }
+    }
+}
+
+/// The weighted sums of the normal's fit, Σ w l lᵀ and Σ w l b (channel sum), over the
+/// lights in [`LANES`] side by side.
+fn weighted_sums(pixel: &Pixel, lights: &Lights, weight: &[f32]) -> (Mat3, Vec3) {
+    let mut gram = [[0.0f32; LANES]; 6];
+    let mut rhs = [[0.0f32; LANES]; 3];
+    for start in (0..weight.len()).step_by(LANES) {
+        let w = &weight[start..start + LANES];
+        let b = &pixel.grey[start..start + LANES];
+        for m in 0..6 {
+            let ll = &lights.outer[m][start..start + LANES];
+            for i in 0..LANES {
+                gram[m][i] += w[i] * ll[i];
+            }
+        }
+        for j in 0..3 {
+            let l = &lights.direction[j][start..start + LANES];
+            for i in 0..LANES {
+                rhs[j][i] += w[i] * b[i] * l[i];
+            }
+        }
+    }
+    let sum = |lanes: &[f32; LANES]| lanes.iter().sum::<f32>();
+    let g = gram.map(|m| sum(&m));
+    let gram = Mat3::from_cols(Vec3::new(g[0], g[1], g[2]), Vec3::new(g[1], g[3], g[4]), Vec3::new(g[2], g[4], g[5]));
+    (gram, Vec3::new(sum(&rhs[0]), sum(&rhs[1]), sum(&rhs[2])))
+}
+
+/// `g = G⁻¹ r` when at least `fewest` weighted observations fix it, their lights not
+/// (nearly) coplanar.
+fn solved(gram: Mat3, rhs: Vec3, count: usize, fewest: usize) -> Option<Vec3> {
+    if count < fewest || !well_posed(gram) {
+        return None;
+    }
+    let g = gram.inverse() * rhs;
+    (g.is_finite() && g != Vec3::ZERO).then_some(g)
+}
+
+/// Whether the smallest eigenvalue λ₁ of the Gram matrix `gram` is at least
+/// [`COPLANAR_RATIO`] times its largest λ₃, by a test without the eigenvalues: λ₁ ≥
+/// det / m₂ (m₂ = λ₁λ₂ + λ₁λ₃ + λ₂λ₃, the sum of its principal 2×2 minors) and λ₃ ≤ trace, so
+/// det ≥ ratio · trace · m₂ is enough (and at most 9 times stricter than needed).
+fn well_posed(gram: Mat3) -> bool {
+    let a = gram.to_cols_array_2d();
+    let trace = a[0][0] + a[1][1] + a[2][2];
+    let minors = a[0][0] * a[1][1] - a[0][1] * a[1][0] + a[0][0] * a[2][2] - a[0][2] * a[2][0] + a[1][1] * a[2][2] - a[1][2] * a[2][1];
+    gram.determinant() >= COPLANAR_RATIO * trace * minors && trace > 0.0
+}
+
+/// Normal and albedo from the final `weight`s (RGB sums for the albedo).
+fn weighted_fit(pixel: &Pixel, lights: &Lights, weight: &[f32], gram: Mat3, count: usize, fitted: u8) -> PixelFit {
+    let mut rhs = [Vec3::ZERO; 3];
+    for (k, b) in pixel.rgb.iter().enumerate() {
+        if weight[k] > 0.0 {
+            let l = lights.direction(k) * weight[k];
+            for c in 0..3 {
+                rhs[c] += l * b[c];
+            }
+        }
+    }
+    match finish(gram, rhs) {
+        Some((normal, albedo)) => PixelFit { normal, albedo, flag: fitted, used: count as u16 },
+        None => PixelFit::dark(count as u16),
+    }
+}
+
+/// Plain least squares on every observation, saturated ones included: the fit kept when a
+/// robust selection leaves too few.
+fn full_fit(pixel: &Pixel, lights: &Lights) -> PixelFit {
+    let mut rhs = [Vec3::ZERO; 3];
+    for (k, b) in pixel.rgb.iter().enumerate() {
+        let l = lights.direction(k);
+        for c in 0..3 {
+            rhs[c] += l * b[c];
+        }
+    }
+    match finish(lights.gram, rhs) {
+        Some((normal, albedo)) => PixelFit { normal, albedo, flag: flag::FULL_FIT, used: lights.count as u16 },
+        None => PixelFit::dark(lights.count as u16),
+    }
+}
+
+/// Floats as integers in the same order (negative ones below positive ones; NaN last).
+#[inline]
+fn order_key(value: f32) -> u32 {
+    let bits = value.to_bits();
+    if value.is_nan() {
+        u32::MAX
+    } else if bits >> 31 == 1 {
+        !bits
+    } else {
+        bits | 0x8000_0000
+    }
+}
+
+
+
+fn tukey(pixel: &Pixel, lights: &Lights, shadow_fraction: f32, work: &mut Work) -> PixelFit {
+    let padded = lights.padded();
+    let brightest = pixel.grey.iter().copied().filter(|&b| b < SATURATED).fold(0.0f32, f32::max);
+    let level = shadow_fraction * brightest;
+    let Work { weight, candidate, residual, keys, .. } = work;
+    weight.clear();
+    weight.extend(pixel.grey.iter().map(|&b| if b > level && b < SATURATED { 1.0 } else { 0.0 }));
+    let mut count = weight.iter().filter(|&&w| w > 0.0).count();
+    let (mut gram, rhs) = weighted_sums(pixel, lights, weight);
+    let Some(mut g) = solved(gram, rhs, count, 3) else {
+        return full_fit(pixel, lights);
+    };
+    residual.resize(padded, 0.0);
+    candidate.resize(padded, 0.0);
+    keys.resize(padded, 0);
+    for _ in 0..TUKEY_ITERATIONS {
+        // Residuals of the unsaturated observations the fit lights; NaN for the others.
+        let mut lit = 0usize;
+        for k in 0..padded {
+            let (b, predicted) = (pixel.grey[k], lights.predicted(g, k));
+            let use_it = predicted > 0.0 && b < SATURATED;
+            let r = if use_it { b - predicted } else { f32::NAN };
+            residual[k] = r;
+            // The bits of |r| order as the values do, NaN after every number.
+            keys[k] = r.to_bits() & 0x7fff_ffff;
+            lit += usize::from(use_it);
+        }
+        if lit < TUKEY_MIN {
+            break;
+        }
+        // NaN keys sort last: the median of the lit observations' absolute residuals.
+        let median = f32::from_bits(*keys.select_nth_unstable(lit / 2).1);
+        let inverse = 1.0 / (TUKEY_SCALES * (MAD_TO_SIGMA * median).max(SCALE_FLOOR * g.length()));
+        let mut next_count = 0usize;
+        for (w, &r) in candidate.iter_mut().zip(residual.iter()) {
+            let u = r * inverse;
+            let inside = u.abs() < 1.0;
+            *w = if inside { (1.0 - u * u) * (1.0 - u * u) } else { 0.0 };
+            next_count += usize::from(inside);
+        }
+        let (next_gram, rhs) = weighted_sums(pixel, lights, candidate);
+        let Some(next) = solved(next_gram, rhs, next_count, TUKEY_MIN) else { break };
+        let settled = (next - g).length() <= TUKEY_SETTLED * g.length();
+        (g, gram, count) = (next, next_gram, next_count);
+        std::mem::swap(weight, candidate);
+        if settled {
+            break;
+        }
+    }
+    weighted_fit(pixel, lights, weight, gram, count, flag::OK)
+}
+
+fn trim(pixel: &Pixel, lights: &Lights, work: &mut Work) -> PixelFit {
+    let count = lights.count;
+    let Work { weight, order, .. } = work;
+    order.clear();
+    order.extend(pixel.grey[..count].iter().enumerate().map(|(k, &b)| (u64::from(order_key(b)) << 32) | k as u64));
+    order.sort_unstable();
+    let darkest = (TRIM_DARKEST * count as f32).round() as usize;
+    let brightest = (TRIM_BRIGHTEST * count as f32).round() as usize;
+    weight.clear();
+    weight.resize(lights.padded(), 0.0);
+    for &key in &order[darkest..count - brightest] {
+        let k = (key & 0xffff_ffff) as usize;
+        weight[k] = if pixel.grey[k] < SATURATED { 1.0 } else { 0.0 };
+    }
+    let kept = weight.iter().filter(|&&w| w > 0.0).count();
+    let (gram, rhs) = weighted_sums(pixel, lights, weight);
+    if solved(gram, rhs, kept, 3).is_some() {
+        return weighted_fit(pixel, lights, weight, gram, kept, flag::OK);
+    }
+    // Too few lights to trim: every unsaturated observation, flagged.
+    weight.iter_mut().zip(pixel.grey).for_each(|(w, &b)| *w = if b < SATURATED { 1.0 } else { 0.0 });
+    let unsaturated = weight[..count].iter().filter(|&&w| w > 0.0).count();
+    let (gram, rhs) = weighted_sums(pixel, lights, weight);
+    if solved(gram, rhs, unsaturated, 3).is_some() {
+        return weighted_fit(pixel, lights, weight, gram, unsaturated, flag::FULL_FIT);
+    }
+    full_fit(pixel, lights)
+}
