@@ -22,6 +22,7 @@ from irtps.options import ClusterOptions, OptionError, ReconstructOptions, Rende
 from irtps.output_rule import check_output, escaped
 from irtps.paths import check_folder, resolve_path
 from irtps.placement import format_placement
+from irtps.radiometry import format_albedo_scale
 from irtps.reconstruct import load_and_reconstruct, load_reconstruction, save_reconstruction
 from irtps.render import Rendering, render
 from irtps.surface import height_to_normals
@@ -80,6 +81,8 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
         print(f"reconstructed {args.data} ({options.method}; {stages}) -> {args.out}")
         print(f"  placement: {format_placement(result.placement)}")
+        if result.albedo_scale is not None:
+            print(f"  {format_albedo_scale(result.albedo_scale)}")
         for step in result.history:
             residual = f"  residual {step.residual['object']:.4f}"
             if step.residual.get("surroundings") is not None:

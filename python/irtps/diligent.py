@@ -94,6 +94,7 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
     scene = Scene(
         camera=Camera(width=size[1], height=size[0], pixel_size=1.0),
         lights=tuple(Light(direction=d, irradiance=e) for d, e in zip(directions, intensities, strict=True)),
+        relative_irradiance=True,  # light_intensities.txt: relative RGB intensities
     )
     return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=png_saturation(image_paths))
 

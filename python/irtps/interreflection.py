@@ -8,12 +8,8 @@ the next estimate of the inter-reflections, and the rendering's residual against
 corrected images A₀ − Eₜ. The result is the pass with the lowest residual, pass 0
 included: IRT-PS never returns worse than classic photometric stereo by its own measure.
 
-The same rendering tells which observations the reconstruction has in shadow (cast or
-attached); in robust mode the next pass leaves them out of its fit, as photometric stereo
-leaves out the dark observations of the input. After subtraction, a shadowed observation
-still holds whatever inter-reflected light the estimate missed, often above the darkness
-threshold, and would pull the normal toward the light; measured, this took pedestal_cornell
-from 8.23° to 7.85° and grooves_dark from 3.59° to 3.21° (8 passes), cap_cornell unchanged.
+When the data set's irradiance is relative, the reconstruction is rendered with the
+reflectance and irradiance of the albedo scale estimated at pass 0 (`irtps.radiometry`).
 
 The estimate Eₜ moves toward each new rendering by a step that adapts to how the loop
 converges (a secant estimate of its contraction): above 1 where the estimates converge
@@ -35,8 +31,9 @@ from irtps.errors import IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
 from irtps.paper_estimator import paper_indirect
-from irtps.pipeline import fit_photometric_stereo, place_surface, placed, resolve_options, surface_relief
+from irtps.pipeline import fit_photometric_stereo, place_surface, placed, rendered_as, resolve_albedo_scale, resolve_options, surface_relief
 from irtps.placement import Placement
+from irtps.radiometry import AlbedoScale
 from irtps.ps import PsResult
 from irtps.residual import Residual, compared_observations, render_with_residual
 from irtps.surface import surface_albedo
@@ -90,7 +87,7 @@ class Iteration:
 class InterreflectionResult:
     """The chosen pass (lowest residual): its fit, albedo (`irtps.surface.surface_albedo`
     of its fit), placed height, the estimate subtracted to get its images (None for pass 0),
-    the placement, and every pass's record."""
+    the placement, the albedo scale it rendered with, and every pass's record."""
 
     fit: PsResult
     albedo: np.ndarray
@@ -99,6 +96,7 @@ class InterreflectionResult:
     history: list[Iteration]
     placement: Placement
     chosen: int = 0
+    albedo_scale: AlbedoScale | None = None
 
 
 def remove_interreflections(
@@ -123,6 +121,9 @@ def remove_interreflections(
         - ``iterations``: largest number of corrections;
         - ``samples``: camera paths per pixel of each indirect estimate;
         - ``seed``: seed of the first estimate; pass t uses ``seed + t``;
+        - ``albedo_scale``: ``"auto"`` estimates the factor from fitted albedo to
+          reflectance at pass 0 when the irradiance is relative (`irtps.radiometry`), 1
+          otherwise; a number gives it;
         - ``base_height``: ``"auto"`` estimates the placement from the floor around the
           object at pass 0 (`irtps.placement`) and refines it as the shape changes;
           ``"boundary"`` or a number as for `irtps.reconstruct`;
@@ -130,10 +131,8 @@ def remove_interreflections(
           module); a number in (0, 2) fixes it (1 takes each new estimate whole);
         - ``early_stop``: stop after two passes in a row whose residual does not fall
           below the best so far by twice its Monte-Carlo noise;
-        - ``update``: ``"original"``: Aₜ₊₁ = A₀ − Eₜ (default), with the observations in
-          shadow in the rendering left out of the next fit (robust mode); ``"previous"``:
-          the paper's literal Aₜ₊₁ = Aₜ − Eₜ, without. Corrected images are kept
-          non-negative;
+        - ``update``: ``"original"``: Aₜ₊₁ = A₀ − Eₜ (default); ``"previous"``: the paper's
+          literal Aₜ₊₁ = Aₜ − Eₜ. Corrected images are kept non-negative;
         - ``integration``: default ``"footprint"``, which keeps creases, and so the
           rendered concavities as deep as the real ones;
         - ``stride``: 1 estimates the indirect light at every pixel; s > 1 at one pixel in
@@ -176,6 +175,7 @@ def remove_interreflections(
     previous_height = None
     previous_relief = None
     placement = None
+    albedo_scale = None
     best = None
     stalled = 0
     history: list[Iteration] = []
@@ -188,18 +188,23 @@ def remove_interreflections(
             start = time.perf_counter()
             relief = surface_relief(dataset, fit.normals, options)
             timings["integration"] = time.perf_counter() - start
-            albedo = surface_albedo(fit.albedo, relief, mask, pixel_size)
+            albedo = surface_albedo(fit.albedo, relief, mask, pixel_size, largest=None if scene.relative_irradiance else 1.0)
             start = time.perf_counter()
             shape_change = 0.0 if previous_relief is None else float(np.abs(relief - previous_relief)[mask].mean())
-            placement = place_surface(dataset, relief, albedo, options, seed=options.seed, previous=placement, shape_change=shape_change)
+            placement = place_surface(dataset, relief, albedo, options, seed=options.seed, previous=placement, shape_change=shape_change, albedo_scale=albedo_scale)
             timings["placement"] = time.perf_counter() - start
             height = placed(relief, mask, placement)
+            if albedo_scale is None:
+                start = time.perf_counter()
+                albedo_scale = resolve_albedo_scale(dataset, height, albedo, usable, options, seed=options.seed)
+                timings["albedo_scale"] = time.perf_counter() - start
+            render_scene, render_albedo = rendered_as(scene, albedo, albedo_scale)
             start = time.perf_counter()
             seed = options.seed + index
             rerendering = render_with_residual(
-                scene,
+                render_scene,
                 height,
-                albedo,
+                render_albedo,
                 mask,
                 original,
                 bounces=options.bounces,
@@ -207,7 +212,6 @@ def remove_interreflections(
                 seed=seed,
                 stride=options.stride,
                 usable=usable,
-                shadow_fraction=options.shadow_fraction if options.robust != "none" and options.update == "original" else None,
             )
             residual = rerendering.residual
             timings["rendering"] = time.perf_counter() - start
@@ -226,10 +230,9 @@ def remove_interreflections(
             if index == options.iterations or (options.early_stop and stalled == PATIENCE):
                 break
             if options.estimator == "paper":
-                estimate, estimate_noise = paper_indirect(scene, height, albedo, mask, reflections=options.bounces, seed=seed), 0.0
+                estimate, estimate_noise = paper_indirect(render_scene, height, render_albedo, mask, reflections=options.bounces, seed=seed), 0.0
             else:
                 estimate, estimate_noise = rerendering.indirect, float(rerendering.noise_energy[mask].sum())
-            shadowed = rerendering.shadowed
             del rerendering
             if options.update == "original":
                 if estimate_used is None:
@@ -243,8 +246,6 @@ def remove_interreflections(
                 estimate_used = estimate if estimate_used is None else estimate_used + record.step * change_of_estimate
                 previous_change = change_of_estimate[:, mask]  # all the step needs of it
                 images = _corrected(original, estimate_used, original, saturated)
-                if shadowed is not None:
-                    images[np.broadcast_to(shadowed, images.shape)] = 0.0
             else:
                 record.step = step
                 estimate_used = step * estimate
@@ -259,7 +260,9 @@ def remove_interreflections(
             IrtpsWarning,
             stacklevel=2,
         )
-    return InterreflectionResult(fit=fit, albedo=albedo, height=height, indirect=estimate_used, history=history, placement=placement, chosen=chosen)
+    return InterreflectionResult(
+        fit=fit, albedo=albedo, height=height, indirect=estimate_used, history=history, placement=placement, chosen=chosen, albedo_scale=albedo_scale
+    )
 
 
 def _postfix(residual: Residual, metrics: dict | None) -> dict:

@@ -269,6 +269,18 @@ class ReconstructOptions(_Options):
     iterations: int = _option(8, "largest number of corrections", int, low=0, high=MAX_ITERATIONS, group="IRT-PS")
     samples: int = _option(256, "camera paths per pixel per estimate", int, low=1, high=MAX_SAMPLES, group="IRT-PS")
     seed: int = _option(0, "random seed of the first estimate (pass t uses seed + t)", int, low=0, high=MAX_SEED, group="IRT-PS")
+    albedo_scale: float | str = _option(
+        "auto",
+        "factor from the fitted albedo to reflectance, for rendering the inter-reflections; auto: estimated from the images when the "
+        "irradiance is relative (DiLiGenT, or irradiance relative in scene.json), 1 when it is absolute",
+        float,
+        low=0.0,
+        high=1e6,
+        low_open=True,
+        words=("auto",),
+        metavar="F|auto",
+        group="IRT-PS",
+    )
     relaxation: float | str = _option(
         "auto",
         "step toward each new estimate: auto adapts it to how the estimates converge (over-relaxes a slow convergence, damps an oscillation); "

@@ -13,6 +13,8 @@ from irtps.integrate import integrate_normals, place_height
 from irtps.options import OptionError, ReconstructOptions
 from irtps.placement import PRECISION_PIXELS, Placement, estimate_placement, fallback_placement
 from irtps.ps import PsResult, photometric_stereo
+from irtps.scene import Scene
+from irtps.radiometry import AlbedoScale, absolute_scale, estimate_albedo_scale, scaled_albedo, scaled_scene
 
 #: Heights are float32 (24 significant bits): a surface placed further than this many pixel
 #: sizes from the origin keeps no precision for its relief.
@@ -73,7 +75,15 @@ def surface_relief(dataset: Dataset, normals: np.ndarray, options: ReconstructOp
 
 
 def place_surface(
-    dataset: Dataset, relief: np.ndarray, albedo: np.ndarray, options: ReconstructOptions, *, seed: int = 0, previous: Placement | None = None, shape_change: float = 0.0
+    dataset: Dataset,
+    relief: np.ndarray,
+    albedo: np.ndarray,
+    options: ReconstructOptions,
+    *,
+    seed: int = 0,
+    previous: Placement | None = None,
+    shape_change: float = 0.0,
+    albedo_scale: AlbedoScale | None = None,
 ) -> Placement:
     """Where the surface `relief` (boundary median at 0) stands (contract §6).
 
@@ -82,9 +92,12 @@ def place_surface(
     (`irtps.placement.estimate_placement`), with the fallback where nothing fixes it.
     Given the `previous` estimate, for a relief that changed by `shape_change` on average
     (world units), the estimate is refined within three times that change of it; the
-    fallback and given placements are kept.
+    fallback and given placements are kept. With an `albedo_scale` (relative irradiance),
+    the floor is rendered with the reflectance and the irradiance it implies.
     """
     scene = dataset.scene
+    if albedo_scale is not None:
+        scene, albedo = rendered_as(scene, albedo, albedo_scale)
     if previous is not None:
         radius = PLACEMENT_SEARCH_CHANGES * shape_change
         if previous.source != "images" or radius < PRECISION_PIXELS * scene.camera.pixel_size:
@@ -97,6 +110,27 @@ def place_surface(
     if options.base_height != "auto":
         return Placement(base_height=float(options.base_height), source="given")
     return estimate_placement(scene, relief, albedo, dataset.mask, dataset.images, bounces=options.bounces, saturation=options.saturation, seed=seed)
+
+
+def resolve_albedo_scale(
+    dataset: Dataset, height: np.ndarray, albedo: np.ndarray, usable: np.ndarray, options: ReconstructOptions, *, seed: int = 0
+) -> AlbedoScale:
+    """The factor from fitted albedo to reflectance (`irtps.radiometry`): the options'
+    number, else estimated from the images when the data set's irradiance is relative, else
+    1. `height` is the placed reconstruction, `usable` the observations compared."""
+    if options.albedo_scale != "auto":
+        return AlbedoScale(factor=float(options.albedo_scale), source="given")
+    if not dataset.scene.relative_irradiance:
+        return absolute_scale()
+    return estimate_albedo_scale(dataset.scene, height, albedo, dataset.mask, dataset.images, usable, bounces=options.bounces, seed=seed)
+
+
+def rendered_as(scene: Scene, albedo: np.ndarray, albedo_scale: AlbedoScale) -> tuple[Scene, np.ndarray]:
+    """The scene and albedo to render a reconstruction with: as they are for absolute
+    irradiance, else the reflectance and the irradiance that `albedo_scale` implies."""
+    if albedo_scale.source == "absolute":
+        return scene, albedo
+    return scaled_scene(scene, albedo_scale.factor), scaled_albedo(albedo, albedo_scale.factor)
 
 
 def placed(relief: np.ndarray, mask: np.ndarray, placement: Placement) -> np.ndarray:

@@ -21,6 +21,7 @@ from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
 from irtps.pipeline import fit_photometric_stereo, place_surface, placed, resolve_options, surface_relief
 from irtps.placement import Placement
+from irtps.radiometry import AlbedoScale
 from irtps.ps import FLAGS, check_lights
 from irtps.surface import surface_albedo
 
@@ -60,6 +61,9 @@ class Reconstruction:
     chosen : int or None
         IRT-PS: the pass returned, the one with the lowest residual (0: classic
         photometric stereo's).
+    albedo_scale : AlbedoScale or None
+        IRT-PS: the factor from the fitted albedo (``albedo``, in the units of the data
+        set's irradiance) to the reflectance it rendered (`irtps.radiometry`).
     """
 
     normals: np.ndarray
@@ -74,6 +78,7 @@ class Reconstruction:
     history: list[Iteration] = field(default_factory=list)
     placement: Placement | None = None
     chosen: int | None = None
+    albedo_scale: AlbedoScale | None = None
 
 
 def reconstruct(
@@ -159,6 +164,7 @@ def reconstruct(
             history=loop.history,
             placement=loop.placement,
             chosen=loop.chosen,
+            albedo_scale=loop.albedo_scale,
         )
     start = time.perf_counter()
     fit = fit_photometric_stereo(dataset, dataset.images, options)
@@ -298,6 +304,7 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             "placement": None if result.placement is None else result.placement.to_dict(),
             "history": [asdict(step) for step in result.history],
             "chosen_pass": result.chosen,
+            "albedo_scale": None if result.albedo_scale is None else result.albedo_scale.to_dict(),
         }
         if result.indirect is not None:
             (folder / "indirect").mkdir()
@@ -339,7 +346,7 @@ _RUN_FIELDS = {
     "history": (list,),
 }
 #: Fields that folders written by older versions of irtps lack.
-_OPTIONAL_RUN_FIELDS = {"pixel_size": (int, float), "placement": (dict, type(None)), "chosen_pass": (int, type(None))}
+_OPTIONAL_RUN_FIELDS = {"pixel_size": (int, float), "placement": (dict, type(None)), "chosen_pass": (int, type(None)), "albedo_scale": (dict, type(None))}
 _HISTORY_FIELDS = {"index": (int,), "height_change": (int, float, type(None)), "timings": (dict,), "metrics": (dict, type(None))}
 _JSON_TYPE_NAMES = {dict: "an object", list: "a list", str: "a string", int: "a number", float: "a number", type(None): "null"}
 
@@ -355,8 +362,9 @@ def load_run_record(path: str | Path) -> dict:
     Returns
     -------
     dict
-        The record as written by `save_reconstruction`. ``pixel_size``, ``placement`` and
-        ``chosen_pass`` are absent from folders written before irtps recorded them.
+        The record as written by `save_reconstruction`. ``pixel_size``, ``placement``,
+        ``chosen_pass`` and ``albedo_scale`` are absent from folders written before irtps
+        recorded them.
 
     Raises
     ------

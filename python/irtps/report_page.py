@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from irtps.evaluate import format_metrics
 from irtps.placement import format_placement
+from irtps.radiometry import format_albedo_scale
 
 if TYPE_CHECKING:
     from irtps.report import Report, ReportFigure
@@ -117,6 +118,8 @@ def _summary(report: Report) -> str:
     pixel_size = record.get("pixel_size")
     scale = "" if pixel_size is None else f", pixel size {pixel_size:g} (world units)"
     placement = "" if record.get("placement") is None else f" Placement: {format_placement(record['placement'])}."
+    if record.get("albedo_scale") is not None:
+        placement += f" {format_albedo_scale(record['albedo_scale']).capitalize()}."
     return f"{method} of {source}: {cols}×{rows} pixels, {report.object_pixels} on the object{scale}.{placement} Folder: {report.run_dir}."
 
 

@@ -74,16 +74,11 @@ class Rerendering:
     noise_energy : numpy.ndarray
         float64 (H, W): Σ over lights and channels of the Monte-Carlo variance of
         `indirect` at each pixel (from its two independent halves; 0 with one path).
-    shadowed : numpy.ndarray or None
-        bool (K, H, W, 1): observations in shadow in the rendering (its direct light, each
-        channel over its irradiance and summed, at most `shadow_fraction` of the pixel's
-        brightest, photometric stereo's rule), when a `shadow_fraction` was given.
     """
 
     indirect: np.ndarray
     residual: Residual
     noise_energy: np.ndarray
-    shadowed: np.ndarray | None = None
 
 
 def render_with_residual(
@@ -98,7 +93,6 @@ def render_with_residual(
     seed: int = 0,
     stride: int = 1,
     usable: np.ndarray | None = None,
-    shadow_fraction: float | None = None,
 ) -> Rerendering:
     """Render a reconstruction's inter-reflected light and its residual against `images`.
 
@@ -120,8 +114,6 @@ def render_with_residual(
     usable : numpy.ndarray, optional
         (K, H, W, 1) bool, the observations to compare (`compared_observations`); default
         all.
-    shadow_fraction : float, optional
-        Also tell which observations the rendering has in shadow (`Rerendering.shadowed`).
 
     Returns
     -------
@@ -154,7 +146,6 @@ def render_with_residual(
     rows = scene.camera.height
     indirect = np.empty(images.shape, dtype=np.float32)
     noise_energy = np.zeros(mask.shape)
-    shadowed = None if shadow_fraction is None else np.empty((*images.shape[:3], 1), dtype=bool)
     sums = _Sums(scene.floor is not None)
     if stride > 1:
         halves = [_sparse_frame(renderer, mask, bounces, count, half_seed, stride) for count, half_seed in zip((first, second), seeds) if count]
@@ -175,10 +166,8 @@ def render_with_residual(
             # Var(mean of halves of n1, n2 paths) = (n1 n2 / n²)·E|A − B|² for per-path variance shared.
             spread = np.square(parts[0] - parts[1], dtype=np.float64).sum(axis=(0, 3))
             noise_energy[start:stop] = spread * first * second / samples**2
-        if shadowed is not None:
-            shadowed[:, start:stop] = ~_lit(direct, scene.light_irradiance, shadow_fraction)
         sums.add(direct, parts, indirect[:, start:stop], images[:, start:stop], mask[start:stop], None if usable is None else usable[:, start:stop])
-    return Rerendering(indirect=indirect, residual=sums.residual(), noise_energy=noise_energy, shadowed=shadowed)
+    return Rerendering(indirect=indirect, residual=sums.residual(), noise_energy=noise_energy)
 
 
 def compared_observations(

@@ -31,6 +31,8 @@ UNIT_TOLERANCE = 1e-3
 
 _WALLS = ("left", "right", "back", "front")
 _SCENE_KEYS = ("format", "camera", "lights", "floor", "environment")
+#: Values of the optional top-level ``irradiance`` field.
+IRRADIANCE_KINDS = ("absolute", "relative")
 _BOX_KEYS = ("type", "x", "y", "z_top", "albedo")
 
 
@@ -145,12 +147,17 @@ class Scene:
         None means there is no floor.
     environment : CornellBox or None
         None means nothing surrounds the object and the floor.
+    relative_irradiance : bool
+        The lights' irradiance is known only up to one common factor (``"irradiance":
+        "relative"`` in ``scene.json``; DiLiGenT's intensities): the fitted albedo is the
+        reflectance over that factor, which IRT-PS estimates (`irtps.radiometry`).
     """
 
     camera: Camera
     lights: tuple[Light, ...]
     floor: Floor | None = None
     environment: CornellBox | None = None
+    relative_irradiance: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "lights", tuple(self.lights))
@@ -187,16 +194,19 @@ def parse_scene(obj: object, source: str = "scene.json") -> Scene:
         the message names the field path, e.g. ``lights[3].direction``.
     """
     fields = _Fields(source)
-    scene_format = fields.mapping(obj, "", required=("format",), optional=_SCENE_KEYS)["format"]
+    scene_format = fields.mapping(obj, "", required=("format",), optional=(*_SCENE_KEYS, "irradiance"))["format"]
     if scene_format != FORMAT:
         fields.fail("format", f"is {scene_format!r}: unknown format (expected {FORMAT!r})")
-    root = fields.mapping(obj, "", required=_SCENE_KEYS)
+    root = fields.mapping(obj, "", required=_SCENE_KEYS, optional=("irradiance",))
+    irradiance = root.get("irradiance", "absolute")
+    if irradiance not in IRRADIANCE_KINDS:
+        fields.fail("irradiance", f"is {irradiance!r}: expected one of {', '.join(map(repr, IRRADIANCE_KINDS))}")
     camera = _parse_camera(fields, root["camera"])
     lights = _parse_lights(fields, root["lights"])
     floor = None if root["floor"] is None else _parse_floor(fields, root["floor"])
     floor_height = 0.0 if floor is None else floor.height
     environment = _parse_environment(fields, root["environment"], floor_height)
-    return Scene(camera=camera, lights=lights, floor=floor, environment=environment)
+    return Scene(camera=camera, lights=lights, floor=floor, environment=environment, relative_irradiance=irradiance == "relative")
 
 
 def scene_to_dict(scene: Scene) -> dict:
@@ -227,7 +237,7 @@ def scene_to_dict(scene: Scene) -> dict:
         if scene.floor is None
         else {"height": float(scene.floor.height), "albedo": _floats(scene.floor.albedo)},
         "environment": _environment_to_dict(scene.environment),
-    }
+    } | ({"irradiance": "relative"} if scene.relative_irradiance else {})
 
 
 def load_scene(path: str | Path) -> Scene:

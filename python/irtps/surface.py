@@ -98,14 +98,16 @@ def footprint_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 
     return normals / np.maximum(weight, 1.0)[..., None]
 
 
-def surface_albedo(albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0) -> np.ndarray:
+def surface_albedo(albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0, *, largest: float | None = 1.0) -> np.ndarray:
     """The albedo of the triangulated surface that explains photometric stereo's fit.
 
     Photometric stereo measures ``ρ·n̄``, with ``n̄`` the mean unit normal over the pixel's
     footprint (`irtps.surface.footprint_normals`); where the surface bends inside a footprint,
     ``|n̄| < 1`` and the fitted albedo reads low (by 30 % on the crease of a right-angled
     V-groove). Rendering the surface with that albedo would darken every bounce off a crease.
-    This divides by ``|n̄|`` of the surface `height` (not below 0.5) and clips to [0, 1].
+    This divides by ``|n̄|`` of the surface `height` (not below 0.5) and clips to
+    [0, `largest`] (no upper bound when `largest` is None: an albedo fitted under relative
+    irradiance is in the irradiance's units, see `irtps.radiometry`).
 
     Parameters
     ----------
@@ -128,7 +130,7 @@ def surface_albedo(albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, 
     [0.5, 0.7071, 0.5]
     """
     length = np.linalg.norm(footprint_normals(height, mask, pixel_size), axis=-1)
-    return np.clip(albedo_ps / np.maximum(length, 0.5)[..., None], 0.0, 1.0).astype(np.float32)
+    return np.clip(albedo_ps / np.maximum(length, 0.5)[..., None], 0.0, largest).astype(np.float32)
 
 
 def _unit_normals(dz_dx: np.ndarray, dz_drow: np.ndarray) -> np.ndarray:
