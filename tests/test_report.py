@@ -87,6 +87,7 @@ def test_irtps_run_gets_every_figure_and_a_self_contained_page(run_copy):
     assert text.count("<tr><td>") == len(run["history"])  # one row per pass
     # The placement and how it was decided, each pass's residual, and the pass chosen.
     assert f"Placement: boundary at height {run['placement']['base_height']:.4g}, estimated from the floor around the object" in text
+    assert run["albedo_scale"]["source"] == "absolute" and "Albedo scale 1 (the irradiance is absolute)." in text
     chosen = run["chosen_pass"]
     assert f"the result is pass {chosen}" in text
     assert f"<tr><td>{chosen} (result)</td><td>{run['history'][chosen]['residual']['object']:.4f}</td>" in text

@@ -278,7 +278,9 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="examples:\n  irtps reconstruct shared/data/diligent/ballPNG --out ball\n"
         "  irtps reconstruct shared/data/mitsuba/cap_cornell --out cap_irtps --method irtps --bounces 3\n"
         "  irtps reconstruct cavity --out cavity_ps --integration mestimator\n"
-        "  irtps reconstruct capture --out capture_ps --saturation 0.99 --base-height boundary",
+        "  irtps reconstruct capture --out capture_ps --saturation 0.99 --base-height boundary\n"
+        "  irtps reconstruct shared/data/diligent/readingPNG --out reading --robust trim\n"
+        "  irtps reconstruct rig_capture --out rig --method irtps --albedo-scale 0.8",
     )
     p.add_argument("data", type=Path, help="data set folder")
     p.add_argument("--out", type=Path, required=True, help="output folder")
