@@ -155,31 +155,31 @@ impl Fit {
         let k_count = self.directions.len();
         let n = mask.len();
         out.normals
-        .par_chunks_mut(TILE)
-        .zip(out.albedo.par_chunks_mut(TILE))
-        .zip(out.flags.par_chunks_mut(TILE))
-        .zip(out.used.par_chunks_mut(TILE))
-        .enumerate()
-        .for_each_init(
-            || Box::new(Sums::default()),
-            |sums, (tile, (((normals, albedo), flags), used))| {
-                let start = tile * TILE;
-                let pixels = normals.len();
-                let tile_mask = &mask[start..start + pixels];
-                if !tile_mask.iter().any(|&m| m) {
-                    return;
-                }
-                let src = |k: usize| &images[(k * n + start) * 3..][..pixels * 3];
-                self.accumulate_tile(src, sums, pixels);
-                for (p, _) in tile_mask.iter().enumerate().filter(|(_, &m)| m) {
-                    let (normal, rho, f, count) = self.solve(sums, p, || (0..k_count).map(|k| self.observation(src(k), k, p)));
-                    normals[p] = normal;
-                    albedo[p] = rho;
-                    flags[p] = f;
-                    used[p] = count;
-                }
-            },
-        );
+            .par_chunks_mut(TILE)
+            .zip(out.albedo.par_chunks_mut(TILE))
+            .zip(out.flags.par_chunks_mut(TILE))
+            .zip(out.used.par_chunks_mut(TILE))
+            .enumerate()
+            .for_each_init(
+                || Box::new(Sums::default()),
+                |sums, (tile, (((normals, albedo), flags), used))| {
+                    let start = tile * TILE;
+                    let pixels = normals.len();
+                    let tile_mask = &mask[start..start + pixels];
+                    if !tile_mask.iter().any(|&m| m) {
+                        return;
+                    }
+                    let src = |k: usize| &images[(k * n + start) * 3..][..pixels * 3];
+                    self.accumulate_tile(src, sums, pixels);
+                    for (p, _) in tile_mask.iter().enumerate().filter(|(_, &m)| m) {
+                        let (normal, rho, f, count) = self.solve(sums, p, || (0..k_count).map(|k| self.observation(src(k), k, p)));
+                        normals[p] = normal;
+                        albedo[p] = rho;
+                        flags[p] = f;
+                        used[p] = count;
+                    }
+                },
+            );
         out
     }
 }

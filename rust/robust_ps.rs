@@ -289,8 +289,6 @@ fn order_key(value: f32) -> u32 {
     }
 }
 
-
-
 fn tukey(pixel: &Pixel, lights: &Lights, shadow_fraction: f32, work: &mut Work) -> PixelFit {
     let padded = lights.padded();
     let brightest = pixel.grey.iter().copied().filter(|&b| b < SATURATED).fold(0.0f32, f32::max);

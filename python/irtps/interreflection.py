@@ -31,7 +31,7 @@ from irtps.errors import IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
 from irtps.paper_estimator import paper_indirect
-from irtps.pipeline import fit_photometric_stereo, place_surface, placed, rendered_as, resolve_albedo_scale, resolve_options, surface_relief
+from irtps.pipeline import fit_photometric_stereo, place_surface, placed, rendered_as, resolve_options, scale_and_place, surface_relief
 from irtps.placement import Placement
 from irtps.radiometry import AlbedoScale
 from irtps.ps import PsResult
@@ -191,13 +191,12 @@ def remove_interreflections(
             albedo = surface_albedo(fit.albedo, relief, mask, pixel_size, largest=None if scene.relative_irradiance else 1.0)
             start = time.perf_counter()
             shape_change = 0.0 if previous_relief is None else float(np.abs(relief - previous_relief)[mask].mean())
-            placement = place_surface(dataset, relief, albedo, options, seed=options.seed, previous=placement, shape_change=shape_change, albedo_scale=albedo_scale)
+            if albedo_scale is None:
+                albedo_scale, placement = scale_and_place(dataset, relief, albedo, options, usable, seed=options.seed)
+            else:
+                placement = place_surface(dataset, relief, albedo, options, seed=options.seed, previous=placement, shape_change=shape_change, albedo_scale=albedo_scale)
             timings["placement"] = time.perf_counter() - start
             height = placed(relief, mask, placement)
-            if albedo_scale is None:
-                start = time.perf_counter()
-                albedo_scale = resolve_albedo_scale(dataset, height, albedo, usable, options, seed=options.seed)
-                timings["albedo_scale"] = time.perf_counter() - start
             render_scene, render_albedo = rendered_as(scene, albedo, albedo_scale)
             start = time.perf_counter()
             seed = options.seed + index

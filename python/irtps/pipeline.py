@@ -112,6 +112,20 @@ def place_surface(
     return estimate_placement(scene, relief, albedo, dataset.mask, dataset.images, bounces=options.bounces, saturation=options.saturation, seed=seed)
 
 
+def scale_and_place(
+    dataset: Dataset, relief: np.ndarray, albedo: np.ndarray, options: ReconstructOptions, usable: np.ndarray, *, seed: int = 0
+) -> tuple[AlbedoScale, Placement]:
+    """The albedo scale and the placement of a first reconstruction. Each needs the other
+    where the irradiance is relative and a floor is seen: the scale is estimated with the
+    surface placed provisionally (the given height, else contract §6's fallback), then the
+    floor is rendered with that scale to place it."""
+    provisional = place_surface(dataset, relief, albedo, dataclasses.replace(options, base_height="boundary") if options.base_height == "auto" else options)
+    scale = resolve_albedo_scale(dataset, placed(relief, dataset.mask, provisional), albedo, usable, options, seed=seed)
+    if options.base_height != "auto":
+        return scale, provisional
+    return scale, place_surface(dataset, relief, albedo, options, seed=seed, albedo_scale=scale)
+
+
 def resolve_albedo_scale(
     dataset: Dataset, height: np.ndarray, albedo: np.ndarray, usable: np.ndarray, options: ReconstructOptions, *, seed: int = 0
 ) -> AlbedoScale:

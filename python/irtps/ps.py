@@ -99,9 +99,10 @@ def photometric_stereo(
           20 % of the pixel's.
         - ``"none"``: plain least squares on every observation.
 
-        Where a mode leaves fewer than 3 non-coplanar lights (4 for Tukey), the pixel keeps
-        the fit before it (the full fit for threshold and trim, flagged; the threshold fit
-        for Tukey).
+        Where a selection leaves fewer than 3 non-coplanar lights, the pixel falls back to a
+        wider one and is flagged (``FLAGS[1]``): threshold to every observation, trim to
+        every unsaturated one (then every one), Tukey's start as threshold. A re-weighting
+        that leaves fewer than 4 stops, and Tukey keeps the fit before it.
     shadow_fraction : float
         Shadow threshold of the threshold mode (and the Tukey mode's start).
     saturation : float, optional

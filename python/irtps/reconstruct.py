@@ -19,7 +19,8 @@ from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
 from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
-from irtps.pipeline import fit_photometric_stereo, place_surface, placed, resolve_options, surface_relief
+from irtps.pipeline import fit_photometric_stereo, place_surface, placed, resolve_options, scale_and_place, surface_relief
+from irtps.residual import compared_observations
 from irtps.placement import Placement
 from irtps.radiometry import AlbedoScale
 from irtps.ps import FLAGS, check_lights
@@ -62,8 +63,9 @@ class Reconstruction:
         IRT-PS: the pass returned, the one with the lowest residual (0: classic
         photometric stereo's).
     albedo_scale : AlbedoScale or None
-        IRT-PS: the factor from the fitted albedo (``albedo``, in the units of the data
-        set's irradiance) to the reflectance it rendered (`irtps.radiometry`).
+        The factor from the fitted albedo (``albedo``, in the units of the data set's
+        irradiance) to the reflectance rendered (`irtps.radiometry`): IRT-PS's, and classic
+        PS's where the irradiance is relative and the floor was rendered to place the object.
     """
 
     normals: np.ndarray
@@ -173,7 +175,15 @@ def reconstruct(
     relief = surface_relief(dataset, fit.normals, options)
     timings["integration"] = time.perf_counter() - start
     start = time.perf_counter()
-    placement = place_surface(dataset, relief, surface_albedo(fit.albedo, relief, dataset.mask, dataset.scene.camera.pixel_size), options, seed=options.seed)
+    scene = dataset.scene
+    albedo = surface_albedo(fit.albedo, relief, dataset.mask, scene.camera.pixel_size, largest=None if scene.relative_irradiance else 1.0)
+    albedo_scale = None
+    if scene.relative_irradiance and scene.floor is not None and options.base_height == "auto":
+        # The floor is rendered to place the object: with the reflectance, so the scale first.
+        usable = compared_observations(dataset.images, scene.light_irradiance, dataset.mask, robust=options.robust != "none", shadow_fraction=options.shadow_fraction, saturation=options.saturation)
+        albedo_scale, placement = scale_and_place(dataset, relief, albedo, options, usable, seed=options.seed)
+    else:
+        placement = place_surface(dataset, relief, albedo, options, seed=options.seed)
     timings["placement"] = time.perf_counter() - start
     return Reconstruction(
         normals=fit.normals,
@@ -185,6 +195,7 @@ def reconstruct(
         timings=timings,
         parameters=parameters,
         placement=placement,
+        albedo_scale=albedo_scale,
     )
 
 
