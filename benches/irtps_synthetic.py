@@ -22,18 +22,18 @@ from pathlib import Path
 
 import irtps
 from irtps.errors import IrtpsWarning
-from irtps.pipeline import fit_photometric_stereo, resolve_options
 from irtps.options import ReconstructOptions
+from irtps.pipeline import fit_photometric_stereo, resolve_options
 
 #: (label, synthesize keywords)
 CASES = [
-    ("pedestal, textured, Cornell", dict(shape="pedestal", albedo="textured", environment="cornell")),
-    ("cavity, textured, Cornell", dict(shape="cavity", albedo="textured", environment="cornell")),
-    ("relief, textured, Cornell, base 10", dict(shape="relief", albedo="textured", environment="cornell", base=10.0)),
-    ("cap, Cornell, base 12", dict(shape="cap", environment="cornell", base=12.0)),
-    ("grooves, textured, no floor", dict(shape="grooves", albedo="textured", environment="none")),
-    ("pedestal, floor only, base 16", dict(shape="pedestal", environment="none", floor=True, base=16.0)),
-    ("cavity, Cornell, base 20", dict(shape="cavity", environment="cornell", base=20.0)),
+    ("pedestal, textured, Cornell", {"shape": "pedestal", "albedo": "textured", "environment": "cornell"}),
+    ("cavity, textured, Cornell", {"shape": "cavity", "albedo": "textured", "environment": "cornell"}),
+    ("relief, textured, Cornell, base 10", {"shape": "relief", "albedo": "textured", "environment": "cornell", "base": 10.0}),
+    ("cap, Cornell, base 12", {"shape": "cap", "environment": "cornell", "base": 12.0}),
+    ("grooves, textured, no floor", {"shape": "grooves", "albedo": "textured", "environment": "none"}),
+    ("pedestal, floor only, base 16", {"shape": "pedestal", "environment": "none", "floor": True, "base": 16.0}),
+    ("cavity, Cornell, base 20", {"shape": "cavity", "environment": "cornell", "base": 20.0}),
 ]
 
 

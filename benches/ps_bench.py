@@ -18,7 +18,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from irtps import _core
 from irtps.ps import ROBUST_MODES
 
@@ -63,6 +62,19 @@ def median_seconds(run, repeats: int) -> float:
     return statistics.median(times)
 
 
+def measure(images: np.ndarray, mask: np.ndarray, d32: np.ndarray, e32: np.ndarray, repeats: int) -> dict:
+    """Median seconds of numpy's plain fit and of each irtps mode, every pixel and the object's."""
+    all_pixels = np.ones(mask.shape, bool)
+    figures = {
+        "numpy_plain_all_s": median_seconds(lambda: numpy_ps(images, d32, e32), repeats),
+        "irtps_plain_all_s": median_seconds(lambda: _core.photometric_stereo(images, all_pixels, d32, e32, "none"), repeats),
+        "numpy_plain_object_s": median_seconds(lambda: numpy_ps(images[:, mask][:, :, None], d32, e32), repeats),
+    }
+    for mode in ROBUST_MODES:
+        figures[f"irtps_{mode}_object_s"] = median_seconds(lambda mode=mode: _core.photometric_stereo(images, mask, d32, e32, mode), repeats)
+    return figures
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeats", type=int, default=5)
@@ -70,17 +82,8 @@ def main() -> None:
     args = parser.parse_args()
     results = []
     for images, mask, directions, irradiance, name in load_inputs():
-        images = np.ascontiguousarray(images, dtype=np.float32)
-        all_pixels = np.ones(mask.shape, bool)
-        d32, e32 = directions.astype(np.float32), irradiance.astype(np.float32)
-        figures = {
-            "input": f"{name}: {images.shape[0]} lights, {images.shape[2]}x{images.shape[1]} RGB float32, {int(mask.sum())} object pixels",
-            "numpy_plain_all_s": median_seconds(lambda: numpy_ps(images, d32, e32), args.repeats),
-            "irtps_plain_all_s": median_seconds(lambda: _core.photometric_stereo(images, all_pixels, d32, e32, "none"), args.repeats),
-            "numpy_plain_object_s": median_seconds(lambda: numpy_ps(images[:, mask][:, :, None], d32, e32), args.repeats),
-        }
-        for mode in ROBUST_MODES:
-            figures[f"irtps_{mode}_object_s"] = median_seconds(lambda: _core.photometric_stereo(images, mask, d32, e32, mode), args.repeats)
+        figures = measure(np.ascontiguousarray(images, dtype=np.float32), mask, directions.astype(np.float32), irradiance.astype(np.float32), args.repeats)
+        figures["input"] = f"{name}: {images.shape[0]} lights, {images.shape[2]}x{images.shape[1]} RGB float32, {int(mask.sum())} object pixels"
         print(f"{figures['input']} (median of {args.repeats})")
         numpy_all, numpy_object = figures["numpy_plain_all_s"], figures["numpy_plain_object_s"]
         print(f"  every pixel:  numpy pinv(L) @ images {numpy_all:.3f} s   irtps none {figures['irtps_plain_all_s']:.3f} s   {numpy_all / figures['irtps_plain_all_s']:.1f}x numpy")

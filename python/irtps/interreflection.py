@@ -31,12 +31,11 @@ from irtps.errors import IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
 from irtps.paper_estimator import paper_indirect
-from irtps.pipeline import fit_photometric_stereo, place_surface, placed, rendered_as, resolve_options, scale_and_place, surface_relief
+from irtps.pipeline import fit_photometric_stereo, fitted_observations, place_surface, placed, rendered_albedo, rendered_as, resolve_options, scale_and_place, surface_relief
 from irtps.placement import Placement
-from irtps.radiometry import AlbedoScale
 from irtps.ps import PsResult
-from irtps.residual import Residual, compared_observations, render_with_residual
-from irtps.surface import surface_albedo
+from irtps.radiometry import AlbedoScale
+from irtps.residual import Residual, render_with_residual
 
 __all__ = ["InterreflectionResult", "Iteration", "remove_interreflections"]
 
@@ -163,10 +162,9 @@ def remove_interreflections(
     """
     options = resolve_options(dataset, ReconstructOptions.build(options, method="irtps", **settings))
     scene, mask = dataset.scene, dataset.mask
-    pixel_size = scene.camera.pixel_size
     original = dataset.images
     saturated = None if options.saturation is None else (original >= options.saturation).any(axis=-1, keepdims=True)
-    usable = compared_observations(original, scene.light_irradiance, mask, robust=options.robust != "none", shadow_fraction=options.shadow_fraction, saturation=options.saturation)
+    usable = fitted_observations(dataset, options)
     images = original
     estimate_used = None
     step = 1.0 if options.relaxation == "auto" else options.relaxation
@@ -188,7 +186,7 @@ def remove_interreflections(
             start = time.perf_counter()
             relief = surface_relief(dataset, fit.normals, options)
             timings["integration"] = time.perf_counter() - start
-            albedo = surface_albedo(fit.albedo, relief, mask, pixel_size, largest=None if scene.relative_irradiance else 1.0)
+            albedo = rendered_albedo(dataset, fit, relief)
             start = time.perf_counter()
             shape_change = 0.0 if previous_relief is None else float(np.abs(relief - previous_relief)[mask].mean())
             if albedo_scale is None:

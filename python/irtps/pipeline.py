@@ -13,8 +13,10 @@ from irtps.integrate import integrate_normals, place_height
 from irtps.options import OptionError, ReconstructOptions
 from irtps.placement import PRECISION_PIXELS, Placement, estimate_placement, fallback_placement
 from irtps.ps import PsResult, photometric_stereo
-from irtps.scene import Scene
 from irtps.radiometry import AlbedoScale, absolute_scale, estimate_albedo_scale, scaled_albedo, scaled_scene
+from irtps.residual import compared_observations
+from irtps.scene import Scene
+from irtps.surface import surface_albedo
 
 #: Heights are float32 (24 significant bits): a surface placed further than this many pixel
 #: sizes from the origin keeps no precision for its relief.
@@ -61,6 +63,27 @@ def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: Recons
         scene.light_irradiance,
         dataset.mask,
         robust=options.robust,
+        shadow_fraction=options.shadow_fraction,
+        saturation=options.saturation,
+    )
+
+
+def rendered_albedo(dataset: Dataset, fit: PsResult, relief: np.ndarray) -> np.ndarray:
+    """The albedo of the triangulated surface `relief` that explains `fit`
+    (`irtps.surface.surface_albedo`): within [0, 1] for absolute irradiance; in the
+    irradiance's units, unbounded, for relative irradiance (`irtps.radiometry` scales it)."""
+    scene = dataset.scene
+    return surface_albedo(fit.albedo, relief, dataset.mask, scene.camera.pixel_size, largest=None if scene.relative_irradiance else 1.0)
+
+
+def fitted_observations(dataset: Dataset, options: ReconstructOptions) -> np.ndarray:
+    """The observations a rendering of the reconstruction is compared with
+    (`irtps.residual.compared_observations` under the options' robust settings)."""
+    return compared_observations(
+        dataset.images,
+        dataset.scene.light_irradiance,
+        dataset.mask,
+        robust=options.robust != "none",
         shadow_fraction=options.shadow_fraction,
         saturation=options.saturation,
     )

@@ -19,12 +19,10 @@ from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
 from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
-from irtps.pipeline import fit_photometric_stereo, place_surface, placed, resolve_options, scale_and_place, surface_relief
-from irtps.residual import compared_observations
+from irtps.pipeline import fit_photometric_stereo, fitted_observations, place_surface, placed, rendered_albedo, resolve_options, scale_and_place, surface_relief
 from irtps.placement import Placement
-from irtps.radiometry import AlbedoScale
 from irtps.ps import FLAGS, check_lights
-from irtps.surface import surface_albedo
+from irtps.radiometry import AlbedoScale
 
 #: What a reconstruction folder holds (`save_reconstruction`); ``indirect`` for IRT-PS only.
 RECONSTRUCTION_FILES = ("normal.exr", "albedo.exr", "height.exr", "mask.png", "mesh.ply", "mesh.obj", "run.json", "indirect")
@@ -176,12 +174,11 @@ def reconstruct(
     timings["integration"] = time.perf_counter() - start
     start = time.perf_counter()
     scene = dataset.scene
-    albedo = surface_albedo(fit.albedo, relief, dataset.mask, scene.camera.pixel_size, largest=None if scene.relative_irradiance else 1.0)
+    albedo = rendered_albedo(dataset, fit, relief)
     albedo_scale = None
     if scene.relative_irradiance and scene.floor is not None and options.base_height == "auto":
         # The floor is rendered to place the object: with the reflectance, so the scale first.
-        usable = compared_observations(dataset.images, scene.light_irradiance, dataset.mask, robust=options.robust != "none", shadow_fraction=options.shadow_fraction, saturation=options.saturation)
-        albedo_scale, placement = scale_and_place(dataset, relief, albedo, options, usable, seed=options.seed)
+        albedo_scale, placement = scale_and_place(dataset, relief, albedo, options, fitted_observations(dataset, options), seed=options.seed)
     else:
         placement = place_surface(dataset, relief, albedo, options, seed=options.seed)
     timings["placement"] = time.perf_counter() - start
