@@ -20,10 +20,10 @@ import sys
 import warnings
 from pathlib import Path
 
+from irtps_accuracy import angular_error, floor_error
+
 import irtps
 from irtps.errors import IrtpsWarning
-from irtps.options import ReconstructOptions
-from irtps.pipeline import fit_photometric_stereo, resolve_options
 
 #: (label, synthesize keywords)
 CASES = [
@@ -37,10 +37,6 @@ CASES = [
 ]
 
 
-def angular_error(dataset, normals) -> float:
-    return irtps.evaluate(mask=dataset.mask, normals=normals, gt=dataset.gt).normal_mean_angular_deg
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--json", type=Path, help="write the rows here")
@@ -49,13 +45,13 @@ def main(argv: list[str] | None = None) -> int:
     print("| case | classic PS | IRT-PS | floor | gap closed |")
     print("|---|---|---|---|---|")
     for label, keywords in CASES:
-        dataset, rendering = irtps.synthesize(size=80, lights=12, bounces=4, samples=256, **keywords)
+        dataset, _ = irtps.synthesize(size=80, lights=12, bounces=4, samples=256, **keywords)
         classic = angular_error(dataset, irtps.reconstruct(dataset).normals)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", IrtpsWarning)
             result = irtps.reconstruct(dataset, "irtps")
         corrected = angular_error(dataset, result.normals)
-        floor = angular_error(dataset, fit_photometric_stereo(dataset, rendering.direct, resolve_options(dataset, ReconstructOptions())).normals)
+        floor = floor_error(dataset)
         closed = (classic - corrected) / (classic - floor)
         rows.append({"case": label, "classic_deg": classic, "irtps_deg": corrected, "floor_deg": floor, "gap_closed": closed})
         print(f"| {label} | {classic:.2f}° | {corrected:.2f}° | {floor:.2f}° | {100 * closed:.1f} % |", flush=True)
