@@ -1,6 +1,7 @@
 """IRT-PS: remove inter-reflections by ray tracing the recovered surface, and iterate.
 
-Pass 0 is classic photometric stereo on the input images A₀. After each pass the
+Each pass is one `irtps.pipeline.reconstruction_pass` (photometric stereo, integration,
+placement); pass 0, on the input images A₀, is classic photometric stereo. After each pass the
 reconstruction (height, albedo, placement) is rendered again in its known surroundings:
 the light that reaches the camera after 1..r bounces (every path serves all K lights) is
 the next estimate of the inter-reflections, and the rendering's residual against A₀
@@ -19,7 +20,6 @@ row whose residual does not fall below the best so far beyond its Monte-Carlo no
 
 from __future__ import annotations
 
-import time
 import warnings
 from dataclasses import dataclass, field
 
@@ -31,7 +31,7 @@ from irtps.errors import IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
 from irtps.paper_estimator import paper_indirect
-from irtps.pipeline import fit_photometric_stereo, fitted_observations, place_surface, placed, rendered_albedo, rendered_as, resolve_options, scale_and_place, surface_relief
+from irtps.pipeline import Pass, fitted_observations, reconstruction_pass, rendered_as, resolve_options, timed
 from irtps.placement import Placement
 from irtps.ps import PsResult
 from irtps.radiometry import AlbedoScale
@@ -170,64 +170,46 @@ def remove_interreflections(
     step = 1.0 if options.relaxation == "auto" else options.relaxation
     steps = _AdaptiveStep(mask)
     previous_change = None
-    previous_height = None
-    previous_relief = None
-    placement = None
-    albedo_scale = None
+    previous: Pass | None = None
     best = None
     stalled = 0
     history: list[Iteration] = []
     with tqdm(total=options.iterations + 1, desc="IRT-PS", unit="pass", disable=not progress, leave=False) as bar:
         for index in range(options.iterations + 1):
-            timings = {}
-            start = time.perf_counter()
-            fit = fit_photometric_stereo(dataset, images, options)
-            timings["photometric_stereo"] = time.perf_counter() - start
-            start = time.perf_counter()
-            relief = surface_relief(dataset, fit.normals, options)
-            timings["integration"] = time.perf_counter() - start
-            albedo = rendered_albedo(dataset, fit, relief)
-            start = time.perf_counter()
-            shape_change = 0.0 if previous_relief is None else float(np.abs(relief - previous_relief)[mask].mean())
-            if albedo_scale is None:
-                albedo_scale, placement = scale_and_place(dataset, relief, albedo, options, usable, seed=options.seed)
-            else:
-                placement = place_surface(dataset, relief, albedo, options, seed=options.seed, previous=placement, shape_change=shape_change, albedo_scale=albedo_scale)
-            timings["placement"] = time.perf_counter() - start
-            height = placed(relief, mask, placement)
-            render_scene, render_albedo = rendered_as(scene, albedo, albedo_scale)
-            start = time.perf_counter()
+            current = reconstruction_pass(dataset, images, options, previous=previous, usable=usable, rendered=True)
+            timings = current.timings
+            render_scene, render_albedo = rendered_as(scene, current.albedo, current.albedo_scale)
             seed = options.seed + index
-            rerendering = render_with_residual(
-                render_scene,
-                height,
-                render_albedo,
-                mask,
-                original,
-                bounces=options.bounces,
-                samples=options.samples,
-                seed=seed,
-                stride=options.stride,
-                usable=usable,
-            )
+            with timed(timings, "rendering"):
+                rerendering = render_with_residual(
+                    render_scene,
+                    current.height,
+                    render_albedo,
+                    mask,
+                    original,
+                    bounces=options.bounces,
+                    samples=options.samples,
+                    seed=seed,
+                    stride=options.stride,
+                    usable=usable,
+                )
             residual = rerendering.residual
-            timings["rendering"] = time.perf_counter() - start
-            change = None if previous_height is None else float(np.abs(height - previous_height)[mask].mean())
+            change = None if previous is None else float(np.abs(current.height - previous.height)[mask].mean())
             metrics = None
             if dataset.gt is not None:
-                metrics = evaluate(mask=mask, normals=fit.normals, albedo=albedo, height=height, gt=dataset.gt).to_dict()
-            record = Iteration(index=index, height_change=change, residual=residual.to_dict(), base_height=placement.base_height, timings=timings, metrics=metrics)
+                metrics = evaluate(mask=mask, normals=current.fit.normals, albedo=current.albedo, height=current.height, gt=dataset.gt).to_dict()
+            record = Iteration(index=index, height_change=change, residual=residual.to_dict(), base_height=current.placement.base_height, timings=timings, metrics=metrics)
             history.append(record)
             improved = best is None or residual.object < best[0].object - SIGNIFICANCE * residual.noise
             stalled = 0 if improved else stalled + 1
             if best is None or residual.object < best[0].object:
-                best = (residual, index, fit, albedo, height, estimate_used, placement)
+                best = (residual, index, current, estimate_used)
             bar.update(1)
             bar.set_postfix(_postfix(residual, metrics), refresh=False)
             if index == options.iterations or (options.early_stop and stalled == PATIENCE):
                 break
             if options.estimator == "paper":
-                estimate, estimate_noise = paper_indirect(render_scene, height, render_albedo, mask, reflections=options.bounces, seed=seed), 0.0
+                estimate, estimate_noise = paper_indirect(render_scene, current.height, render_albedo, mask, reflections=options.bounces, seed=seed), 0.0
             else:
                 estimate, estimate_noise = rerendering.indirect, float(rerendering.noise_energy[mask].sum())
             del rerendering
@@ -247,9 +229,8 @@ def remove_interreflections(
                 record.step = step
                 estimate_used = step * estimate
                 images = _corrected(images, estimate_used, original, saturated)
-            previous_height = height
-            previous_relief = relief
-    residual, chosen, fit, albedo, height, estimate_used, placement = best
+            previous = current
+    residual, chosen, chosen_pass, estimate_used = best
     if chosen == 0 and len(history) > 1:
         warnings.warn(
             f"IRT-PS: no pass explained the images better than classic photometric stereo (residual {residual.object:.4f}); "
@@ -258,7 +239,14 @@ def remove_interreflections(
             stacklevel=2,
         )
     return InterreflectionResult(
-        fit=fit, albedo=albedo, height=height, indirect=estimate_used, history=history, placement=placement, chosen=chosen, albedo_scale=albedo_scale
+        fit=chosen_pass.fit,
+        albedo=chosen_pass.albedo,
+        height=chosen_pass.height,
+        indirect=estimate_used,
+        history=history,
+        placement=chosen_pass.placement,
+        chosen=chosen,
+        albedo_scale=chosen_pass.albedo_scale,
     )
 
 

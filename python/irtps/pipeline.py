@@ -1,10 +1,17 @@
 """One pass of the reconstruction pipeline: photometric stereo, normal integration,
-placement; classic photometric stereo is one pass, IRT-PS one pass per corrected image set.
+placement, the height raised to it inside the mask (`reconstruction_pass`).
+
+Classic photometric stereo is one pass on the data set's images: IRT-PS with zero
+corrections. IRT-PS (`irtps.interreflection`) runs one pass per corrected image set, each
+given the one before.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -24,6 +31,104 @@ MAX_BASE_HEIGHT_PIXELS = 1e6
 #: IRT-PS refines an estimated placement within this many times the mean change of the
 #: relief from the pass before.
 PLACEMENT_SEARCH_CHANGES = 3.0
+
+
+@dataclasses.dataclass
+class Pass:
+    """What one pass of the pipeline reconstructed (`reconstruction_pass`).
+
+    Attributes
+    ----------
+    fit : PsResult
+        Photometric stereo on the pass's images.
+    relief : numpy.ndarray
+        float32 (H, W) height map of the fit's normals, its mask's boundary median at 0.
+    albedo : numpy.ndarray
+        The albedo of the triangulated relief that explains the fit (`rendered_albedo`).
+    placement : Placement
+        Where the relief stands.
+    height : numpy.ndarray
+        float32 (H, W) relief raised to the placement inside the mask, 0 outside.
+    albedo_scale : AlbedoScale or None
+        The factor from fitted albedo to rendered reflectance, where it was resolved.
+    timings : dict
+        Seconds per stage: ``photometric_stereo``, ``integration``, ``placement``.
+    """
+
+    fit: PsResult
+    relief: np.ndarray
+    albedo: np.ndarray
+    placement: Placement
+    height: np.ndarray
+    albedo_scale: AlbedoScale | None
+    timings: dict[str, float]
+
+
+def reconstruction_pass(
+    dataset: Dataset,
+    images: np.ndarray,
+    options: ReconstructOptions,
+    *,
+    previous: Pass | None = None,
+    usable: np.ndarray | None = None,
+    rendered: bool = False,
+) -> Pass:
+    """Photometric stereo on `images`, integration, placement and the placed height.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        Lights, mask, scene and the input images (which place the object).
+    images : numpy.ndarray
+        (K, H, W, 3): the data set's images, or images corrected for inter-reflections.
+    options : ReconstructOptions
+        Resolved settings (`resolve_options`).
+    previous : Pass, optional
+        The pass before (IRT-PS): its placement is refined as the relief changed from its
+        relief (`place_surface`), and its albedo scale is kept.
+    usable : numpy.ndarray, optional
+        The observations compared (`fitted_observations`), computed where needed if not
+        given.
+    rendered : bool
+        The reconstruction will be rendered (IRT-PS): a first pass resolves the albedo
+        scale (`resolve_albedo_scale`) even where the placement does not need it.
+
+    Returns
+    -------
+    Pass
+        Its ``albedo_scale`` is None where neither the rendering nor the placement needed
+        it (classic photometric stereo on absolute irradiance, or with a given placement).
+    """
+    mask = dataset.mask
+    timings: dict[str, float] = {}
+    with timed(timings, "photometric_stereo"):
+        fit = fit_photometric_stereo(dataset, images, options)
+    with timed(timings, "integration"):
+        relief = surface_relief(dataset, fit.normals, options)
+    with timed(timings, "placement"):
+        albedo = rendered_albedo(dataset, fit, relief)
+        scene = dataset.scene
+        if previous is not None:
+            albedo_scale = previous.albedo_scale
+            shape_change = float(np.abs(relief - previous.relief)[mask].mean())
+            placement = place_surface(
+                dataset, relief, albedo, options, seed=options.seed, previous=previous.placement, shape_change=shape_change, albedo_scale=albedo_scale
+            )
+        elif rendered or (scene.relative_irradiance and scene.floor is not None and options.base_height == "auto"):
+            # The floor is rendered to place the object: with the reflectance, so the scale first.
+            usable = fitted_observations(dataset, options) if usable is None else usable
+            albedo_scale, placement = scale_and_place(dataset, relief, albedo, options, usable, seed=options.seed)
+        else:
+            albedo_scale, placement = None, place_surface(dataset, relief, albedo, options, seed=options.seed)
+    return Pass(fit=fit, relief=relief, albedo=albedo, placement=placement, height=placed(relief, mask, placement), albedo_scale=albedo_scale, timings=timings)
+
+
+@contextmanager
+def timed(timings: dict[str, float], stage: str) -> Iterator[None]:
+    """Record in ``timings[stage]`` the seconds that the ``with`` block takes."""
+    start = time.perf_counter()
+    yield
+    timings[stage] = time.perf_counter() - start
 
 
 def resolve_options(dataset: Dataset, options: ReconstructOptions) -> ReconstructOptions:

@@ -19,7 +19,7 @@ from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
 from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
-from irtps.pipeline import fit_photometric_stereo, fitted_observations, place_surface, placed, rendered_albedo, resolve_options, scale_and_place, surface_relief
+from irtps.pipeline import reconstruction_pass, resolve_options, timed
 from irtps.placement import Placement
 from irtps.ps import FLAGS, check_lights
 from irtps.radiometry import AlbedoScale
@@ -146,11 +146,10 @@ def reconstruct(
     options = resolve_options(dataset, ReconstructOptions.build(options, **settings))
     _check_input(dataset, options.saturation, options.robust)
     parameters = options.to_dict()
-    timings = {}
     if options.method == "irtps":
-        start = time.perf_counter()
-        loop = remove_interreflections(dataset, options, progress=progress)
-        timings["irtps"] = time.perf_counter() - start
+        timings: dict[str, float] = {}
+        with timed(timings, "irtps"):
+            loop = remove_interreflections(dataset, options, progress=progress)
         return Reconstruction(
             normals=loop.fit.normals,
             albedo=loop.albedo,
@@ -166,33 +165,19 @@ def reconstruct(
             chosen=loop.chosen,
             albedo_scale=loop.albedo_scale,
         )
-    start = time.perf_counter()
-    fit = fit_photometric_stereo(dataset, dataset.images, options)
-    timings["photometric_stereo"] = time.perf_counter() - start
-    start = time.perf_counter()
-    relief = surface_relief(dataset, fit.normals, options)
-    timings["integration"] = time.perf_counter() - start
-    start = time.perf_counter()
-    scene = dataset.scene
-    albedo = rendered_albedo(dataset, fit, relief)
-    albedo_scale = None
-    if scene.relative_irradiance and scene.floor is not None and options.base_height == "auto":
-        # The floor is rendered to place the object: with the reflectance, so the scale first.
-        albedo_scale, placement = scale_and_place(dataset, relief, albedo, options, fitted_observations(dataset, options), seed=options.seed)
-    else:
-        placement = place_surface(dataset, relief, albedo, options, seed=options.seed)
-    timings["placement"] = time.perf_counter() - start
+    # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
+    first = reconstruction_pass(dataset, dataset.images, options)
     return Reconstruction(
-        normals=fit.normals,
-        albedo=fit.albedo,
-        height=placed(relief, dataset.mask, placement),
+        normals=first.fit.normals,
+        albedo=first.fit.albedo,
+        height=first.height,
         mask=dataset.mask,
-        flags=fit.flags,
+        flags=first.fit.flags,
         pixel_size=dataset.scene.camera.pixel_size,
-        timings=timings,
+        timings=first.timings,
         parameters=parameters,
-        placement=placement,
-        albedo_scale=albedo_scale,
+        placement=first.placement,
+        albedo_scale=first.albedo_scale,
     )
 
 
