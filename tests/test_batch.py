@@ -65,10 +65,10 @@ def test_a_task_that_dies_is_reported_and_the_others_finish(cluster, three_sets,
     cap, ball, _ = three_sets
     real_task = irtps.batch.reconstruct_to_folder
 
-    def task_losing_the_ball(source, destination, options):
+    def task_losing_the_ball(source, destination, options, **settings):
         if Path(source).name == "ball":
             raise RuntimeError("worker lost")
-        return real_task(source, destination, options)
+        return real_task(source, destination, options, **settings)
 
     monkeypatch.setattr(irtps.batch, "reconstruct_to_folder", task_losing_the_ball)
     results = reconstruct_many([ball, cap], tmp_path / "out", client=cluster)
@@ -112,6 +112,33 @@ def test_command_succeeds_when_every_data_set_does(cluster, three_sets, tmp_path
     printed = capsys.readouterr().out
     assert "| cap | ok |" in printed and "| ball | ok |" in printed
     assert "2 data sets reconstructed" in printed
+
+
+def test_resume_keeps_complete_outputs_untouched_and_redoes_the_others(cluster, three_sets, tmp_path, capsys):
+    cap, ball, _ = three_sets
+    out = tmp_path / "out"
+    argv = ["batch", str(cap), str(ball), "--out", str(out), "--scheduler", cluster.scheduler.address]
+    assert main([*argv, "--quiet"]) == 0
+    first = json.loads((out / "batch.json").read_text())
+    (out / "ball" / "mesh.obj").unlink()  # an output folder that lost a file
+    for name in ("batch.json", "batch.md"):  # as if the batch had been stopped before its summary
+        (out / name).unlink()
+    kept = sorted(out.glob("cap/**/*")) + [out / "cap"]
+    before = {path: (path.stat().st_ino, path.stat().st_mtime_ns, path.is_file() and path.read_bytes()) for path in kept}
+    capsys.readouterr()
+    assert main([*argv, "--resume"]) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads((out / "batch.json").read_text())
+    assert [(s["name"], s["status"]) for s in summary["datasets"]] == [("cap", "reused"), ("ball", "ok")]
+    assert (summary["succeeded"], summary["reused"], summary["failed"]) == (2, 1, 0)
+    assert summary["datasets"][0]["metrics"] == first["datasets"][0]["metrics"]  # evaluated again from the kept files
+    assert {path: (path.stat().st_ino, path.stat().st_mtime_ns, path.is_file() and path.read_bytes()) for path in kept} == before
+    assert (out / "ball" / "mesh.obj").stat().st_size > 0
+    assert "| cap | reused |" in printed and "1 data sets reconstructed into" in printed and "(1 complete from an earlier run, kept)" in printed
+    # Other options: no output is theirs, both are redone.
+    assert main([*argv, "--resume", "--shadow-fraction", "0.1", "--quiet"]) == 0
+    assert [s["status"] for s in json.loads((out / "batch.json").read_text())["datasets"]] == ["ok", "ok"]
+    assert json.loads((out / "cap" / "run.json").read_text())["parameters"]["shadow_fraction"] == 0.1
 
 
 def test_local_cluster_options_are_refused_with_a_scheduler(three_sets, tmp_path, capsys):

@@ -6,6 +6,14 @@ same file system as the client, under the same paths. A data set that fails is r
 with its error and the others go on. The warnings of a task (e.g. saturated
 observations) travel back with its result and are issued again on the client.
 
+A worker process that dies while it reconstructs a data set (killed, out of memory) does
+not lose the data set: Dask's nanny starts the worker again and the scheduler runs the
+task again, on another worker or the restarted one, up to
+``distributed.scheduler.allowed-failures`` times (3 by default); each data set's result
+records how many workers it lost (`BatchResult.lost_workers`). A data set that kills
+every worker that runs it fails with a ``KilledWorker`` error and the others go on. A
+resumed batch (``resume=True``) keeps every output folder that is already complete.
+
 An interrupted batch (Ctrl-C, SIGTERM) on a `local_cluster` stops its worker processes
 before it returns: a worker writing an output folder finishes that write, then exits
 at once without waiting for the reconstruction under way; the worker processes leave
@@ -28,6 +36,7 @@ import sys
 import threading
 import time
 import warnings
+from collections import Counter
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, replace
@@ -35,11 +44,12 @@ from multiprocessing import resource_tracker
 from pathlib import Path
 
 from irtps.atomic import atomic_write_text
+from irtps.dataset import load_ground_truth
 from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
 from irtps.paths import resolve_path
-from irtps.reconstruct import load_and_reconstruct, save_reconstruction
+from irtps.reconstruct import load_and_reconstruct, load_reconstruction, load_run_record, save_reconstruction
 
 __all__ = ["BatchResult", "connect", "local_cluster", "output_names", "reconstruct_many", "reconstruct_to_folder", "summary_table", "write_summary"]
 
@@ -59,10 +69,12 @@ class BatchResult:
     source : str
         The data set folder, as read by the worker.
     status : str
-        ``"ok"`` or ``"failed"``.
+        ``"ok"``, ``"reused"`` (a resumed batch kept its complete output folder) or
+        ``"failed"``.
     seconds : float or None
-        Time spent on the worker (reading, reconstructing, writing, evaluating); None
-        when the task did not report back (e.g. its worker died).
+        Time spent on the worker (reading, reconstructing, writing, evaluating; for a
+        reused output, checking and evaluating it); None when the task did not report
+        back (e.g. every worker that ran it died).
     error : str or None
         Why it failed: the error message, which names the file or field concerned.
     metrics : dict or None
@@ -72,7 +84,10 @@ class BatchResult:
         The warnings raised while the worker read, reconstructed and wrote the data set,
         each once, in order: the message of an `irtps.IrtpsWarning` (which names the file
         concerned), ``"Category: message"`` for another warning (``RuntimeWarning``, or
-        ``module.Category`` outside the builtins).
+        ``module.Category`` outside the builtins). Empty for a reused output.
+    lost_workers : int
+        How many times a worker died (killed, out of memory) while it held this data
+        set's task, which then ran again.
     """
 
     name: str
@@ -82,6 +97,7 @@ class BatchResult:
     error: str | None = None
     metrics: dict | None = None
     warnings: tuple[str, ...] = ()
+    lost_workers: int = 0
 
     @property
     def failed(self) -> bool:
@@ -124,12 +140,21 @@ def output_names(paths: Sequence[str | Path]) -> list[str]:
     return names
 
 
-def reconstruct_to_folder(source: str, destination: str, options: ReconstructOptions) -> BatchResult:
+def reconstruct_to_folder(source: str, destination: str, options: ReconstructOptions, *, resume: bool = False) -> BatchResult:
     """Reconstruct one data set folder into an output folder: the task of a batch.
 
     Errors are caught and reported, never raised, so that one bad data set does not
     stop a batch; warnings are recorded in the result (`BatchResult.warnings`), not
     shown.
+
+    With ``resume``, an output folder that is already complete is kept as it is (and
+    evaluated against the ground truth, if any): its ``run.json``, written last by
+    `irtps.save_reconstruction`, is valid and records the same data set folder and the
+    same options (an option left unset, resolved for each data set, matches any value);
+    its normal, albedo and height maps and its mask read back, all of one size; its two
+    meshes are files that are not empty; and when the chosen IRT-PS pass is not pass 0,
+    ``indirect/`` holds ``000.exr``, ``001.exr`` and so on, none empty. Any other output
+    folder is reconstructed again and replaced.
 
     Parameters
     ----------
@@ -139,6 +164,8 @@ def reconstruct_to_folder(source: str, destination: str, options: ReconstructOpt
         The reconstruction folder to write (atomically, as `irtps.save_reconstruction`).
     options : ReconstructOptions
         How to reconstruct (`irtps.options.ReconstructOptions`).
+    resume : bool
+        Keep a complete output folder (status ``"reused"``) instead of replacing it.
 
     Returns
     -------
@@ -155,16 +182,22 @@ def reconstruct_to_folder(source: str, destination: str, options: ReconstructOpt
     start = time.perf_counter()
     with _TASKS.running(), _recorded_warnings() as recorded:
         try:
-            dataset, result = load_and_reconstruct(source, options=options)
-            with _TASKS.writing():
-                save_reconstruction(result, destination, source=str(resolve_path(source)))
-            metrics = None
-            if dataset.gt is not None:
-                metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=dataset.gt).to_dict()
+            kept = _complete_output(destination, source, options) if resume else None
+            if kept is None:
+                status = "ok"
+                dataset, result = load_and_reconstruct(source, options=options)
+                with _TASKS.writing():
+                    save_reconstruction(result, destination, source=str(resolve_path(source)))
+                gt, normals, albedo, height, mask = dataset.gt, result.normals, result.albedo, result.height, result.mask
+            else:
+                status = "reused"
+                normals, albedo, height, mask = kept
+                gt = load_ground_truth(source, mask.shape)
+            metrics = None if gt is None else evaluate(mask=mask, normals=normals, albedo=albedo, height=height, gt=gt).to_dict()
         except Exception as error:  # a batch reports every failure of a data set and goes on
             outcome = BatchResult(name, source, "failed", time.perf_counter() - start, error=_describe(error))
         else:
-            outcome = BatchResult(name, source, "ok", time.perf_counter() - start, metrics=metrics)
+            outcome = BatchResult(name, source, status, time.perf_counter() - start, metrics=metrics)
     return _with_warnings(outcome, recorded)
 
 
@@ -175,16 +208,26 @@ def reconstruct_many(
     *,
     client=None,
     progress: bool = False,
+    resume: bool = False,
     **settings,
 ) -> list[BatchResult]:
     """Reconstruct many data set folders on a Dask cluster, each into ``out/NAME/``.
 
-    Each data set is one task; the worker reads the folder and writes
+    Each data set is one task, started in the order given (as workers are free); the
+    worker reads the folder and writes
     ``out/NAME/`` (as `irtps.save_reconstruction`, atomically) itself, with ``NAME``
     from `output_names`. A failed data set is reported in its `BatchResult`; the others
     go on. Nothing is written for a failed data set: an output from an earlier run
     stays as it was. The warnings of each task are issued again here as it completes,
     as ``NAME: message`` (an `irtps.IrtpsWarning`, or the worker warning's category).
+
+    A worker that dies while it holds a task (killed, out of memory) costs the data set
+    nothing but time: the scheduler runs the task again, on another worker or the one
+    the nanny restarted, up to ``distributed.scheduler.allowed-failures`` times (3 by
+    default), then reports a ``KilledWorker`` failure for that data set alone; the
+    result counts the lost workers (`BatchResult.lost_workers`). Results are released on
+    the cluster as they arrive, so that a worker lost later does not run a finished data
+    set again.
 
     Interrupted (KeyboardInterrupt, e.g. Ctrl-C), it cancels the tasks and lets the
     interrupt through; on a `local_cluster` (given or the default one), the cluster's
@@ -208,6 +251,11 @@ def reconstruct_many(
         ``if __name__ == "__main__":``).
     progress : bool
         Show a progress bar, advancing as data sets finish.
+    resume : bool
+        Keep each output folder that is already complete, status ``"reused"``, instead
+        of reconstructing it again (see `reconstruct_to_folder` for what is complete);
+        without it, an existing output folder is replaced once its new reconstruction is
+        written.
     **settings
         Fields of `ReconstructOptions` that replace those of `options`, e.g.
         ``method="irtps"``.
@@ -246,17 +294,18 @@ def reconstruct_many(
     sources = [str(resolve_path(path)) for path in datasets]
     folder = resolve_path(out)
     names = output_names(sources)
-    with _using(client) as active:
+    with _using(client) as active, _lost_workers(active) as lost:
         pending = {
-            active.submit(reconstruct_to_folder, source, str(folder / name), options, pure=False): (name, source)
-            for name, source in zip(names, sources, strict=True)
+            active.submit(reconstruct_to_folder, source, str(folder / name), options, resume=resume, pure=False, priority=-index): (name, source)
+            for index, (name, source) in enumerate(zip(names, sources, strict=True))
         }
         outcomes = {}
         try:
             with tqdm(distributed.as_completed(pending), total=len(pending), desc="batch", unit="set", disable=not progress, leave=False) as bar:
                 for future in bar:
-                    name, source = pending[future]
-                    outcomes[name] = outcome = _result_of(future, name, source)
+                    name, source = pending.pop(future)
+                    outcomes[name] = outcome = _with_lost_workers(_result_of(future, name, source), lost[future.key])
+                    del future  # released: a worker lost later does not run this data set again
                     if outcome.warnings:
                         with tqdm.external_write_mode():  # the bar steps aside for the warnings
                             _issue_warnings(outcome)
@@ -402,8 +451,9 @@ def connect(address: str) -> Iterator:
 
 
 def summary_table(results: Sequence[BatchResult]) -> str:
-    """The outcome of a batch as a markdown table: data set, status, seconds, mean
-    angular error (when there is ground truth) and the error of a failed data set.
+    """The outcome of a batch as a markdown table: data set, status (with the workers
+    lost while they held the data set, if any), seconds, mean angular error (when there
+    is ground truth) and the error of a failed data set.
 
     Parameters
     ----------
@@ -416,24 +466,32 @@ def summary_table(results: Sequence[BatchResult]) -> str:
     Examples
     --------
     >>> print(summary_table([BatchResult("ball", "/d/ball", "ok", 1.25, metrics={"normal_mean_angular_deg": 2.5}),
-    ...                      BatchResult("cap", "/d/cap", "failed", 0.5, error="/d/cap/scene.json: missing")]), end="")
+    ...                      BatchResult("cap", "/d/cap", "failed", 0.5, error="/d/cap/scene.json: missing"),
+    ...                      BatchResult("cavity", "/d/cavity", "ok", 3.0, lost_workers=1)]), end="")
     | Data set | Status | Seconds | Angular error (°) | Error |
     |---|---|---|---|---|
     | ball | ok | 1.2 | 2.5 |  |
     | cap | failed | 0.5 | n/a | /d/cap/scene.json: missing |
+    | cavity | ok (1 worker lost) | 3.0 | n/a |  |
     """
     lines = ["| Data set | Status | Seconds | Angular error (°) | Error |", "|---|---|---|---|---|"]
     for result in results:
         seconds = "n/a" if result.seconds is None else f"{result.seconds:.1f}"
         angular = "n/a" if result.mean_angular_error is None else f"{result.mean_angular_error:.4g}"
         error = (result.error or "").replace("|", "\\|").replace("\n", " ")
-        lines.append(f"| {result.name} | {result.status} | {seconds} | {angular} | {error} |")
+        status = result.status
+        if result.lost_workers:
+            status += f" ({result.lost_workers} worker{'s' if result.lost_workers > 1 else ''} lost)"
+        lines.append(f"| {result.name} | {status} | {seconds} | {angular} | {error} |")
     return "\n".join(lines) + "\n"
 
 
 def write_summary(results: Sequence[BatchResult], out: str | Path, *, settings: dict) -> None:
     """Write ``batch.json`` (settings, counts and every `BatchResult`) and ``batch.md``
     (`summary_table`) into a batch's output folder, each atomically.
+
+    The counts: ``succeeded`` (data sets not failed, reused ones included), ``reused``
+    and ``failed``.
 
     Parameters
     ----------
@@ -445,7 +503,8 @@ def write_summary(results: Sequence[BatchResult], out: str | Path, *, settings: 
     """
     folder = Path(out)
     failed = sum(result.failed for result in results)
-    summary = {"settings": settings, "succeeded": len(results) - failed, "failed": failed, "datasets": [asdict(result) for result in results]}
+    reused = sum(result.status == "reused" for result in results)
+    summary = {"settings": settings, "succeeded": len(results) - failed, "reused": reused, "failed": failed, "datasets": [asdict(result) for result in results]}
     atomic_write_text(folder / SUMMARY_JSON, json.dumps(summary, indent=2))
     atomic_write_text(folder / SUMMARY_MARKDOWN, summary_table(results))
 
@@ -650,11 +709,76 @@ def _issue_warnings(outcome: BatchResult) -> None:
 
 
 def _result_of(future, name: str, source: str) -> BatchResult:
-    """A task's `BatchResult`, or a failed one if the task did not return (its worker died)."""
+    """A task's `BatchResult`, or a failed one if the task did not return (every worker
+    that ran it died)."""
+    from distributed import KilledWorker
+
     try:
         return future.result()
-    except Exception as error:  # lost worker, cancelled task: the data set failed, the batch goes on
+    except KilledWorker as error:
+        deaths = error.allowed_failures + 1
+        message = (
+            f"KilledWorker: each of the {deaths} workers that ran it died (killed, e.g. out of memory); Dask gave up on it "
+            f"(distributed.scheduler.allowed-failures = {error.allowed_failures})"
+        )
+        return BatchResult(name, source, "failed", None, error=message, lost_workers=deaths)
+    except Exception as error:  # cancelled task, unreachable cluster: the data set failed, the batch goes on
         return BatchResult(name, source, "failed", None, error=_describe(error))
+
+
+def _with_lost_workers(outcome: BatchResult, lost: int) -> BatchResult:
+    """The outcome with the workers lost while they held its task, as the scheduler reported them."""
+    return outcome if lost <= outcome.lost_workers else replace(outcome, lost_workers=lost)
+
+
+@contextmanager
+def _lost_workers(client) -> Iterator[Counter]:
+    """For the duration: how many times a worker that held each task (by key) left the
+    cluster unexpectedly (died), from the scheduler's ``remove-worker`` events."""
+    lost: Counter = Counter()
+
+    def count(event) -> None:
+        _, message = event
+        if message.get("action") == "remove-worker" and not message.get("expected"):
+            lost.update(message.get("processing-tasks", ()))
+
+    client.subscribe_topic("all", count)
+    try:
+        yield lost
+    finally:
+        client.unsubscribe_topic("all")
+
+
+def _complete_output(destination: str, source: str, options: ReconstructOptions) -> tuple | None:
+    """The normals, albedo, height and mask of a complete output folder of `source` made
+    with `options` (see `reconstruct_to_folder`), or None."""
+    folder = Path(destination)
+    try:
+        record = load_run_record(folder)
+        maps = load_reconstruction(folder)
+        meshes = all(_nonempty_file(folder / name) for name in ("mesh.ply", "mesh.obj"))
+        indirect = not record.get("chosen_pass") or _numbered_images(folder / "indirect")
+    except (IrtpsError, OSError):
+        return None
+    same_run = record["source"] == str(resolve_path(source)) and _same_options(record["parameters"], options)
+    return maps if same_run and meshes and indirect else None
+
+
+def _numbered_images(folder: Path) -> bool:
+    """Whether a folder holds ``000.exr``, ``001.exr`` … and nothing else, none empty."""
+    files = {file.name: file for file in folder.iterdir()}
+    return bool(files) and files.keys() == {f"{k:03d}.exr" for k in range(len(files))} and all(map(_nonempty_file, files.values()))
+
+
+def _nonempty_file(path: Path) -> bool:
+    return path.is_file() and path.stat().st_size > 0
+
+
+def _same_options(recorded: dict, options: ReconstructOptions) -> bool:
+    """Whether a ``run.json``'s parameters are `options`; an option left unset (None),
+    which the reconstruction resolves for each data set, matches any recorded value."""
+    wanted = json.loads(json.dumps(options.to_dict()))
+    return recorded.keys() == wanted.keys() and all(value is None or recorded[key] == value for key, value in wanted.items())
 
 
 def _describe(error: BaseException) -> str:

@@ -19,7 +19,7 @@ from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object,
 from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate, format_metrics
 from irtps.options import ClusterOptions, OptionError, ReconstructOptions, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
-from irtps.output_rule import check_output, escaped
+from irtps.output_rule import check_output, escaped, written_by_irtps
 from irtps.paths import check_folder, resolve_path
 from irtps.placement import format_placement
 from irtps.radiometry import format_albedo_scale
@@ -98,7 +98,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
 
 def _cmd_batch(args: argparse.Namespace) -> None:
     options, cluster_options = from_arguments(ReconstructOptions, args), from_arguments(ClusterOptions, args)
-    check_output(args.out, args.data, force=args.force)
+    check_output(args.out, args.data, force=args.force or _holds_batch_outputs(args.out))
     if args.force and os.path.lexists(args.out) and not args.out.is_dir():
         args.out.unlink()  # OUT is a folder that the data sets' folders go into, not replaced as a whole
     if cluster_options.scheduler is None:
@@ -107,14 +107,26 @@ def _cmd_batch(args: argparse.Namespace) -> None:
     else:
         cluster = connect(cluster_options.scheduler)
     with cluster as client:
-        results = reconstruct_many(args.data, args.out, options, client=client, progress=not args.quiet)
+        results = reconstruct_many(args.data, args.out, options, client=client, progress=not args.quiet, resume=args.resume)
     write_summary(results, args.out, settings=options.to_dict())
     print(summary_table(results), end="")
     failed = sum(result.failed for result in results)
     if failed:
         raise IrtpsError(f"{failed} of {len(results)} data sets failed (see {args.out / SUMMARY_MARKDOWN})")
     if not args.quiet:
-        print(f"{len(results)} data sets reconstructed into {args.out}/; summary in {args.out / SUMMARY_MARKDOWN} and {args.out / SUMMARY_JSON}")
+        reused = sum(result.status == "reused" for result in results)
+        kept = f" ({reused} complete from an earlier run, kept)" if reused else ""
+        print(f"{len(results) - reused} data sets reconstructed into {args.out}/{kept}; summary in {args.out / SUMMARY_MARKDOWN} and {args.out / SUMMARY_JSON}")
+
+
+def _holds_batch_outputs(out: Path) -> bool:
+    """Whether ``out`` is a folder of an earlier batch, even one stopped before its summary:
+    nothing in it but reconstruction folders, leftovers of atomic writes (hidden) and a summary."""
+    try:
+        entries = [entry for entry in out.iterdir() if not entry.name.startswith(".")]
+    except OSError:  # missing, not a folder: check_output says what is wrong
+        return False
+    return all(entry.name in (SUMMARY_JSON, SUMMARY_MARKDOWN) or (entry.is_dir() and written_by_irtps(entry)) for entry in entries)
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> None:
@@ -299,19 +311,31 @@ def build_parser() -> argparse.ArgumentParser:
         "reported and the others go on. Prints a summary (status, seconds, mean angular error when there is ground "
         "truth, the error of a failed data set) and writes it to OUT/batch.md and OUT/batch.json; exits with status "
         "2 if any data set failed. Needs Dask: pip install 'irtps[batch]'.\n\n"
+        "A worker process that dies (killed, out of memory) loses nothing: its data set runs again on another worker "
+        "or the restarted one, up to 3 times (Dask's distributed.scheduler.allowed-failures), and the summary counts the "
+        "lost workers; a data set that kills every worker that runs it fails with a KilledWorker error. With --resume, "
+        "a batch run again (e.g. after it was stopped) keeps each output folder that is complete and reports it as "
+        "'reused'.\n\n"
         "On a cluster with a shared file system: run 'dask scheduler' on one node, "
         "'RAYON_NUM_THREADS=1 dask worker tcp://HOST:8786 --nworkers $(nproc) --nthreads 1' on each compute node, "
         "then 'irtps batch ... --scheduler tcp://HOST:8786'.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  irtps batch shared/data/diligent/*PNG --out diligent_ps\n"
         "  irtps batch scenes/* --out runs --method irtps --bounces 2 --workers 2 --threads-per-worker 4\n"
-        "  irtps batch /shared/scenes/* --out /shared/runs --method irtps --scheduler tcp://head-node:8786",
+        "  irtps batch /shared/scenes/* --out /shared/runs --method irtps --scheduler tcp://head-node:8786\n"
+        "  irtps batch scenes/* --out runs --method irtps --bounces 2 --resume   # after an interrupted run",
     )
     p.add_argument("data", type=Path, nargs="+", help="data set folders")
     p.add_argument("--out", type=Path, required=True, help="folder for one reconstruction folder per data set and the summary")
     add_arguments(p, ReconstructOptions, groups=RECONSTRUCT_GROUPS)
     add_arguments(p.add_argument_group("cluster"), ClusterOptions)
     _add_force(p)
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep each output folder that is complete (run.json, written last, records the same data set and options, and "
+        "every file it goes with is there) instead of reconstructing it again; others are redone",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=_cmd_batch)
 
