@@ -170,3 +170,16 @@ def test_a_data_set_that_kills_every_worker_fails_alone(data, flags, received, t
     )
     assert "| poison | failed (4 workers lost) |" in capsys.readouterr().out
     assert sorted(path.name for path in out.iterdir()) == ["ball", "batch.json", "batch.md", "cap"]
+
+
+def test_data_sets_waiting_for_a_worker_are_not_charged_with_its_deaths(data, flags, tmp_path):
+    (flags / "release").touch()  # the poison kills its worker as soon as it runs
+    out = tmp_path / "out"
+    # More data sets than twice the worker threads: the scheduler holds back those that wait
+    # (but cap, sent to the worker with the poison before there were three, may be charged
+    # with the first death; with Dask's default worker saturation, it was charged with all four).
+    status = main(["batch", str(data / "poison"), str(data / "cap"), str(data / "ball"), "--out", str(out), "--workers", "1", "--quiet"])
+    assert status == 2
+    summary = _summary(out)
+    assert {name: entry["status"] for name, entry in summary.items()} == {"poison": "failed", "cap": "ok", "ball": "ok"}
+    assert (summary["poison"]["lost_workers"], summary["ball"]["lost_workers"]) == (4, 0) and summary["cap"]["lost_workers"] <= 1

@@ -350,6 +350,13 @@ def local_cluster(workers: int | None = None, threads_per_worker: int = 1, *, pr
     no half-started cluster is left; the worker processes start with SIGINT blocked, so
     a terminal's Ctrl-C never reaches one still importing.
 
+    The scheduler gives a worker no more tasks than it has threads while other tasks
+    wait (``distributed.scheduler.worker-saturation`` 1.0, not Dask's 1.1): Dask charges
+    a worker's death to every task the worker holds, and a data set waiting behind one
+    that kills its worker each time would fail with it (``KilledWorker``). Dask holds
+    tasks back so only in batches of more than twice as many data sets as threads, and
+    sends the first of them to the workers at once.
+
     Yields
     ------
     distributed.Client
@@ -370,13 +377,15 @@ def local_cluster(workers: int | None = None, threads_per_worker: int = 1, *, pr
     if threads_per_worker < 1:
         raise IrtpsError(f"threads_per_worker: must be at least 1, not {threads_per_worker}")
     distributed = _import_distributed()
+    import dask  # installed with distributed
+
     worker_options = {"env": {"RAYON_NUM_THREADS": str(threads_per_worker)}, "preload": [__name__]} if processes else {}
     cluster = client = None
     try:
         # no dashboard; the scheduler's HTTP server (health checks) on a free port: no
         # "Port 8787 is already in use" warning when another cluster runs on this machine
         scheduler_options = {"dashboard_address": "localhost:0"}
-        with _signals_held(processes):
+        with _signals_held(processes), dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):
             cluster = distributed.LocalCluster(
                 n_workers=workers, threads_per_worker=threads_per_worker, processes=processes, dashboard_address=None, scheduler_kwargs=scheduler_options, **worker_options
             )
