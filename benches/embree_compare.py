@@ -37,6 +37,7 @@ except ImportError:  # pragma: no cover - depends on the environment
     sys.exit("embree_compare.py needs Embree's Python bindings: pip install embreex")
 
 from irtps import _core
+from irtps.scene import CornellBox, Floor
 
 OFFSET = 1e-3
 
@@ -65,11 +66,11 @@ def build_renderer(n: int) -> tuple[_core.Renderer, np.ndarray]:
     albedo[..., 2] = 0.7 - 0.3 * col[:, None]
     half = 0.625 * n
     grey = (0.7, 0.7, 0.7)
-    box = ((-half, half), (-half, half), 0.5 * n, (0.8, 0.1, 0.1), (0.1, 0.8, 0.1), grey, grey)
+    box = CornellBox((-half, half), (-half, half), 0.5 * n, (0.8, 0.1, 0.1), (0.1, 0.8, 0.1), grey, grey)
     renderer = _core.Renderer(
         height, mask, albedo, 1.0,
         np.array([[0.0, 0.0, 1.0]], dtype=np.float32), np.ones((1, 3), dtype=np.float32),
-        floor=(0.0, (0.8, 0.8, 0.8)), cornell_box=box,
+        floor=Floor(0.0, (0.8, 0.8, 0.8)), cornell_box=box,
     )
     return renderer, height
 

@@ -1,12 +1,14 @@
 //! The pyo3 bindings (`irtps._core`): conversions only. Heavy work runs with the GIL
-//! released, and every core error becomes a Python exception naming its input.
+//! released, and every core error becomes, here and only here, the Python exception that
+//! irtps raises for it: `irtps.errors.ArgumentError` for an argument, `DatasetError` for a
+//! file. Their types for Python are in python/irtps/_core.pyi.
 
 use std::path::PathBuf;
 
 use glam::vec3a;
 use numpy::ndarray::{Array, Array2, IxDyn};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods};
-use pyo3::exceptions::{PyOSError, PyValueError};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use rayon::prelude::*;
 
@@ -19,10 +21,18 @@ use crate::scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
 /// Rays a parallel task of `Renderer.intersect` traces as one batch.
 const RAYS_PER_TASK: usize = 4096;
 
+pyo3::import_exception!(irtps.errors, ArgumentError);
+pyo3::import_exception!(irtps.errors, DatasetError);
+
+/// `irtps.errors.ArgumentError(argument, problem)`: the message starts with the argument.
+fn argument_error(argument: &str, problem: impl Into<String>) -> PyErr {
+    ArgumentError::new_err((argument.to_string(), problem.into()))
+}
+
 fn to_py(err: Error) -> PyErr {
     match err {
-        Error::Io { .. } => PyOSError::new_err(err.to_string()),
-        _ => PyValueError::new_err(err.to_string()),
+        Error::Input { field, message } => argument_error(&field, message),
+        Error::Io { .. } | Error::Format { .. } => DatasetError::new_err(err.to_string()),
     }
 }
 
@@ -37,7 +47,7 @@ fn array_to_image(array: &PyReadonlyArrayDyn<'_, f32>, name: &str) -> PyResult<I
     let (height, width, channels) = match *shape {
         [h, w] => (h, w, 1),
         [h, w, c] => (h, w, c),
-        _ => return Err(PyValueError::new_err(format!("{name}: expected an (H, W) or (H, W, C) array, got shape {shape:?}"))),
+        _ => return Err(argument_error(name, format!("expected an (H, W) or (H, W, C) array, got shape {shape:?}"))),
     };
     let data = array.as_array().iter().copied().collect();
     Ok(Image { width, height, channels, data })
@@ -82,7 +92,7 @@ fn read_images(py: Python<'_>, paths: Vec<PathBuf>) -> PyResult<Bound<'_, PyArra
 fn rows_of_3(array: &PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<Vec<[f32; 3]>> {
     let a = array.as_array();
     if a.ncols() != 3 {
-        return Err(PyValueError::new_err(format!("{name}: expected shape (N, 3), got {:?}", a.shape())));
+        return Err(argument_error(name, format!("expected shape (N, 3), got {:?}", a.shape())));
     }
     Ok(a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
 }
@@ -91,7 +101,7 @@ fn rows_of_3(array: &PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<Vec<[f32
 /// copied otherwise.
 fn flat_rows_of_3<'a>(array: &'a PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<std::borrow::Cow<'a, [f32]>> {
     if array.shape()[1] != 3 {
-        return Err(PyValueError::new_err(format!("{name}: expected shape (N, 3), got {:?}", array.shape())));
+        return Err(argument_error(name, format!("expected shape (N, 3), got {:?}", array.shape())));
     }
     Ok(match array.as_slice() {
         Ok(flat) => std::borrow::Cow::Borrowed(flat),
@@ -105,15 +115,41 @@ type HitArrays<'py> = (Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<i64>>);
 /// Positions, triangles, vertex albedo and triangle normals of a scene's mesh.
 type MeshArrays<'py> = (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<u32>>, Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<f32>>);
 
-type BoxArgs = ((f32, f32), (f32, f32), f32, Rgb, Rgb, Rgb, Rgb);
+/// The floor as Python gives it: `irtps.scene.Floor` (or any object with these attributes).
+#[derive(FromPyObject)]
+struct FloorArgs {
+    #[pyo3(attribute)]
+    height: f32,
+    #[pyo3(attribute)]
+    albedo: Rgb,
+}
+
+/// The Cornell box as Python gives it: `irtps.scene.CornellBox` (or any object with these
+/// attributes).
+#[derive(FromPyObject)]
+struct BoxArgs {
+    #[pyo3(attribute)]
+    x: (f32, f32),
+    #[pyo3(attribute)]
+    y: (f32, f32),
+    #[pyo3(attribute)]
+    z_top: f32,
+    #[pyo3(attribute)]
+    albedo_left: Rgb,
+    #[pyo3(attribute)]
+    albedo_right: Rgb,
+    #[pyo3(attribute)]
+    albedo_back: Rgb,
+    #[pyo3(attribute)]
+    albedo_front: Rgb,
+}
 
 /// A scene made ready for rendering and ray queries: height-field object, optional floor
 /// and Cornell box, distant lights.
 ///
 /// Parameters: `height` (H, W) float32, `mask` (H, W) bool, `albedo` (H, W, 3) float32,
-/// `pixel_size`, `light_directions` (K, 3), `light_irradiance` (K, 3), `floor`
-/// `(height, (r, g, b))` or None, `cornell_box` `((x0, x1), (y0, y1), z_top, left, right,
-/// back, front)` or None.
+/// `pixel_size`, `light_directions` (K, 3), `light_irradiance` (K, 3), `floor` an
+/// `irtps.scene.Floor` or None, `cornell_box` an `irtps.scene.CornellBox` or None.
 #[pyclass(frozen, module = "irtps._core")]
 struct Renderer {
     inner: CoreRenderer,
@@ -132,20 +168,20 @@ impl Renderer {
         pixel_size: f32,
         light_directions: PyReadonlyArray2<'_, f32>,
         light_irradiance: PyReadonlyArray2<'_, f32>,
-        floor: Option<(f32, Rgb)>,
+        floor: Option<FloorArgs>,
         cornell_box: Option<BoxArgs>,
     ) -> PyResult<Renderer> {
         let (h, w) = (height.shape()[0], height.shape()[1]);
         if mask.shape() != [h, w] {
-            return Err(PyValueError::new_err(format!("mask: shape {:?} differs from height {:?}", mask.shape(), [h, w])));
+            return Err(argument_error("mask", format!("shape {:?} differs from height {:?}", mask.shape(), [h, w])));
         }
         if albedo.shape() != [h, w, 3] {
-            return Err(PyValueError::new_err(format!("albedo: shape {:?}, expected {:?}", albedo.shape(), [h, w, 3])));
+            return Err(argument_error("albedo", format!("shape {:?}, expected {:?}", albedo.shape(), [h, w, 3])));
         }
         let directions = rows_of_3(&light_directions, "light_directions")?;
         let irradiance = rows_of_3(&light_irradiance, "light_irradiance")?;
         if directions.len() != irradiance.len() {
-            return Err(PyValueError::new_err("light_irradiance: needs one row per light direction"));
+            return Err(argument_error("light_irradiance", "needs one row per light direction"));
         }
         let albedo_view = albedo.as_array();
         let surface = HeightField {
@@ -159,15 +195,15 @@ impl Renderer {
         let scene = Scene {
             camera: Camera { width: w, height: h, pixel_size },
             surface,
-            floor: floor.map(|(height, albedo)| Floor { height, albedo }),
-            cornell_box: cornell_box.map(|(x, y, z_top, left, right, back, front)| CornellBox {
-                x: [x.0, x.1],
-                y: [y.0, y.1],
-                z_top,
-                left,
-                right,
-                back,
-                front,
+            floor: floor.map(|floor| Floor { height: floor.height, albedo: floor.albedo }),
+            cornell_box: cornell_box.map(|walls| CornellBox {
+                x: [walls.x.0, walls.x.1],
+                y: [walls.y.0, walls.y.1],
+                z_top: walls.z_top,
+                left: walls.albedo_left,
+                right: walls.albedo_right,
+                back: walls.albedo_back,
+                front: walls.albedo_front,
             }),
         };
         let lights: Vec<Light> = directions
@@ -235,7 +271,7 @@ impl Renderer {
         let o = flat_rows_of_3(&origins, "origins")?;
         let d = flat_rows_of_3(&directions, "directions")?;
         if o.len() != d.len() {
-            return Err(PyValueError::new_err("directions: needs one row per origin"));
+            return Err(argument_error("directions", "needs one row per origin"));
         }
         let tracer = self.inner.tracer();
         let mut t = vec![f32::INFINITY; o.len() / 3];
@@ -259,7 +295,7 @@ impl Renderer {
                 // One thread: one batch, without a pool or work splitting.
                 Some(1) => batch(&mut t, &mut id, &o, &d),
                 Some(n) => {
-                    let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| PyValueError::new_err(format!("threads: {e}")))?;
+                    let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| argument_error("threads", format!("{e}")))?;
                     pool.install(|| parallel(&mut t, &mut id));
                 }
             }
@@ -273,7 +309,7 @@ fn lights_from(directions: &PyReadonlyArray2<'_, f32>, irradiance: &PyReadonlyAr
     let directions = rows_of_3(directions, "light_directions")?;
     let irradiance = rows_of_3(irradiance, "light_irradiance")?;
     if directions.len() != irradiance.len() {
-        return Err(PyValueError::new_err("light_irradiance: needs one row per light direction"));
+        return Err(argument_error("light_irradiance", "needs one row per light direction"));
     }
     Ok(directions.iter().zip(&irradiance).map(|(d, e)| Light { direction: vec3a(d[0], d[1], d[2]), irradiance: *e }).collect())
 }
@@ -309,18 +345,18 @@ fn photometric_stereo<'py>(
         "threshold" => Robust::Threshold,
         "trim" => Robust::Trim,
         "tukey" => Robust::Tukey,
-        other => return Err(PyValueError::new_err(format!("robust: unknown mode {other:?}; expected none, threshold, trim or tukey"))),
+        other => return Err(argument_error("robust", format!("unknown mode {other:?}; expected none, threshold, trim or tukey"))),
     };
     let shape = images.shape().to_vec();
     if shape[3] != 3 || mask.shape() != [shape[1], shape[2]] {
-        return Err(PyValueError::new_err(format!("images: shape {shape:?} does not match mask {:?} x 3 channels", mask.shape())));
+        return Err(argument_error("images", format!("shape {shape:?} does not match mask {:?} x 3 channels", mask.shape())));
     }
     let lights = lights_from(&light_directions, &light_irradiance)?;
     if lights.len() != shape[0] {
-        return Err(PyValueError::new_err(format!("images: {} images for {} lights", shape[0], lights.len())));
+        return Err(argument_error("images", format!("{} images for {} lights", shape[0], lights.len())));
     }
-    let data = images.as_slice().map_err(|_| PyValueError::new_err("images: must be C-contiguous"))?;
-    let mask_data = mask.as_slice().map_err(|_| PyValueError::new_err("mask: must be C-contiguous"))?;
+    let data = images.as_slice().map_err(|_| argument_error("images", "must be C-contiguous"))?;
+    let mask_data = mask.as_slice().map_err(|_| argument_error("mask", "must be C-contiguous"))?;
     let settings = PsSettings { robust, shadow_fraction, saturation };
     let out = py.detach(|| core_ps(data, mask_data, &lights, &settings)).map_err(to_py)?;
     let (h, w) = (shape[1], shape[2]);

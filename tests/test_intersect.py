@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from irtps import _core
+from irtps.scene import Floor
 
 
 def flat_renderer(n: int = 16, height: float = 2.0, floor: float = 0.0) -> _core.Renderer:
@@ -13,7 +14,7 @@ def flat_renderer(n: int = 16, height: float = 2.0, floor: float = 0.0) -> _core
     mask = np.ones((n, n), dtype=bool)
     albedo = np.full((n, n, 3), 0.5, dtype=np.float32)
     lights = np.array([[0.0, 0.0, 1.0]], dtype=np.float32)
-    return _core.Renderer(z, mask, albedo, 1.0, lights, np.ones((1, 3), dtype=np.float32), floor=(floor, (0.5, 0.5, 0.5)))
+    return _core.Renderer(z, mask, albedo, 1.0, lights, np.ones((1, 3), dtype=np.float32), floor=Floor(floor, (0.5, 0.5, 0.5)))
 
 
 def test_rays_down_onto_a_plane_hit_at_its_height_and_rays_up_miss():

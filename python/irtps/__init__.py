@@ -2,8 +2,9 @@
 
 from importlib.metadata import PackageNotFoundError, version
 
-from irtps.dataset import Dataset, GroundTruth, load_dataset, load_ground_truth, load_scene_object, save_dataset
-from irtps.errors import DatasetError, IrtpsError, IrtpsWarning
+from irtps.data import Dataset, GroundTruth
+from irtps.dataset import load_dataset, load_ground_truth, load_scene_object, save_dataset
+from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
 from irtps.evaluate import Metrics, angular_error_deg, evaluate
 from irtps.integrate import integrate_normals, place_height
 from irtps.ps import PsResult, photometric_stereo
@@ -19,6 +20,7 @@ except PackageNotFoundError:
     __version__ = "0+unknown"
 
 __all__ = [
+    "ArgumentError",
     "Camera",
     "CornellBox",
     "Dataset",

@@ -10,6 +10,7 @@ import sys
 import time
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -80,7 +81,8 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
         print(f"reconstructed {args.data} ({options.method}; {stages}) -> {args.out}")
-        print(f"  placement: {format_placement(result.placement)}")
+        if result.placement is not None:
+            print(f"  placement: {format_placement(result.placement)}")
         if result.albedo_scale is not None:
             print(f"  {format_albedo_scale(result.albedo_scale)}")
         for step in result.history:
@@ -192,7 +194,7 @@ def _cmd_demo(args: argparse.Namespace) -> None:
     size = from_arguments(SynthOptions, args).size  # the demo's only scene option
     check_output(args.out, [], force=args.force)
     start = time.perf_counter()
-    settings = {"shape": "cap", "size": size, "lights": 12, "environment": "cornell", "bounces": 4, "samples": 256, "seed": options.seed}
+    settings: dict[str, Any] = {"shape": "cap", "size": size, "lights": 12, "environment": "cornell", "bounces": 4, "samples": 256, "seed": options.seed}
     with atomic_output_dir(args.out) as folder:
         dataset, rendering = synthesize(**settings, progress=not args.quiet)
         save_dataset(dataset, folder / "data", extra=_bounce_files(rendering), rendering={"command": "demo", **settings})

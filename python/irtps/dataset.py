@@ -1,7 +1,7 @@
-"""Data sets: images under known lights, a mask and optional ground truth.
-
-`load_dataset` reads a folder in the irtps layout (``scene.json``, contract
-``irtps.scene/1``) or the DiLiGenT layout; `save_dataset` writes the irtps layout.
+"""Data set folders: `load_dataset` detects the layout and reads a folder in the irtps layout
+(``scene.json``, contract ``irtps.scene/1``) or the DiLiGenT layout (`irtps.diligent`);
+`save_dataset` writes the irtps layout. The data classes, `Dataset` and `GroundTruth`, are
+`irtps.data`'s.
 """
 
 from __future__ import annotations
@@ -9,16 +9,17 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 import numpy as np
 
+from irtps._checks import check_finite
 from irtps.atomic import atomic_output_dir
-from irtps.errors import DatasetError
-from irtps.imageio import check_finite, clip_negative, format_size, image_size, read_exr, read_image, read_images, read_mask, write_exr, write_png
+from irtps.data import Dataset, GroundTruth
+from irtps.diligent import load_diligent, load_diligent_ground_truth
+from irtps.errors import ArgumentError, DatasetError
+from irtps.imageio import check_stack_memory, clip_negative, format_size, png_saturation, read_exr, read_image, read_images, read_mask, write_exr, write_png
 from irtps.paths import check_file, check_folder, exists, optional_file, optional_folder
-from irtps.resources import check_memory
 from irtps.scene import Scene, load_scene, write_scene
 
 SCENE_FILE = "scene.json"
@@ -29,84 +30,6 @@ DILIGENT_MARKER = "light_directions.txt"
 
 _NUMBERED_IMAGE = re.compile(r"\d{3,}\.(exr|png)", re.IGNORECASE)
 _HEIGHT_CHANNEL_TOLERANCE = 1e-6
-
-
-@dataclass
-class GroundTruth:
-    """Ground truth of a data set, for evaluation only; each part is optional.
-
-    Attributes
-    ----------
-    height : numpy.ndarray or None
-        float32 (H, W): heights above the floor, 0 outside the mask.
-    normal : numpy.ndarray or None
-        float32 (H, W, 3): unit normals (nx, ny, nz), 0 outside the mask.
-    albedo : numpy.ndarray or None
-        float32 (H, W, 3): RGB albedo.
-    direct : numpy.ndarray or None
-        float32 (K, H, W, 3): the direct-light-only image for each light.
-    """
-
-    height: np.ndarray | None = None
-    normal: np.ndarray | None = None
-    albedo: np.ndarray | None = None
-    direct: np.ndarray | None = None
-
-    def __post_init__(self) -> None:
-        for name in ("height", "normal", "albedo", "direct"):
-            value = getattr(self, name)
-            if value is not None:
-                setattr(self, name, np.asarray(value, dtype=np.float32))
-
-
-@dataclass
-class Dataset:
-    """Photometric-stereo images of one object with their scene.
-
-    Attributes
-    ----------
-    scene : Scene
-    images : numpy.ndarray
-        float32 (K, H, W, 3), linear RGB radiance; image k is lit by ``scene.lights[k]``.
-    mask : numpy.ndarray
-        bool (H, W): True on object pixels.
-    gt : GroundTruth or None
-    source : str or None
-        The folder the data set was read from.
-    saturation : float or None
-        The value at which the camera clips, where it is known: 1.0 for images read from
-        PNG files (their largest code value), None for float images. `irtps.reconstruct`
-        leaves out observations at or above it.
-
-    Raises
-    ------
-    DatasetError
-        On construction, if an array's shape disagrees with the scene.
-    """
-
-    scene: Scene
-    images: np.ndarray
-    mask: np.ndarray
-    gt: GroundTruth | None = None
-    source: str | None = None
-    saturation: float | None = None
-
-    def __post_init__(self) -> None:
-        self.images = np.asarray(self.images, dtype=np.float32)
-        self.mask = np.asarray(self.mask, dtype=bool)
-        self.check_shapes()
-
-    def check_shapes(self) -> None:
-        """Raise `DatasetError` if an array's shape disagrees with the scene's lights and camera."""
-        count = len(self.scene.lights)
-        size = (self.scene.camera.height, self.scene.camera.width)
-        _expect_shape("Dataset.images", self.images, (count, *size, 3))
-        _expect_shape("Dataset.mask", self.mask, size)
-        if self.gt is not None:
-            for name, shape in _gt_shapes(count, size).items():
-                value = getattr(self.gt, name)
-                if value is not None:
-                    _expect_shape(f"Dataset.gt.{name}", value, shape)
 
 
 def load_dataset(path: str | Path, *, ground_truth: bool = True) -> Dataset:
@@ -148,8 +71,6 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True) -> Dataset:
     if exists(folder / SCENE_FILE):
         return _load_irtps(folder, ground_truth)
     if exists(folder / DILIGENT_MARKER):
-        from irtps.diligent import load_diligent
-
         return load_diligent(folder, ground_truth=ground_truth)
     raise DatasetError(
         f"{folder}: not a data set: it holds neither {SCENE_FILE} (irtps layout) "
@@ -185,8 +106,10 @@ def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.n
     Raises
     ------
     DatasetError
-        If the data set breaks the contract (shapes, non-finite values, scene) or
-        ``extra`` is malformed; nothing is written then.
+        If the data set breaks the contract (shapes, non-finite values, scene); nothing is
+        written then.
+    ArgumentError
+        If ``extra`` is malformed; nothing is written then.
     """
     dataset.check_shapes()
     if not dataset.mask.any():
@@ -194,10 +117,10 @@ def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.n
     extra = dict(extra or {})
     _check_extra(extra)
     for k, image in enumerate(dataset.images):
-        check_finite(f"Dataset.images[{k}]", image)
+        check_finite(f"Dataset.images[{k}]", image, error=DatasetError)
     for name, files in _gt_files(dataset.gt).items():
         for relative, array in files:
-            check_finite(f"Dataset.gt.{name} ({relative})", array)
+            check_finite(f"Dataset.gt.{name} ({relative})", array, error=DatasetError)
     with atomic_output_dir(path) as out:
         write_scene(dataset.scene, out / SCENE_FILE)
         (out / IMAGES_FOLDER).mkdir()
@@ -250,9 +173,7 @@ def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | 
             )
         return _load_ground_truth(folder / GT_FOLDER, len(scene.lights), camera_size, direct=False)
     if exists(folder / DILIGENT_MARKER):
-        from irtps.diligent import load_diligent_ground_truth
-
-        return load_diligent_ground_truth(folder, tuple(size))
+        return load_diligent_ground_truth(folder, (size[0], size[1]))
     raise DatasetError(f"{folder}: not a data set: it holds neither {SCENE_FILE} nor {DILIGENT_MARKER}")
 
 
@@ -274,44 +195,6 @@ def _load_irtps(folder: Path, ground_truth: bool) -> Dataset:
     gt = _load_ground_truth(folder / GT_FOLDER, count, size) if ground_truth else None
     saturation = png_saturation(paths)
     return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=saturation)
-
-
-def check_stack_memory(paths: list[Path], size: tuple[int, int] | None = None, where: str | Path | None = None) -> None:
-    """Refuse, before decoding any, a stack of images that would not fit in memory.
-
-    Parameters
-    ----------
-    paths : list of pathlib.Path
-        The images, all of the first one's size.
-    size : tuple of int, optional
-        The (H, W) expected, used when the first image's header cannot be parsed.
-    where : str or pathlib.Path, optional
-        The folder or file that lists the images, named in the message (by default the
-        first image's folder).
-
-    Raises
-    ------
-    IrtpsError
-        ``"WHERE: K images of WxH decoded as float32 RGB need X GB, more than the Y GB
-        available"``.
-    DatasetError
-        If the first image is not a readable regular file.
-    """
-    claimed = image_size(paths[0])
-    if claimed is not None and size is not None:
-        claimed = max(claimed, tuple(size), key=lambda shape: shape[0] * shape[1])
-    shape = claimed or size
-    if shape is None:
-        return
-    check_memory(
-        len(paths) * shape[0] * shape[1] * 3 * np.dtype(np.float32).itemsize,
-        f"{paths[0].parent if where is None else where}: {len(paths)} images of {format_size(shape)} decoded as float32 RGB",
-    )
-
-
-def png_saturation(paths: list[Path]) -> float | None:
-    """1.0 (the largest code value, read as 1) when every image is a PNG file, else None."""
-    return 1.0 if all(path.suffix.lower() == ".png" for path in paths) else None
 
 
 def _numbered_images(folder: Path, count: int) -> list[Path]:
@@ -363,7 +246,7 @@ def read_height_map(path: Path, size: tuple[int, int]) -> np.ndarray:
         Naming ``path``: unreadable, non-finite, channels that differ, another size.
     """
     height = read_exr(path)
-    check_finite(path, height)
+    check_finite(path, height, error=DatasetError)
     if height.ndim == 3:
         spread = float(np.ptp(height, axis=2).max())
         if spread > _HEIGHT_CHANNEL_TOLERANCE * max(1.0, float(np.abs(height).max())):
@@ -386,7 +269,7 @@ def read_normal_map(path: Path, size: tuple[int, int] | None = None) -> np.ndarr
     normal = read_exr(path)
     if normal.ndim != 3:
         raise DatasetError(f"{path}: has a single Y channel; a normal map needs R, G, B = nx, ny, nz")
-    check_finite(path, normal)
+    check_finite(path, normal, error=DatasetError)
     return normal if size is None else _checked_size(path, normal, size)
 
 
@@ -412,16 +295,12 @@ def _checked_size(path: Path, array: np.ndarray, size: tuple[int, int]) -> np.nd
 
 def _image_size(shape: tuple[int, ...]) -> tuple[int, int]:
     """(H, W) of an image shape (H, W), (H, W, 3) or a stack shape (K, H, W, 3)."""
-    return tuple(shape[1:3]) if len(shape) == 4 else tuple(shape[:2])
+    return (shape[1], shape[2]) if len(shape) == 4 else (shape[0], shape[1])
 
 
 def _if_file(path: Path, read):
     """``read(path)`` if an optional file is there, None if nothing is at ``path``."""
     return read(path) if optional_file(path) else None
-
-
-def _gt_shapes(count: int, size: tuple[int, int]) -> dict[str, tuple[int, ...]]:
-    return {"height": size, "normal": (*size, 3), "albedo": (*size, 3), "direct": (count, *size, 3)}
 
 
 def _gt_files(gt: GroundTruth | None) -> dict[str, list[tuple[str, np.ndarray]]]:
@@ -441,30 +320,25 @@ def _gt_files(gt: GroundTruth | None) -> dict[str, list[tuple[str, np.ndarray]]]
 def _check_extra(extra: dict) -> None:
     for relative, array in extra.items():
         if not isinstance(relative, str):
-            raise DatasetError(f"extra: keys must be relative paths (str), got {relative!r}")
+            raise ArgumentError("extra", f"keys must be relative paths (str), got {relative!r}")
         path = PurePosixPath(relative)
         if path.is_absolute() or "\\" in relative or ".." in path.parts or path.suffix != ".exr":
-            raise DatasetError(f"extra: {relative!r} must be a relative POSIX path inside the data set ending in .exr")
+            raise ArgumentError("extra", f"{relative!r} must be a relative POSIX path inside the data set ending in .exr")
         shape = np.shape(array)
         if not (len(shape) == 2 or (len(shape) == 3 and shape[2] == 3)):
-            raise DatasetError(f"extra: {relative!r} has shape {shape}, expected (H, W) or (H, W, 3)")
+            raise ArgumentError("extra", f"{relative!r} has shape {shape}, expected (H, W) or (H, W, 3)")
 
 
 def _write_new_exr(out: Path, relative: str, array: np.ndarray) -> None:
     target = out / relative
     if target.exists():
-        raise DatasetError(f"extra: {relative!r} would overwrite a file of the data set")
+        raise ArgumentError("extra", f"{relative!r} would overwrite a file of the data set")
     target.parent.mkdir(parents=True, exist_ok=True)
     write_exr(target, array)
 
 
 def _image_name(k: int, suffix: str = ".exr") -> str:
     return f"{k:03d}{suffix}"
-
-
-def _expect_shape(name: str, array: np.ndarray, shape: tuple[int, ...]) -> None:
-    if array.shape != tuple(shape):
-        raise DatasetError(f"{name} has shape {array.shape}, expected {tuple(shape)} from the scene")
 
 
 def load_scene_object(path: str | Path) -> tuple[Scene, np.ndarray, np.ndarray, np.ndarray]:

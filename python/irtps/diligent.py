@@ -13,9 +13,10 @@ from pathlib import Path
 import numpy as np
 import scipy.io
 
-from irtps.dataset import Dataset, GroundTruth, check_stack_memory, png_saturation
+from irtps.data import Dataset, GroundTruth
+from irtps._checks import check_finite
 from irtps.errors import DatasetError
-from irtps.imageio import check_finite, format_size, read_images, read_mask
+from irtps.imageio import check_stack_memory, format_size, png_saturation, read_images, read_mask
 from irtps.paths import check_file, check_folder, optional_file
 from irtps.scene import MIN_LIGHTS, Camera, Light, Scene
 
@@ -187,5 +188,5 @@ def _read_normals(path: Path, size: tuple[int, int]) -> np.ndarray:
     if normals.shape[:2] != tuple(size):
         raise DatasetError(f"{path}: size {format_size(normals.shape)} does not match the images ({format_size(size)})")
     normals = normals.astype(np.float32)
-    check_finite(path, normals)
+    check_finite(path, normals, error=DatasetError)
     return normals

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from irtps.errors import DatasetError
+from irtps._checks import check_image, check_mask, check_positive
 from irtps.surface import height_to_normals
 
 __all__ = ["BACKGROUND", "albedo_to_rgb", "hillshade", "normal_to_rgb", "object_window", "radiance_to_rgb"]
@@ -37,7 +37,7 @@ def object_window(mask: np.ndarray, margin: float = 0.05) -> tuple[slice, slice]
 
     Raises
     ------
-    DatasetError
+    ArgumentError
         If the mask is not (H, W) or is empty.
 
     Examples
@@ -47,7 +47,7 @@ def object_window(mask: np.ndarray, margin: float = 0.05) -> tuple[slice, slice]
     >>> object_window(mask)
     (slice(39, 61, None), slice(9, 31, None))
     """
-    mask = _check_mask(mask)
+    mask = check_mask(mask, nonempty=True)
     rows, cols = np.nonzero(mask)
     extra = max(1, int(round(margin * max(np.ptp(rows) + 1, np.ptp(cols) + 1))))
     height, width = mask.shape
@@ -77,7 +77,7 @@ def normal_to_rgb(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
     Raises
     ------
-    DatasetError
+    ArgumentError
         Naming the argument whose shape is wrong.
 
     Examples
@@ -87,8 +87,8 @@ def normal_to_rgb(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     >>> normal_to_rgb(normals, np.array([[True, False]])).tolist()
     [[[0.5, 0.5, 1.0], [0.5, 0.5, 0.5]]]
     """
-    mask = _check_mask(mask)
-    normals = _check_image("normals", normals, mask)
+    mask = check_mask(mask, nonempty=True)
+    normals = check_image("normals", normals, mask)
     rgb = np.clip((normals + 1.0) / 2.0, 0.0, 1.0)
     return _with_background(rgb, mask)
 
@@ -127,8 +127,8 @@ def albedo_to_rgb(albedo: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, flo
     >>> scale, float(rgb[0, 0, 0])
     (0.25, 1.0)
     """
-    mask = _check_mask(mask)
-    albedo = _check_image("albedo", albedo, mask)
+    mask = check_mask(mask, nonempty=True)
+    albedo = check_image("albedo", albedo, mask)
     white = _white_level(albedo, mask)
     scale = 1.0 / white if white > 1.0 else 1.0
     return _with_background(_srgb(albedo * scale), mask), scale
@@ -163,8 +163,8 @@ def radiance_to_rgb(radiance: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray,
     >>> round(scale, 6), [round(float(v), 4) for v in rgb[0, 0]]
     (50.0, [1.0, 0.7354, 0.0])
     """
-    mask = _check_mask(mask)
-    radiance = _check_image("radiance", radiance, mask)
+    mask = check_mask(mask, nonempty=True)
+    radiance = check_image("radiance", radiance, mask)
     white = _white_level(radiance, mask)
     scale = 1.0 / white if white > 0.0 else 1.0
     return _with_background(_srgb(radiance * scale), mask), scale
@@ -205,7 +205,7 @@ def hillshade(
 
     Raises
     ------
-    DatasetError
+    ArgumentError
         Naming the argument that is malformed.
 
     Examples
@@ -215,14 +215,9 @@ def hillshade(
     >>> round(float(flat[0, 0, 0]), 4)  # sin 45°
     0.7071
     """
-    mask = _check_mask(mask)
-    height = np.asarray(height, dtype=np.float64)
-    if height.shape != mask.shape:
-        raise DatasetError(f"height has shape {height.shape}, expected {mask.shape} to match the mask")
-    if not np.isfinite(height[mask]).all():
-        raise DatasetError("height is not finite on some masked pixels")
-    if not (np.isfinite(pixel_size) and pixel_size > 0):
-        raise DatasetError(f"pixel_size must be a positive number, got {pixel_size!r}")
+    mask = check_mask(mask, nonempty=True)
+    height = check_image("height", height, mask, channels=None)
+    pixel_size = check_positive("pixel_size", pixel_size)
     azimuth, altitude = np.radians(azimuth_deg), np.radians(altitude_deg)
     light = np.array([np.cos(altitude) * np.sin(azimuth), np.cos(altitude) * np.cos(azimuth), np.sin(altitude)])
     shade = np.clip(height_to_normals(height, mask, pixel_size) @ light, 0.0, 1.0)
@@ -241,22 +236,3 @@ def _srgb(linear: np.ndarray) -> np.ndarray:
 
 def _with_background(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return np.where(mask[..., None], rgb, BACKGROUND).astype(np.float32)
-
-
-def _check_mask(mask) -> np.ndarray:
-    mask = np.asarray(mask)
-    if mask.ndim != 2:
-        raise DatasetError(f"mask has shape {mask.shape}, expected (H, W)")
-    mask = mask.astype(bool)
-    if not mask.any():
-        raise DatasetError("mask is empty: no object pixel to show")
-    return mask
-
-
-def _check_image(name: str, image, mask: np.ndarray) -> np.ndarray:
-    image = np.asarray(image, dtype=np.float64)
-    if image.shape != (*mask.shape, 3):
-        raise DatasetError(f"{name} has shape {image.shape}, expected {(*mask.shape, 3)} to match the mask")
-    if not np.isfinite(image[mask]).all():
-        raise DatasetError(f"{name} is not finite on some masked pixels")
-    return image

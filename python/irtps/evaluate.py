@@ -26,8 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from irtps.dataset import GroundTruth
-from irtps.errors import DatasetError
+from irtps._checks import check_finite, check_image, check_mask, check_number
+from irtps.data import GroundTruth
 
 __all__ = ["ErrorMaps", "Metrics", "angular_error_deg", "error_maps", "evaluate", "format_metrics"]
 
@@ -146,7 +146,7 @@ def angular_error_deg(normals: np.ndarray, normals_gt: np.ndarray, mask: np.ndar
 
     Raises
     ------
-    DatasetError
+    ArgumentError
         (an `IrtpsError`) naming the argument whose shape disagrees, or ``normals``
         if it is not finite on an evaluated pixel.
 
@@ -159,12 +159,11 @@ def angular_error_deg(normals: np.ndarray, normals_gt: np.ndarray, mask: np.ndar
     >>> np.round(angular_error_deg(n, up, np.array([[True, False]])), 4).tolist()
     [[10.0, nan]]
     """
-    mask = _as_mask(mask)
-    shape = mask.shape
-    normals = _as_array("normals", normals, (*shape, 3))
-    normals_gt = _as_array("normals_gt", normals_gt, (*shape, 3))
+    mask = check_mask(mask)
+    normals = check_image("normals", normals, mask, finite=False)
+    normals_gt = check_image("normals_gt", normals_gt, mask, finite=False)
     valid = mask & _valid_normals(normals_gt)
-    _check_finite("normals", normals, valid)
+    check_finite("normals", normals, valid)
     return _angular_map(normals, normals_gt, valid)
 
 
@@ -204,7 +203,7 @@ def evaluate(
 
     Raises
     ------
-    DatasetError
+    ArgumentError
         (an `IrtpsError`) naming the argument whose shape disagrees with ``mask``, or a
         reconstruction that is not finite on an evaluated pixel.
 
@@ -247,7 +246,7 @@ def error_maps(
 
     Raises
     ------
-    DatasetError
+    ArgumentError
         As for `evaluate`.
 
     Examples
@@ -309,18 +308,15 @@ def format_metrics(metrics: Metrics) -> str:
 
 
 def _compare(mask, normals, albedo, height, gt, base_height) -> tuple[Metrics, ErrorMaps]:
-    mask = _as_mask(mask)
-    shape = mask.shape
-    normals = _as_optional("normals", normals, (*shape, 3))
-    albedo = _as_optional("albedo", albedo, (*shape, 3))
-    height = _as_optional("height", height, shape)
+    mask = check_mask(mask)
+    normals = _as_optional("normals", normals, mask, 3)
+    albedo = _as_optional("albedo", albedo, mask, 3)
+    height = _as_optional("height", height, mask, None)
     gt = gt if gt is not None else GroundTruth()
-    gt_normal = _as_optional("gt.normal", gt.normal, (*shape, 3))
-    gt_albedo = _as_optional("gt.albedo", gt.albedo, (*shape, 3))
-    gt_height = _as_optional("gt.height", gt.height, shape)
-    base_height = float(base_height)
-    if not np.isfinite(base_height):
-        raise DatasetError(f"base_height must be finite, got {base_height}")
+    gt_normal = _as_optional("gt.normal", gt.normal, mask, 3)
+    gt_albedo = _as_optional("gt.albedo", gt.albedo, mask, 3)
+    gt_height = _as_optional("gt.height", gt.height, mask, None)
+    base_height = check_number("base_height", base_height)
 
     valid = mask.copy()
     if gt_normal is not None:
@@ -331,7 +327,7 @@ def _compare(mask, normals, albedo, height, gt, base_height) -> tuple[Metrics, E
         valid &= np.isfinite(gt_height)
     for name, value in (("normals", normals), ("albedo", albedo), ("height", height)):
         if value is not None:
-            _check_finite(name, value, valid)
+            check_finite(name, value, valid)
 
     pixels = int(valid.sum())
     fields: dict = {"pixels": pixels}
@@ -390,30 +386,8 @@ def _scatter(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return out
 
 
-def _as_mask(mask) -> np.ndarray:
-    mask = np.asarray(mask)
-    if mask.ndim != 2:
-        raise DatasetError(f"mask has shape {mask.shape}, expected (H, W)")
-    return mask.astype(bool)
-
-
-def _as_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
-    array = np.asarray(value, dtype=np.float64)
-    if array.shape != tuple(shape):
-        raise DatasetError(f"{name} has shape {array.shape}, expected {tuple(shape)} to match the mask")
-    return array
-
-
-def _as_optional(name: str, value, shape: tuple[int, ...]) -> np.ndarray | None:
-    return None if value is None else _as_array(name, value, shape)
-
-
-def _check_finite(name: str, array: np.ndarray, valid: np.ndarray) -> None:
-    values = array[valid]
-    bad = ~np.isfinite(values)
-    if bad.any():
-        pixels = int(bad.reshape(len(values), -1).any(axis=1).sum())
-        raise DatasetError(f"{name} is not finite on {pixels} evaluated pixel(s)")
+def _as_optional(name: str, value, mask: np.ndarray, channels: int | None) -> np.ndarray | None:
+    return None if value is None else check_image(name, value, mask, channels=channels, finite=False)
 
 
 def _num(value: float | None) -> str:

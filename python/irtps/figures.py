@@ -14,8 +14,9 @@ from matplotlib import colormaps
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
+from irtps._checks import check_array
 from irtps.display import BACKGROUND
-from irtps.errors import DatasetError
+from irtps.errors import ArgumentError
 
 __all__ = ["convergence_png", "error_map_png", "image_png"]
 
@@ -46,9 +47,7 @@ def image_png(rgb: np.ndarray, title: str) -> bytes:
     >>> image_png(np.zeros((4, 4, 3)), "black")[:8]
     b'\\x89PNG\\r\\n\\x1a\\n'
     """
-    rgb = np.asarray(rgb, dtype=np.float64)
-    if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise DatasetError(f"image has shape {rgb.shape}, expected (H, W, 3)")
+    rgb = check_array("rgb", rgb, (None, None, 3))
     figure = Figure(figsize=FIGURE_SIZE, layout="constrained")
     axes = figure.add_subplot()
     axes.imshow(np.clip(rgb, 0.0, 1.0))
@@ -79,7 +78,7 @@ def error_map_png(errors: np.ndarray, title: str, unit: str) -> bytes:
 
     Raises
     ------
-    DatasetError
+    ArgumentError
         If ``errors`` is not (H, W) or has no finite value.
 
     Examples
@@ -89,12 +88,10 @@ def error_map_png(errors: np.ndarray, title: str, unit: str) -> bytes:
     >>> png[:8]
     b'\\x89PNG\\r\\n\\x1a\\n'
     """
-    errors = np.asarray(errors, dtype=np.float64)
-    if errors.ndim != 2:
-        raise DatasetError(f"error map has shape {errors.shape}, expected (H, W)")
+    errors = check_array("errors", errors, (None, None))
     finite = errors[np.isfinite(errors)]
     if finite.size == 0:
-        raise DatasetError(f"error map {title!r} has no finite value")
+        raise ArgumentError("errors", f"the map {title!r} has no finite value")
     top = float(np.percentile(finite, ERROR_SCALE_PERCENTILE))
     figure = Figure(figsize=FIGURE_SIZE, layout="constrained")
     axes = figure.add_subplot()
@@ -134,7 +131,7 @@ def convergence_png(
 
     Raises
     ------
-    DatasetError
+    ArgumentError
         If the sequences differ in length or no pass has a residual.
 
     Examples
@@ -143,11 +140,11 @@ def convergence_png(
     b'\\x89PNG\\r\\n\\x1a\\n'
     """
     if not len(passes) == len(angular_error_deg) == len(residual):
-        raise DatasetError(f"convergence: {len(passes)} passes but {len(angular_error_deg)} errors and {len(residual)} residuals")
+        raise ArgumentError("passes", f"{len(passes)} passes but {len(angular_error_deg)} errors and {len(residual)} residuals")
     errors = [(k, e) for k, e in zip(passes, angular_error_deg) if e is not None]
     residuals = [(k, r) for k, r in zip(passes, residual) if r is not None]
     if not residuals:
-        raise DatasetError("convergence: no pass has a residual")
+        raise ArgumentError("residual", "no pass has a residual")
     figure = Figure(figsize=(FIGURE_SIZE[0] * (2 if errors else 1), FIGURE_SIZE[1] * 0.8), layout="constrained")
     panels = figure.subplots(1, 2 if errors else 1, squeeze=False, sharex=True)[0]
     if errors:

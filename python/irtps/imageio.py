@@ -10,14 +10,16 @@ refused before it is opened, so that reading never blocks (see `irtps.paths`).
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from irtps import _core
+from irtps._checks import check_finite
 from irtps.errors import DatasetError, IrtpsWarning
 from irtps.paths import MISSING, check_file, file_problem
+from irtps.resources import check_memory
 
 PNG_BIT_DEPTHS = (8, 16)
 """Bit depths of PNG files that can be written."""
@@ -43,7 +45,8 @@ def read_exr(path: str | Path) -> np.ndarray:
     DatasetError
         If the file is missing, unreadable, corrupt or has other channels.
     """
-    return _core_call(_core.read_exr, path)
+    _check_readable(path)
+    return _core.read_exr(str(path))
 
 
 def write_exr(path: str | Path, array: np.ndarray) -> None:
@@ -55,7 +58,7 @@ def write_exr(path: str | Path, array: np.ndarray) -> None:
     array : numpy.ndarray
         (H, W) or (H, W, 3); converted to float32.
     """
-    _core_call(_core.write_exr, path, _image_array(path, array), reading=False)
+    _core.write_exr(str(path), _image_array(path, array))
 
 
 def read_png(path: str | Path) -> tuple[np.ndarray, int]:
@@ -73,7 +76,8 @@ def read_png(path: str | Path) -> tuple[np.ndarray, int]:
     bit_depth : int
         8 or 16.
     """
-    return _core_call(_core.read_png, path)
+    _check_readable(path)
+    return _core.read_png(str(path))
 
 
 def write_png(path: str | Path, array: np.ndarray, bit_depth: int = 8) -> None:
@@ -87,7 +91,7 @@ def write_png(path: str | Path, array: np.ndarray, bit_depth: int = 8) -> None:
     """
     if bit_depth not in PNG_BIT_DEPTHS:
         raise DatasetError(f"{path}: PNG bit depth must be 8 or 16, got {bit_depth}")
-    _core_call(_core.write_png, path, _image_array(path, array), bit_depth, reading=False)
+    _core.write_png(str(path), _image_array(path, array), bit_depth)
 
 
 def read_image(path: str | Path) -> np.ndarray:
@@ -116,7 +120,7 @@ def read_image(path: str | Path) -> np.ndarray:
         raise DatasetError(f"{path}: unknown image type {suffix!r}: expected .exr or .png")
     if image.ndim == 2:
         image = np.repeat(image[:, :, None], 3, axis=2)
-    check_finite(path, image)
+    check_finite(path, image, error=DatasetError)
     return image
 
 
@@ -142,10 +146,7 @@ def read_images(paths: Sequence[str | Path]) -> np.ndarray:
         raise DatasetError("no image files given")
     for path in paths:
         _check_readable(path)
-    try:
-        return _core.read_images([str(path) for path in paths])
-    except (ValueError, OSError) as error:
-        raise DatasetError(str(error)) from error
+    return _core.read_images([str(path) for path in paths])
 
 
 def clip_negative(paths: Sequence[str | Path], images: np.ndarray) -> None:
@@ -205,24 +206,6 @@ def read_mask(path: str | Path, shape: tuple[int, int]) -> np.ndarray:
     if not mask.any():
         raise DatasetError(f"{path}: the mask is empty (every pixel is zero)")
     return mask
-
-
-def check_finite(path: str | Path, array: np.ndarray) -> None:
-    """Raise `DatasetError` naming ``path`` and the first pixel if ``array`` has a NaN or infinity.
-
-    Parameters
-    ----------
-    path : str or pathlib.Path
-        The file the array was read from.
-    array : numpy.ndarray
-        (H, W) or (H, W, C).
-    """
-    bad = ~np.isfinite(array)
-    if bad.any():
-        index = tuple(np.argwhere(bad)[0])
-        row, column = index[0], index[1]
-        value = array[index]
-        raise DatasetError(f"{path}: non-finite value {value} at row {row}, column {column}")
 
 
 def image_size(path: str | Path) -> tuple[int, int] | None:
@@ -291,6 +274,44 @@ def _exr_size(head: bytes) -> tuple[int, int] | None:
     return None
 
 
+def check_stack_memory(paths: list[Path], size: tuple[int, int] | None = None, where: str | Path | None = None) -> None:
+    """Refuse, before decoding any, a stack of images that would not fit in memory.
+
+    Parameters
+    ----------
+    paths : list of pathlib.Path
+        The images, all of the first one's size.
+    size : tuple of int, optional
+        The (H, W) expected, used when the first image's header cannot be parsed.
+    where : str or pathlib.Path, optional
+        The folder or file that lists the images, named in the message (by default the
+        first image's folder).
+
+    Raises
+    ------
+    IrtpsError
+        ``"WHERE: K images of WxH decoded as float32 RGB need X GB, more than the Y GB
+        available"``.
+    DatasetError
+        If the first image is not a readable regular file.
+    """
+    claimed = image_size(paths[0])
+    if claimed is not None and size is not None:
+        claimed = max(claimed, (size[0], size[1]), key=lambda shape: shape[0] * shape[1])
+    shape = claimed or size
+    if shape is None:
+        return
+    check_memory(
+        len(paths) * shape[0] * shape[1] * 3 * np.dtype(np.float32).itemsize,
+        f"{paths[0].parent if where is None else where}: {len(paths)} images of {format_size(shape)} decoded as float32 RGB",
+    )
+
+
+def png_saturation(paths: list[Path]) -> float | None:
+    """1.0 (the largest code value, read as 1) when every image is a PNG file, else None."""
+    return 1.0 if all(path.suffix.lower() == ".png" for path in paths) else None
+
+
 def format_size(shape: Sequence[int]) -> str:
     """An image size as ``"WxH"`` (width x height) from a shape starting with (H, W)."""
     return f"{shape[1]}x{shape[0]}"
@@ -312,14 +333,3 @@ def _check_readable(path: str | Path) -> None:
     if problem is not None and problem != MISSING:
         raise DatasetError(f"{path}: {problem}")
 
-
-def _core_call(function: Callable, path: str | Path, *args, reading: bool = True):
-    if reading:
-        _check_readable(path)
-    try:
-        return function(str(path), *args)
-    except (ValueError, OSError) as error:
-        message = str(error)
-        if str(path) not in message:
-            message = f"{path}: {message}"
-        raise DatasetError(message) from error

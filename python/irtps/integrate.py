@@ -26,12 +26,13 @@ import scipy.fft
 import scipy.ndimage
 import scipy.sparse
 
-from irtps.errors import IrtpsError
+from irtps._checks import check_choice, check_finite, check_mask, check_number, check_positive, document_choices
+from irtps.errors import ArgumentError
 
-__all__ = ["IntegrationError", "integrate_normals", "mask_boundary", "normals_to_gradients", "place_height"]
+__all__ = ["integrate_normals", "mask_boundary", "normals_to_gradients", "place_height"]
 
 METHODS = ("ls", "mestimator", "footprint", "dct", "fc")
-_ROBUST_WEIGHTS = ("huber", "cauchy")
+ROBUST_WEIGHTS = ("huber", "cauchy")
 # Tuning constants giving 95 % efficiency on Gaussian residuals (in units of the scale).
 _HUBER_K = 1.345
 _CAUCHY_K = 2.385
@@ -51,14 +52,6 @@ _MAX_PCG_ITERATIONS = 1000
 _DEFAULT_TOLERANCE = {"ls": 1e-5, "mestimator": 1e-4}
 _PRESMOOTHER = ("gauss_seidel", {"sweep": "symmetric"})
 _POSTSMOOTHER = ("gauss_seidel", {"sweep": "symmetric"})
-
-
-class IntegrationError(IrtpsError, ValueError):
-    """Inputs that normal integration cannot accept.
-
-    The message names the argument concerned, e.g.
-    ``"normals: 12 pixels inside the mask are not finite"``.
-    """
 
 
 def normals_to_gradients(normals, mask=None, *, max_slope: float = 10.0):
@@ -86,7 +79,7 @@ def normals_to_gradients(normals, mask=None, *, max_slope: float = 10.0):
 
     Raises
     ------
-    IntegrationError
+    ArgumentError
         If `normals` is not (H, W, 3), has non-finite values inside the mask, or `mask` has
         another shape.
 
@@ -99,10 +92,11 @@ def normals_to_gradients(normals, mask=None, *, max_slope: float = 10.0):
     (0.5, -0.25)
     """
     normals, mask = _check_normals_mask(normals, mask)
-    max_slope = _check_positive(max_slope, "max_slope")
+    max_slope = check_positive("max_slope", max_slope)
     return _gradients(normals, mask, max_slope)
 
 
+@document_choices(method=METHODS, robust_weight=ROBUST_WEIGHTS)
 def integrate_normals(
     normals,
     mask=None,
@@ -166,9 +160,9 @@ def integrate_normals(
         of the mask is integrated on its own (it has its own free constant).
     pixel_size : float
         World size of a pixel; heights are in the same unit.
-    method : {"ls", "mestimator", "dct", "fc"}
+    method : str
         See above.
-    robust_weight : {"huber", "cauchy"}
+    robust_weight : str
         Weight function of ``"mestimator"`` (ignored by the other methods).
     max_slope : float
         Slopes are clipped to ``[-max_slope, max_slope]`` (default 10, about 84°), so that
@@ -195,7 +189,7 @@ def integrate_normals(
 
     Raises
     ------
-    IntegrationError
+    ArgumentError
         (a ``ValueError`` and an :class:`irtps.errors.IrtpsError`) naming the argument: a
         shape mismatch, non-finite normals inside the mask, an empty mask, an unknown
         `method` or `robust_weight`, a non-positive `pixel_size`, `max_slope` or
@@ -218,22 +212,18 @@ def integrate_normals(
     (1.0, 0.5)
     """
     normals, mask = _check_normals_mask(normals, mask)
-    pixel_size = _check_positive(pixel_size, "pixel_size")
-    max_slope = _check_positive(max_slope, "max_slope")
+    pixel_size = check_positive("pixel_size", pixel_size)
+    max_slope = check_positive("max_slope", max_slope)
     if tolerance is None:
         tolerance = _DEFAULT_TOLERANCE.get(method, 1e-5)
-    tolerance = _check_positive(tolerance, "tolerance")
-    if method not in METHODS:
-        raise IntegrationError(f"method: unknown method {method!r}; expected one of {', '.join(METHODS)}")
+    tolerance = check_positive("tolerance", tolerance)
+    check_choice("method", method, METHODS)
     if method == "mestimator":
-        if robust_weight not in _ROBUST_WEIGHTS:
-            raise IntegrationError(
-                f"robust_weight: unknown weight {robust_weight!r}; expected one of {', '.join(_ROBUST_WEIGHTS)}"
-            )
+        check_choice("robust_weight", robust_weight, ROBUST_WEIGHTS)
         if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
-            raise IntegrationError(f"iterations: expected a non-negative integer, got {iterations!r}")
+            raise ArgumentError("iterations", f"expected a non-negative integer, got {iterations!r}")
     if not mask.any():
-        raise IntegrationError("mask: the mask is empty (no pixel to integrate)")
+        raise ArgumentError("mask", "empty (no pixel set)")
 
     p, q = _gradients(normals, mask, max_slope)
     # Height steps per pixel step: along a row (+column) dz = p*s, down a column (+row) dz = -q*s.
@@ -242,8 +232,9 @@ def integrate_normals(
 
     if method in ("dct", "fc"):
         if not mask.all():
-            raise IntegrationError(
-                f"mask: method {method!r} needs the full rectangle (every pixel masked); "
+            raise ArgumentError(
+                "mask",
+                f"method {method!r} needs the full rectangle (every pixel masked); "
                 f"{int((~mask).sum())} pixels are unmasked: use method='ls'"
             )
         z = _integrate_dct(gc, gr) if method == "dct" else _integrate_fc(gc, gr)
@@ -289,7 +280,7 @@ def place_height(height, mask=None, *, base_height: float = 0.0, per_component: 
 
     Raises
     ------
-    IntegrationError
+    ArgumentError
         If `height` is not 2-D, has non-finite values inside the mask, `mask` has another
         shape or is empty, or `base_height` is not finite.
 
@@ -304,22 +295,15 @@ def place_height(height, mask=None, *, base_height: float = 0.0, per_component: 
     """
     height = np.asarray(height)
     if height.ndim != 2:
-        raise IntegrationError(f"height: expected an (H, W) array, got shape {height.shape}")
+        raise ArgumentError("height", f"expected an (H, W) array, got shape {height.shape}")
     if not np.issubdtype(height.dtype, np.number) or np.iscomplexobj(height):
-        raise IntegrationError(f"height: expected real numbers, got dtype {height.dtype}")
+        raise ArgumentError("height", f"expected real numbers, got dtype {height.dtype}")
     height = height.astype(np.float64)
-    mask = _check_mask(mask, height.shape[:2], "height")
+    mask = check_mask(mask, height.shape, match="height")
     if not mask.any():
-        raise IntegrationError("mask: the mask is empty")
-    bad = int((~np.isfinite(height[mask])).sum())
-    if bad:
-        raise IntegrationError(f"height: {bad} pixels inside the mask are not finite")
-    try:
-        base_height = float(base_height)
-    except (TypeError, ValueError):
-        raise IntegrationError(f"base_height: expected a number, got {base_height!r}") from None
-    if not np.isfinite(base_height):
-        raise IntegrationError(f"base_height: expected a finite number, got {base_height!r}")
+        raise ArgumentError("mask", "empty (no pixel set)")
+    check_finite("height", height, mask)
+    base_height = check_number("base_height", base_height)
 
     boundary = mask_boundary(mask)
     out = np.zeros(height.shape, np.float64)
@@ -354,7 +338,7 @@ def mask_boundary(mask) -> np.ndarray:
     >>> mask_boundary(m).astype(int)[1:4, 1:4].tolist()
     [[1, 1, 1], [1, 0, 1], [1, 1, 1]]
     """
-    mask = np.asarray(mask, dtype=bool)
+    mask = check_mask(mask)
     inner = scipy.ndimage.binary_erosion(mask, structure=_FOUR, border_value=0)
     return mask & ~inner
 
@@ -362,38 +346,17 @@ def mask_boundary(mask) -> np.ndarray:
 # --------------------------------------------------------------------------- checks
 
 
-def _check_positive(value, name: str) -> float:
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise IntegrationError(f"{name}: expected a positive number, got {value!r}") from None
-    if not (np.isfinite(value) and value > 0):
-        raise IntegrationError(f"{name}: expected a positive finite number, got {value!r}")
-    return value
-
-
-def _check_mask(mask, shape, other: str) -> np.ndarray:
-    if mask is None:
-        return np.ones(shape, dtype=bool)
-    mask = np.asarray(mask)
-    if mask.shape != tuple(shape):
-        raise IntegrationError(f"mask: shape {mask.shape} does not match {other} shape {tuple(shape)}")
-    return mask.astype(bool)
-
-
 def _check_normals_mask(normals, mask):
     normals = np.asarray(normals)
     if normals.ndim != 3 or normals.shape[2] != 3:
-        raise IntegrationError(f"normals: expected an (H, W, 3) array, got shape {normals.shape}")
+        raise ArgumentError("normals", f"expected an (H, W, 3) array, got shape {normals.shape}")
     if normals.shape[0] == 0 or normals.shape[1] == 0:
-        raise IntegrationError(f"normals: the image is empty, shape {normals.shape}")
+        raise ArgumentError("normals", f"the image is empty, shape {normals.shape}")
     if not np.issubdtype(normals.dtype, np.number) or np.iscomplexobj(normals):
-        raise IntegrationError(f"normals: expected real numbers, got dtype {normals.dtype}")
-    mask = _check_mask(mask, normals.shape[:2], "normals (H, W)")
+        raise ArgumentError("normals", f"expected real numbers, got dtype {normals.dtype}")
+    mask = check_mask(mask, normals.shape[:2], match="normals")
     normals = normals.astype(np.float64)
-    bad = int((~np.isfinite(normals[mask])).any(axis=-1).sum())
-    if bad:
-        raise IntegrationError(f"normals: {bad} pixels inside the mask are not finite (NaN or inf)")
+    check_finite("normals", normals, mask)
     return normals, mask
 
 

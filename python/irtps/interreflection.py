@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from irtps.dataset import Dataset
+from irtps.data import Dataset
 from irtps.errors import IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
@@ -163,15 +163,15 @@ def remove_interreflections(
     options = resolve_options(dataset, ReconstructOptions.build(options, method="irtps", **settings))
     scene, mask = dataset.scene, dataset.mask
     original = dataset.images
-    saturated = None if options.saturation is None else (original >= options.saturation).any(axis=-1, keepdims=True)
+    saturated: np.ndarray | None = None if options.saturation is None else np.any(original >= options.saturation, axis=-1, keepdims=True)
     usable = fitted_observations(dataset, options)
     images = original
-    estimate_used = None
-    step = 1.0 if options.relaxation == "auto" else options.relaxation
+    estimate_used: np.ndarray | None = None
+    step = 1.0 if options.relaxation == "auto" else float(options.relaxation)
     steps = _AdaptiveStep(mask)
-    previous_change = None
+    previous_change: np.ndarray | None = None
     previous: Pass | None = None
-    best = None
+    best: tuple[Residual, int, Pass, np.ndarray | None] | None = None
     stalled = 0
     history: list[Iteration] = []
     with tqdm(total=options.iterations + 1, desc="IRT-PS", unit="pass", disable=not progress, leave=False) as bar:
@@ -214,15 +214,16 @@ def remove_interreflections(
                 estimate, estimate_noise = rerendering.indirect, float(rerendering.noise_energy[mask].sum())
             del rerendering
             if options.update == "original":
-                if estimate_used is None:
-                    change_of_estimate, record.step = estimate, 1.0
+                if estimate_used is None or previous_change is None:
+                    change_of_estimate, taken = estimate, 1.0
                 else:
                     change_of_estimate = estimate - estimate_used
                     if options.relaxation == "auto":
                         step = steps.next(change_of_estimate, previous_change)
-                    record.step = step
-                steps.taken(record.step, estimate_noise)
-                estimate_used = estimate if estimate_used is None else estimate_used + record.step * change_of_estimate
+                    taken = step
+                record.step = taken
+                steps.taken(taken, estimate_noise)
+                estimate_used = estimate if estimate_used is None else estimate_used + taken * change_of_estimate
                 previous_change = change_of_estimate[:, mask]  # all the step needs of it
                 images = _corrected(original, estimate_used, original, saturated)
             else:
@@ -230,6 +231,7 @@ def remove_interreflections(
                 estimate_used = step * estimate
                 images = _corrected(images, estimate_used, original, saturated)
             previous = current
+    assert best is not None, "the loop runs at least one pass"
     residual, chosen, chosen_pass, estimate_used = best
     if chosen == 0 and len(history) > 1:
         warnings.warn(

@@ -26,8 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
+from irtps._checks import check_array, check_finite, check_image, check_mask, check_positive
 from irtps.atomic import atomic_write_bytes
-from irtps.errors import DatasetError
+from irtps.errors import ArgumentError
 
 __all__ = ["height_field_mesh", "write_obj", "write_ply"]
 
@@ -72,7 +73,7 @@ def height_field_mesh(
 
     Raises
     ------
-    DatasetError
+    ArgumentError
         (an `IrtpsError`) naming the argument whose shape disagrees with ``height``,
         a ``pixel_size`` that is not positive, or values that are not finite on a vertex.
 
@@ -86,19 +87,12 @@ def height_field_mesh(
     >>> f.tolist(), c, n
     ([[0, 2, 1], [1, 2, 3]], None, None)
     """
-    height = np.asarray(height)
-    if height.ndim != 2:
-        raise DatasetError(f"height has shape {height.shape}, expected (H, W)")
+    height = check_array("height", height, (None, None))
     rows, cols = height.shape
-    mask = np.asarray(mask)
-    if mask.shape != height.shape:
-        raise DatasetError(f"mask has shape {mask.shape}, expected {height.shape} to match height")
-    mask = mask.astype(bool)
-    albedo = _optional_image("albedo", albedo, height.shape)
-    normals = _optional_image("normals", normals, height.shape)
-    s = float(pixel_size)
-    if not (np.isfinite(s) and s > 0):
-        raise DatasetError(f"pixel_size must be a positive number, got {pixel_size!r}")
+    mask = check_mask(mask, height.shape, match="height")
+    albedo = None if albedo is None else check_image("albedo", albedo, mask, finite=False)
+    normals = None if normals is None else check_image("normals", normals, mask, finite=False)
+    s = check_positive("pixel_size", pixel_size)
 
     block = mask[:-1, :-1] & mask[1:, :-1] & mask[:-1, 1:] & mask[1:, 1:]
     used = np.zeros_like(mask)
@@ -110,8 +104,8 @@ def height_field_mesh(
     index = np.full(height.shape, -1, dtype=np.int64)
     index[used] = np.arange(int(used.sum()))
     i, j = np.nonzero(used)
-    z = height[used].astype(np.float64)
-    _check_finite("height", z)
+    check_finite("height", height, used)
+    z = height[used]
     x = (j + 0.5 - cols / 2.0) * s
     y = (rows / 2.0 - i - 0.5) * s
     vertices = np.stack([x, y, z], axis=1).astype(np.float32)
@@ -123,14 +117,14 @@ def height_field_mesh(
 
     colors = None
     if albedo is not None:
-        values = albedo[used].astype(np.float64)
-        _check_finite("albedo", values)
+        check_finite("albedo", albedo, used)
+        values = albedo[used]
         colors = np.rint(np.clip(values, 0.0, 1.0) * 255.0).astype(np.uint8)
 
     vertex_normals = None
     if normals is not None:
-        values = normals[used].astype(np.float64)
-        _check_finite("normals", values)
+        check_finite("normals", normals, used)
+        values = normals[used]
         length = np.linalg.norm(values, axis=1, keepdims=True)
         values = np.divide(values, length, out=np.zeros_like(values), where=length > 0)
         vertex_normals = values.astype(np.float32)
@@ -166,9 +160,10 @@ def write_ply(
 
     Raises
     ------
+    ArgumentError
+        (an `IrtpsError`) naming the argument that is malformed; nothing is written then.
     DatasetError
-        (an `IrtpsError`) naming the argument that is malformed, or if the folder is not
-        writable; nothing is written then.
+        If the folder cannot be created or written to.
 
     Examples
     --------
@@ -243,9 +238,10 @@ def write_obj(path: str | Path, vertices: np.ndarray, faces: np.ndarray, normals
 
     Raises
     ------
+    ArgumentError
+        (an `IrtpsError`) naming the argument that is malformed; nothing is written then.
     DatasetError
-        (an `IrtpsError`) naming the argument that is malformed, or if the folder is not
-        writable; nothing is written then.
+        If the folder cannot be created or written to.
 
     Examples
     --------
@@ -278,46 +274,20 @@ def _format_rows(line: str, rows: np.ndarray) -> str:
 
 
 def _check_mesh(vertices, faces, colors, normals):
-    vertices = np.asarray(vertices)
-    if vertices.ndim != 2 or vertices.shape[1] != 3:
-        raise DatasetError(f"vertices has shape {vertices.shape}, expected (V, 3)")
-    vertices = vertices.astype(np.float32)
-    _check_finite("vertices", vertices)
+    vertices = check_array("vertices", vertices, (None, 3), dtype=np.float32)
+    check_finite("vertices", vertices, unit="vertex")
     count = len(vertices)
-    faces = np.asarray(faces)
-    if faces.ndim != 2 or faces.shape[1] != 3:
-        raise DatasetError(f"faces has shape {faces.shape}, expected (F, 3)")
+    faces = check_array("faces", faces, (None, 3), dtype=None)
     if faces.size and not np.issubdtype(faces.dtype, np.integer):
-        raise DatasetError(f"faces must hold integer vertex indices, got dtype {faces.dtype}")
+        raise ArgumentError("faces", f"must hold integer vertex indices, got dtype {faces.dtype}")
     faces = faces.astype(np.int64)
     if faces.size and (faces.min() < 0 or faces.max() >= count):
-        raise DatasetError(f"faces index vertices {faces.min()}..{faces.max()}, but there are {count} vertices")
+        raise ArgumentError("faces", f"index vertices {faces.min()}..{faces.max()}, but there are {count} vertices")
     if colors is not None:
-        colors = np.asarray(colors)
-        if colors.shape != (count, 3):
-            raise DatasetError(f"colors has shape {colors.shape}, expected ({count}, 3) to match vertices")
+        colors = check_array("colors", colors, (count, 3), match="vertices", dtype=None)
         if colors.dtype != np.uint8:
-            raise DatasetError(f"colors must be uint8 (0..255), got dtype {colors.dtype}")
+            raise ArgumentError("colors", f"must be uint8 (0..255), got dtype {colors.dtype}")
     if normals is not None:
-        normals = np.asarray(normals)
-        if normals.shape != (count, 3):
-            raise DatasetError(f"normals has shape {normals.shape}, expected ({count}, 3) to match vertices")
-        normals = normals.astype(np.float32)
-        _check_finite("normals", normals)
+        normals = check_array("normals", normals, (count, 3), match="vertices", dtype=np.float32)
+        check_finite("normals", normals, unit="vertex")
     return vertices, faces, colors, normals
-
-
-def _optional_image(name: str, value, size: tuple[int, int]) -> np.ndarray | None:
-    if value is None:
-        return None
-    array = np.asarray(value)
-    if array.shape != (*size, 3):
-        raise DatasetError(f"{name} has shape {array.shape}, expected {(*size, 3)} to match height")
-    return array
-
-
-def _check_finite(name: str, values: np.ndarray) -> None:
-    bad = ~np.isfinite(values)
-    if bad.any():
-        count = int(bad.reshape(len(values), -1).any(axis=1).sum())
-        raise DatasetError(f"{name} is not finite on {count} vertex/vertices")

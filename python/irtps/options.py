@@ -23,7 +23,7 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
-from irtps.errors import IrtpsError
+from irtps.errors import ArgumentError
 from irtps.imageio import MAX_IMAGE_PIXELS
 from irtps.integrate import METHODS as INTEGRATION_METHODS
 from irtps.ps import ROBUST_MODES
@@ -65,8 +65,9 @@ MAX_WORKERS = 4096
 T = TypeVar("T", bound="_Options")
 
 
-class OptionError(IrtpsError, ValueError):
-    """An option value out of its range or not among its choices.
+class OptionError(ArgumentError):
+    """An option value out of its range or not among its choices: the `ArgumentError` of an
+    option.
 
     Attributes
     ----------
@@ -77,9 +78,8 @@ class OptionError(IrtpsError, ValueError):
     """
 
     def __init__(self, option: str, problem: str) -> None:
-        super().__init__(f"{option}: {problem}")
+        super().__init__(option, problem)
         self.option = option
-        self.problem = problem
 
 
 @dataclass(frozen=True)
@@ -378,7 +378,7 @@ class ClusterOptions(_Options):
             raise OptionError("scheduler", "--workers and --threads-per-worker set up the local cluster; with --scheduler, give them to 'dask worker' (--nworkers, --nthreads)")
 
 
-def add_arguments(parser: argparse.ArgumentParser, cls: type[_Options], *, defaults: dict | None = None, groups: dict[str, str] | None = None) -> None:
+def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls: type[_Options], *, defaults: dict | None = None, groups: dict[str, str] | None = None) -> None:
     """Add one command-line option per field of `cls` (``--shadow-fraction`` for
     ``shadow_fraction``), with its help, default and choices.
 

@@ -15,7 +15,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from irtps.dataset import Dataset
+from irtps.data import Dataset
 from irtps.integrate import integrate_normals, place_height
 from irtps.options import OptionError, ReconstructOptions
 from irtps.placement import PRECISION_PIXELS, Placement, estimate_placement, fallback_placement
@@ -267,10 +267,11 @@ def resolve_albedo_scale(
     return estimate_albedo_scale(dataset.scene, height, albedo, dataset.mask, dataset.images, usable, bounces=options.bounces, seed=seed)
 
 
-def rendered_as(scene: Scene, albedo: np.ndarray, albedo_scale: AlbedoScale) -> tuple[Scene, np.ndarray]:
+def rendered_as(scene: Scene, albedo: np.ndarray, albedo_scale: AlbedoScale | None) -> tuple[Scene, np.ndarray]:
     """The scene and albedo to render a reconstruction with: as they are for absolute
-    irradiance, else the reflectance and the irradiance that `albedo_scale` implies."""
-    if albedo_scale.source == "absolute":
+    irradiance (or no scale), else the reflectance and the irradiance that `albedo_scale`
+    implies."""
+    if albedo_scale is None or albedo_scale.source == "absolute":
         return scene, albedo
     return scaled_scene(scene, albedo_scale.factor), scaled_albedo(albedo, albedo_scale.factor)
 

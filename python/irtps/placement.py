@@ -172,7 +172,7 @@ def estimate_placement(
     chosen = spread_lights(scene.light_directions, MAX_LIGHTS)
     scene = dataclasses.replace(scene, lights=tuple(scene.lights[k] for k in chosen))
     images = np.asarray(images, dtype=np.float32)[chosen]
-    unsaturated = np.ones((*images.shape[:3], 1), dtype=bool) if saturation is None else ~(images >= saturation).any(axis=-1, keepdims=True)
+    unsaturated = np.ones((*images.shape[:3], 1), dtype=bool) if saturation is None else ~np.any(images >= saturation, axis=-1, keepdims=True)
     mask = np.asarray(mask, dtype=bool)
     relief = np.where(mask, np.asarray(height, dtype=np.float64), 0.0)
     scene, relief, albedo, mask, images, unsaturated = _coarse(scene, relief, np.asarray(albedo, dtype=np.float64), mask, images, unsaturated)

@@ -7,7 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from irtps import _core
-from irtps.errors import IrtpsError
+from irtps._checks import check_array, check_choice, check_mask, check_positive, document_choices
+from irtps.errors import ArgumentError
 
 #: Robust modes of `photometric_stereo`, the default first.
 ROBUST_MODES = ("tukey", "threshold", "trim", "none")
@@ -48,17 +49,15 @@ def check_lights(light_directions: np.ndarray, light_irradiance: np.ndarray) -> 
 
     Raises
     ------
-    IrtpsError
+    ArgumentError
         Naming the field (``lights`` or ``lights[k].irradiance``) and the problem.
     """
     directions = np.ascontiguousarray(light_directions, dtype=np.float32)
     irradiance = np.ascontiguousarray(light_irradiance, dtype=np.float32)
-    try:
-        _core.check_lights(directions, irradiance)
-    except ValueError as err:
-        raise IrtpsError(str(err)) from None
+    _core.check_lights(directions, irradiance)
 
 
+@document_choices(robust=ROBUST_MODES)
 def photometric_stereo(
     images: np.ndarray,
     light_directions: np.ndarray,
@@ -85,7 +84,7 @@ def photometric_stereo(
         (K, 3) RGB irradiance of each light.
     mask : numpy.ndarray, optional
         (H, W) bool; default every pixel.
-    robust : {"tukey", "threshold", "trim", "none"}
+    robust : str
         Which observations each pixel's fit uses. Every mode but ``"none"`` leaves saturated
         observations out.
 
@@ -114,7 +113,7 @@ def photometric_stereo(
 
     Raises
     ------
-    IrtpsError
+    ArgumentError
         Fewer than 3 lights, coplanar lights, shapes that disagree, a
         ``shadow_fraction`` outside [0, 1), a ``saturation`` that is not positive or an
         unknown ``robust`` mode.
@@ -129,20 +128,14 @@ def photometric_stereo(
     >>> print(np.round(fit.normals[0, 0], 4), np.round(fit.albedo[0, 0], 4))
     [0.  0.6 0.8] [0.5 0.5 0.5]
     """
-    images = np.ascontiguousarray(images, dtype=np.float32)
-    if images.ndim != 4 or images.shape[3] != 3:
-        raise IrtpsError(f"images: expected shape (K, H, W, 3), got {images.shape}")
-    mask = np.ones(images.shape[1:3], bool) if mask is None else np.ascontiguousarray(mask, dtype=bool)
+    images = np.ascontiguousarray(check_array("images", images, (None, None, None, 3), dtype=np.float32))
+    mask = np.ascontiguousarray(check_mask(mask, images.shape[1:3], match="images"))
     directions = np.ascontiguousarray(light_directions, dtype=np.float32)
     irradiance = np.ascontiguousarray(light_irradiance, dtype=np.float32)
-    if robust not in ROBUST_MODES:
-        raise IrtpsError(f"robust: unknown mode {robust!r}; expected one of {', '.join(ROBUST_MODES)}")
+    check_choice("robust", robust, ROBUST_MODES)
     if not 0 <= shadow_fraction < 1:
-        raise IrtpsError(f"shadow_fraction: {shadow_fraction} is not in [0, 1)")
-    if saturation is not None and not (np.isfinite(saturation) and saturation > 0):
-        raise IrtpsError(f"saturation: {saturation} is not a positive number")
-    try:
-        normals, albedo, flags, used = _core.photometric_stereo(images, mask, directions, irradiance, robust, shadow_fraction, saturation)
-    except ValueError as err:
-        raise IrtpsError(str(err)) from None
+        raise ArgumentError("shadow_fraction", f"{shadow_fraction} is not in [0, 1)")
+    if saturation is not None:
+        saturation = check_positive("saturation", saturation)
+    normals, albedo, flags, used = _core.photometric_stereo(images, mask, directions, irradiance, robust, shadow_fraction, saturation)
     return PsResult(normals=normals, albedo=albedo, flags=flags, used=used)

@@ -13,7 +13,7 @@ import numpy as np
 
 from irtps.atomic import atomic_output_dir
 from irtps.dataset import Dataset, load_dataset, read_albedo_map, read_height_map, read_normal_map
-from irtps.errors import DatasetError, IrtpsError, IrtpsWarning
+from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
 from irtps.imageio import read_mask, write_exr, write_png
 from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
@@ -244,7 +244,7 @@ def _check_input(dataset: Dataset, saturation: float | None, robust: str) -> Non
         raise DatasetError(f"{source}: every image is black on the object (no value above 0 in the mask)")
     if saturation is None:
         return
-    saturated = (observed >= saturation).any(axis=2)
+    saturated = np.any(observed >= saturation, axis=2)
     count = int(saturated.sum())
     if count:
         fate = "used as they are (robust mode none)" if robust == "none" else "left out of the fit"
@@ -274,9 +274,18 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
         The output folder; replaced only once everything is written.
     source : str, optional
         The input data set, recorded in ``run.json``.
+
+    Raises
+    ------
+    ArgumentError
+        If `result` is not a `Reconstruction`.
+    DatasetError
+        If the folder cannot be written.
     """
     from irtps import __version__
 
+    if not isinstance(result, Reconstruction):
+        raise ArgumentError("result", f"expected a Reconstruction, got {type(result).__name__}")
     with atomic_output_dir(path) as folder:
         write_exr(folder / "normal.exr", result.normals)
         write_exr(folder / "albedo.exr", result.albedo)

@@ -8,7 +8,8 @@ import numpy as np
 from tqdm import tqdm
 
 from irtps import _core
-from irtps.errors import IrtpsError
+from irtps._checks import check_array, check_mask
+from irtps.errors import ArgumentError
 from irtps.options import RenderOptions
 from irtps.resources import check_memory
 from irtps.scene import Scene
@@ -72,9 +73,11 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
 
     Raises
     ------
+    ArgumentError
+        If the arrays do not match the camera.
     IrtpsError
-        If the arrays do not match the camera, or the light visibility cache (about
-        ``4 * K * H * W`` bytes) would need more memory than is available.
+        If the light visibility cache (about ``4 * K * H * W`` bytes) would need more
+        memory than is available.
     """
     camera = scene.camera
     check_memory(
@@ -82,28 +85,19 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
         f"lights: {len(scene.lights)} lights of {camera.width}x{camera.height} images (light visibility cache)",
     )
     expected = (camera.height, camera.width)
-    height = np.ascontiguousarray(height, dtype=np.float32)
-    albedo = np.ascontiguousarray(albedo, dtype=np.float32)
-    mask = np.ascontiguousarray(mask, dtype=bool)
-    for name, array, shape in (("height", height, expected), ("mask", mask, expected), ("albedo", albedo, (*expected, 3))):
-        if array.shape != shape:
-            raise IrtpsError(f"{name}: shape {array.shape} does not match the camera ({shape})")
-    floor = None if scene.floor is None else (scene.floor.height, scene.floor.albedo)
-    box = scene.environment
-    walls = None if box is None else (box.x, box.y, box.z_top, box.albedo_left, box.albedo_right, box.albedo_back, box.albedo_front)
-    try:
-        return _core.Renderer(
-            height,
-            mask,
-            albedo,
-            camera.pixel_size,
-            scene.light_directions.astype(np.float32),
-            scene.light_irradiance.astype(np.float32),
-            floor,
-            walls,
-        )
-    except ValueError as err:
-        raise IrtpsError(str(err)) from None
+    height = np.ascontiguousarray(check_array("height", height, expected, match="the camera", dtype=np.float32))
+    mask = np.ascontiguousarray(check_mask(mask, expected, match="the camera"))
+    albedo = np.ascontiguousarray(check_array("albedo", albedo, (*expected, 3), match="the camera", dtype=np.float32))
+    return _core.Renderer(
+        height,
+        mask,
+        albedo,
+        camera.pixel_size,
+        scene.light_directions.astype(np.float32),
+        scene.light_irradiance.astype(np.float32),
+        scene.floor,
+        scene.environment,
+    )
 
 
 def render_memory_bytes(lights: int, size: tuple[int, int], bounces: int) -> int:
@@ -182,9 +176,11 @@ def render(
 
     Raises
     ------
+    ArgumentError
+        On a bad count or arrays that do not match the camera.
     IrtpsError
-        On a bad count, arrays that do not match the camera, or (checked before anything
-        is allocated, see `check_render_memory`) images that would not fit in memory.
+        Checked before anything is allocated (see `check_render_memory`): images that
+        would not fit in memory.
 
     Examples
     --------
@@ -198,10 +194,10 @@ def render(
     >>> round(float(flat.direct[1, 4, 4, 0]), 4)  # albedo · cos θ = 0.5 · 0.8
     0.4
     """
-    _check_counts(bounces, samples, seed)
+    check_counts(bounces, samples, seed)
     direct_samples = min(samples, DEFAULT_DIRECT_SAMPLES) if direct_samples is None else direct_samples
     if direct_samples < 0 or (direct_samples == 0 and bounces == 0):
-        raise IrtpsError(f"direct_samples: {direct_samples} must be at least 1 (or 0 with bounces)")
+        raise ArgumentError("direct_samples", f"{direct_samples} must be at least 1 (or 0 with bounces)")
     check_render_memory(len(scene.lights), (scene.camera.height, scene.camera.width), bounces)
     renderer = make_renderer(scene, height, albedo, mask)
     planes = _render_planes(renderer, scene, bounces, samples, direct_samples, seed, True, progress)
@@ -244,11 +240,11 @@ def render_indirect(
     numpy.ndarray
         float32 (K, H, W, 3).
     """
-    _check_counts(bounces, samples, seed)
+    check_counts(bounces, samples, seed)
     if bounces < 1:
-        raise IrtpsError(f"bounces: {bounces} must be at least 1")
+        raise ArgumentError("bounces", f"{bounces} must be at least 1")
     if stride < 1:
-        raise IrtpsError(f"stride: {stride} must be at least 1")
+        raise ArgumentError("stride", f"{stride} must be at least 1")
     check_frame_memory(scene)
     renderer = make_renderer(scene, height, albedo, mask)
     if stride == 1:
@@ -302,7 +298,7 @@ def render_sparse(renderer: _core.Renderer, mask: np.ndarray, bounces: int, samp
     return out
 
 
-def _check_counts(bounces: int, samples: int, seed: int) -> None:
+def check_counts(bounces: int, samples: int, seed: int) -> None:
     """Raise `OptionError` naming the first of bounces, samples and seed out of range."""
     RenderOptions(bounces=bounces, samples=samples, seed=seed)
 

@@ -23,7 +23,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from irtps.render import check_frame_memory, make_renderer, render_sparse
+from irtps._checks import check_array, check_mask
+from irtps.errors import ArgumentError
+from irtps.render import check_counts, check_frame_memory, make_renderer, render_sparse
 from irtps.scene import Scene
 
 __all__ = ["Rerendering", "Residual", "compared_observations", "render_with_residual"]
@@ -119,6 +121,12 @@ def render_with_residual(
     -------
     Rerendering
 
+    Raises
+    ------
+    ArgumentError
+        Naming a count out of range (`bounces`, `samples`, `seed`, `stride`) or an array
+        that does not match the camera.
+
     Examples
     --------
     A flat square of the right albedo explains its images far better than one 20 % too
@@ -137,6 +145,9 @@ def render_with_residual(
     >>> round(right.object, 2), round(dark.object, 2), right.surroundings
     (0.06, 0.23, None)
     """
+    check_counts(bounces, samples, seed)
+    if stride < 1:
+        raise ArgumentError("stride", f"{stride} must be at least 1")
     mask = np.asarray(mask, dtype=bool)
     check_frame_memory(scene, planes=4 if stride > 1 else 1)
     renderer = make_renderer(scene, height, albedo, mask)
@@ -189,11 +200,13 @@ def compared_observations(
     >>> kept[:, 0, :, 0].tolist()  # the dark observation is left out on the object only
     [[True, True], [True, True], [False, True]]
     """
+    images = check_array("images", images, (None, None, None, 3), dtype=None)
+    mask = check_mask(mask, images.shape[1:3], match="images")
     usable = np.ones((*images.shape[:3], 1), dtype=bool)
     if saturation is not None:
         usable &= ~(images >= saturation).any(axis=-1, keepdims=True)
     if robust:
-        usable &= _lit(images, irradiance, shadow_fraction) | ~np.asarray(mask, dtype=bool)[None, :, :, None]
+        usable &= _lit(images, irradiance, shadow_fraction) | ~mask[None, :, :, None]
     return usable
 
 

@@ -459,7 +459,8 @@ class _Fields:
         items = self.array(value, field)
         if len(items) != 3:
             self.fail(field, f"must have 3 numbers, got {len(items)}")
-        return tuple(self.number(item, f"{field}[{c}]") for c, item in enumerate(items))
+        first, second, third = (self.number(item, f"{field}[{c}]") for c, item in enumerate(items))
+        return first, second, third
 
     def rgb01(self, value: object, field: str) -> tuple[float, float, float]:
         rgb = self.vector3(value, field)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from irtps._checks import check_array, check_mask, check_positive
+
 
 def height_to_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0) -> np.ndarray:
     """Unit normals ``normalize(-dz/dx, -dz/dy, 1)`` of a height field.
@@ -34,8 +36,7 @@ def height_to_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 
     >>> np.round(n[1, 1] * np.sqrt(5), 6).tolist()
     [-2.0, 0.0, 1.0]
     """
-    height = np.asarray(height, dtype=np.float64)
-    mask = np.asarray(mask, dtype=bool)
+    height, mask = _checked_surface(height, mask, pixel_size)
     dz_dcol = _masked_derivative(height, mask, axis=1)
     dz_drow = _masked_derivative(height, mask, axis=0)
     normals = _unit_normals(dz_dcol / pixel_size, dz_drow / pixel_size)
@@ -77,8 +78,7 @@ def footprint_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 
     >>> np.round(n[1, 2], 4).tolist(), round(float(np.linalg.norm(n[1, 1])), 4)
     ([0.0, 0.0, 0.7071], 1.0)
     """
-    height = np.asarray(height, dtype=np.float64)
-    mask = np.asarray(mask, dtype=bool)
+    height, mask = _checked_surface(height, mask, pixel_size)
     rows, cols = height.shape
     normals = np.zeros((rows, cols, 3))
     if rows < 2 or cols < 2:
@@ -129,8 +129,16 @@ def surface_albedo(albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, 
     >>> np.round(surface_albedo(fitted, height, np.ones((3, 5), bool))[1, 1:4, 0].astype(float), 4).tolist()
     [0.5, 0.7071, 0.5]
     """
+    check_array("albedo_ps", albedo_ps, (*np.shape(height), 3), match="height", dtype=None)
     length = np.linalg.norm(footprint_normals(height, mask, pixel_size), axis=-1)
     return np.clip(albedo_ps / np.maximum(length, 0.5)[..., None], 0.0, largest).astype(np.float32)
+
+
+def _checked_surface(height, mask, pixel_size) -> tuple[np.ndarray, np.ndarray]:
+    """`height` as float64 (H, W) and `mask` as bool of its shape; `pixel_size` positive."""
+    height = check_array("height", height, (None, None))
+    check_positive("pixel_size", pixel_size)
+    return height, check_mask(mask, height.shape, match="height")
 
 
 def _unit_normals(dz_dx: np.ndarray, dz_drow: np.ndarray) -> np.ndarray:

@@ -7,8 +7,9 @@ from collections.abc import Callable
 import numpy as np
 from scipy import ndimage
 
-from irtps.dataset import Dataset, GroundTruth
-from irtps.errors import IrtpsError
+from irtps._checks import check_choice
+from irtps.data import Dataset, GroundTruth
+from irtps.errors import ArgumentError
 from irtps.integrate import place_height
 from irtps.options import OptionError, RenderOptions, SynthOptions
 from irtps.render import Rendering, check_render_memory, render
@@ -116,7 +117,7 @@ def ring_lights(count: int, *, max_zenith_deg: float = 50.0, irradiance: float =
     list of Light
     """
     if count < 3:
-        raise IrtpsError(f"lights: {count} given, photometric stereo needs at least 3")
+        raise ArgumentError("count", f"{count} lights given, photometric stereo needs at least 3")
     golden = np.pi * (3 - np.sqrt(5))
     cos_max = np.cos(np.radians(max_zenith_deg))
     index = np.arange(count) + 0.5
@@ -124,7 +125,7 @@ def ring_lights(count: int, *, max_zenith_deg: float = 50.0, irradiance: float =
     radial = np.sqrt(1 - z**2)
     azimuth = golden * np.arange(count)
     directions = np.stack([radial * np.cos(azimuth), radial * np.sin(azimuth), z], axis=1)
-    return [Light(direction=d, irradiance=(irradiance,) * 3) for d in directions]
+    return [Light(direction=d, irradiance=np.full(3, irradiance)) for d in directions]
 
 
 def make_albedo(mask: np.ndarray, pattern: str, rng: np.random.Generator, colour=(0.8, 0.8, 0.8)) -> np.ndarray:
@@ -137,7 +138,7 @@ def make_albedo(mask: np.ndarray, pattern: str, rng: np.random.Generator, colour
         noise /= np.abs(noise).max()
         albedo = 0.55 + 0.35 * noise
     else:
-        raise IrtpsError(f"albedo: unknown pattern {pattern!r} (uniform, textured)")
+        raise ArgumentError("pattern", f"unknown {pattern!r}; expected one of uniform, textured")
     return np.where(mask[..., None], albedo, 0.0).astype(np.float32)
 
 
@@ -192,8 +193,7 @@ def synthesize(
     >>> data.images.shape
     (3, 16, 16, 3)
     """
-    if shape not in SHAPES:
-        raise IrtpsError(f"shape: unknown {shape!r} (choose from {', '.join(SHAPES)})")
+    check_choice("shape", shape, SHAPES)
     SynthOptions(size=size, lights=lights, albedo=albedo, environment=environment, floor=floor, base=base)
     RenderOptions(bounces=bounces, samples=samples, seed=seed)
     check_render_memory(lights, (size, size), bounces)

@@ -7,8 +7,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from irtps.dataset import Dataset
-from irtps.errors import IrtpsError
+from irtps.data import Dataset
+from irtps.errors import ArgumentError
 from irtps.evaluate import evaluate
 from irtps.options import PAPER_BOUNCES, ReconstructOptions, TableOptions
 from irtps.reconstruct import Reconstruction, reconstruct
@@ -72,22 +72,22 @@ def comparison_table(
 
     Raises
     ------
-    IrtpsError
-        No data set, two under one name, or one without ground truth; `OptionError` for an
-        option out of range.
+    ArgumentError
+        Naming ``datasets``: none, two under one name, or one without ground truth;
+        `OptionError` for an option out of range.
     """
     options = TableOptions.build(options, **settings)
     if not datasets:
-        raise IrtpsError("datasets: none given")
+        raise ArgumentError("datasets", "none given")
     names = [name for name, _ in datasets]
     repeated = sorted({name for name in names if names.count(name) > 1})
     if repeated:
-        raise IrtpsError(f"datasets: the name {repeated[0]!r} is given to more than one data set (names must be distinct)")
+        raise ArgumentError("datasets", f"the name {repeated[0]!r} is given to more than one data set (names must be distinct)")
     methods = method_names(options.bounces, options.paper)
     per_dataset: dict[str, dict[str, dict]] = {}
     for name, data in datasets:
         if data.gt is None:
-            raise IrtpsError(f"{name}: has no ground truth to compare with")
+            raise ArgumentError("datasets", f"{name} has no ground truth to compare with")
         per_dataset[name] = {}
         for method, run in _runs(options):
             result = reconstruct(data, options=run)
@@ -95,7 +95,7 @@ def comparison_table(
             per_dataset[name][method] = metrics.to_dict()
             if on_result is not None:
                 on_result(name, method, result)
-    overall = {}
+    overall: dict[str, dict] = {}
     for method in methods:
         overall[method] = {}
         for _, key in ROWS:

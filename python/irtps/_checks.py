@@ -1,0 +1,203 @@
+"""Checks of the arguments of irtps's public functions, shared by every module (as
+scikit-image's ``skimage._shared`` checks).
+
+Each check returns the argument as the code goes on to use it, or raises
+`irtps.errors.ArgumentError` (an `irtps.IrtpsError` and a `ValueError`) whose message starts
+with the argument's name. Data read from a file are checked the same way with
+``error=DatasetError`` and the file as the name.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Sequence
+from itertools import dropwhile
+from pathlib import Path
+from typing import TypeVar
+
+import numpy as np
+
+from irtps.errors import ArgumentError, IrtpsError
+
+F = TypeVar("F", bound=Callable)
+
+
+def check_array(name: str, value, shape: tuple[int | None, ...], *, match: str | None = None, dtype: type | None = np.float64) -> np.ndarray:
+    """`value` as an array of `shape` (None: any length on that axis), converted to `dtype`
+    (None: kept as it is; a float type: refused unless `value` holds real numbers).
+
+    Examples
+    --------
+    >>> check_array("albedo", [[0.5, 0.5, 0.5]], (None, 3)).shape
+    (1, 3)
+    >>> check_array("albedo", [0.5, 0.5], (None, 3), match="the vertices")
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: albedo: shape (2,), expected (N, 3) to match the vertices
+    """
+    array = np.asarray(value)
+    if array.ndim != len(shape) or any(want is not None and have != want for have, want in zip(array.shape, shape)):
+        expected = _shape_text(shape)
+        raise ArgumentError(name, f"shape {array.shape}, expected {expected}" + (f" to match {match}" if match else ""))
+    if dtype is None:
+        return array
+    if np.issubdtype(dtype, np.floating) and not (np.issubdtype(array.dtype, np.number) or array.dtype == bool) or np.iscomplexobj(array):
+        raise ArgumentError(name, f"expected real numbers, got dtype {array.dtype}")
+    return array.astype(dtype)
+
+
+def _shape_text(shape: tuple[int | None, ...]) -> str:
+    """A shape with its free axes named as the docs name them: (N, 3), (H, W), (K, H, W, 3)."""
+    free = len(shape) - len(tuple(dropwhile(lambda want: want is None, shape)))
+    names = ["K", "H", "W"][-free:] if free >= 2 else ["N"] * free
+    parts = [*names, *("N" if want is None else str(want) for want in shape[free:])]
+    return "(" + ", ".join(parts) + ("," if len(parts) == 1 else "") + ")"
+
+
+def check_mask(mask, shape: tuple[int, int] | None = None, *, match: str | None = None, name: str = "mask", nonempty: bool = False) -> np.ndarray:
+    """`mask` as a bool (H, W) array: of `shape` if given (that of the array named by
+    `match`; None is then every pixel), with a pixel set if `nonempty`.
+
+    Examples
+    --------
+    >>> check_mask([[1, 0]]).tolist()
+    [[True, False]]
+    >>> check_mask([[0, 0]], nonempty=True)
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: mask: empty (no pixel set)
+    """
+    if mask is None and shape is not None:
+        return np.ones(shape, dtype=bool)
+    mask = check_array(name, mask, (None, None) if shape is None else tuple(shape), match=match, dtype=bool)
+    if nonempty and not mask.any():
+        raise ArgumentError(name, "empty (no pixel set)")
+    return mask
+
+
+def check_image(name: str, value, mask: np.ndarray, *, channels: int | None = 3, finite: bool = True) -> np.ndarray:
+    """`value` as a float64 map of the mask's size, (H, W, `channels`) or (H, W) for
+    ``channels=None``, finite on the mask's pixels if `finite`.
+
+    Examples
+    --------
+    >>> mask = np.array([[True, False]])
+    >>> check_image("height", [[1.0, np.inf]], mask, channels=None).shape
+    (1, 2)
+    >>> check_image("albedo", np.zeros((1, 3, 3)), mask)
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: albedo: shape (1, 3, 3), expected (1, 2, 3) to match the mask
+    """
+    image = check_array(name, value, mask.shape if channels is None else (*mask.shape, channels), match="the mask")
+    if finite:
+        check_finite(name, image, mask)
+    return image
+
+
+def check_finite(name: str | Path, array: np.ndarray, where: np.ndarray | None = None, *, unit: str = "pixel", error: type[IrtpsError] = ArgumentError) -> None:
+    """Refuse a NaN or an infinity in `array` (at the pixels `where` is set, if given),
+    naming the first: by row and column for an image (``unit="pixel"``), else by its index
+    along the first axis (e.g. ``unit="vertex"``).
+
+    ``error=DatasetError`` names a file read as `name`.
+
+    Examples
+    --------
+    >>> check_finite("height", np.array([[0.0, np.nan]]))
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: height: non-finite value nan at row 0, column 1
+    >>> check_finite("height", np.array([[0.0, np.nan]]), where=np.array([[True, False]]))
+    """
+    bad = ~np.isfinite(array)
+    if where is not None:
+        bad &= where.reshape(where.shape + (1,) * (array.ndim - where.ndim))
+    if not bad.any():
+        return
+    index = tuple(np.argwhere(bad)[0])
+    place = f"row {index[0]}, column {index[1]}" if unit == "pixel" else f"{unit} {index[0]}"
+    message = f"non-finite value {array[index]} at {place}"
+    if error is ArgumentError:
+        raise ArgumentError(str(name), message)
+    raise error(f"{name}: {message}")
+
+
+def check_positive(name: str, value) -> float:
+    """`value` as a float, refused unless it is a positive finite number.
+
+    Examples
+    --------
+    >>> check_positive("pixel_size", 0)
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: pixel_size: expected a positive finite number, got 0
+    """
+    number = check_number(name, value, what="a positive finite number")
+    if not number > 0:
+        raise ArgumentError(name, f"expected a positive finite number, got {value!r}")
+    return number
+
+
+def check_number(name: str, value, *, what: str = "a finite number") -> float:
+    """`value` as a float, refused unless it is a finite number.
+
+    Examples
+    --------
+    >>> check_number("base_height", "high")
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: base_height: expected a finite number, got 'high'
+    """
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ArgumentError(name, f"expected {what}, got {value!r}") from None
+    if not np.isfinite(number):
+        raise ArgumentError(name, f"expected {what}, got {value!r}")
+    return number
+
+
+def check_choice(name: str, value, choices) -> None:
+    """Refuse `value` unless it is one of `choices`.
+
+    Examples
+    --------
+    >>> check_choice("robust", "huber", ("tukey", "none"))
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: robust: unknown 'huber'; expected one of tukey, none
+    """
+    if value not in choices:
+        raise ArgumentError(name, f"unknown {value!r}; expected one of {', '.join(map(str, choices))}")
+
+
+def document_choices(**choices: Sequence[str]) -> Callable[[F], F]:
+    """Write into the decorated function's docstring the choices of each argument named, from
+    the very sequence the code checks: its ``name : ...`` parameter line becomes
+    ``name : {"a", "b"}``.
+
+    Examples
+    --------
+    >>> @document_choices(mode=("fast", "exact"))
+    ... def solve(mode):
+    ...     '''Parameters
+    ...     ----------
+    ...     mode : str
+    ...     '''
+    >>> [line.strip() for line in solve.__doc__.splitlines() if line.strip().startswith("mode")]
+    ['mode : {"fast", "exact"}']
+    """
+
+    def decorate(function: F) -> F:
+        doc = function.__doc__ or ""
+        for name, values in choices.items():
+            listed = "{" + ", ".join(f'"{value}"' for value in values) + "}"
+            line = rf"^(\s*{re.escape(name)} : ).*$"
+            doc, count = re.subn(line, lambda match, listed=listed: match.group(1) + listed, doc, count=1, flags=re.MULTILINE)
+            if count != 1:
+                raise TypeError(f"{function.__qualname__}: its docstring has no parameter line for {name!r}")
+        function.__doc__ = doc
+        return function
+
+    return decorate

@@ -1,0 +1,92 @@
+"""Types of the compiled core (rust/python.rs): image I/O, photometric stereo, the renderer.
+
+Errors about an input arrive as `irtps.errors.ArgumentError` (an argument) or
+`irtps.errors.DatasetError` (a file's content), failures to read or write as `OSError`.
+"""
+
+from collections.abc import Sequence
+from os import PathLike
+from typing import final
+
+import numpy as np
+import numpy.typing as npt
+
+from irtps.scene import CornellBox, Floor
+
+__all__ = ["read_exr", "write_exr", "read_png", "write_png", "read_images", "photometric_stereo", "check_lights", "Renderer", "MAX_IMAGE_PIXELS"]
+
+_F32 = npt.NDArray[np.float32]
+_Path = str | PathLike[str]
+
+#: Largest image (width × height) the core reads or renders.
+MAX_IMAGE_PIXELS: int
+
+def read_exr(path: _Path) -> _F32:
+    """float32 (H, W, 3) for R, G, B or (H, W) for a single Y channel."""
+
+def write_exr(path: _Path, array: _F32) -> None:
+    """A float32 (H, W) array as a Y channel or (H, W, 3) as R, G, B."""
+
+def read_png(path: _Path) -> tuple[_F32, int]:
+    """(values / (2^bits − 1), (H, W) or (H, W, 3); bits) of an 8- or 16-bit PNG."""
+
+def write_png(path: _Path, array: _F32, bit_depth: int) -> None:
+    """Values in [0, 1], (H, W) gray or (H, W, 3) RGB, as an 8- or 16-bit PNG."""
+
+def read_images(paths: Sequence[_Path]) -> _F32:
+    """EXR/PNG images of one size read in parallel: float32 (K, H, W, 3)."""
+
+def check_lights(light_directions: _F32, light_irradiance: _F32) -> None:
+    """Refuse fewer than 3 lights, (nearly) coplanar lights or an irradiance not positive."""
+
+def photometric_stereo(
+    images: _F32,
+    mask: npt.NDArray[np.bool_],
+    light_directions: _F32,
+    light_irradiance: _F32,
+    robust: str = "tukey",
+    shadow_fraction: float = 0.05,
+    saturation: float | None = None,
+) -> tuple[_F32, _F32, npt.NDArray[np.uint8], npt.NDArray[np.uint16]]:
+    """(normals (H, W, 3), albedo (H, W, 3), flags (H, W), observations used (H, W)) of
+    C-contiguous float32 images (K, H, W, 3)."""
+
+@final
+class Renderer:
+    """A scene made ready for rendering and ray queries: height-field object, optional floor
+    and Cornell box, distant lights."""
+
+    def __new__(
+        cls,
+        height: _F32,
+        mask: npt.NDArray[np.bool_],
+        albedo: _F32,
+        pixel_size: float,
+        light_directions: _F32,
+        light_irradiance: _F32,
+        floor: Floor | None = None,
+        cornell_box: CornellBox | None = None,
+    ) -> Renderer: ...
+    @property
+    def triangle_count(self) -> int:
+        """Number of triangles in the scene."""
+
+    @property
+    def light_count(self) -> int:
+        """Number of lights."""
+
+    def render_rows(
+        self, row_start: int, row_end: int, bounces: int, samples: int, direct_samples: int, seed: int, split_bounces: bool = True
+    ) -> _F32:
+        """float32 (P, K, rows, W, 3): the direct image (when `direct_samples` > 0), then each
+        bounce (`split_bounces`) or their sum."""
+
+    def render_pixels(self, pixels: Sequence[int], bounces: int, samples: int, direct_samples: int, seed: int, split_bounces: bool = True) -> _F32:
+        """float32 (P, K, N, 3) for the listed pixels (row-major indices), planes as in
+        `render_rows`."""
+
+    def mesh_arrays(self) -> tuple[_F32, npt.NDArray[np.uint32], _F32, _F32]:
+        """(positions (V, 3), triangles (T, 3), vertex albedo (V, 3), facing unit normals (T, 3))."""
+
+    def intersect(self, origins: _F32, directions: _F32, threads: int | None = None) -> tuple[_F32, npt.NDArray[np.int64]]:
+        """(distance (N,), inf on a miss; triangle (N,), −1 on a miss) of a batch of rays."""

@@ -1,0 +1,100 @@
+"""The data classes of a data set, `Dataset` and `GroundTruth`: the arrays, checked against
+the scene. Reading and writing them is `irtps.dataset`'s (the layouts), which depends on this
+module, never the other way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from irtps.errors import DatasetError
+from irtps.scene import Scene
+
+
+@dataclass
+class GroundTruth:
+    """Ground truth of a data set, for evaluation only; each part is optional.
+
+    Attributes
+    ----------
+    height : numpy.ndarray or None
+        float32 (H, W): heights above the floor, 0 outside the mask.
+    normal : numpy.ndarray or None
+        float32 (H, W, 3): unit normals (nx, ny, nz), 0 outside the mask.
+    albedo : numpy.ndarray or None
+        float32 (H, W, 3): RGB albedo.
+    direct : numpy.ndarray or None
+        float32 (K, H, W, 3): the direct-light-only image for each light.
+    """
+
+    height: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    albedo: np.ndarray | None = None
+    direct: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("height", "normal", "albedo", "direct"):
+            value = getattr(self, name)
+            if value is not None:
+                setattr(self, name, np.asarray(value, dtype=np.float32))
+
+
+@dataclass
+class Dataset:
+    """Photometric-stereo images of one object with their scene.
+
+    Attributes
+    ----------
+    scene : Scene
+    images : numpy.ndarray
+        float32 (K, H, W, 3), linear RGB radiance; image k is lit by ``scene.lights[k]``.
+    mask : numpy.ndarray
+        bool (H, W): True on object pixels.
+    gt : GroundTruth or None
+    source : str or None
+        The folder the data set was read from.
+    saturation : float or None
+        The value at which the camera clips, where it is known: 1.0 for images read from
+        PNG files (their largest code value), None for float images. `irtps.reconstruct`
+        leaves out observations at or above it.
+
+    Raises
+    ------
+    DatasetError
+        On construction, if an array's shape disagrees with the scene.
+    """
+
+    scene: Scene
+    images: np.ndarray
+    mask: np.ndarray
+    gt: GroundTruth | None = None
+    source: str | None = None
+    saturation: float | None = None
+
+    def __post_init__(self) -> None:
+        self.images = np.asarray(self.images, dtype=np.float32)
+        self.mask = np.asarray(self.mask, dtype=bool)
+        self.check_shapes()
+
+    def check_shapes(self) -> None:
+        """Raise `DatasetError` if an array's shape disagrees with the scene's lights and camera."""
+        count = len(self.scene.lights)
+        size = (self.scene.camera.height, self.scene.camera.width)
+        _expect_shape("Dataset.images", self.images, (count, *size, 3))
+        _expect_shape("Dataset.mask", self.mask, size)
+        if self.gt is not None:
+            for name, shape in _gt_shapes(count, size).items():
+                value = getattr(self.gt, name)
+                if value is not None:
+                    _expect_shape(f"Dataset.gt.{name}", value, shape)
+
+
+def _gt_shapes(count: int, size: tuple[int, int]) -> dict[str, tuple[int, ...]]:
+    return {"height": size, "normal": (*size, 3), "albedo": (*size, 3), "direct": (count, *size, 3)}
+
+
+def _expect_shape(name: str, array: np.ndarray, shape: tuple[int, ...]) -> None:
+    if array.shape != tuple(shape):
+        raise DatasetError(f"{name} has shape {array.shape}, expected {tuple(shape)} from the scene")
