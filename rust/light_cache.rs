@@ -77,17 +77,25 @@ impl LightCache {
     }
 
     /// Radiance leaving a point of triangle `t` (barycentrics `u`, `v`, albedo `albedo`,
-    /// position `point`) under each light alone, written to `out[k]`.
+    /// position `point`) under each light alone, written to `out[k]`. With `exact_edges`,
+    /// a light that the cache points around the point disagree about (a shadow's edge
+    /// crosses there) gets a real shadow ray instead of the interpolated visibility.
     #[inline]
     #[allow(clippy::too_many_arguments)]
-    pub fn direct_radiance(&self, mesh: &Mesh, tracer: &Tracer, t: usize, (u, v): (f32, f32), point: Vec3A, albedo: Rgb, out: &mut [Rgb]) {
+    pub fn direct_radiance(&self, mesh: &Mesh, tracer: &Tracer, t: usize, (u, v): (f32, f32), point: Vec3A, albedo: Rgb, exact_edges: bool, out: &mut [Rgb]) {
         let n = mesh.normals[t];
         let k_count = self.directions.len();
         let panel = mesh.panel_of[t];
+        let origin = point + n * self.ray_offset;
+        let traced = |k: usize| f32::from(u8::from(!tracer.occluded(origin, self.directions[k], f32::INFINITY)));
         if panel == NO_PANEL {
             let [a, b, c] = mesh.triangles[t].map(|i| &self.vertex_visibility[i as usize * k_count..][..k_count]);
             let w = 1.0 - u - v;
-            self.shade(n, albedo, out, |k| w * a[k] as f32 + u * b[k] as f32 + v * c[k] as f32);
+            if exact_edges {
+                self.shade(n, albedo, out, |k| if a[k] == b[k] && b[k] == c[k] { f32::from(a[k]) } else { traced(k) });
+            } else {
+                self.shade(n, albedo, out, |k| w * a[k] as f32 + u * b[k] as f32 + v * c[k] as f32);
+            }
             return;
         }
         let panel_index = panel as usize;
@@ -103,7 +111,11 @@ impl LightCache {
         let row = |a: usize, b: usize| &vis[(b * (nu + 1) + a) * k_count..][..k_count];
         let (v00, v10, v01, v11) = (row(a, b), row(a + 1, b), row(a, b + 1), row(a + 1, b + 1));
         let (w00, w10, w01, w11) = ((1.0 - fs) * (1.0 - ft), fs * (1.0 - ft), (1.0 - fs) * ft, fs * ft);
-        self.shade(n, albedo, out, |k| w00 * v00[k] as f32 + w10 * v10[k] as f32 + w01 * v01[k] as f32 + w11 * v11[k] as f32);
+        if exact_edges {
+            self.shade(n, albedo, out, |k| if v00[k] == v10[k] && v00[k] == v01[k] && v00[k] == v11[k] { f32::from(v00[k]) } else { traced(k) });
+        } else {
+            self.shade(n, albedo, out, |k| w00 * v00[k] as f32 + w10 * v10[k] as f32 + w01 * v01[k] as f32 + w11 * v11[k] as f32);
+        }
     }
 
     #[inline]

@@ -233,7 +233,7 @@ impl Renderer {
     #[pyo3(signature = (row_start, row_end, bounces, samples, direct_samples, seed, split_bounces=true))]
     #[allow(clippy::too_many_arguments)]
     fn render_rows<'py>(&self, py: Python<'py>, row_start: usize, row_end: usize, bounces: usize, samples: usize, direct_samples: usize, seed: u64, split_bounces: bool) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-        let settings = RenderSettings { bounces, samples, direct_samples, seed, split_bounces };
+        let settings = RenderSettings { bounces, samples, direct_samples, seed, split_bounces, cached_direct: false };
         let data = py.detach(|| self.inner.render_rows(row_start..row_end, &settings)).map_err(to_py)?;
         let shape = [settings.planes(), self.inner.light_count(), row_end - row_start, self.inner.camera().width, 3];
         let array = Array::from_shape_vec(IxDyn(&shape), data).map_err(|e| PyValueError::new_err(e.to_string()))?;
@@ -241,11 +241,12 @@ impl Renderer {
     }
 
     /// Renders the listed pixels (row-major indices): float32 (P, K, N, 3), planes as in
-    /// `render_rows`.
-    #[pyo3(signature = (pixels, bounces, samples, direct_samples, seed, split_bounces=true))]
+    /// `render_rows`; `cached_direct` shades the direct image from the light cache (no
+    /// shadow rays) instead of exactly.
+    #[pyo3(signature = (pixels, bounces, samples, direct_samples, seed, split_bounces=true, cached_direct=false))]
     #[allow(clippy::too_many_arguments)]
-    fn render_pixels<'py>(&self, py: Python<'py>, pixels: Vec<usize>, bounces: usize, samples: usize, direct_samples: usize, seed: u64, split_bounces: bool) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-        let settings = RenderSettings { bounces, samples, direct_samples, seed, split_bounces };
+    fn render_pixels<'py>(&self, py: Python<'py>, pixels: Vec<usize>, bounces: usize, samples: usize, direct_samples: usize, seed: u64, split_bounces: bool, cached_direct: bool) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let settings = RenderSettings { bounces, samples, direct_samples, seed, split_bounces, cached_direct };
         let data = py.detach(|| self.inner.render_pixels(&pixels, &settings)).map_err(to_py)?;
         let shape = [settings.planes(), self.inner.light_count(), pixels.len(), 3];
         let array = Array::from_shape_vec(IxDyn(&shape), data).map_err(|e| PyValueError::new_err(e.to_string()))?;

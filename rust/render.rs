@@ -32,6 +32,11 @@ pub struct RenderSettings {
     pub seed: u64,
     /// One image per bounce (true), or all the bounces summed into one (false).
     pub split_bounces: bool,
+    /// Shade the points the camera sees with the light cache's visibility where the cache
+    /// points around them agree, and a shadow ray only where a shadow's edge passes (true),
+    /// or with one shadow ray per light and footprint sample (false). Both are exact but
+    /// for occluders thinner than the cache's spacing; true traces far fewer rays.
+    pub cached_direct: bool,
 }
 
 impl RenderSettings {
@@ -163,7 +168,11 @@ impl Renderer {
             let point = origin - Vec3A::Z * hit.t;
             let albedo = self.mesh.albedo_at(hit.triangle, hit.u, hit.v);
             if sample < s.direct_samples {
-                self.cache.traced_direct_radiance(&self.tracer, point, n, albedo, light);
+                if s.cached_direct {
+                    self.cache.direct_radiance(&self.mesh, &self.tracer, hit.triangle, (hit.u, hit.v), point, albedo, true, light);
+                } else {
+                    self.cache.traced_direct_radiance(&self.tracer, point, n, albedo, light);
+                }
                 add_scaled(&mut acc[..k_count * 3], light, [1.0 / s.direct_samples as f32; 3]);
             }
             if sample < path_count {
@@ -190,7 +199,7 @@ impl Renderer {
             }
             let p_hit = point + n * self.ray_offset + dir * hit.t;
             let albedo_hit = self.mesh.albedo_at(hit.triangle, hit.u, hit.v);
-            self.cache.direct_radiance(&self.mesh, &self.tracer, hit.triangle, (hit.u, hit.v), p_hit, albedo_hit, light);
+            self.cache.direct_radiance(&self.mesh, &self.tracer, hit.triangle, (hit.u, hit.v), p_hit, albedo_hit, false, light);
             let plane = s.bounce_plane(bounce);
             add_scaled(&mut acc[plane * k3..(plane + 1) * k3], light, throughput);
             throughput = [0, 1, 2].map(|c| throughput[c] * albedo_hit[c]);
@@ -233,7 +242,7 @@ mod tests {
         let albedo = [0.8, 0.5, 0.25];
         let light = Light { direction: vec3a(-0.3, 0.2, 0.9).normalize(), irradiance: [PI, 2.0, 1.0] };
         let renderer = Renderer::new(&tilted_plate(8, albedo), &[light]).unwrap();
-        let settings = RenderSettings { bounces: 0, samples: 0, direct_samples: 9, seed: 0, split_bounces: true };
+        let settings = RenderSettings { bounces: 0, samples: 0, direct_samples: 9, seed: 0, split_bounces: true, cached_direct: false };
         let image = renderer.render_rows(0..8, &settings).unwrap();
         let cosine = vec3a(-0.25, 0.0, 1.0).normalize().dot(light.direction);
         for (row, col) in [(1, 1), (4, 5), (6, 2)] {
@@ -246,10 +255,26 @@ mod tests {
     }
 
     #[test]
+    fn direct_light_from_the_cache_with_traced_shadow_edges_matches_the_traced_one() {
+        let mut scene = tilted_plate(8, [0.6, 0.5, 0.4]);
+        scene.surface.height[27] += 6.0; // a spike that shadows the plate's lower side
+        let light = Light { direction: vec3a(0.6, 0.0, 0.8), irradiance: [PI; 3] };
+        let renderer = Renderer::new(&scene, &[light]).unwrap();
+        let traced = RenderSettings { bounces: 0, samples: 0, direct_samples: 16, seed: 1, split_bounces: true, cached_direct: false };
+        let cached = RenderSettings { cached_direct: true, ..traced };
+        let (exact, interpolated) = (renderer.render_rows(0..8, &traced).unwrap(), renderer.render_rows(0..8, &cached).unwrap());
+        for (i, (e, c)) in exact.iter().zip(&interpolated).enumerate() {
+            assert!((e - c).abs() <= 1e-5 * e.max(1e-3), "pixel {}: {e} vs {c}", i / 3);
+        }
+        // The spike at (3, 3) shadows (3, 1) on its side away from the light.
+        assert!(exact[(3 * 8 + 1) * 3] < 0.5 * exact[(3 * 8 + 6) * 3]);
+    }
+
+    #[test]
     fn a_convex_object_alone_has_no_inter_reflection() {
         let light = Light { direction: Vec3A::Z, irradiance: [PI; 3] };
         let renderer = Renderer::new(&tilted_plate(8, [0.9; 3]), &[light]).unwrap();
-        let settings = RenderSettings { bounces: 2, samples: 16, direct_samples: 1, seed: 0, split_bounces: true };
+        let settings = RenderSettings { bounces: 2, samples: 16, direct_samples: 1, seed: 0, split_bounces: true, cached_direct: false };
         let image = renderer.render_rows(0..8, &settings).unwrap();
         let plane = 8 * 8 * 3;
         assert!(image[..plane].iter().any(|&v| v > 0.0));
@@ -262,7 +287,7 @@ mod tests {
         scene.floor = Some(crate::scene::Floor { height: 0.0, albedo: [0.5; 3] });
         let light = Light { direction: vec3a(0.3, 0.1, 0.9).normalize(), irradiance: [PI; 3] };
         let renderer = Renderer::new(&scene, &[light]).unwrap();
-        let split = RenderSettings { bounces: 3, samples: 8, direct_samples: 0, seed: 2, split_bounces: true };
+        let split = RenderSettings { bounces: 3, samples: 8, direct_samples: 0, seed: 2, split_bounces: true, cached_direct: false };
         let summed = RenderSettings { split_bounces: false, ..split };
         assert_eq!((split.planes(), summed.planes()), (3, 1));
         let per_bounce = renderer.render_rows(0..8, &split).unwrap();
@@ -279,7 +304,7 @@ mod tests {
     fn rows_out_of_range_are_an_error_naming_rows() {
         let light = Light { direction: Vec3A::Z, irradiance: [PI; 3] };
         let renderer = Renderer::new(&tilted_plate(4, [0.5; 3]), &[light]).unwrap();
-        let settings = RenderSettings { bounces: 1, samples: 1, direct_samples: 1, seed: 0, split_bounces: true };
+        let settings = RenderSettings { bounces: 1, samples: 1, direct_samples: 1, seed: 0, split_bounces: true, cached_direct: false };
         assert!(renderer.render_rows(2..9, &settings).unwrap_err().to_string().starts_with("rows"));
     }
 }

@@ -30,7 +30,7 @@ def test_irtps_removes_most_of_the_inter_reflection_error(grooves):
     assert closed > 0.6
     residuals = [step.residual["object"] for step in result.history]
     assert result.chosen > 0 and residuals[result.chosen] == min(residuals) < 0.5 * residuals[0]
-    assert result.indirect.shape == grooves.images.shape and (result.indirect >= 0).all()
+    assert result.indirect.shape == (len(grooves.images), grooves.mask.sum(), 3) and (result.indirect >= 0).all()
 
 
 def test_irtps_leaves_a_scene_without_inter_reflection_alone():
@@ -75,3 +75,15 @@ def test_surface_albedo_undoes_the_crease_bias_of_photometric_stereo(grooves):
     corrected_bias = np.mean(corrected[inner] - truth[inner])
     assert fitted_bias < -0.02  # crease pixels read dark
     assert abs(corrected_bias) < 0.6 * abs(fitted_bias)  # the rest: cast shadows in the narrow grooves
+
+
+def test_a_reconstruction_gives_its_inter_reflection_estimate_as_images_and_saves_them(tmp_path):
+    data, _ = irtps.synthesize("grooves", size=24, lights=6, environment="none", bounces=2, samples=16, seed=3)
+    result = irtps.reconstruct(data, "irtps", bounces=2, iterations=2, samples=16, early_stop=False)
+    assert result.chosen > 0
+    frames, mask = result.indirect, data.mask
+    assert frames.shape == data.images.shape and frames.dtype == np.float32
+    np.testing.assert_array_equal(frames[:, mask], result.object_indirect)
+    assert not frames[:, ~mask].any() and frames[:, mask].max() > 0
+    irtps.save_reconstruction(result, tmp_path / "out")
+    np.testing.assert_array_equal(irtps.imageio.read_exr(tmp_path / "out" / "indirect" / "004.exr"), frames[4])

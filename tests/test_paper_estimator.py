@@ -45,7 +45,7 @@ def test_paper_estimate_is_the_scaled_colour_for_every_light():
 def test_the_loop_runs_the_paper_estimator_and_rejects_bad_depths():
     data, _ = irtps.synthesize("cap", size=24, lights=6, environment="cornell", bounces=2, samples=16, seed=5)
     result = remove_interreflections(data, bounces=2, iterations=2, estimator="paper", update="previous")
-    assert len(result.history) == 3 and result.indirect.shape == data.images.shape
+    assert len(result.history) == 3 and result.indirect.shape == (len(data.images), data.mask.sum(), 3)
     with pytest.raises(IrtpsError, match="bounces"):
         remove_interreflections(data, bounces=4, estimator="paper")
     with pytest.raises(IrtpsError, match="estimator"):

@@ -22,9 +22,10 @@ from irtps.errors import ArgumentError, IrtpsError
 F = TypeVar("F", bound=Callable)
 
 
-def check_array(name: str, value, shape: tuple[int | None, ...], *, match: str | None = None, dtype: type | None = np.float64) -> np.ndarray:
+def check_array(name: str, value, shape: tuple[int | None, ...], *, match: str | None = None, dtype: type | None = np.float64, copy: bool = True) -> np.ndarray:
     """`value` as an array of `shape` (None: any length on that axis), converted to `dtype`
-    (None: kept as it is; a float type: refused unless `value` holds real numbers).
+    (None: kept as it is; a float type: refused unless `value` holds real numbers); a copy
+    unless `copy` is False and `value` is already of `dtype`.
 
     Examples
     --------
@@ -43,7 +44,7 @@ def check_array(name: str, value, shape: tuple[int | None, ...], *, match: str |
         return array
     if np.issubdtype(dtype, np.floating) and not (np.issubdtype(array.dtype, np.number) or array.dtype == bool) or np.iscomplexobj(array):
         raise ArgumentError(name, f"expected real numbers, got dtype {array.dtype}")
-    return array.astype(dtype)
+    return array.astype(dtype, copy=copy)
 
 
 def _shape_text(shape: tuple[int | None, ...]) -> str:

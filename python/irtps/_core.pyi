@@ -81,9 +81,11 @@ class Renderer:
         """float32 (P, K, rows, W, 3): the direct image (when `direct_samples` > 0), then each
         bounce (`split_bounces`) or their sum."""
 
-    def render_pixels(self, pixels: Sequence[int], bounces: int, samples: int, direct_samples: int, seed: int, split_bounces: bool = True) -> _F32:
+    def render_pixels(
+        self, pixels: Sequence[int], bounces: int, samples: int, direct_samples: int, seed: int, split_bounces: bool = True, cached_direct: bool = False
+    ) -> _F32:
         """float32 (P, K, N, 3) for the listed pixels (row-major indices), planes as in
-        `render_rows`."""
+        `render_rows`; `cached_direct` shades the direct image from the light cache."""
 
     def mesh_arrays(self) -> tuple[_F32, npt.NDArray[np.uint32], _F32, _F32]:
         """(positions (V, 3), triangles (T, 3), vertex albedo (V, 3), facing unit normals (T, 3))."""

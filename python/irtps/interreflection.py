@@ -85,8 +85,8 @@ class Iteration:
 @dataclass
 class InterreflectionResult:
     """The chosen pass (lowest residual): its fit, albedo (`irtps.surface.surface_albedo`
-    of its fit), placed height, the estimate subtracted to get its images (None for pass 0),
-    the placement, the albedo scale it rendered with, and every pass's record."""
+    of its fit), placed height, the estimate subtracted from the object's pixels to get its
+    images ((K, N, 3) at the mask's N pixels, row-major; None for pass 0), the placement, the albedo scale it rendered with, and every pass's record."""
 
     fit: PsResult
     albedo: np.ndarray
@@ -163,12 +163,14 @@ def remove_interreflections(
     options = resolve_options(dataset, ReconstructOptions.build(options, method="irtps", **settings))
     scene, mask = dataset.scene, dataset.mask
     original = dataset.images
-    saturated: np.ndarray | None = None if options.saturation is None else np.any(original >= options.saturation, axis=-1, keepdims=True)
+    # After pass 0, the loop holds the mask's pixels only: photometric stereo fits nothing else.
+    observed = original[:, mask]
+    saturated: np.ndarray | None = None if options.saturation is None else np.any(observed >= options.saturation, axis=-1, keepdims=True)
     usable = fitted_observations(dataset, options)
     images = original
     estimate_used: np.ndarray | None = None
     step = 1.0 if options.relaxation == "auto" else float(options.relaxation)
-    steps = _AdaptiveStep(mask)
+    steps = _AdaptiveStep()
     previous_change: np.ndarray | None = None
     previous: Pass | None = None
     best: tuple[Residual, int, Pass, np.ndarray | None] | None = None
@@ -209,9 +211,9 @@ def remove_interreflections(
             if index == options.iterations or (options.early_stop and stalled == PATIENCE):
                 break
             if options.estimator == "paper":
-                estimate, estimate_noise = paper_indirect(render_scene, current.height, render_albedo, mask, reflections=options.bounces, seed=seed), 0.0
+                estimate, estimate_noise = paper_indirect(render_scene, current.height, render_albedo, mask, reflections=options.bounces, seed=seed)[:, mask], 0.0
             else:
-                estimate, estimate_noise = rerendering.indirect, float(rerendering.noise_energy[mask].sum())
+                estimate, estimate_noise = rerendering.indirect, float(rerendering.noise_energy.sum())
             del rerendering
             if options.update == "original":
                 if estimate_used is None or previous_change is None:
@@ -224,12 +226,12 @@ def remove_interreflections(
                 record.step = taken
                 steps.taken(taken, estimate_noise)
                 estimate_used = estimate if estimate_used is None else estimate_used + taken * change_of_estimate
-                previous_change = change_of_estimate[:, mask]  # all the step needs of it
-                images = _corrected(original, estimate_used, original, saturated)
+                previous_change = change_of_estimate
+                images = _corrected(observed, estimate_used, observed, saturated)
             else:
                 record.step = step
                 estimate_used = step * estimate
-                images = _corrected(images, estimate_used, original, saturated)
+                images = _corrected(observed if index == 0 else images, estimate_used, observed, saturated)
             previous = current
     assert best is not None, "the loop runs at least one pass"
     residual, chosen, chosen_pass, estimate_used = best
@@ -274,8 +276,7 @@ class _AdaptiveStep:
     estimate follows from the steps taken.
     """
 
-    def __init__(self, mask: np.ndarray) -> None:
-        self.mask = mask
+    def __init__(self) -> None:
         self.step = 1.0
         self.new_noise = 0.0
         self.running_noise = 0.0
@@ -287,9 +288,9 @@ class _AdaptiveStep:
         self.running_noise = (1 - step) ** 2 * self.previous_running + step**2 * new_noise
 
     def next(self, change: np.ndarray, previous_change: np.ndarray) -> float:
-        """The step for `change` (K, H, W, 3), the difference between the newest estimate
-        and the running one, given the `previous_change` on the object's pixels (K, N, 3)."""
-        now, before = change[:, self.mask], previous_change
+        """The step for `change` (K, N, 3 on the object's pixels), the difference between
+        the newest estimate and the running one, given the `previous_change`."""
+        now, before = change, previous_change
         # Noise shared by the two changes: the running estimate's before the last step
         # enters both with the same sign, the last new estimate's with opposite signs.
         shared = (1 - self.step) * self.previous_running - self.step * self.new_noise

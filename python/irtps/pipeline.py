@@ -19,7 +19,7 @@ from irtps.data import Dataset
 from irtps.integrate import integrate_normals, place_height
 from irtps.options import OptionError, ReconstructOptions
 from irtps.placement import PRECISION_PIXELS, Placement, estimate_placement, fallback_placement
-from irtps.ps import PsResult, photometric_stereo
+from irtps.ps import OUTSIDE_MASK, PsResult, photometric_stereo
 from irtps.radiometry import AlbedoScale, absolute_scale, estimate_albedo_scale, scaled_albedo, scaled_scene
 from irtps.residual import compared_observations
 from irtps.scene import Scene
@@ -160,17 +160,30 @@ def resolve_options(dataset: Dataset, options: ReconstructOptions) -> Reconstruc
 
 def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: ReconstructOptions) -> PsResult:
     """Photometric stereo on `images` (the data set's, or corrected ones) with the data set's
-    lights and mask and the options' robust settings."""
-    scene = dataset.scene
-    return photometric_stereo(
-        images,
+    lights and mask and the options' robust settings. `images` are (K, H, W, 3), or
+    (K, N, 3) at the mask's N pixels in row-major order (the corrected images of IRT-PS)."""
+    scene, mask = dataset.scene, dataset.mask
+    fit_on = (images, mask) if images.ndim == 4 else (images[:, None], np.ones((1, images.shape[1]), dtype=bool))
+    fit = photometric_stereo(
+        *fit_on[:1],
         scene.light_directions,
         scene.light_irradiance,
-        dataset.mask,
+        fit_on[1],
         robust=options.robust,
         shadow_fraction=options.shadow_fraction,
         saturation=options.saturation,
     )
+    if images.ndim == 4:
+        return fit
+    frame = PsResult(
+        normals=np.zeros((*mask.shape, 3), np.float32),
+        albedo=np.zeros((*mask.shape, 3), np.float32),
+        flags=np.full(mask.shape, OUTSIDE_MASK, np.uint8),
+        used=np.zeros(mask.shape, np.uint16),
+    )
+    for name in ("normals", "albedo", "flags", "used"):
+        getattr(frame, name)[mask] = getattr(fit, name)[0]
+    return frame
 
 
 def rendered_albedo(dataset: Dataset, fit: PsResult, relief: np.ndarray) -> np.ndarray:

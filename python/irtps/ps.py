@@ -14,6 +14,8 @@ from irtps.errors import ArgumentError
 ROBUST_MODES = ("tukey", "threshold", "trim", "none")
 #: Meaning of the values of `PsResult.flags`.
 FLAGS = {0: "fitted", 1: "full fit kept (too few non-coplanar lit observations)", 2: "no light", 3: "outside the mask"}
+#: The flag of the pixels outside the mask.
+OUTSIDE_MASK = 3
 
 
 @dataclass
@@ -128,7 +130,7 @@ def photometric_stereo(
     >>> print(np.round(fit.normals[0, 0], 4), np.round(fit.albedo[0, 0], 4))
     [0.  0.6 0.8] [0.5 0.5 0.5]
     """
-    images = np.ascontiguousarray(check_array("images", images, (None, None, None, 3), dtype=np.float32))
+    images = np.ascontiguousarray(check_array("images", images, (None, None, None, 3), dtype=np.float32, copy=False))
     mask = np.ascontiguousarray(check_mask(mask, images.shape[1:3], match="images"))
     directions = np.ascontiguousarray(light_directions, dtype=np.float32)
     irradiance = np.ascontiguousarray(light_irradiance, dtype=np.float32)

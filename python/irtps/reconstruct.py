@@ -50,8 +50,9 @@ class Reconstruction:
         Seconds spent in each stage.
     parameters : dict
         The settings used.
-    indirect : numpy.ndarray or None
-        IRT-PS: float32 (K, H, W, 3), the last estimate of the inter-reflected light.
+    object_indirect : numpy.ndarray or None
+        IRT-PS: float32 (K, N, 3), the estimate of the inter-reflected light subtracted from
+        the images at the mask's N pixels (row-major order) to get the pass returned.
     history : list of Iteration
         IRT-PS: one entry per pass (residual, height change, step, timings, errors when
         ground truth is present); empty for classic photometric stereo.
@@ -74,11 +75,27 @@ class Reconstruction:
     pixel_size: float
     timings: dict[str, float] = field(default_factory=dict)
     parameters: dict = field(default_factory=dict)
-    indirect: np.ndarray | None = None
+    object_indirect: np.ndarray | None = None
     history: list[Iteration] = field(default_factory=list)
     placement: Placement | None = None
     chosen: int | None = None
     albedo_scale: AlbedoScale | None = None
+
+    @property
+    def indirect(self) -> np.ndarray | None:
+        """IRT-PS: float32 (K, H, W, 3), `object_indirect` as images (0 around the object);
+        made on each access."""
+        if self.object_indirect is None:
+            return None
+        return np.stack([self.indirect_image(k) for k in range(len(self.object_indirect))])
+
+    def indirect_image(self, k: int) -> np.ndarray:
+        """float32 (H, W, 3): the estimate of image `k`'s inter-reflected light (IRT-PS)."""
+        if self.object_indirect is None:
+            raise ArgumentError("k", "a classic photometric stereo reconstruction has no inter-reflection estimate")
+        image = np.zeros((*self.mask.shape, 3), dtype=np.float32)
+        image[self.mask] = self.object_indirect[k]
+        return image
 
 
 def reconstruct(
@@ -159,7 +176,7 @@ def reconstruct(
             pixel_size=dataset.scene.camera.pixel_size,
             timings=timings,
             parameters=parameters,
-            indirect=loop.indirect,
+            object_indirect=loop.indirect,
             history=loop.history,
             placement=loop.placement,
             chosen=loop.chosen,
@@ -308,10 +325,10 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             "chosen_pass": result.chosen,
             "albedo_scale": None if result.albedo_scale is None else result.albedo_scale.to_dict(),
         }
-        if result.indirect is not None:
+        if result.object_indirect is not None:
             (folder / "indirect").mkdir()
-            for k, image in enumerate(result.indirect):
-                write_exr(folder / "indirect" / f"{k:03d}.exr", image)
+            for k in range(len(result.object_indirect)):
+                write_exr(folder / "indirect" / f"{k:03d}.exr", result.indirect_image(k))
         (folder / "run.json").write_text(json.dumps(run, indent=2))
 
 

@@ -30,8 +30,9 @@ from irtps.scene import Scene
 
 __all__ = ["Rerendering", "Residual", "compared_observations", "render_with_residual"]
 
-#: Footprint samples per pixel of the direct image the residual compares (stratified, with
-#: exact shadow rays).
+#: Footprint samples per pixel of the direct image the residual compares (stratified; shaded
+#: from the renderer's light cache, as the bounces are: 16 samples under 96 lights would cost
+#: 1536 shadow rays a pixel, more than the camera paths).
 DIRECT_SAMPLES = 16
 #: The second half of the camera paths uses the seed moved by this much (the seeds of the
 #: passes, seed + t, never reach it).
@@ -71,11 +72,13 @@ class Rerendering:
     Attributes
     ----------
     indirect : numpy.ndarray
-        float32 (K, H, W, 3), bounces 1..r summed.
+        float32 (K, N, 3), bounces 1..r summed, at the N pixels of the mask (row-major
+        order): all that photometric stereo fits.
     residual : Residual
     noise_energy : numpy.ndarray
-        float64 (H, W): Σ over lights and channels of the Monte-Carlo variance of
-        `indirect` at each pixel (from its two independent halves; 0 with one path).
+        float64 (N,): Σ over lights and channels of the Monte-Carlo variance of
+        `indirect` at each of those pixels (from its two independent halves; 0 with one
+        path).
     """
 
     indirect: np.ndarray
@@ -152,33 +155,33 @@ def render_with_residual(
     check_frame_memory(scene, planes=4 if stride > 1 else 1)
     renderer = make_renderer(scene, height, albedo, mask)
     first = max(1, samples // 2)
-    second = samples - first
+    counts = (first, samples - first) if samples > first else (first,)
     seeds = (seed, seed + _SECOND_HALF_SEED)
-    rows = scene.camera.height
-    indirect = np.empty(images.shape, dtype=np.float32)
-    noise_energy = np.zeros(mask.shape)
-    sums = _Sums(scene.floor is not None)
-    if stride > 1:
-        halves = [_sparse_frame(renderer, mask, bounces, count, half_seed, stride) for count, half_seed in zip((first, second), seeds) if count]
-    chunk = max(1, rows // 32)
-    for start in range(0, rows, chunk):
-        stop = min(rows, start + chunk)
-        if stride == 1:
-            planes = renderer.render_rows(start, stop, bounces, first, DIRECT_SAMPLES, seeds[0], False)
-            direct, parts = planes[0], [planes[1]]
-            if second:
-                parts.append(renderer.render_rows(start, stop, bounces, second, 0, seeds[1], False)[0])
-        else:
-            direct = renderer.render_rows(start, stop, 0, 1, DIRECT_SAMPLES, seed, False)[0]
-            parts = [half[:, start:stop] for half in halves]
-        counts = (first, second)[: len(parts)]
-        indirect[:, start:stop] = sum(count * part for count, part in zip(counts, parts)) / samples
+    rendering = _Halves(renderer, bounces, counts, seeds, seed, stride)
+    object_pixels = np.flatnonzero(mask)
+    observed = images[:, mask]
+    compared = None if usable is None else usable[:, mask]
+    indirect = np.empty(observed.shape, dtype=np.float32)
+    noise_energy = np.zeros(len(object_pixels))
+    sparse = rendering.sparse(mask)
+    on_object, halves = np.zeros(2), np.zeros(2)
+    for chunk in _chunks(len(object_pixels)):
+        direct, parts = rendering.pixels(object_pixels[chunk], None if sparse is None else [half[:, chunk] for half in sparse])
+        indirect[:, chunk] = sum(count * part for count, part in zip(counts, parts)) / samples
+        keep = None if compared is None else compared[:, chunk]
+        on_object += _difference(direct + indirect[:, chunk], observed[:, chunk], keep)
         if len(parts) == 2:
             # Var(mean of halves of n1, n2 paths) = (n1 n2 / n²)·E|A − B|² for per-path variance shared.
-            spread = np.square(parts[0] - parts[1], dtype=np.float64).sum(axis=(0, 3))
-            noise_energy[start:stop] = spread * first * second / samples**2
-        sums.add(direct, parts, indirect[:, start:stop], images[:, start:stop], mask[start:stop], None if usable is None else usable[:, start:stop])
-    return Rerendering(indirect=indirect, residual=sums.residual(), noise_energy=noise_energy)
+            spread = np.square(parts[0] - parts[1], dtype=np.float64).sum(axis=(0, 2))
+            noise_energy[chunk] = spread * counts[0] * counts[1] / samples**2
+            halves += [_difference(direct + part, observed[:, chunk], keep)[0] for part in parts]
+    del sparse
+    scale = max(on_object[1], np.finfo(float).tiny)
+    surroundings = None
+    if scene.floor is not None:
+        surroundings = _surroundings_residual(rendering, ~mask, images, usable, counts, samples)
+    residual = Residual(object=float(on_object[0] / scale), surroundings=surroundings, noise=float(abs(halves[0] - halves[1]) / scale / 2))
+    return Rerendering(indirect=indirect, residual=residual, noise_energy=noise_energy)
 
 
 def compared_observations(
@@ -203,58 +206,78 @@ def compared_observations(
     images = check_array("images", images, (None, None, None, 3), dtype=None)
     mask = check_mask(mask, images.shape[1:3], match="images")
     usable = np.ones((*images.shape[:3], 1), dtype=bool)
+    # One image at a time: no temporary the size of the images.
     if saturation is not None:
-        usable &= ~(images >= saturation).any(axis=-1, keepdims=True)
+        for kept, image in zip(usable, images):
+            kept[..., 0] = ~(image >= saturation).any(axis=-1)
     if robust:
-        usable &= _lit(images, irradiance, shadow_fraction) | ~mask[None, :, :, None]
+        irradiance = np.asarray(irradiance, dtype=np.float32)
+        brightest = np.zeros(images.shape[1:3], dtype=np.float32)
+        for image, light in zip(images, irradiance):
+            np.maximum(brightest, _brightness(image, light), out=brightest)
+        level, around = shadow_fraction * brightest, ~mask
+        for kept, image, light in zip(usable, images, irradiance):
+            kept[..., 0] &= (_brightness(image, light) > level) | around
     return usable
 
 
-def _lit(images: np.ndarray, irradiance: np.ndarray, shadow_fraction: float) -> np.ndarray:
-    """Photometric stereo's rule for a lit observation (`irtps.ps.photometric_stereo`): its
-    channels over their irradiance, summed, above `shadow_fraction` of the pixel's
-    brightest. bool (K, H, W, 1) for (K, H, W, 3) images."""
-    brightness = (images / np.asarray(irradiance, dtype=np.float32)[:, None, None, :]).sum(axis=-1, keepdims=True, dtype=np.float32)
-    return brightness > shadow_fraction * brightness.max(axis=0, keepdims=True)
+def _brightness(image: np.ndarray, irradiance: np.ndarray) -> np.ndarray:
+    """Photometric stereo's brightness of an observation (`irtps.ps.photometric_stereo`): its
+    channels over their irradiance, summed. float32 (H, W) for an (H, W, 3) image."""
+    return (image / irradiance).sum(axis=-1, dtype=np.float32)
 
 
-def _sparse_frame(renderer, mask: np.ndarray, bounces: int, samples: int, seed: int, stride: int) -> np.ndarray:
-    """The inter-reflected light of the object and of its surroundings, each rendered
-    sparsely and interpolated on its own (no blending across the mask's edge)."""
-    frame = render_sparse(renderer, mask, bounces, samples, seed, stride)
-    if (~mask).any():
-        frame += render_sparse(renderer, ~mask, bounces, samples, seed, stride)
-    return frame
+class _Halves:
+    """Renders pixels as the residual needs them: the direct image, and the inter-reflected
+    light of each half of the camera paths (traced, or taken from sparse frames)."""
+
+    def __init__(self, renderer, bounces: int, counts: tuple[int, ...], seeds: tuple[int, int], seed: int, stride: int) -> None:
+        self.renderer, self.bounces, self.counts, self.seeds, self.seed, self.stride = renderer, bounces, counts, seeds, seed, stride
+
+    def sparse(self, pixels: np.ndarray) -> list[np.ndarray] | None:
+        """With a stride above 1, each half's inter-reflected light at the listed pixels of
+        the bool image `pixels`, rendered sparsely and interpolated: (K, N, 3) each."""
+        if self.stride == 1:
+            return None
+        return [render_sparse(self.renderer, pixels, self.bounces, count, half_seed, self.stride)[:, pixels] for count, half_seed in zip(self.counts, self.seeds)]
+
+    def pixels(self, pixels: np.ndarray, sparse: list[np.ndarray] | None) -> tuple[np.ndarray, list[np.ndarray]]:
+        """(direct (K, n, 3), [each half's inter-reflected light (K, n, 3)]) at the listed
+        pixels (flat indices); `sparse` gives the halves when the stride is above 1."""
+        listed = pixels.tolist()
+        if sparse is not None:
+            return self.renderer.render_pixels(listed, 0, 1, DIRECT_SAMPLES, self.seed, False, True)[0], sparse
+        planes = self.renderer.render_pixels(listed, self.bounces, self.counts[0], DIRECT_SAMPLES, self.seeds[0], False, True)
+        parts = [planes[1]]
+        if len(self.counts) == 2:
+            parts.append(self.renderer.render_pixels(listed, self.bounces, self.counts[1], 0, self.seeds[1], False)[0])
+        return planes[0], parts
 
 
-class _Sums:
-    """Running sums of |rendered − observed| and |observed| on the object and around it,
-    for the full estimate and for each half of the paths."""
-
-    def __init__(self, surroundings: bool) -> None:
-        self.surroundings = surroundings
-        self.object = np.zeros(2)
-        self.around = np.zeros(2)
-        self.halves = np.zeros(2)
-
-    def add(self, direct, parts, indirect, observed, mask, usable) -> None:
-        keep = np.broadcast_to(mask[None, :, :, None], observed.shape)
-        if usable is not None:
-            keep = keep & usable
-        self.object += _difference(direct + indirect, observed, keep)
-        if len(parts) == 2:
-            self.halves += [_difference(direct + part, observed, keep)[0] for part in parts]
-        if self.surroundings:
-            around = np.broadcast_to(~mask[None, :, :, None], observed.shape)
-            self.around += _difference(direct + indirect, observed, around if usable is None else around & usable)
-
-    def residual(self) -> Residual:
-        scale = max(self.object[1], np.finfo(float).tiny)
-        around = self.around[0] / self.around[1] if self.surroundings and self.around[1] > 0 else None
-        noise = abs(self.halves[0] - self.halves[1]) / scale / 2
-        return Residual(object=float(self.object[0] / scale), surroundings=None if around is None else float(around), noise=float(noise))
+def _surroundings_residual(rendering: _Halves, around: np.ndarray, images: np.ndarray, usable: np.ndarray | None, counts: tuple[int, ...], samples: int) -> float | None:
+    """The residual over the pixels of the bool image `around`: every observation that is
+    not saturated (`usable`); None when there is none."""
+    pixels = np.flatnonzero(around)
+    sparse = rendering.sparse(around)
+    sums = np.zeros(2)
+    for chunk in _chunks(len(pixels)):
+        direct, parts = rendering.pixels(pixels[chunk], None if sparse is None else [half[:, chunk] for half in sparse])
+        indirect = sum(count * part for count, part in zip(counts, parts)) / samples
+        rows, cols = np.unravel_index(pixels[chunk], around.shape)
+        sums += _difference(direct + indirect, images[:, rows, cols], None if usable is None else usable[:, rows, cols])
+    return float(sums[0] / sums[1]) if sums[1] > 0 else None
 
 
-def _difference(rendered: np.ndarray, observed: np.ndarray, keep: np.ndarray) -> np.ndarray:
-    """[Σ|rendered − observed|, Σ|observed|] over `keep`."""
+def _chunks(count: int) -> list[slice]:
+    """Slices of about a 32nd of `count` items (at least 1024): rendered together, they bound
+    the renderer's output buffers."""
+    size = max(1024, -(-count // 32))
+    return [slice(start, min(count, start + size)) for start in range(0, count, size)]
+
+
+def _difference(rendered: np.ndarray, observed: np.ndarray, keep: np.ndarray | None) -> np.ndarray:
+    """[Σ|rendered − observed|, Σ|observed|] over `keep` (a mask that broadcasts; default all)."""
+    if keep is None:
+        return np.array([float(np.abs(rendered - observed).sum()), float(np.abs(observed).sum())])
+    keep = np.broadcast_to(keep, observed.shape)
     return np.array([float(np.abs(rendered - observed)[keep].sum()), float(np.abs(observed)[keep].sum())])
