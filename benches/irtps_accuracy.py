@@ -13,6 +13,7 @@ Usage::
     python benches/irtps_accuracy.py                     # all shared data sets
     python benches/irtps_accuracy.py --only pedestal_cornell --passes 16
     python benches/irtps_accuracy.py --json accuracy.json
+    python benches/irtps_accuracy.py --samples 128       # IRT-PS with 128 paths per pixel
 """
 
 from __future__ import annotations
@@ -45,13 +46,13 @@ def floor_error(dataset) -> float | None:
     return angular_error(dataset, fit_photometric_stereo(dataset, dataset.gt.direct, options).normals)
 
 
-def measure(path: Path, passes: int | None) -> dict:
+def measure(path: Path, passes: int | None, settings: dict) -> dict:
     dataset = irtps.load_dataset(path)
     classic = angular_error(dataset, irtps.reconstruct(dataset).normals)
     start = time.perf_counter()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", IrtpsWarning)
-        result = irtps.reconstruct(dataset, "irtps")
+        result = irtps.reconstruct(dataset, "irtps", **settings)
     seconds = time.perf_counter() - start
     irtps_error = angular_error(dataset, result.normals)
     floor = floor_error(dataset)
@@ -70,8 +71,8 @@ def measure(path: Path, passes: int | None) -> dict:
         "warnings": [str(w.message) for w in caught],
     }
     if passes is not None and floor is not None:
-        long = irtps.reconstruct(dataset, "irtps", iterations=passes, early_stop=False)
-        short = irtps.reconstruct(dataset, "irtps", iterations=5)
+        long = irtps.reconstruct(dataset, "irtps", iterations=passes, early_stop=False, **settings)
+        short = irtps.reconstruct(dataset, "irtps", iterations=5, **settings)
         row[f"error_{passes}_passes_deg"] = angular_error(dataset, long.normals)
         row["error_at_most_5_passes_deg"] = angular_error(dataset, short.normals)
     return row
@@ -82,6 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--shared", type=Path, default=SHARED, help="the shared data folder (default: ../shared/data)")
     parser.add_argument("--only", nargs="+", help="data set names to run (default: all)")
     parser.add_argument("--passes", type=int, help="also run this many passes without the early stop, and at most 5 (data sets with direct-only images)")
+    parser.add_argument("--samples", type=int, help="camera paths per pixel of IRT-PS's estimates (default: irtps's)")
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
     paths = sorted(p for group in ("mitsuba", "diligent") for p in (args.shared / group).glob("*") if p.is_dir())
@@ -94,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     print("| data | classic PS | IRT-PS | floor | gap closed | passes (chosen) | placement | seconds |")
     print("|---|---|---|---|---|---|---|---|")
     for path in paths:
-        row = measure(path, args.passes)
+        row = measure(path, args.passes, {} if args.samples is None else {"samples": args.samples})
         rows.append(row)
         floor = "n/a" if row["floor_deg"] is None else f"{row['floor_deg']:.2f}°"
         closed = "n/a" if row["gap_closed"] is None else f"{100 * row['gap_closed']:.1f} %"

@@ -9,6 +9,7 @@ with the argument's name. Data read from a file are checked the same way with
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Callable, Sequence
 from itertools import dropwhile
@@ -195,10 +196,15 @@ def document_choices(**choices: Sequence[str]) -> Callable[[F], F]:
         for name, values in choices.items():
             listed = "{" + ", ".join(f'"{value}"' for value in values) + "}"
             line = rf"^(\s*{re.escape(name)} : ).*$"
-            doc, count = re.subn(line, lambda match, listed=listed: match.group(1) + listed, doc, count=1, flags=re.MULTILINE)
+            doc, count = re.subn(line, functools.partial(_replace_value, listed=listed), doc, count=1, flags=re.MULTILINE)
             if count != 1:
                 raise TypeError(f"{function.__qualname__}: its docstring has no parameter line for {name!r}")
         function.__doc__ = doc
         return function
 
     return decorate
+
+
+def _replace_value(match: re.Match[str], listed: str) -> str:
+    """A numpydoc parameter line `match` with its type replaced by `listed`."""
+    return match.group(1) + listed

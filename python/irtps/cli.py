@@ -26,6 +26,7 @@ from irtps.placement import format_placement
 from irtps.radiometry import format_albedo_scale
 from irtps.reconstruct import load_and_reconstruct, load_reconstruction, save_reconstruction
 from irtps.render import Rendering, render
+from irtps.resources import return_freed_memory
 from irtps.surface import height_to_normals
 from irtps.synth import SHAPES, synthesize
 from irtps.table import comparison_table, format_table, method_names
@@ -432,6 +433,7 @@ def main(argv: list[str] | None = None) -> int:
     field; 130 on Ctrl-C and 143 on SIGTERM, after removing any partial output.
     """
     args = build_parser().parse_args(argv)
+    return_freed_memory()
     previous = signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         with warnings.catch_warnings():

@@ -155,7 +155,7 @@ def render_with_residual(
     check_frame_memory(scene, planes=4 if stride > 1 else 1)
     renderer = make_renderer(scene, height, albedo, mask)
     first = max(1, samples // 2)
-    counts = (first, samples - first) if samples > first else (first,)
+    counts: tuple[int, ...] = (first, samples - first) if samples > first else (first,)
     seeds = (seed, seed + _SECOND_HALF_SEED)
     rendering = _Halves(renderer, bounces, counts, seeds, seed, stride)
     object_pixels = np.flatnonzero(mask)

@@ -1,18 +1,25 @@
-"""Memory: refuse up front the inputs that would need more of it than the machine has.
+"""Memory: refuse up front the inputs that would need more of it than the machine has, and
+give freed memory back.
 
 `check_memory` is called where the size of a large allocation is known before it is made
 (the images of a data set, the planes of a rendering), so that an input too large for
 the machine is a clear error naming the field instead of a crash, an exhausted swap or
-the out-of-memory killer.
+the out-of-memory killer. `return_freed_memory` keeps a run's resident memory near what it
+holds (the ``irtps`` command calls it).
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
 from pathlib import Path
 
 from irtps.errors import IrtpsError
 
+#: glibc's ``mallopt`` parameter: the size from which a block is mapped on its own.
+_M_MMAP_THRESHOLD = -3
+#: glibc's initial value of that threshold, kept fixed by `return_freed_memory`.
+MMAP_THRESHOLD_BYTES = 128 * 1024
 _MEMINFO = Path("/proc/meminfo")
 _CGROUP_V2 = Path("/sys/fs/cgroup")
 _CGROUP_V1 = Path("/sys/fs/cgroup/memory")
@@ -36,6 +43,27 @@ def available_memory_bytes() -> int | None:
     if left is not None:
         available = left if available is None else min(available, left)
     return available
+
+
+def return_freed_memory() -> bool:
+    """Have the C library give each large freed block back to the system at once (glibc).
+
+    glibc maps every block above a threshold on its own and unmaps it when it is freed, but
+    raises the threshold to the size of each such block freed (up to 32 MiB): from then on,
+    image-sized temporaries come from the heap and stay resident after they are freed. On
+    DiLiGenT reading that kept classic photometric stereo's peak resident memory at 1.52x
+    the decoded images instead of 1.40x. This fixes the threshold at its initial 128 KiB.
+
+    Returns
+    -------
+    bool
+        Whether the threshold was set (False where the C library has no ``mallopt``).
+    """
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    return bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES))
 
 
 def format_bytes(count: float) -> str:
