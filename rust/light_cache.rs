@@ -20,8 +20,11 @@ use crate::tracer::Tracer;
 /// Light visibility at the cache points, plus the light parameters needed to shade with it.
 pub struct LightCache {
     directions: Vec<Vec3A>,
-    /// Irradiance of each light divided by π (the Lambertian BRDF without the albedo).
-    radiance_scale: Vec<Rgb>,
+    /// x, y and z of each light's direction, light by light (the shading runs over lights).
+    direction_xyz: [Vec<f32>; 3],
+    /// Irradiance of each light divided by π (the Lambertian BRDF without the albedo), one
+    /// vector per channel.
+    radiance_scale: [Vec<f32>; 3],
     /// `vertex_visibility[v · K + k]` is 1 when light k is unoccluded from mesh vertex v.
     vertex_visibility: Vec<u8>,
     /// Per panel, `[(b · (nu + 1) + a) · K + k]` for grid vertex (a, b).
@@ -34,7 +37,8 @@ impl LightCache {
     /// distance by which shadow rays start off the surface.
     pub fn new(mesh: &Mesh, tracer: &Tracer, lights: &[Light], ray_offset: f32) -> LightCache {
         let directions: Vec<Vec3A> = lights.iter().map(|l| l.direction.normalize()).collect();
-        let radiance_scale = lights.iter().map(|l| l.irradiance.map(|e| e / PI)).collect();
+        let radiance_scale = [0, 1, 2].map(|c| lights.iter().map(|l| l.irradiance[c] / PI).collect());
+        let direction_xyz = [0, 1, 2].map(|axis| directions.iter().map(|d| d[axis]).collect());
         let mut object_vertex = vec![false; mesh.positions.len()];
         for (tri, &panel) in mesh.triangles.iter().zip(&mesh.panel_of) {
             if panel == NO_PANEL {
@@ -68,7 +72,7 @@ impl LightCache {
                 visibility_at(&points)
             })
             .collect();
-        LightCache { directions, radiance_scale, vertex_visibility, panel_visibility, ray_offset }
+        LightCache { directions, direction_xyz, radiance_scale, vertex_visibility, panel_visibility, ray_offset }
     }
 
     /// Number of lights.
@@ -76,13 +80,14 @@ impl LightCache {
         self.directions.len()
     }
 
-    /// Radiance leaving a point of triangle `t` (barycentrics `u`, `v`, albedo `albedo`,
-    /// position `point`) under each light alone, written to `out[k]`. With `exact_edges`,
-    /// a light that the cache points around the point disagree about (a shadow's edge
-    /// crosses there) gets a real shadow ray instead of the interpolated visibility.
-    #[inline]
+    /// Adds `weight` times the radiance leaving a point of triangle `t` (barycentrics `u`,
+    /// `v`, albedo `albedo`, position `point`) under each light alone to `acc`, laid out by
+    /// channel then light (`acc[c · K + k]`). The visibility is interpolated between the
+    /// cache points; with `exact_edges`, a light that they disagree about (a shadow's edge
+    /// crosses there) gets a real shadow ray instead.
+    #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    pub fn direct_radiance(&self, mesh: &Mesh, tracer: &Tracer, t: usize, (u, v): (f32, f32), point: Vec3A, albedo: Rgb, exact_edges: bool, out: &mut [Rgb]) {
+    pub fn add_direct_radiance(&self, mesh: &Mesh, tracer: &Tracer, t: usize, (u, v): (f32, f32), point: Vec3A, albedo: Rgb, exact_edges: bool, weight: Rgb, acc: &mut [f32]) {
         let n = mesh.normals[t];
         let k_count = self.directions.len();
         let panel = mesh.panel_of[t];
@@ -92,16 +97,16 @@ impl LightCache {
             let [a, b, c] = mesh.triangles[t].map(|i| &self.vertex_visibility[i as usize * k_count..][..k_count]);
             let w = 1.0 - u - v;
             if exact_edges {
-                self.shade(n, albedo, out, |k| if a[k] == b[k] && b[k] == c[k] { f32::from(a[k]) } else { traced(k) });
+                self.add_shaded::<true>(n, albedo, weight, acc, |k| if a[k] == b[k] && b[k] == c[k] { f32::from(a[k]) } else { traced(k) });
             } else {
-                self.shade(n, albedo, out, |k| w * a[k] as f32 + u * b[k] as f32 + v * c[k] as f32);
+                self.add_shaded::<false>(n, albedo, weight, acc, |k| w * a[k] as f32 + u * b[k] as f32 + v * c[k] as f32);
             }
             return;
         }
         let panel_index = panel as usize;
         let grid: &Panel = &mesh.panels[panel_index];
         let Some((gs, gt)) = grid.grid_coords(point) else {
-            self.traced_direct_radiance(tracer, point, n, albedo, out);
+            self.add_traced_direct_radiance(tracer, point, n, albedo, weight, acc);
             return;
         };
         let (nu, nv) = grid.cells;
@@ -112,38 +117,37 @@ impl LightCache {
         let (v00, v10, v01, v11) = (row(a, b), row(a + 1, b), row(a, b + 1), row(a + 1, b + 1));
         let (w00, w10, w01, w11) = ((1.0 - fs) * (1.0 - ft), fs * (1.0 - ft), (1.0 - fs) * ft, fs * ft);
         if exact_edges {
-            self.shade(n, albedo, out, |k| if v00[k] == v10[k] && v00[k] == v01[k] && v00[k] == v11[k] { f32::from(v00[k]) } else { traced(k) });
+            self.add_shaded::<true>(n, albedo, weight, acc, |k| if v00[k] == v10[k] && v00[k] == v01[k] && v00[k] == v11[k] { f32::from(v00[k]) } else { traced(k) });
         } else {
-            self.shade(n, albedo, out, |k| w00 * v00[k] as f32 + w10 * v10[k] as f32 + w01 * v01[k] as f32 + w11 * v11[k] as f32);
+            self.add_shaded::<false>(n, albedo, weight, acc, |k| w00 * v00[k] as f32 + w10 * v10[k] as f32 + w01 * v01[k] as f32 + w11 * v11[k] as f32);
         }
     }
 
-    #[inline]
-    fn shade(&self, n: Vec3A, albedo: Rgb, out: &mut [Rgb], visibility: impl Fn(usize) -> f32) {
-        for (k, slot) in out.iter_mut().enumerate() {
-            let factor = n.dot(self.directions[k]).max(0.0);
-            if factor == 0.0 {
-                *slot = [0.0; 3];
-                continue;
-            }
-            let factor = factor * visibility(k);
-            let s = self.radiance_scale[k];
-            *slot = [albedo[0] * s[0] * factor, albedo[1] * s[1] * factor, albedo[2] * s[2] * factor];
+    /// Adds `weight` × albedo × E/π × max(0, n·l) × visibility of each light to `acc`
+    /// (`acc[c · K + k]`). With `TRACED` the visibility (a shadow ray) is asked for only
+    /// where the light is in front; otherwise it is read for every light (a light behind
+    /// gets 0 all the same) and the loop over lights vectorises.
+    #[inline(always)]
+    fn add_shaded<const TRACED: bool>(&self, n: Vec3A, albedo: Rgb, weight: Rgb, acc: &mut [f32], visibility: impl Fn(usize) -> f32) {
+        let k_count = self.directions.len();
+        // Every slice cut to K, so that the loop runs without bounds checks.
+        let [x, y, z] = [0, 1, 2].map(|axis| &self.direction_xyz[axis][..k_count]);
+        let [scale_r, scale_g, scale_b] = [0, 1, 2].map(|c| &self.radiance_scale[c][..k_count]);
+        let (red, rest) = acc[..3 * k_count].split_at_mut(k_count);
+        let (green, blue) = rest.split_at_mut(k_count);
+        for k in 0..k_count {
+            let cosine = (n.x * x[k] + n.y * y[k] + n.z * z[k]).max(0.0);
+            let factor = if TRACED && cosine == 0.0 { 0.0 } else { cosine * visibility(k) };
+            red[k] += albedo[0] * scale_r[k] * factor * weight[0];
+            green[k] += albedo[1] * scale_g[k] * factor * weight[1];
+            blue[k] += albedo[2] * scale_b[k] * factor * weight[2];
         }
     }
 
-    /// Like [`Self::direct_radiance`], but with one real shadow ray per light.
-    #[inline]
-    pub fn traced_direct_radiance(&self, tracer: &Tracer, point: Vec3A, n: Vec3A, albedo: Rgb, out: &mut [Rgb]) {
+    /// Like [`Self::add_direct_radiance`], but with one real shadow ray per light in front.
+    #[inline(always)]
+    pub fn add_traced_direct_radiance(&self, tracer: &Tracer, point: Vec3A, n: Vec3A, albedo: Rgb, weight: Rgb, acc: &mut [f32]) {
         let origin = point + n * self.ray_offset;
-        for (k, dir) in self.directions.iter().enumerate() {
-            let cosine = n.dot(*dir);
-            out[k] = if cosine > 0.0 && !tracer.occluded(origin, *dir, f32::INFINITY) {
-                let s = self.radiance_scale[k];
-                [albedo[0] * s[0] * cosine, albedo[1] * s[1] * cosine, albedo[2] * s[2] * cosine]
-            } else {
-                [0.0; 3]
-            };
-        }
+        self.add_shaded::<true>(n, albedo, weight, acc, |k| f32::from(u8::from(!tracer.occluded(origin, self.directions[k], f32::INFINITY))));
     }
 }

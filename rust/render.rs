@@ -61,6 +61,8 @@ pub struct Renderer {
     cache: LightCache,
     ray_offset: f32,
     camera_z: f32,
+    /// Whether this processor runs [`Renderer::render_pixel`]'s AVX2 build.
+    avx2: bool,
 }
 
 impl Renderer {
@@ -79,7 +81,11 @@ impl Renderer {
         let ray_offset = 1e-4 * extent;
         let camera_z = if hi.z.is_finite() { hi.z + extent } else { extent };
         let cache = LightCache::new(&mesh, &tracer, lights, ray_offset);
-        Ok(Renderer { camera: scene.camera, mesh, tracer, cache, ray_offset, camera_z })
+        #[cfg(target_arch = "x86_64")]
+        let avx2 = std::is_x86_feature_detected!("avx2");
+        #[cfg(not(target_arch = "x86_64"))]
+        let avx2 = false;
+        Ok(Renderer { camera: scene.camera, mesh, tracer, cache, ray_offset, camera_z, avx2 })
     }
 
     /// The camera.
@@ -123,17 +129,18 @@ impl Renderer {
         }
         let stride = settings.planes() * k_count * 3;
         let mut per_pixel = vec![0.0f32; pixels.len() * stride];
-        per_pixel.par_chunks_mut(stride).zip(pixels).for_each_init(
-            || vec![[0.0f32; 3]; k_count],
-            |scratch, (acc, &p)| self.render_pixel(p / w, p % w, settings, acc, scratch),
-        );
-        // Transpose pixel-major (pixel, plane, k, c) to image-major (plane, k, pixel, c).
+        per_pixel.par_chunks_mut(stride).zip(pixels).for_each(|(acc, &p)| self.render_pixel(p / w, p % w, settings, acc));
+        // Transpose pixel-major (pixel, plane, c, k) to image-major (plane, k, pixel, c).
         let planes = settings.planes() * k_count;
         let plane_len = pixels.len() * 3;
         let mut out = vec![0.0f32; planes * plane_len];
-        out.par_chunks_mut(plane_len.max(1)).enumerate().for_each(|(plane, dst)| {
+        out.par_chunks_mut(plane_len.max(1)).enumerate().for_each(|(image, dst)| {
+            let (plane, k) = (image / k_count, image % k_count);
             for (p, px) in dst.chunks_exact_mut(3).enumerate() {
-                px.copy_from_slice(&per_pixel[p * stride + plane * 3..][..3]);
+                let sums = &per_pixel[p * stride + plane * 3 * k_count..];
+                for (c, value) in px.iter_mut().enumerate() {
+                    *value = sums[c * k_count + k];
+                }
             }
         });
         Ok(out)
@@ -149,8 +156,27 @@ impl Renderer {
         Ok(())
     }
 
-    /// Accumulates one pixel into `acc` (layout `(P, K, 3)`), already averaged.
-    fn render_pixel(&self, row: usize, col: usize, s: &RenderSettings, acc: &mut [f32], light: &mut [Rgb]) {
+    /// Accumulates one pixel into `acc` (layout `(P, 3, K)`: by plane, channel, light),
+    /// already averaged; with AVX2 where the processor has it.
+    fn render_pixel(&self, row: usize, col: usize, s: &RenderSettings, acc: &mut [f32]) {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is set only when the processor supports AVX2.
+            return unsafe { self.render_pixel_avx2(row, col, s, acc) };
+        }
+        self.render_pixel_portable(row, col, s, acc);
+    }
+
+    /// [`Renderer::render_pixel_portable`] compiled for AVX2: the sums over the lights run
+    /// eight at a time, the same operations in the same order, so the same results.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn render_pixel_avx2(&self, row: usize, col: usize, s: &RenderSettings, acc: &mut [f32]) {
+        self.render_pixel_portable(row, col, s, acc);
+    }
+
+    #[inline(always)]
+    fn render_pixel_portable(&self, row: usize, col: usize, s: &RenderSettings, acc: &mut [f32]) {
         let k_count = self.light_count();
         let pixel = (row * self.camera.width + col) as u64;
         let key = hash(&[s.seed, pixel]);
@@ -168,16 +194,17 @@ impl Renderer {
             let point = origin - Vec3A::Z * hit.t;
             let albedo = self.mesh.albedo_at(hit.triangle, hit.u, hit.v);
             if sample < s.direct_samples {
+                let weight = [1.0 / s.direct_samples as f32; 3];
+                let direct = &mut acc[..k_count * 3];
                 if s.cached_direct {
-                    self.cache.direct_radiance(&self.mesh, &self.tracer, hit.triangle, (hit.u, hit.v), point, albedo, true, light);
+                    self.cache.add_direct_radiance(&self.mesh, &self.tracer, hit.triangle, (hit.u, hit.v), point, albedo, true, weight, direct);
                 } else {
-                    self.cache.traced_direct_radiance(&self.tracer, point, n, albedo, light);
+                    self.cache.add_traced_direct_radiance(&self.tracer, point, n, albedo, weight, direct);
                 }
-                add_scaled(&mut acc[..k_count * 3], light, [1.0 / s.direct_samples as f32; 3]);
             }
             if sample < path_count {
                 let mut rng = Rng::new(hash(&[key, sample as u64, 0x5EED]));
-                self.trace_path(point, n, albedo, (q[2], q[3]), &mut rng, s, acc, light);
+                self.trace_path(point, n, albedo, (q[2], q[3]), &mut rng, s, acc);
             }
         }
     }
@@ -185,7 +212,8 @@ impl Renderer {
     /// Follows one cosine-sampled path from a camera hit, adding bounce b's radiance
     /// (already divided by the sample count) into its plane of `acc`.
     #[allow(clippy::too_many_arguments)]
-    fn trace_path(&self, mut point: Vec3A, mut n: Vec3A, albedo: Rgb, first: (f32, f32), rng: &mut Rng, s: &RenderSettings, acc: &mut [f32], light: &mut [Rgb]) {
+    #[inline(always)]
+    fn trace_path(&self, mut point: Vec3A, mut n: Vec3A, albedo: Rgb, first: (f32, f32), rng: &mut Rng, s: &RenderSettings, acc: &mut [f32]) {
         let k3 = self.light_count() * 3;
         let inv_samples = 1.0 / s.samples as f32;
         let mut throughput = albedo.map(|a| a * inv_samples);
@@ -199,9 +227,9 @@ impl Renderer {
             }
             let p_hit = point + n * self.ray_offset + dir * hit.t;
             let albedo_hit = self.mesh.albedo_at(hit.triangle, hit.u, hit.v);
-            self.cache.direct_radiance(&self.mesh, &self.tracer, hit.triangle, (hit.u, hit.v), p_hit, albedo_hit, false, light);
             let plane = s.bounce_plane(bounce);
-            add_scaled(&mut acc[plane * k3..(plane + 1) * k3], light, throughput);
+            let sums = &mut acc[plane * k3..(plane + 1) * k3];
+            self.cache.add_direct_radiance(&self.mesh, &self.tracer, hit.triangle, (hit.u, hit.v), p_hit, albedo_hit, false, throughput, sums);
             throughput = [0, 1, 2].map(|c| throughput[c] * albedo_hit[c]);
             if throughput.iter().all(|&t| t == 0.0) {
                 return;
@@ -209,15 +237,6 @@ impl Renderer {
             point = p_hit;
             n = n_hit;
         }
-    }
-}
-
-#[inline]
-fn add_scaled(acc: &mut [f32], values: &[Rgb], weight: Rgb) {
-    for (dst, v) in acc.chunks_exact_mut(3).zip(values) {
-        dst[0] += v[0] * weight[0];
-        dst[1] += v[1] * weight[1];
-        dst[2] += v[2] * weight[2];
     }
 }
 

@@ -720,15 +720,20 @@ def _issue_warnings(outcome: BatchResult) -> None:
 def _result_of(future, name: str, source: str) -> BatchResult:
     """A task's `BatchResult`, or a failed one if the task did not return (every worker
     that ran it died)."""
+    import dask
     from distributed import KilledWorker
 
     try:
         return future.result()
     except KilledWorker as error:
-        deaths = error.allowed_failures + 1
+        # Older Dask releases do not carry the limit on the error; it is the configured one.
+        allowed = getattr(error, "allowed_failures", None)
+        if allowed is None:
+            allowed = int(dask.config.get("distributed.scheduler.allowed-failures"))
+        deaths = allowed + 1
         message = (
             f"KilledWorker: each of the {deaths} workers that ran it died (killed, e.g. out of memory); Dask gave up on it "
-            f"(distributed.scheduler.allowed-failures = {error.allowed_failures})"
+            f"(distributed.scheduler.allowed-failures = {allowed})"
         )
         return BatchResult(name, source, "failed", None, error=message, lost_workers=deaths)
     except Exception as error:  # cancelled task, unreachable cluster: the data set failed, the batch goes on
