@@ -14,6 +14,7 @@ pub mod ps;
 pub mod robust_ps;
 pub mod render;
 pub mod sampler;
+pub mod sparse_cholesky;
 pub mod scene;
 pub mod tracer;
 

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use glam::vec3a;
 use numpy::ndarray::{Array, Array2, IxDyn};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyArray2, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use rayon::prelude::*;
@@ -17,6 +17,7 @@ use crate::image_io::{self, Image};
 use crate::ps::{check_lights as core_check_lights, photometric_stereo as core_ps, PsSettings, Robust};
 use crate::render::{RenderSettings, Renderer as CoreRenderer};
 use crate::scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
+use crate::sparse_cholesky::SparseCholesky as CoreSparseCholesky;
 
 /// Rays a parallel task of `Renderer.intersect` traces as one batch.
 const RAYS_PER_TASK: usize = 4096;
@@ -371,6 +372,60 @@ fn photometric_stereo<'py>(
     ))
 }
 
+/// Non-negative int64 indices as `usize`, or an error naming `name`.
+fn indices_of(array: &PyReadonlyArray1<'_, i64>, name: &str) -> PyResult<Vec<usize>> {
+    array.as_array().iter().map(|&i| usize::try_from(i).map_err(|_| argument_error(name, format!("negative index {i}")))).collect()
+}
+
+/// The Cholesky factorisation `L Lᵀ` of a sparse symmetric positive definite matrix,
+/// factored once (faer), for many solves.
+///
+/// Parameters: `indptr`, `indices` (int64) and `data` (float64), the CSR (or CSC: the same
+/// for a symmetric matrix) arrays of an n×n matrix with sorted indices, of which only the
+/// upper triangle is read; `name`, the argument named in errors (an `ArgumentError` when
+/// the arrays are malformed or the matrix is not positive definite).
+#[pyclass(frozen, module = "irtps._core")]
+struct SparseCholesky {
+    inner: CoreSparseCholesky,
+    name: String,
+}
+
+#[pymethods]
+impl SparseCholesky {
+    #[new]
+    #[pyo3(signature = (indptr, indices, data, name="matrix"))]
+    fn new(py: Python<'_>, indptr: PyReadonlyArray1<'_, i64>, indices: PyReadonlyArray1<'_, i64>, data: PyReadonlyArray1<'_, f64>, name: &str) -> PyResult<SparseCholesky> {
+        let indptr = indices_of(&indptr, name)?;
+        let indices = indices_of(&indices, name)?;
+        let data = data.as_array().to_vec();
+        let n = indptr.len().saturating_sub(1);
+        let inner = py.detach(|| CoreSparseCholesky::factor(name, n, &indptr, &indices, &data)).map_err(to_py)?;
+        Ok(SparseCholesky { inner, name: name.to_string() })
+    }
+
+    /// The matrix's dimension n.
+    #[getter]
+    fn dim(&self) -> usize {
+        self.inner.dim()
+    }
+
+    /// Number of float64 values stored in the factor L.
+    #[getter]
+    fn factor_len(&self) -> usize {
+        self.inner.factor_len()
+    }
+
+    /// The solution x of `A x = b` for a float64 (n,) right-hand side `b`.
+    fn solve<'py>(&self, py: Python<'py>, b: PyReadonlyArray1<'_, f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let mut x = b.as_array().to_vec();
+        if x.len() != self.inner.dim() {
+            return Err(argument_error("b", format!("length {} for the {}x{} matrix {}", x.len(), self.inner.dim(), self.inner.dim(), self.name)));
+        }
+        py.detach(|| self.inner.solve_in_place("b", &mut x, 1)).map_err(to_py)?;
+        Ok(PyArray1::from_vec(py, x))
+    }
+}
+
 /// The compiled core of irtps.
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -382,6 +437,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(photometric_stereo, m)?)?;
     m.add_function(wrap_pyfunction!(check_lights, m)?)?;
     m.add_class::<Renderer>()?;
+    m.add_class::<SparseCholesky>()?;
     m.add("MAX_IMAGE_PIXELS", image_io::MAX_IMAGE_PIXELS)?;
     Ok(())
 }

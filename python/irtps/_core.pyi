@@ -1,4 +1,5 @@
-"""Types of the compiled core (rust/python.rs): image I/O, photometric stereo, the renderer.
+"""Types of the compiled core (rust/python.rs): image I/O, photometric stereo, the renderer,
+the sparse Cholesky factorisation.
 
 Errors about an input arrive as `irtps.errors.ArgumentError` (an argument) or
 `irtps.errors.DatasetError` (a file's content), failures to read or write as `OSError`.
@@ -13,7 +14,7 @@ import numpy.typing as npt
 
 from irtps.scene import CornellBox, Floor
 
-__all__ = ["read_exr", "write_exr", "read_png", "write_png", "read_images", "photometric_stereo", "check_lights", "Renderer", "MAX_IMAGE_PIXELS"]
+__all__ = ["read_exr", "write_exr", "read_png", "write_png", "read_images", "photometric_stereo", "check_lights", "Renderer", "SparseCholesky", "MAX_IMAGE_PIXELS"]
 
 _F32 = npt.NDArray[np.float32]
 _Path = str | PathLike[str]
@@ -92,3 +93,23 @@ class Renderer:
 
     def intersect(self, origins: _F32, directions: _F32, threads: int | None = None) -> tuple[_F32, npt.NDArray[np.int64]]:
         """(distance (N,), inf on a miss; triangle (N,), −1 on a miss) of a batch of rays."""
+
+@final
+class SparseCholesky:
+    """The Cholesky factorisation of a sparse symmetric positive definite matrix (faer),
+    factored once for many solves: from its CSR (or CSC) arrays with sorted indices, of
+    which only the upper triangle is read. `name` is the argument named in errors."""
+
+    def __new__(
+        cls, indptr: npt.NDArray[np.int64], indices: npt.NDArray[np.int64], data: npt.NDArray[np.float64], name: str = "matrix"
+    ) -> SparseCholesky: ...
+    @property
+    def dim(self) -> int:
+        """The matrix's dimension n."""
+
+    @property
+    def factor_len(self) -> int:
+        """Number of float64 values stored in the factor L."""
+
+    def solve(self, b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """The solution x of ``A x = b`` for a float64 (n,) right-hand side."""

@@ -21,6 +21,8 @@ direction.
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 import scipy.fft
 import scipy.ndimage
@@ -36,7 +38,11 @@ ROBUST_WEIGHTS = ("huber", "cauchy")
 # Tuning constants giving 95 % efficiency on Gaussian residuals (in units of the scale).
 _HUBER_K = 1.345
 _CAUCHY_K = 2.385
-# 4-connectivity: the finite differences only ever join 4-neighbours.
+# 4-connectivity: the finite differences only ever join 4-neighbours. The mask's components
+# and boundary come from scipy.ndimage (label, binary_erosion), not scikit-image: its
+# measure.label does the same labelling, and segmentation.find_boundaries(mode="inner") does
+# not count the image border as boundary, which place_height needs; scikit-image has no
+# normal integration, so it would be a dependency for nothing scipy does not already do.
 _FOUR = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=bool)
 # Size below which the AMG hierarchy stops coarsening (then a sparse LU).
 _MAX_COARSE = 300
@@ -50,6 +56,17 @@ _IRLS_INNER_TOLERANCE = 1e-3
 _REUSE_LIMIT = 25
 _MAX_PCG_ITERATIONS = 1000
 _DEFAULT_TOLERANCE = {"ls": 1e-5, "mestimator": 1e-4}
+#: Largest systems (unknowns) solved by faer's sparse Cholesky factorisation, factored once
+#: per mask; larger ones by AMG-PCG, the hierarchy set up once per mask. Measured on a disc
+#: (benches/integration_bench.py --solvers, 2 busy cores): the factor wins from the second
+#: solve on (IRT-PS, 6 passes at 512x512: ls 0.55 s against 1.14 s with pyamg, footprint
+#: 1.6 s against 2.7 s) but its fill-in grows faster than the system (AMD ordering): at
+#: 1024x1024 (667 k unknowns) the footprint factor holds 958 MB, 7.8 s to factor, where
+#: pyamg needs a few tens of MB; the ls factor there holds 264 MB (3.2 s for 6 passes,
+#: against 5.1 s). A single solve (classic PS) is up to 2x slower by the factor at 512x512
+#: (footprint 1.2 s against 0.7 s): the IRT-PS loop is what it is kept for.
+_LS_DIRECT_LIMIT = 700_000
+_FOOTPRINT_DIRECT_LIMIT = 300_000
 _PRESMOOTHER = ("gauss_seidel", {"sweep": "symmetric"})
 _POSTSMOOTHER = ("gauss_seidel", {"sweep": "symmetric"})
 
@@ -121,8 +138,11 @@ def integrate_normals(
         forward difference (matched with the slope at the first pixel) and a backward
         difference (matched with the slope at the second one); pixels without a masked
         neighbour on a side simply have no difference there, which is the free (natural)
-        boundary condition. The normal equations are a weighted graph Laplacian, solved by
-        conjugate gradients preconditioned with an algebraic multigrid V-cycle (pyamg).
+        boundary condition. The normal equations are a weighted graph Laplacian. They depend
+        on the mask only, and are set up once for as long as the mask stays the same (the
+        IRT-PS passes): factored by faer's sparse Cholesky (up to 700 k pixels), or beyond
+        solved by conjugate gradients preconditioned with an algebraic multigrid V-cycle
+        (pyamg).
     ``"mestimator"``
         The same functional with a robust penalty on each difference (each forward and
         each backward difference gets its own weight, so a wrong normal only loses the
@@ -140,7 +160,8 @@ def integrate_normals(
         masked neighbours (one-sided at the mask edge), weakly coupled by forward
         differences to tie the odd and even pixels together. Unlike ``"ls"``, it keeps
         creases sharp (a V-groove's bottom is not blunted), which matters when the surface
-        is rendered again, as in IRT-PS.
+        is rendered again, as in IRT-PS. Set up once per mask as ``"ls"`` is, factored up
+        to 300 k pixels (the factor's fill-in is larger: about 1 GB at 1024×1024).
     ``"dct"``
         Full rectangle only (`mask` all true or None): the same least-squares problem,
         whose normal equations are the Poisson equation with Neumann boundary, solved
@@ -174,7 +195,8 @@ def integrate_normals(
         and only the last, accurate one is done.
     tolerance : float, optional
         Relative residual ``||b - A z|| / ||b||`` at which the conjugate gradients of
-        ``"ls"`` and ``"mestimator"`` stop (ignored by the spectral methods). Default:
+        ``"ls"``, ``"footprint"`` and ``"mestimator"`` stop (ignored by the spectral methods
+        and where the system is factored, whose solution is exact to rounding). Default:
         1e-5 for ``"ls"``, which puts the solver's error well below the discretisation's
         on smooth surfaces; 1e-4 for ``"mestimator"``, whose own error (the outliers'
         residual influence) is far larger than that. The intermediate re-weighted solves
@@ -246,7 +268,7 @@ def integrate_normals(
     problem = _Problem(mask, gc, gr)
     if method == "mestimator" and iterations > 0:
         # The least-squares start only needs the accuracy of the intermediate solves.
-        z = problem.solve_ls(max(tolerance, _IRLS_INNER_TOLERANCE))
+        z = problem.solve_ls(max(tolerance, _IRLS_INNER_TOLERANCE), robust_start=True)
         z = problem.solve_robust(z, robust_weight, iterations, tolerance)
     else:
         z = problem.solve_ls(tolerance)
@@ -427,70 +449,103 @@ _FOOTPRINT_COUPLING = 0.3
 
 def _integrate_footprint(mask, gc, gr, tolerance):
     """Least squares on central differences (one-sided at the mask edge), weakly coupled."""
-    index = np.full(mask.shape, -1, dtype=np.int64)
-    n = int(mask.sum())
-    index[mask] = np.arange(n)
-    rows, cols, vals, targets, weights = [], [], [], [], []
-    count = 0
-    for axis, g in ((1, gc), (0, gr)):
-        before = np.zeros_like(mask)
-        after = np.zeros_like(mask)
-        if axis == 1:
-            before[:, 1:], after[:, :-1] = mask[:, :-1], mask[:, 1:]
-        else:
-            before[1:, :], after[:-1, :] = mask[:-1, :], mask[1:, :]
-        here = index
-        nxt = np.full_like(index, -1)
-        prv = np.full_like(index, -1)
-        if axis == 1:
-            nxt[:, :-1], prv[:, 1:] = index[:, 1:], index[:, :-1]
-        else:
-            nxt[:-1, :], prv[1:, :] = index[1:, :], index[:-1, :]
-        cases = [
-            (mask & before & after, nxt, prv, 0.5, 1.0),  # central
-            (mask & after & ~before, nxt, here, 1.0, 1.0),  # forward at the mask edge
-            (mask & before & ~after, here, prv, 1.0, 1.0),  # backward at the mask edge
-        ]
-        for where, plus, minus, coefficient, weight in cases:
-            m = int(where.sum())
+    system = _cached(("footprint", _mask_key(mask)), lambda: _FootprintSystem(mask))
+    return system.solve(gc, gr, tolerance)
+
+
+class _FootprintSystem:
+    """The normal equations of ``"footprint"`` on one mask: they depend on the mask only.
+
+    The rows of the least-squares system ``diag(w) A z = diag(w) T g`` are the central
+    differences (one-sided at the mask edge) and the coupling forward differences of each
+    axis; ``g`` is the slopes ``(gc, gr)`` raveled and ``T`` picks (or averages) the slopes
+    each row is matched with. The first pixel of each 4-connected component is pinned to
+    0, which leaves the normal matrix ``A_f^T W^2 A_f`` (over the free pixels)
+    positive definite; its right-hand side is ``A_f^T W^2 T g``, one sparse product.
+    """
+
+    def __init__(self, mask):
+        h, w = mask.shape
+        index = np.full(mask.shape, -1, dtype=np.int64)
+        n = int(mask.sum())
+        index[mask] = np.arange(n)
+        flat = np.arange(h * w).reshape(h, w)
+        rows, cols, vals, weights = [], [], [], []
+        target_rows, target_cols, target_vals = [], [], []
+        count = 0
+        for axis, offset in ((1, 0), (0, h * w)):
+            before = np.zeros_like(mask)
+            after = np.zeros_like(mask)
+            nxt = np.full_like(index, -1)
+            prv = np.full_like(index, -1)
+            if axis == 1:
+                before[:, 1:], after[:, :-1] = mask[:, :-1], mask[:, 1:]
+                nxt[:, :-1], prv[:, 1:] = index[:, 1:], index[:, :-1]
+            else:
+                before[1:, :], after[:-1, :] = mask[:-1, :], mask[1:, :]
+                nxt[:-1, :], prv[1:, :] = index[1:, :], index[:-1, :]
+            step = 1 if axis == 1 else w
+            cases = [
+                (mask & before & after, nxt, prv, 0.5),  # central
+                (mask & after & ~before, nxt, index, 1.0),  # forward at the mask edge
+                (mask & before & ~after, index, prv, 1.0),  # backward at the mask edge
+            ]
+            for where, plus, minus, coefficient in cases:
+                m = int(where.sum())
+                r = np.arange(count, count + m)
+                rows += [r, r]
+                cols += [plus[where], minus[where]]
+                vals += [np.full(m, coefficient), np.full(m, -coefficient)]
+                weights.append(np.ones(m))
+                target_rows.append(r)
+                target_cols.append(offset + flat[where])
+                target_vals.append(np.ones(m))
+                count += m
+            # Coupling: every edge between masked neighbours, matched with the mean slope.
+            edge = mask & after
+            m = int(edge.sum())
             r = np.arange(count, count + m)
             rows += [r, r]
-            cols += [plus[where], minus[where]]
-            vals += [np.full(m, coefficient), np.full(m, -coefficient)]
-            targets.append(g[where])
-            weights.append(np.full(m, weight))
+            cols += [nxt[edge], index[edge]]
+            vals += [np.ones(m), -np.ones(m)]
+            weights.append(np.full(m, _FOOTPRINT_COUPLING))
+            target_rows += [r, r]
+            target_cols += [offset + flat[edge], offset + flat[edge] + step]
+            target_vals += [np.full(m, 0.5), np.full(m, 0.5)]
             count += m
-        # Coupling: every edge between masked neighbours, matched with the mean slope.
-        edge = mask & after
-        m = int(edge.sum())
-        r = np.arange(count, count + m)
-        rows += [r, r]
-        cols += [nxt[edge], here[edge]]
-        vals += [np.ones(m), -np.ones(m)]
-        g_next = np.roll(g, -1, axis=axis)
-        targets.append(0.5 * (g[edge] + g_next[edge]))
-        weights.append(np.full(m, _FOOTPRINT_COUPLING))
-        count += m
-    w = np.concatenate(weights)
-    a = scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(count, n))
-    a = scipy.sparse.diags(w) @ a
-    b = w * np.concatenate(targets)
-    labels, components = scipy.ndimage.label(mask, structure=_FOUR)
-    component = labels[mask] - 1
-    pinned = np.unique(component, return_index=True)[1]
-    free = np.ones(n, dtype=bool)
-    free[pinned] = False
-    a_free = a[:, free].tocsc().tocsr()
-    normal = (a_free.T @ a_free).tocsr()
-    rhs = a_free.T @ b
-    z = np.zeros(n)
-    if normal.shape[0] > 0:
-        z[free], _, _ = _pcg(normal, rhs, _AmgPreconditioner(normal), np.zeros(normal.shape[0]), tolerance)
-    means = np.bincount(component, z, components) / np.bincount(component, minlength=components)
-    z -= means[component]
-    out = np.zeros(mask.shape, dtype=np.float32)
-    out[mask] = z
-    return out
+        weight = np.concatenate(weights)
+        a = scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(count, n))
+        targets = scipy.sparse.csr_matrix(
+            (np.concatenate(target_vals), (np.concatenate(target_rows), np.concatenate(target_cols))), shape=(count, 2 * h * w)
+        )
+        labels, self.components = scipy.ndimage.label(mask, structure=_FOUR)
+        self.component = labels[mask] - 1
+        self.mask = mask
+        self.free = np.ones(n, dtype=bool)
+        self.free[np.unique(self.component, return_index=True)[1]] = False
+        a_free_t = (scipy.sparse.diags(weight) @ a[:, self.free]).T.tocsr()
+        self.normal = (a_free_t @ a_free_t.T).tocsr()
+        self.normal.sort_indices()
+        self.rhs_operator = (a_free_t @ scipy.sparse.diags(weight) @ targets).tocsr()
+        self.solver = None
+
+    def rhs(self, gc, gr):
+        """The normal equations' right-hand side for the slopes ``(gc, gr)``."""
+        return self.rhs_operator @ np.concatenate([gc.ravel(), gr.ravel()])
+
+    def solve(self, gc, gr, tolerance):
+        """Centred heights (H, W) float32 for the slopes, 0 outside the mask."""
+        z = np.zeros(self.free.size)
+        if self.normal.shape[0] > 0:
+            if self.solver is None:
+                direct = self.normal.shape[0] <= _FOOTPRINT_DIRECT_LIMIT
+                self.solver = _SpdSolver(self.normal, "footprint normal matrix", direct=direct)
+            z[self.free] = self.solver.solve(self.rhs(gc, gr), tolerance)
+        means = np.bincount(self.component, z, self.components) / np.bincount(self.component, minlength=self.components)
+        z -= means[self.component]
+        out = np.zeros(self.mask.shape, dtype=np.float32)
+        out[self.mask] = z
+        return out
 
 
 # --------------------------------------------------------------------------- least squares
@@ -604,15 +659,22 @@ class _Problem:
 
     # --- solvers
 
-    def solve_ls(self, tolerance):
+    def solve_ls(self, tolerance, *, robust_start=False):
+        """Least-squares heights. The solver of the mask's matrix is cached (see
+        :func:`_cached`), except for the start of ``"mestimator"`` (`robust_start`), whose
+        AMG hierarchy the re-weighted solves reuse."""
         if self.n_edges == 0:
             return np.zeros(self.n)
-        weight = np.full(self.n_edges, 2.0)
-        a = self.matrix(weight)
         b = self.rhs(self.t_f + self.t_b)
-        self._amg = _AmgPreconditioner(a)
-        z, _, _ = _pcg(a, b, self._amg, np.zeros(self.n), tolerance)
-        return self._project(z)
+        if robust_start:
+            solver = _SpdSolver(self.matrix(np.full(self.n_edges, 2.0)), "ls normal matrix", direct=False)
+            self._amg = solver.amg
+        else:
+            solver = _cached(
+                ("ls", _mask_key(self.mask)),
+                lambda: _SpdSolver(self.matrix(np.full(self.n_edges, 2.0)), "ls normal matrix", direct=self.n <= _LS_DIRECT_LIMIT),
+            )
+        return self._project(solver.solve(b, tolerance))
 
     def solve_robust(self, z, robust_weight, iterations, tolerance):
         """IRLS from the least-squares heights `z`: `iterations` re-weighted solves.
@@ -685,6 +747,52 @@ def _robust_weights(residuals, kind):
         np.reciprocal(w, out=w)
     half = residuals.size // 2
     return w[:half], w[half:]
+
+
+class _SpdSolver:
+    """One symmetric positive definite system, set up once and solved for many right-hand
+    sides: when `direct`, by faer's sparse Cholesky factorisation
+    (:class:`irtps._core.SparseCholesky`, exact to rounding), otherwise by conjugate
+    gradients preconditioned with a pyamg hierarchy set up once.
+    """
+
+    def __init__(self, matrix, name, *, direct):
+        self.matrix = matrix
+        self.factor = None
+        self.amg = None
+        if direct:
+            from irtps._core import SparseCholesky
+
+            self.factor = SparseCholesky(matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64), matrix.data, name)
+        else:
+            self.amg = _AmgPreconditioner(matrix)
+
+    def solve(self, b, tolerance):
+        """The solution of ``matrix x = b``; `tolerance` is the conjugate gradients' relative
+        residual (the factorisation's solution is exact to rounding)."""
+        if self.factor is not None:
+            return self.factor.solve(b)
+        x, _, _ = _pcg(self.matrix, b, self.amg, np.zeros(b.size), tolerance)
+        return x
+
+
+#: The last system set up (key -> solver or system), reused while the key is the same: the
+#: IRT-PS passes integrate on one mask. One entry, so that a large factor does not outlive
+#: the next integration on another mask.
+_LAST_SYSTEM: dict = {}
+
+
+def _cached(key, build):
+    """The object built by ``build()`` for `key`, built only when the last key differs."""
+    if key not in _LAST_SYSTEM:
+        _LAST_SYSTEM.clear()
+        _LAST_SYSTEM[key] = build()
+    return _LAST_SYSTEM[key]
+
+
+def _mask_key(mask):
+    """A key of the mask (its shape and a digest of its bits): the system's only input."""
+    return mask.shape, hashlib.blake2b(np.packbits(mask).tobytes(), digest_size=16).digest()
 
 
 def _dot(a, b):
