@@ -22,6 +22,7 @@ direction.
 from __future__ import annotations
 
 import hashlib
+import threading
 
 import numpy as np
 import scipy.fft
@@ -449,7 +450,7 @@ _FOOTPRINT_COUPLING = 0.3
 
 def _integrate_footprint(mask, gc, gr, tolerance):
     """Least squares on central differences (one-sided at the mask edge), weakly coupled."""
-    system = _cached(("footprint", _mask_key(mask)), lambda: _FootprintSystem(mask))
+    system = _cached(("footprint", _mask_key(mask)), lambda: _FootprintSystem(mask).with_solver())
     return system.solve(gc, gr, tolerance)
 
 
@@ -529,17 +530,22 @@ class _FootprintSystem:
         self.rhs_operator = (a_free_t @ scipy.sparse.diags(weight) @ targets).tocsr()
         self.solver = None
 
+    def with_solver(self):
+        """This system, with its solver set up (factored, or its AMG hierarchy built)."""
+        if self.normal.shape[0] > 0:
+            direct = self.normal.shape[0] <= _FOOTPRINT_DIRECT_LIMIT
+            self.solver = _SpdSolver(self.normal, "footprint normal matrix", direct=direct)
+        return self
+
     def rhs(self, gc, gr):
         """The normal equations' right-hand side for the slopes ``(gc, gr)``."""
         return self.rhs_operator @ np.concatenate([gc.ravel(), gr.ravel()])
 
     def solve(self, gc, gr, tolerance):
-        """Centred heights (H, W) float32 for the slopes, 0 outside the mask."""
+        """Centred heights (H, W) float32 for the slopes, 0 outside the mask (after
+        :meth:`with_solver`)."""
         z = np.zeros(self.free.size)
-        if self.normal.shape[0] > 0:
-            if self.solver is None:
-                direct = self.normal.shape[0] <= _FOOTPRINT_DIRECT_LIMIT
-                self.solver = _SpdSolver(self.normal, "footprint normal matrix", direct=direct)
+        if self.solver is not None:
             z[self.free] = self.solver.solve(self.rhs(gc, gr), tolerance)
         means = np.bincount(self.component, z, self.components) / np.bincount(self.component, minlength=self.components)
         z -= means[self.component]
@@ -778,16 +784,20 @@ class _SpdSolver:
 
 #: The last system set up (key -> solver or system), reused while the key is the same: the
 #: IRT-PS passes integrate on one mask. One entry, so that a large factor does not outlive
-#: the next integration on another mask.
+#: the next integration on another mask; a lock, for batch workers running threads.
 _LAST_SYSTEM: dict = {}
+_LAST_SYSTEM_LOCK = threading.Lock()
 
 
 def _cached(key, build):
     """The object built by ``build()`` for `key`, built only when the last key differs."""
-    if key not in _LAST_SYSTEM:
-        _LAST_SYSTEM.clear()
-        _LAST_SYSTEM[key] = build()
-    return _LAST_SYSTEM[key]
+    with _LAST_SYSTEM_LOCK:
+        system = _LAST_SYSTEM.get(key)
+        if system is None:
+            system = build()
+            _LAST_SYSTEM.clear()
+            _LAST_SYSTEM[key] = system
+    return system
 
 
 def _mask_key(mask):
