@@ -86,7 +86,8 @@ class Iteration:
 class InterreflectionResult:
     """The chosen pass (lowest residual): its fit, albedo (`irtps.surface.surface_albedo`
     of its fit), placed height, the estimate subtracted from the object's pixels to get its
-    images ((K, N, 3) at the mask's N pixels, row-major; None for pass 0), the placement, the albedo scale it rendered with, and every pass's record."""
+    images ((K, N, 3) at the mask's N pixels, row-major; None for pass 0), the placement,
+    the albedo scale it rendered with, and every pass's record."""
 
     fit: PsResult
     albedo: np.ndarray

@@ -163,12 +163,13 @@ def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: Recons
     lights and mask and the options' robust settings. `images` are (K, H, W, 3), or
     (K, N, 3) at the mask's N pixels in row-major order (the corrected images of IRT-PS)."""
     scene, mask = dataset.scene, dataset.mask
-    fit_on = (images, mask) if images.ndim == 4 else (images[:, None], np.ones((1, images.shape[1]), dtype=bool))
+    # (K, N, 3) observations are fitted as one row of N pixels, every one in the mask.
+    fitted, fitted_mask = (images, mask) if images.ndim == 4 else (images[:, None], np.ones((1, images.shape[1]), dtype=bool))
     fit = photometric_stereo(
-        *fit_on[:1],
+        fitted,
         scene.light_directions,
         scene.light_irradiance,
-        fit_on[1],
+        fitted_mask,
         robust=options.robust,
         shadow_fraction=options.shadow_fraction,
         saturation=options.saturation,

@@ -30,9 +30,10 @@ from irtps.scene import Scene
 
 __all__ = ["Rerendering", "Residual", "compared_observations", "render_with_residual"]
 
-#: Footprint samples per pixel of the direct image the residual compares (stratified; shaded
-#: from the renderer's light cache, as the bounces are: 16 samples under 96 lights would cost
-#: 1536 shadow rays a pixel, more than the camera paths).
+#: Footprint samples per pixel of the direct image the residual compares (stratified; each
+#: light's visibility from the renderer's light cache, with a shadow ray only where a
+#: shadow's edge crosses the triangle: one ray a light and sample would be 1536 a pixel
+#: under 96 lights, more than the camera paths).
 DIRECT_SAMPLES = 16
 #: The second half of the camera paths uses the seed moved by this much (the seeds of the
 #: passes, seed + t, never reach it).
