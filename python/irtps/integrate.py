@@ -65,9 +65,12 @@ _DEFAULT_TOLERANCE = {"ls": 1e-5, "mestimator": 1e-4}
 #: 1024x1024 (667 k unknowns) the footprint factor holds 958 MB, 7.8 s to factor, where
 #: pyamg needs a few tens of MB; the ls factor there holds 264 MB (3.2 s for 6 passes,
 #: against 5.1 s). A single solve (classic PS) is up to 2x slower by the factor at 512x512
-#: (footprint 1.2 s against 0.7 s): the IRT-PS loop is what it is kept for.
-_LS_DIRECT_LIMIT = 700_000
-_FOOTPRINT_DIRECT_LIMIT = 300_000
+#: (footprint 1.2 s against 0.7 s), and a kept footprint factor of 187 MB there would be
+#: most of what IRT-PS may hold beside 512x512 images: the factor is kept up to 100 k
+#: unknowns (about 75 MB for footprint, less for ls; as fast as pyamg for one solve at
+#: 128x128), where the loop's later passes are its gain, and pyamg, set up once, beyond.
+_LS_DIRECT_LIMIT = 100_000
+_FOOTPRINT_DIRECT_LIMIT = 100_000
 _PRESMOOTHER = ("gauss_seidel", {"sweep": "symmetric"})
 _POSTSMOOTHER = ("gauss_seidel", {"sweep": "symmetric"})
 
@@ -141,7 +144,7 @@ def integrate_normals(
         neighbour on a side simply have no difference there, which is the free (natural)
         boundary condition. The normal equations are a weighted graph Laplacian. They depend
         on the mask only, and are set up once for as long as the mask stays the same (the
-        IRT-PS passes): factored by faer's sparse Cholesky (up to 700 k pixels), or beyond
+        IRT-PS passes): factored by faer's sparse Cholesky (up to 100 k pixels), or beyond
         solved by conjugate gradients preconditioned with an algebraic multigrid V-cycle
         (pyamg).
     ``"mestimator"``
