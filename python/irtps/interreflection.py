@@ -6,8 +6,11 @@ reconstruction (height, albedo, placement) is rendered again in its known surrou
 the light that reaches the camera after 1..r bounces (every path serves all K lights) is
 the next estimate of the inter-reflections, and the rendering's residual against A₀
 (`irtps.residual`) says how well the pass explains its images. The next pass fits the
-corrected images A₀ − Eₜ. The result is the pass with the lowest residual, pass 0
-included: IRT-PS never returns worse than classic photometric stereo by its own measure.
+corrected images A₀ − Eₜ − Sₜ, where Sₜ is the light of the floor and box that the
+object's edge pixels see past the object's last triangles (`irtps.surroundings`), rendered
+from the same reconstruction where it does not hinge on sub-pixel detail. The result is the
+pass with the lowest residual, pass 0 included: IRT-PS never returns worse than classic
+photometric stereo by its own measure.
 
 When the data set's irradiance is relative, the reconstruction is rendered with the
 reflectance and irradiance of the albedo scale estimated at pass 0 (`irtps.radiometry`).
@@ -36,6 +39,7 @@ from irtps.placement import Placement
 from irtps.ps import PsResult
 from irtps.radiometry import AlbedoScale
 from irtps.residual import Residual, render_with_residual
+from irtps.surroundings import surroundings_light
 
 __all__ = ["InterreflectionResult", "Iteration", "remove_interreflections"]
 
@@ -86,7 +90,8 @@ class Iteration:
 class InterreflectionResult:
     """The chosen pass (lowest residual): its fit, albedo (`irtps.surface.surface_albedo`
     of its fit), placed height, the estimate subtracted from the object's pixels to get its
-    images ((K, N, 3) at the mask's N pixels, row-major; None for pass 0), the placement,
+    images ((K, N, 3) at the mask's N pixels, row-major: the inter-reflections and, in edge
+    pixels, the surroundings' light, `irtps.surroundings`; None for pass 0), the placement,
     the albedo scale it rendered with, and every pass's record."""
 
     fit: PsResult
@@ -131,8 +136,10 @@ def remove_interreflections(
           module); a number in (0, 2) fixes it (1 takes each new estimate whole);
         - ``early_stop``: stop after two passes in a row whose residual does not fall
           below the best so far by twice its Monte-Carlo noise;
-        - ``update``: ``"original"``: Aₜ₊₁ = A₀ − Eₜ (default); ``"previous"``: the paper's
-          literal Aₜ₊₁ = Aₜ − Eₜ. Corrected images are kept non-negative;
+        - ``update``: ``"original"``: Aₜ₊₁ = A₀ − Eₜ − Sₜ (default; Sₜ the surroundings'
+          light in the edge pixels, with the ``"physical"`` estimator only);
+          ``"previous"``: the paper's literal Aₜ₊₁ = Aₜ − Eₜ. Corrected images are kept
+          non-negative;
         - ``integration``: default ``"footprint"``, which keeps creases, and so the
           rendered concavities as deep as the real ones;
         - ``stride``: 1 estimates the indirect light at every pixel; s > 1 at one pixel in
@@ -170,6 +177,8 @@ def remove_interreflections(
     usable = fitted_observations(dataset, options)
     images = original
     estimate_used: np.ndarray | None = None
+    subtracted: np.ndarray | None = None
+    coverage: np.ndarray | None = None
     step = 1.0 if options.relaxation == "auto" else float(options.relaxation)
     steps = _AdaptiveStep()
     previous_change: np.ndarray | None = None
@@ -179,7 +188,7 @@ def remove_interreflections(
     history: list[Iteration] = []
     with tqdm(total=options.iterations + 1, desc="IRT-PS", unit="pass", disable=not progress, leave=False) as bar:
         for index in range(options.iterations + 1):
-            current = reconstruction_pass(dataset, images, options, previous=previous, usable=usable, rendered=True)
+            current = reconstruction_pass(dataset, images, options, previous=previous, usable=usable, rendered=True, coverage=coverage)
             timings = current.timings
             render_scene, render_albedo = rendered_as(scene, current.albedo, current.albedo_scale)
             seed = options.seed + index
@@ -206,7 +215,7 @@ def remove_interreflections(
             improved = best is None or residual.object < best[0].object - SIGNIFICANCE * residual.noise
             stalled = 0 if improved else stalled + 1
             if best is None or residual.object < best[0].object:
-                best = (residual, index, current, estimate_used)
+                best = (residual, index, current, subtracted)
             bar.update(1)
             bar.set_postfix(_postfix(residual, metrics), refresh=False)
             if index == options.iterations or (options.early_stop and stalled == PATIENCE):
@@ -228,14 +237,21 @@ def remove_interreflections(
                 steps.taken(taken, estimate_noise)
                 estimate_used = estimate if estimate_used is None else estimate_used + taken * change_of_estimate
                 previous_change = change_of_estimate
-                images = _corrected(observed, estimate_used, observed, saturated)
+                subtracted = estimate_used
+                if options.estimator == "physical":
+                    with timed(timings, "surroundings"):
+                        seen = surroundings_light(render_scene, current.height, render_albedo, mask, seed=seed)
+                    if seen.corrected.any():
+                        subtracted = estimate_used + seen.light
+                    coverage = seen.coverage(mask) if seen.corrected.any() else None
+                images = _corrected(observed, subtracted, observed, saturated)
             else:
                 record.step = step
-                estimate_used = step * estimate
+                estimate_used = subtracted = step * estimate
                 images = _corrected(observed if index == 0 else images, estimate_used, observed, saturated)
             previous = current
     assert best is not None, "the loop runs at least one pass"
-    residual, chosen, chosen_pass, estimate_used = best
+    residual, chosen, chosen_pass, subtracted = best
     if chosen == 0 and len(history) > 1:
         warnings.warn(
             f"IRT-PS: no pass explained the images better than classic photometric stereo (residual {residual.object:.4f}); "
@@ -247,7 +263,7 @@ def remove_interreflections(
         fit=chosen_pass.fit,
         albedo=chosen_pass.albedo,
         height=chosen_pass.height,
-        indirect=estimate_used,
+        indirect=subtracted,
         history=history,
         placement=chosen_pass.placement,
         chosen=chosen,

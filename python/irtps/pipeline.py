@@ -72,6 +72,7 @@ def reconstruction_pass(
     previous: Pass | None = None,
     usable: np.ndarray | None = None,
     rendered: bool = False,
+    coverage: np.ndarray | None = None,
 ) -> Pass:
     """Photometric stereo on `images`, integration, placement and the placed height.
 
@@ -92,6 +93,10 @@ def reconstruction_pass(
     rendered : bool
         The reconstruction will be rendered (IRT-PS): a first pass resolves the albedo
         scale (`resolve_albedo_scale`) even where the placement does not need it.
+    coverage : numpy.ndarray, optional
+        (H, W): the fraction of each pixel's footprint whose light `images` hold (IRT-PS's
+        edge pixels, their surroundings' light subtracted: `irtps.surroundings`); the
+        albedo is the fitted one over it. Default 1.
 
     Returns
     -------
@@ -106,7 +111,7 @@ def reconstruction_pass(
     with timed(timings, "integration"):
         relief = surface_relief(dataset, fit.normals, options)
     with timed(timings, "placement"):
-        albedo = rendered_albedo(dataset, fit, relief)
+        albedo = rendered_albedo(dataset, fit, relief, coverage)
         scene = dataset.scene
         if previous is not None:
             albedo_scale = previous.albedo_scale
@@ -187,12 +192,15 @@ def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: Recons
     return frame
 
 
-def rendered_albedo(dataset: Dataset, fit: PsResult, relief: np.ndarray) -> np.ndarray:
+def rendered_albedo(dataset: Dataset, fit: PsResult, relief: np.ndarray, coverage: np.ndarray | None = None) -> np.ndarray:
     """The albedo of the triangulated surface `relief` that explains `fit`
-    (`irtps.surface.surface_albedo`): within [0, 1] for absolute irradiance; in the
-    irradiance's units, unbounded, for relative irradiance (`irtps.radiometry` scales it)."""
+    (`irtps.surface.surface_albedo`), where the fitted images hold the object's light over
+    the fraction `coverage` (H, W) of each pixel's footprint (default 1): within [0, 1] for
+    absolute irradiance; in the irradiance's units, unbounded, for relative irradiance
+    (`irtps.radiometry` scales it)."""
     scene = dataset.scene
-    return surface_albedo(fit.albedo, relief, dataset.mask, scene.camera.pixel_size, largest=None if scene.relative_irradiance else 1.0)
+    fitted = fit.albedo if coverage is None else fit.albedo / coverage[..., None].astype(np.float32)
+    return surface_albedo(fitted, relief, dataset.mask, scene.camera.pixel_size, largest=None if scene.relative_irradiance else 1.0)
 
 
 def fitted_observations(dataset: Dataset, options: ReconstructOptions) -> np.ndarray:
