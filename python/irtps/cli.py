@@ -285,9 +285,10 @@ def build_parser() -> argparse.ArgumentParser:
         "normal.exr (R, G, B = nx, ny, nz), albedo.exr, height.exr, mask.png, mesh.ply (the height field with "
         "per-vertex albedo colour and normals), mesh.obj (the same mesh for any viewer) and run.json (parameters, "
         "timings, versions, the data set's path, the placement); with --method irtps also "
-        "indirect/NNN.exr (the estimated inter-reflected light) and each pass's residual in run.json: the reconstruction "
-        "rendered again and compared with the images, the number to judge a run by without ground truth. The result is the "
-        "pass with the lowest residual (pass 0 is classic PS). "
+        "indirect/NNN.exr (the estimated inter-reflected light, with the floor's light in the edge pixels, that was "
+        "subtracted) and each pass's residual in run.json: the reconstruction rendered again and compared with the "
+        "images, the number to judge a run by without ground truth. The result is the pass with the lowest residual "
+        "(pass 0 is classic PS). "
         "When DATA has ground truth, the errors are printed too. OUT is replaced atomically.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  irtps reconstruct shared/data/diligent/ballPNG --out ball\n"

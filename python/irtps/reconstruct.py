@@ -51,8 +51,9 @@ class Reconstruction:
     parameters : dict
         The settings used.
     object_indirect : numpy.ndarray or None
-        IRT-PS: float32 (K, N, 3), the estimate of the inter-reflected light subtracted from
-        the images at the mask's N pixels (row-major order) to get the pass returned.
+        IRT-PS: float32 (K, N, 3), the estimate of the inter-reflected light (and of the
+        surroundings' light in the edge pixels) subtracted from the images at the mask's N
+        pixels (row-major order) to get the pass returned.
     history : list of Iteration
         IRT-PS: one entry per pass (residual, height change, step, timings, errors when
         ground truth is present); empty for classic photometric stereo.
@@ -282,7 +283,8 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
     see `irtps.mesh`), ``run.json`` (parameters, pixel size, timings, versions, source,
     placement, IRT-PS history with each pass's residual, and the pass chosen) and, for
     IRT-PS, ``indirect/NNN.exr`` (the estimate of each image's inter-reflected light that
-    the chosen pass removed; none when that is pass 0).
+    the chosen pass removed, with the surroundings' light in the edge pixels,
+    `irtps.surroundings`; none when that is pass 0).
 
     Parameters
     ----------

@@ -260,7 +260,8 @@ def _indirect_figure(folder: Path, mask: np.ndarray, window: tuple[slice, slice]
     caption = (
         f"The inter-reflected light that IRT-PS estimated and removed in its last pass, averaged over the "
         f"{len(paths)} images (indirect/*.exr); × {scale:.3g} so that the 99th percentile is white, sRGB-encoded. "
-        "Colour bled from coloured surroundings shows here."
+        "Colour bled from coloured surroundings shows here; so does, at the object's edge, the light of the floor or box "
+        "that the edge pixels see past the object (subtracted with it)."
     )
     return ReportFigure("indirect", "Estimated inter-reflections", caption, image_png(rgb, "Estimated inter-reflections"))
 
