@@ -13,6 +13,7 @@ pub mod light_cache;
 pub mod ps;
 pub mod robust_ps;
 pub mod render;
+pub mod residual;
 pub mod sampler;
 pub mod sparse_cholesky;
 pub mod scene;

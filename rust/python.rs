@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use glam::vec3a;
 use numpy::ndarray::{Array, Array2, IxDyn};
-use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyArray2, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyArray2, PyArray3, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use rayon::prelude::*;
@@ -16,6 +16,7 @@ use crate::error::Error;
 use crate::image_io::{self, Image};
 use crate::ps::{check_lights as core_check_lights, photometric_stereo as core_ps, PsSettings, Robust};
 use crate::render::{RenderSettings, Renderer as CoreRenderer};
+use crate::residual::{compare as core_compare, RenderedPlanes};
 use crate::scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
 use crate::sparse_cholesky::SparseCholesky as CoreSparseCholesky;
 
@@ -104,10 +105,19 @@ fn flat_rows_of_3<'a>(array: &'a PyReadonlyArray2<'_, f32>, name: &str) -> PyRes
     if array.shape()[1] != 3 {
         return Err(argument_error(name, format!("expected shape (N, 3), got {:?}", array.shape())));
     }
-    Ok(match array.as_slice() {
-        Ok(flat) => std::borrow::Cow::Borrowed(flat),
-        Err(_) => std::borrow::Cow::Owned(array.as_array().iter().copied().collect()),
+    Ok(match array.as_array().to_slice() {
+        Some(flat) => std::borrow::Cow::Borrowed(flat),
+        None => std::borrow::Cow::Owned(array.as_array().iter().copied().collect()),
     })
+}
+
+/// An array's values in C order: borrowed when the array is C-contiguous, copied otherwise.
+fn flat<'a, T: numpy::Element + Copy, D: numpy::ndarray::Dimension>(array: &'a numpy::PyReadonlyArray<'_, T, D>) -> std::borrow::Cow<'a, [T]> {
+    // numpy's own `as_slice` also lends Fortran-ordered data: ndarray's `to_slice` only C order.
+    match array.as_array().to_slice() {
+        Some(values) => std::borrow::Cow::Borrowed(values),
+        None => std::borrow::Cow::Owned(array.as_array().iter().copied().collect()),
+    }
 }
 
 /// Distances (inf on a miss) and triangle indices (−1 on a miss) of a batch of rays.
@@ -357,8 +367,8 @@ fn photometric_stereo<'py>(
     if lights.len() != shape[0] {
         return Err(argument_error("images", format!("{} images for {} lights", shape[0], lights.len())));
     }
-    let data = images.as_slice().map_err(|_| argument_error("images", "must be C-contiguous"))?;
-    let mask_data = mask.as_slice().map_err(|_| argument_error("mask", "must be C-contiguous"))?;
+    let data = images.as_array().to_slice().ok_or_else(|| argument_error("images", "must be C-contiguous"))?;
+    let mask_data = mask.as_array().to_slice().ok_or_else(|| argument_error("mask", "must be C-contiguous"))?;
     let settings = PsSettings { robust, shadow_fraction, saturation };
     let out = py.detach(|| core_ps(data, mask_data, &lights, &settings)).map_err(to_py)?;
     let (h, w) = (shape[1], shape[2]);
@@ -370,6 +380,56 @@ fn photometric_stereo<'py>(
         Array::from_shape_vec(IxDyn(&[h, w]), out.flags).map_err(err)?.into_pyarray(py),
         Array::from_shape_vec(IxDyn(&[h, w]), out.used).map_err(err)?.into_pyarray(py),
     ))
+}
+
+/// A rendering's inter-reflection estimate, the noise energy of each pixel's estimate and
+/// the residual's sums.
+type ComparisonArrays<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray1<f64>>, (f64, f64, f64, f64));
+
+/// Compares a rendering of N pixels under K lights with the observations (`observed`,
+/// float32 (K, N, 3)): the direct image `direct` and the inter-reflected light of one or
+/// two halves of the camera paths, `halves`, of `counts` paths a pixel each, all (K, N, 3).
+/// Returns (the inter-reflected light (K, N, 3), each pixel's Monte-Carlo noise energy
+/// (N,) (0 with one half), (Σ|rendered − observed|, Σ|observed|, and Σ|direct + half −
+/// observed| for each half)), the sums over the observations whose `keep` (K, N) is true.
+#[pyfunction]
+#[pyo3(signature = (direct, halves, counts, observed, keep=None))]
+fn compare_rendering<'py>(
+    py: Python<'py>,
+    direct: PyReadonlyArray3<'_, f32>,
+    halves: Vec<PyReadonlyArray3<'_, f32>>,
+    counts: Vec<usize>,
+    observed: PyReadonlyArray3<'_, f32>,
+    keep: Option<PyReadonlyArray2<'_, bool>>,
+) -> PyResult<ComparisonArrays<'py>> {
+    let shape = direct.shape().to_vec();
+    if shape[2] != 3 {
+        return Err(argument_error("direct", format!("expected shape (K, N, 3), got {shape:?}")));
+    }
+    let (lights, pixels) = (shape[0], shape[1]);
+    for (name, other) in std::iter::once(("observed", observed.shape())).chain(halves.iter().map(|h| ("halves", h.shape()))) {
+        if other != shape.as_slice() {
+            return Err(argument_error(name, format!("shape {other:?} differs from direct {shape:?}")));
+        }
+    }
+    if let Some(keep) = &keep {
+        if keep.shape() != [lights, pixels] {
+            return Err(argument_error("keep", format!("shape {:?}, expected {:?}", keep.shape(), [lights, pixels])));
+        }
+    }
+    let (direct, observed) = (flat(&direct), flat(&observed));
+    let halves: Vec<_> = halves.iter().map(flat).collect();
+    let keep = keep.as_ref().map(flat);
+    let comparison = py
+        .detach(|| {
+            let half_slices: Vec<&[f32]> = halves.iter().map(|h| h.as_ref()).collect();
+            let planes = RenderedPlanes { direct: &direct, halves: &half_slices, counts: &counts };
+            core_compare(&planes, &observed, keep.as_deref(), lights, pixels)
+        })
+        .map_err(to_py)?;
+    let indirect = Array::from_shape_vec((lights, pixels, 3), comparison.indirect).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let sums = comparison.sums;
+    Ok((indirect.into_pyarray(py), PyArray1::from_vec(py, comparison.noise_energy), (sums.difference, sums.observed, sums.half_difference[0], sums.half_difference[1])))
 }
 
 /// Non-negative int64 indices as `usize`, or an error naming `name`.
@@ -436,6 +496,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_images, m)?)?;
     m.add_function(wrap_pyfunction!(photometric_stereo, m)?)?;
     m.add_function(wrap_pyfunction!(check_lights, m)?)?;
+    m.add_function(wrap_pyfunction!(compare_rendering, m)?)?;
     m.add_class::<Renderer>()?;
     m.add_class::<SparseCholesky>()?;
     m.add("MAX_IMAGE_PIXELS", image_io::MAX_IMAGE_PIXELS)?;

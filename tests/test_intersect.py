@@ -59,3 +59,15 @@ def test_mismatched_rows_are_an_error_naming_the_argument():
     renderer = flat_renderer()
     with pytest.raises(ValueError, match="directions"):
         renderer.intersect(np.zeros((3, 3), np.float32), np.zeros((2, 3), np.float32))
+
+
+def test_fortran_ordered_rays_are_read_row_by_row():
+    # numpy lends a Fortran-ordered array as one block of x, then y, then z: the core must
+    # not take it for rows.
+    renderer = flat_renderer(height=2.0)
+    origins = np.array([[0.0, 0.0, 10.0], [1.0, -1.0, 10.0], [3.0, 2.0, 10.0]], dtype=np.float32)
+    down = np.tile(np.array([0.0, 0.0, -1.0], dtype=np.float32), (3, 1))
+    t_c, _ = renderer.intersect(origins, down, threads=1)
+    t_f, _ = renderer.intersect(np.asfortranarray(origins), np.asfortranarray(down), threads=1)
+    np.testing.assert_allclose(t_c, 8.0, rtol=1e-6)
+    np.testing.assert_array_equal(t_f, t_c)

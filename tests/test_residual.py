@@ -56,3 +56,29 @@ def test_the_residual_compares_what_photometric_stereo_fits(robust):
     kept = compared_observations(images, np.ones((4, 3)), np.array([[True, False]]), robust=robust, shadow_fraction=0.05, saturation=1.5)[..., 0]
     assert kept[:, 0, 1].tolist() == [False, True, True, True]  # around the object: not saturated
     assert kept[:, 0, 0].tolist() == [False, True, True, not robust]
+
+
+@pytest.mark.parametrize("layout", ["C", "F", "strided"])
+def test_the_cores_comparison_matches_numpy_in_any_memory_layout(layout):
+    from irtps import _core
+
+    rng = np.random.default_rng(3)
+    lights, pixels = 5, 40
+    direct, first, second = (rng.random((lights, pixels, 3), dtype=np.float32) for _ in range(3))
+    frame = rng.random((lights, 2 * pixels, 3), dtype=np.float32)
+    kept = rng.random((lights, 2 * pixels)) > 0.3
+    observed, keep = np.ascontiguousarray(frame[:, ::2]), np.ascontiguousarray(kept[:, ::2])
+    if layout == "F":
+        observed, keep = np.asfortranarray(observed), np.asfortranarray(keep)
+    elif layout == "strided":
+        observed, keep = frame[:, ::2], kept[:, ::2]
+    indirect, noise, sums = _core.compare_rendering(direct, [first, second], [3, 5], observed, keep)
+    expected = (3 * first + 5 * second) / 8
+    np.testing.assert_array_equal(indirect, expected)
+    np.testing.assert_allclose(noise, np.square(first - second, dtype=np.float64).sum(axis=(0, 2)) * 15 / 64, rtol=1e-12)
+    kept3 = np.broadcast_to(keep[..., None], observed.shape)
+    for total, rendered in zip(sums[:1] + sums[2:], (direct + expected, direct + first, direct + second)):
+        assert total == pytest.approx(float(np.abs(rendered - observed)[kept3].sum(dtype=np.float64)), rel=1e-9)
+    assert sums[1] == pytest.approx(float(np.abs(observed)[kept3].sum(dtype=np.float64)), rel=1e-9)
+    with pytest.raises(ValueError, match="keep"):
+        _core.compare_rendering(direct, [first], [8], observed, keep[:, 1:])

@@ -14,7 +14,7 @@ import numpy.typing as npt
 
 from irtps.scene import CornellBox, Floor
 
-__all__ = ["read_exr", "write_exr", "read_png", "write_png", "read_images", "photometric_stereo", "check_lights", "Renderer", "SparseCholesky", "MAX_IMAGE_PIXELS"]
+__all__ = ["read_exr", "write_exr", "read_png", "write_png", "read_images", "photometric_stereo", "check_lights", "compare_rendering", "Renderer", "SparseCholesky", "MAX_IMAGE_PIXELS"]
 
 _F32 = npt.NDArray[np.float32]
 _Path = str | PathLike[str]
@@ -51,6 +51,18 @@ def photometric_stereo(
 ) -> tuple[_F32, _F32, npt.NDArray[np.uint8], npt.NDArray[np.uint16]]:
     """(normals (H, W, 3), albedo (H, W, 3), flags (H, W), observations used (H, W)) of
     C-contiguous float32 images (K, H, W, 3)."""
+
+def compare_rendering(
+    direct: _F32,
+    halves: Sequence[_F32],
+    counts: Sequence[int],
+    observed: _F32,
+    keep: npt.NDArray[np.bool_] | None = None,
+) -> tuple[_F32, npt.NDArray[np.float64], tuple[float, float, float, float]]:
+    """A rendering of N pixels under K lights against the observations, all (K, N, 3):
+    (the halves' inter-reflected light weighted by their path `counts`, each pixel's
+    Monte-Carlo noise energy (N,), (Σ|rendered − observed|, Σ|observed|, Σ|direct + each
+    half − observed|)), the sums over the observations whose `keep` (K, N) is true."""
 
 @final
 class Renderer:

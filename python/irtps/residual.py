@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from irtps import _core
 from irtps._checks import check_array, check_mask
 from irtps.errors import ArgumentError
 from irtps.render import check_counts, check_frame_memory, make_renderer, render_sparse
@@ -160,7 +161,7 @@ def render_with_residual(
     seeds = (seed, seed + _SECOND_HALF_SEED)
     rendering = _Halves(renderer, bounces, counts, seeds, seed, stride)
     object_pixels = np.flatnonzero(mask)
-    observed = images[:, mask]
+    observed = np.asarray(images[:, mask], dtype=np.float32)
     compared = None if usable is None else usable[:, mask]
     indirect = np.empty(observed.shape, dtype=np.float32)
     noise_energy = np.zeros(len(object_pixels))
@@ -168,19 +169,16 @@ def render_with_residual(
     on_object, halves = np.zeros(2), np.zeros(2)
     for chunk in _chunks(len(object_pixels)):
         direct, parts = rendering.pixels(object_pixels[chunk], None if sparse is None else [half[:, chunk] for half in sparse])
-        indirect[:, chunk] = sum(count * part for count, part in zip(counts, parts)) / samples
-        keep = None if compared is None else compared[:, chunk]
-        on_object += _difference(direct + indirect[:, chunk], observed[:, chunk], keep)
+        keep = None if compared is None else compared[:, chunk, 0]
+        indirect[:, chunk], noise_energy[chunk], sums = _core.compare_rendering(direct, parts, counts, observed[:, chunk], keep)
+        on_object += sums[:2]
         if len(parts) == 2:
-            # Var(mean of halves of n1, n2 paths) = (n1 n2 / n²)·E|A − B|² for per-path variance shared.
-            spread = np.square(parts[0] - parts[1], dtype=np.float64).sum(axis=(0, 2))
-            noise_energy[chunk] = spread * counts[0] * counts[1] / samples**2
-            halves += [_difference(direct + part, observed[:, chunk], keep)[0] for part in parts]
+            halves += sums[2:]
     del sparse
     scale = max(on_object[1], np.finfo(float).tiny)
     surroundings = None
     if scene.floor is not None:
-        surroundings = _surroundings_residual(rendering, ~mask, images, usable, counts, samples)
+        surroundings = _surroundings_residual(rendering, ~mask, images, usable, counts)
     residual = Residual(object=float(on_object[0] / scale), surroundings=surroundings, noise=float(abs(halves[0] - halves[1]) / scale / 2))
     return Rerendering(indirect=indirect, residual=residual, noise_energy=noise_energy)
 
@@ -212,19 +210,18 @@ def compared_observations(
         for kept, image in zip(usable, images):
             kept[..., 0] = ~(image >= saturation).any(axis=-1)
     if robust:
+        # Shadows are told apart on the object only: around it every observation is kept.
         irradiance = np.asarray(irradiance, dtype=np.float32)
-        brightest = np.zeros(images.shape[1:3], dtype=np.float32)
-        for image, light in zip(images, irradiance):
-            np.maximum(brightest, _brightness(image, light), out=brightest)
-        level, around = shadow_fraction * brightest, ~mask
-        for kept, image, light in zip(usable, images, irradiance):
-            kept[..., 0] &= (_brightness(image, light) > level) | around
+        rows, cols = np.nonzero(mask)
+        brightness = np.stack([_brightness(image[rows, cols], light) for image, light in zip(images, irradiance)]) if len(rows) else np.zeros((len(images), 0), np.float32)
+        level = shadow_fraction * brightness.max(axis=0, initial=0.0)
+        usable[:, rows, cols, 0] &= brightness > level
     return usable
 
 
 def _brightness(image: np.ndarray, irradiance: np.ndarray) -> np.ndarray:
-    """Photometric stereo's brightness of an observation (`irtps.ps.photometric_stereo`): its
-    channels over their irradiance, summed. float32 (H, W) for an (H, W, 3) image."""
+    """Photometric stereo's brightness of observations (`irtps.ps.photometric_stereo`): their
+    channels over their irradiance, summed. float32 (...) for (..., 3) observations."""
     return (image / irradiance).sum(axis=-1, dtype=np.float32)
 
 
@@ -255,7 +252,7 @@ class _Halves:
         return planes[0], parts
 
 
-def _surroundings_residual(rendering: _Halves, around: np.ndarray, images: np.ndarray, usable: np.ndarray | None, counts: tuple[int, ...], samples: int) -> float | None:
+def _surroundings_residual(rendering: _Halves, around: np.ndarray, images: np.ndarray, usable: np.ndarray | None, counts: tuple[int, ...]) -> float | None:
     """The residual over the pixels of the bool image `around`: every observation that is
     not saturated (`usable`); None when there is none."""
     pixels = np.flatnonzero(around)
@@ -263,9 +260,9 @@ def _surroundings_residual(rendering: _Halves, around: np.ndarray, images: np.nd
     sums = np.zeros(2)
     for chunk in _chunks(len(pixels)):
         direct, parts = rendering.pixels(pixels[chunk], None if sparse is None else [half[:, chunk] for half in sparse])
-        indirect = sum(count * part for count, part in zip(counts, parts)) / samples
         rows, cols = np.unravel_index(pixels[chunk], around.shape)
-        sums += _difference(direct + indirect, images[:, rows, cols], None if usable is None else usable[:, rows, cols])
+        keep = None if usable is None else usable[:, rows, cols, 0]
+        sums += _core.compare_rendering(direct, parts, counts, np.asarray(images[:, rows, cols], dtype=np.float32), keep)[2][:2]
     return float(sums[0] / sums[1]) if sums[1] > 0 else None
 
 
@@ -274,11 +271,3 @@ def _chunks(count: int) -> list[slice]:
     the renderer's output buffers."""
     size = max(1024, -(-count // 32))
     return [slice(start, min(count, start + size)) for start in range(0, count, size)]
-
-
-def _difference(rendered: np.ndarray, observed: np.ndarray, keep: np.ndarray | None) -> np.ndarray:
-    """[Σ|rendered − observed|, Σ|observed|] over `keep` (a mask that broadcasts; default all)."""
-    if keep is None:
-        return np.array([float(np.abs(rendered - observed).sum()), float(np.abs(observed).sum())])
-    keep = np.broadcast_to(keep, observed.shape)
-    return np.array([float(np.abs(rendered - observed)[keep].sum()), float(np.abs(observed)[keep].sum())])

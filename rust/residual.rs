@@ -1,0 +1,171 @@
+//! A rendering compared with the observed images, in one pass over its planes.
+//!
+//! IRT-PS re-renders its reconstruction after every pass: the direct image and the
+//! inter-reflected light of the camera paths, traced in one or two halves. This module turns
+//! those planes into the pass's inter-reflection estimate (the halves' weighted mean), the
+//! residual's sums over the compared observations, and the Monte-Carlo noise of the estimate
+//! at each pixel (from the spread between the halves).
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+
+/// The planes of a rendering of N pixels under K lights, each laid out (K, N, 3).
+pub struct RenderedPlanes<'a> {
+    /// The direct image.
+    pub direct: &'a [f32],
+    /// The inter-reflected light of each half of the camera paths (one or two halves).
+    pub halves: &'a [&'a [f32]],
+    /// Camera paths per pixel of each half.
+    pub counts: &'a [usize],
+}
+
+/// Sums of |rendered − observed| and |observed| over the compared observations.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ResidualSums {
+    /// Σ |direct + inter-reflected − observed|.
+    pub difference: f64,
+    /// Σ |observed|.
+    pub observed: f64,
+    /// Σ |direct + half h − observed| for each half (0 for a missing second half).
+    pub half_difference: [f64; 2],
+}
+
+impl ResidualSums {
+    fn add(self, other: ResidualSums) -> ResidualSums {
+        ResidualSums {
+            difference: self.difference + other.difference,
+            observed: self.observed + other.observed,
+            half_difference: [self.half_difference[0] + other.half_difference[0], self.half_difference[1] + other.half_difference[1]],
+        }
+    }
+}
+
+/// A rendering compared with the observations.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Comparison {
+    /// The inter-reflected light, (K, N, 3): Σ_h counts[h] · half h / Σ counts.
+    pub indirect: Vec<f32>,
+    /// Per pixel, the Monte-Carlo noise energy of `indirect` summed over lights and channels:
+    /// (n₁ n₂ / n²) Σ |half 1 − half 2|² (all 0 with one half).
+    pub noise_energy: Vec<f64>,
+    /// The residual's sums.
+    pub sums: ResidualSums,
+}
+
+/// Compares `planes` (N pixels, K lights) with `observed` (K, N, 3), over the observations
+/// whose `keep` (K, N) is true (all when None).
+///
+/// Errors name the argument whose length does not match, or the counts when there are not
+/// one or two halves with a path each.
+pub fn compare(planes: &RenderedPlanes<'_>, observed: &[f32], keep: Option<&[bool]>, lights: usize, pixels: usize) -> Result<Comparison> {
+    let size = lights * pixels * 3;
+    let check = |name: &str, len: usize, expected: usize| {
+        if len == expected {
+            Ok(())
+        } else {
+            Err(Error::input(name, format!("{len} values, expected {expected} for {lights} lights and {pixels} pixels")))
+        }
+    };
+    check("direct", planes.direct.len(), size)?;
+    check("observed", observed.len(), size)?;
+    if let Some(keep) = keep {
+        check("keep", keep.len(), lights * pixels)?;
+    }
+    if !(1..=2).contains(&planes.halves.len()) || planes.counts.len() != planes.halves.len() || planes.counts.contains(&0) {
+        return Err(Error::input("counts", format!("{:?}: expected one or two halves with at least one path each", planes.counts)));
+    }
+    for half in planes.halves {
+        check("halves", half.len(), size)?;
+    }
+    let samples = planes.counts.iter().sum::<usize>() as f32;
+    let weights: Vec<f32> = planes.counts.iter().map(|&c| c as f32).collect();
+    let mut indirect = vec![0f32; size];
+    let row = pixels * 3;
+    let sums = if size == 0 {
+        ResidualSums::default()
+    } else {
+        indirect
+            .par_chunks_mut(row)
+            .enumerate()
+            .map(|(k, out)| {
+                let span = k * row..(k + 1) * row;
+                let (direct, observed) = (&planes.direct[span.clone()], &observed[span.clone()]);
+                let halves: Vec<&[f32]> = planes.halves.iter().map(|h| &h[span.clone()]).collect();
+                let mut sums = ResidualSums::default();
+                for (i, value) in out.iter_mut().enumerate() {
+                    let weighted = halves.iter().zip(&weights).fold(0f32, |acc, (h, w)| acc + w * h[i]);
+                    *value = weighted / samples;
+                    if keep.is_some_and(|keep| !keep[k * pixels + i / 3]) {
+                        continue;
+                    }
+                    let seen = observed[i];
+                    sums.difference += f64::from((direct[i] + *value - seen).abs());
+                    sums.observed += f64::from(seen.abs());
+                    for (slot, h) in sums.half_difference.iter_mut().zip(&halves) {
+                        *slot += f64::from((direct[i] + h[i] - seen).abs());
+                    }
+                }
+                sums
+            })
+            .reduce(ResidualSums::default, ResidualSums::add)
+    };
+    let mut noise_energy = vec![0f64; pixels];
+    if let [first, second] = planes.halves {
+        let factor = (planes.counts[0] * planes.counts[1]) as f64 / f64::from(samples).powi(2);
+        noise_energy.par_iter_mut().enumerate().for_each(|(p, energy)| {
+            let spread: f64 = (0..lights)
+                .flat_map(|k| (0..3).map(move |c| (k * pixels + p) * 3 + c))
+                .map(|i| f64::from(first[i] - second[i]).powi(2))
+                .sum();
+            *energy = spread * factor;
+        });
+    }
+    Ok(Comparison { indirect, noise_energy, sums })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sums_weigh_the_halves_and_skip_what_is_not_kept() {
+        // 2 lights, 1 pixel: direct 1, halves 2 and 4 of 1 and 3 paths → indirect 3.5.
+        let direct = [1.0; 6];
+        let (first, second) = ([2.0; 6], [4.0; 6]);
+        let observed = [4.0, 4.0, 4.0, 9.0, 9.0, 9.0];
+        let halves: [&[f32]; 2] = [&first, &second];
+        let planes = RenderedPlanes { direct: &direct, halves: &halves, counts: &[1, 3] };
+        let all = compare(&planes, &observed, None, 2, 1).unwrap();
+        assert_eq!(all.indirect, vec![3.5; 6]);
+        assert_eq!(all.sums.difference, 3.0 * 0.5 + 3.0 * 4.5);
+        assert_eq!(all.sums.observed, 39.0);
+        assert_eq!(all.sums.half_difference, [3.0 * 1.0 + 3.0 * 6.0, 3.0 * 1.0 + 3.0 * 4.0]);
+        // 6 values of |2 − 4|² = 4, times n₁n₂/n² = 3/16.
+        assert_eq!(all.noise_energy, vec![24.0 * 3.0 / 16.0]);
+        let first_light = compare(&planes, &observed, Some(&[true, false]), 2, 1).unwrap();
+        assert_eq!(first_light.sums.difference, 1.5);
+        assert_eq!(first_light.sums.observed, 12.0);
+        assert_eq!(first_light.indirect, all.indirect);
+    }
+
+    #[test]
+    fn one_half_has_no_noise_estimate() {
+        let (direct, half, observed) = ([0.5; 3], [0.25; 3], [1.0; 3]);
+        let halves: [&[f32]; 1] = [&half];
+        let planes = RenderedPlanes { direct: &direct, halves: &halves, counts: &[4] };
+        let only = compare(&planes, &observed, None, 1, 1).unwrap();
+        assert_eq!(only.noise_energy, vec![0.0]);
+        assert_eq!(only.sums.half_difference, [0.75, 0.0]);
+    }
+
+    #[test]
+    fn mismatched_lengths_name_the_argument() {
+        let halves: [&[f32]; 1] = [&[0.0; 3]];
+        let planes = RenderedPlanes { direct: &[0.0; 3], halves: &halves, counts: &[1] };
+        let err = compare(&planes, &[0.0; 6], None, 1, 1).unwrap_err().to_string();
+        assert!(err.contains("observed"), "{err}");
+        let planes = RenderedPlanes { direct: &[0.0; 3], halves: &halves, counts: &[0] };
+        assert!(compare(&planes, &[0.0; 3], None, 1, 1).unwrap_err().to_string().contains("counts"));
+    }
+}
