@@ -46,6 +46,8 @@ pub struct Mesh {
     pub panels: Vec<Panel>,
     /// Index of the height-field vertex of each pixel (`u32::MAX` when it has none).
     pub pixel_vertex: Vec<u32>,
+    /// The pixel whose albedo each vertex carries (`u32::MAX` for the surroundings').
+    pub albedo_pixel: Vec<u32>,
     /// Where the height field's and the skirt's triangles lie on the pixel grid, for tracers
     /// that exploit it (shared with them, not copied); None when the mesh was not built from
     /// a height field.
@@ -206,9 +208,20 @@ impl Mesh {
         (lo, hi)
     }
 
-    fn add_vertex(&mut self, p: Vec3A, albedo: Rgb) -> u32 {
+    /// Gives every vertex of the object the albedo of its pixel in `albedo` (one per pixel);
+    /// the surroundings keep theirs.
+    pub fn set_object_albedo(&mut self, albedo: &[Rgb]) {
+        for (vertex, &pixel) in self.albedo.iter_mut().zip(&self.albedo_pixel) {
+            if let Some(rgb) = albedo.get(pixel as usize) {
+                *vertex = *rgb;
+            }
+        }
+    }
+
+    fn add_vertex(&mut self, p: Vec3A, albedo: Rgb, pixel: u32) -> u32 {
         self.positions.push(p);
         self.albedo.push(albedo);
+        self.albedo_pixel.push(pixel);
         (self.positions.len() - 1) as u32
     }
 
@@ -237,7 +250,7 @@ impl Mesh {
         let normal = edge_u.cross(edge_v).normalize();
         let id = self.panels.len() as u32;
         self.panels.push(Panel { origin, edge_u, edge_v, normal, grid_lo: window.0, grid_hi: window.1, cells, unbounded: false });
-        let c = [origin, origin + edge_u, origin + edge_u + edge_v, origin + edge_v].map(|p| self.add_vertex(p, albedo));
+        let c = [origin, origin + edge_u, origin + edge_u + edge_v, origin + edge_v].map(|p| self.add_vertex(p, albedo, u32::MAX));
         self.add_triangle([c[0], c[1], c[2]], normal, kind, id);
         self.add_triangle([c[0], c[2], c[3]], normal, kind, id);
         id as usize
@@ -264,7 +277,7 @@ impl Mesh {
                 if used {
                     let (x, y) = cam.pixel_center(i, j);
                     let p = i * w + j;
-                    self.pixel_vertex[p] = self.add_vertex(vec3a(x, y, surface.height[p]), surface.albedo[p]);
+                    self.pixel_vertex[p] = self.add_vertex(vec3a(x, y, surface.height[p]), surface.albedo[p], p as u32);
                 }
             }
         }
@@ -329,18 +342,18 @@ impl Mesh {
     fn add_skirt(&mut self, top_a: u32, top_b: u32, outward: Vec3A, base: f32, pixel_size: f32) -> std::ops::Range<u32> {
         let first = self.triangles.len() as u32;
         let (pa, pb) = (self.positions[top_a as usize], self.positions[top_b as usize]);
-        let (albedo_a, albedo_b) = (self.albedo[top_a as usize], self.albedo[top_b as usize]);
+        let (albedo_a, albedo_b) = ((self.albedo[top_a as usize], self.albedo_pixel[top_a as usize]), (self.albedo[top_b as usize], self.albedo_pixel[top_b as usize]));
         let drop = pa.z.max(pb.z) - base;
         if drop <= 0.0 {
             return first..first;
         }
         let rows = ((drop / pixel_size).ceil() as usize).clamp(1, MAX_SKIRT_ROWS);
-        let column = |mesh: &mut Mesh, top: Vec3A, albedo: Rgb| -> Vec<u32> {
+        let column = |mesh: &mut Mesh, top: Vec3A, (albedo, pixel): (Rgb, u32)| -> Vec<u32> {
             let z_top = top.z.max(base);
             (0..=rows)
                 .map(|r| {
                     let z = z_top + (base - z_top) * r as f32 / rows as f32;
-                    mesh.add_vertex(vec3a(top.x, top.y, z), albedo)
+                    mesh.add_vertex(vec3a(top.x, top.y, z), albedo, pixel)
                 })
                 .collect()
         };

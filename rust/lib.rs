@@ -4,6 +4,7 @@
 //! The crate builds and tests without Python; the `python` feature adds the pyo3 bindings
 //! (module `irtps._core`).
 
+pub mod denoise;
 pub mod error;
 mod escape_cone;
 pub mod geometry;

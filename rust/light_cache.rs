@@ -18,6 +18,7 @@ use crate::scene::{Light, Rgb};
 use crate::tracer::Tracer;
 
 /// Light visibility at the cache points, plus the light parameters needed to shade with it.
+#[derive(Clone)]
 pub struct LightCache {
     directions: Vec<Vec3A>,
     /// x, y and z of each light's direction, light by light (the shading runs over lights).
@@ -73,6 +74,12 @@ impl LightCache {
             })
             .collect();
         LightCache { directions, direction_xyz, radiance_scale, vertex_visibility, panel_visibility, ray_offset }
+    }
+
+    /// The same visibility, shading with the irradiance `irradiance` of each light instead.
+    pub fn with_irradiance(&self, irradiance: &[Rgb]) -> LightCache {
+        let radiance_scale = [0, 1, 2].map(|c| irradiance.iter().map(|e| e[c] / PI).collect());
+        LightCache { radiance_scale, ..self.clone() }
     }
 
     /// Number of lights.

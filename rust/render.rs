@@ -7,6 +7,7 @@
 //! the direct radiance leaving its (b+1)-th vertex.
 
 use std::ops::Range;
+use std::sync::Arc;
 
 use glam::{vec3a, Vec3A};
 use rayon::prelude::*;
@@ -15,7 +16,7 @@ use crate::error::{Error, Result};
 use crate::geometry::Mesh;
 use crate::light_cache::LightCache;
 use crate::sampler::{cosine_hemisphere, hash, low_discrepancy_4d, unit_float, Rng};
-use crate::scene::{validate_lights, Camera, Light, Rgb, Scene};
+use crate::scene::{check_albedo, validate_lights, Camera, Light, Rgb, Scene};
 use crate::tracer::Tracer;
 
 /// How much to render.
@@ -57,7 +58,8 @@ impl RenderSettings {
 pub struct Renderer {
     camera: Camera,
     mesh: Mesh,
-    tracer: Tracer,
+    /// Geometry only: shared by the renderers made with [`Renderer::with_reflectance`].
+    tracer: Arc<Tracer>,
     cache: LightCache,
     ray_offset: f32,
     camera_z: f32,
@@ -74,7 +76,7 @@ impl Renderer {
         }
         validate_lights(lights)?;
         let mesh = Mesh::from_scene(scene);
-        let tracer = Tracer::new(&mesh);
+        let tracer = Arc::new(Tracer::new(&mesh));
         let (lo, hi) = mesh.near_bounds();
         let view = scene.camera.pixel_size * scene.camera.width.max(scene.camera.height) as f32;
         let extent = if lo.x.is_finite() { (hi - lo).max_element().max(view) } else { view };
@@ -86,6 +88,28 @@ impl Renderer {
         #[cfg(not(target_arch = "x86_64"))]
         let avx2 = false;
         Ok(Renderer { camera: scene.camera, mesh, tracer, cache, ray_offset, camera_z, avx2 })
+    }
+
+    /// The same scene with the object's albedo `albedo` (one per pixel, row-major; read at
+    /// the object's pixels) and each light's irradiance `irradiance`: the geometry, its BVH
+    /// and the light visibility are kept, not built or traced again.
+    pub fn with_reflectance(&self, albedo: &[Rgb], irradiance: &[Rgb]) -> Result<Renderer> {
+        let pixels = self.camera.width * self.camera.height;
+        if albedo.len() != pixels {
+            return Err(Error::input("albedo", format!("{} values for {pixels} pixels", albedo.len())));
+        }
+        if irradiance.len() != self.light_count() {
+            return Err(Error::input("irradiance", format!("{} values for {} lights", irradiance.len(), self.light_count())));
+        }
+        for &pixel in self.mesh.albedo_pixel.iter().filter(|&&p| (p as usize) < pixels) {
+            let p = pixel as usize;
+            check_albedo(&format!("albedo at pixel (row {}, column {})", p / self.camera.width, p % self.camera.width), &albedo[p])?;
+        }
+        let lights: Vec<Light> = irradiance.iter().map(|e| Light { direction: Vec3A::Z, irradiance: *e }).collect();
+        validate_lights(&lights)?;
+        let mut mesh = self.mesh.clone();
+        mesh.set_object_albedo(albedo);
+        Ok(Renderer { mesh, tracer: Arc::clone(&self.tracer), cache: self.cache.with_irradiance(irradiance), ..*self })
     }
 
     /// The camera.
@@ -317,6 +341,27 @@ mod tests {
             assert!((t - expected).abs() <= 1e-6 * expected.max(1e-3), "{t} vs {expected}");
         }
         assert!(total.iter().any(|&v| v > 0.0));
+    }
+
+    #[test]
+    fn new_reflectance_renders_as_a_renderer_built_with_it() {
+        // A plate with a spike (skirt walls, shadows) on a floor: bounces and cached direct light.
+        let mut scene = tilted_plate(8, [0.3; 3]);
+        scene.surface.height[27] += 6.0;
+        scene.floor = Some(crate::scene::Floor { height: -2.0, albedo: [0.5; 3] });
+        let lights = [vec3a(0.6, 0.0, 0.8), vec3a(0.0, -0.6, 0.8)].map(|direction| Light { direction, irradiance: [PI; 3] });
+        let albedo: Vec<Rgb> = (0..64).map(|p| [0.1 + 0.01 * p as f32, 0.9, 0.4]).collect();
+        let irradiance = [[1.0, 2.0, 3.0], [0.5, 0.5, 0.5]];
+        let renderer = Renderer::new(&scene, &lights).unwrap().with_reflectance(&albedo, &irradiance).unwrap();
+        scene.surface.albedo = albedo.clone();
+        let built = Renderer::new(&scene, &lights.map(|l| Light { irradiance: if l.direction.x > 0.0 { irradiance[0] } else { irradiance[1] }, ..l })).unwrap();
+        let settings = RenderSettings { bounces: 2, samples: 4, direct_samples: 4, seed: 3, split_bounces: false, cached_direct: true };
+        let pixels: Vec<usize> = (0..64).collect();
+        assert_eq!(renderer.render_pixels(&pixels, &settings).unwrap(), built.render_pixels(&pixels, &settings).unwrap());
+        let too_bright = vec![[1.5; 3]; 64];
+        let error = |result: Result<Renderer>| result.err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(error(renderer.with_reflectance(&too_bright, &irradiance)).starts_with("albedo at pixel"));
+        assert!(error(renderer.with_reflectance(&albedo, &irradiance[..1])).starts_with("irradiance"));
     }
 
     #[test]

@@ -20,6 +20,19 @@ pub struct RenderedPlanes<'a> {
     pub counts: &'a [usize],
 }
 
+/// The observations a rendering is compared with: those of `total` pixels under K lights, of
+/// which the rendering covers `first..first + N`.
+pub struct Observed<'a> {
+    /// (K, total, 3) the observed values.
+    pub values: &'a [f32],
+    /// (K, total): the observations compared (all when None).
+    pub keep: Option<&'a [bool]>,
+    /// Pixels per light in `values` and `keep`.
+    pub total: usize,
+    /// The rendering's first pixel among them.
+    pub first: usize,
+}
+
 /// Sums of |rendered − observed| and |observed| over the compared observations.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ResidualSums {
@@ -53,12 +66,12 @@ pub struct Comparison {
     pub sums: ResidualSums,
 }
 
-/// Compares `planes` (N pixels, K lights) with `observed` (K, N, 3), over the observations
-/// whose `keep` (K, N) is true (all when None).
+/// Compares `planes` (N pixels, K lights) with the observations of the same pixels in
+/// `observed`.
 ///
 /// Errors name the argument whose length does not match, or the counts when there are not
 /// one or two halves with a path each.
-pub fn compare(planes: &RenderedPlanes<'_>, observed: &[f32], keep: Option<&[bool]>, lights: usize, pixels: usize) -> Result<Comparison> {
+pub fn compare(planes: &RenderedPlanes<'_>, observed: &Observed<'_>, lights: usize, pixels: usize) -> Result<Comparison> {
     let size = lights * pixels * 3;
     let check = |name: &str, len: usize, expected: usize| {
         if len == expected {
@@ -68,9 +81,12 @@ pub fn compare(planes: &RenderedPlanes<'_>, observed: &[f32], keep: Option<&[boo
         }
     };
     check("direct", planes.direct.len(), size)?;
-    check("observed", observed.len(), size)?;
-    if let Some(keep) = keep {
-        check("keep", keep.len(), lights * pixels)?;
+    if observed.first + pixels > observed.total {
+        return Err(Error::input("first", format!("pixels {}..{} of {}", observed.first, observed.first + pixels, observed.total)));
+    }
+    check("observed", observed.values.len(), lights * observed.total * 3)?;
+    if let Some(keep) = observed.keep {
+        check("keep", keep.len(), lights * observed.total)?;
     }
     if !(1..=2).contains(&planes.halves.len()) || planes.counts.len() != planes.halves.len() || planes.counts.contains(&0) {
         return Err(Error::input("counts", format!("{:?}: expected one or two halves with at least one path each", planes.counts)));
@@ -90,20 +106,23 @@ pub fn compare(planes: &RenderedPlanes<'_>, observed: &[f32], keep: Option<&[boo
             .enumerate()
             .map(|(k, out)| {
                 let span = k * row..(k + 1) * row;
-                let (direct, observed) = (&planes.direct[span.clone()], &observed[span.clone()]);
+                let direct = &planes.direct[span.clone()];
+                let seen_first = k * observed.total + observed.first;
+                let seen = &observed.values[3 * seen_first..3 * (seen_first + pixels)];
+                let keep = observed.keep.map(|keep| &keep[seen_first..seen_first + pixels]);
                 let halves: Vec<&[f32]> = planes.halves.iter().map(|h| &h[span.clone()]).collect();
                 let mut sums = ResidualSums::default();
                 for (i, value) in out.iter_mut().enumerate() {
                     let weighted = halves.iter().zip(&weights).fold(0f32, |acc, (h, w)| acc + w * h[i]);
                     *value = weighted / samples;
-                    if keep.is_some_and(|keep| !keep[k * pixels + i / 3]) {
+                    if keep.is_some_and(|keep| !keep[i / 3]) {
                         continue;
                     }
-                    let seen = observed[i];
-                    sums.difference += f64::from((direct[i] + *value - seen).abs());
-                    sums.observed += f64::from(seen.abs());
+                    let value_seen = seen[i];
+                    sums.difference += f64::from((direct[i] + *value - value_seen).abs());
+                    sums.observed += f64::from(value_seen.abs());
                     for (slot, h) in sums.half_difference.iter_mut().zip(&halves) {
-                        *slot += f64::from((direct[i] + h[i] - seen).abs());
+                        *slot += f64::from((direct[i] + h[i] - value_seen).abs());
                     }
                 }
                 sums
@@ -136,17 +155,27 @@ mod tests {
         let observed = [4.0, 4.0, 4.0, 9.0, 9.0, 9.0];
         let halves: [&[f32]; 2] = [&first, &second];
         let planes = RenderedPlanes { direct: &direct, halves: &halves, counts: &[1, 3] };
-        let all = compare(&planes, &observed, None, 2, 1).unwrap();
+        let all = compare(&planes, &Observed { values: &observed, keep: None, total: 1, first: 0 }, 2, 1).unwrap();
         assert_eq!(all.indirect, vec![3.5; 6]);
         assert_eq!(all.sums.difference, 3.0 * 0.5 + 3.0 * 4.5);
         assert_eq!(all.sums.observed, 39.0);
         assert_eq!(all.sums.half_difference, [3.0 * 1.0 + 3.0 * 6.0, 3.0 * 1.0 + 3.0 * 4.0]);
         // 6 values of |2 − 4|² = 4, times n₁n₂/n² = 3/16.
         assert_eq!(all.noise_energy, vec![24.0 * 3.0 / 16.0]);
-        let first_light = compare(&planes, &observed, Some(&[true, false]), 2, 1).unwrap();
+        let first_light = compare(&planes, &Observed { values: &observed, keep: Some(&[true, false]), total: 1, first: 0 }, 2, 1).unwrap();
         assert_eq!(first_light.sums.difference, 1.5);
         assert_eq!(first_light.sums.observed, 12.0);
         assert_eq!(first_light.indirect, all.indirect);
+    }
+
+    #[test]
+    fn a_window_of_the_observations_is_compared() {
+        // 1 light, observations of 3 pixels; the rendering covers the middle one.
+        let halves: [&[f32]; 1] = [&[0.5; 3]];
+        let planes = RenderedPlanes { direct: &[0.5; 3], halves: &halves, counts: &[2] };
+        let values = [9.0, 9.0, 9.0, 1.5, 1.5, 1.5, 9.0, 9.0, 9.0];
+        let middle = compare(&planes, &Observed { values: &values, keep: Some(&[false, true, false]), total: 3, first: 1 }, 1, 1).unwrap();
+        assert_eq!((middle.sums.difference, middle.sums.observed), (1.5, 4.5));
     }
 
     #[test]
@@ -154,7 +183,7 @@ mod tests {
         let (direct, half, observed) = ([0.5; 3], [0.25; 3], [1.0; 3]);
         let halves: [&[f32]; 1] = [&half];
         let planes = RenderedPlanes { direct: &direct, halves: &halves, counts: &[4] };
-        let only = compare(&planes, &observed, None, 1, 1).unwrap();
+        let only = compare(&planes, &Observed { values: &observed, keep: None, total: 1, first: 0 }, 1, 1).unwrap();
         assert_eq!(only.noise_energy, vec![0.0]);
         assert_eq!(only.sums.half_difference, [0.75, 0.0]);
     }
@@ -163,9 +192,11 @@ mod tests {
     fn mismatched_lengths_name_the_argument() {
         let halves: [&[f32]; 1] = [&[0.0; 3]];
         let planes = RenderedPlanes { direct: &[0.0; 3], halves: &halves, counts: &[1] };
-        let err = compare(&planes, &[0.0; 6], None, 1, 1).unwrap_err().to_string();
+        let err = compare(&planes, &Observed { values: &[0.0; 3], keep: None, total: 2, first: 0 }, 1, 1).unwrap_err().to_string();
         assert!(err.contains("observed"), "{err}");
+        let err = compare(&planes, &Observed { values: &[0.0; 6], keep: None, total: 2, first: 2 }, 1, 1).unwrap_err().to_string();
+        assert!(err.contains("first"), "{err}");
         let planes = RenderedPlanes { direct: &[0.0; 3], halves: &halves, counts: &[0] };
-        assert!(compare(&planes, &[0.0; 3], None, 1, 1).unwrap_err().to_string().contains("counts"));
+        assert!(compare(&planes, &Observed { values: &[0.0; 3], keep: None, total: 1, first: 0 }, 1, 1).unwrap_err().to_string().contains("counts"));
     }
 }

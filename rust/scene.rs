@@ -151,7 +151,8 @@ pub fn validate_lights(lights: &[Light]) -> Result<()> {
     Ok(())
 }
 
-fn check_albedo(field: &str, rgb: &Rgb) -> Result<()> {
+/// Refuses an albedo outside [0, 1], naming `field`.
+pub fn check_albedo(field: &str, rgb: &Rgb) -> Result<()> {
     if rgb.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)) {
         Ok(())
     } else {

@@ -82,3 +82,8 @@ def test_the_cores_comparison_matches_numpy_in_any_memory_layout(layout):
     assert sums[1] == pytest.approx(float(np.abs(observed)[kept3].sum(dtype=np.float64)), rel=1e-9)
     with pytest.raises(ValueError, match="keep"):
         _core.compare_rendering(direct, [first], [8], observed, keep[:, 1:])
+    # The same pixels as a window of a longer list of observations.
+    longer, kept_longer = np.concatenate([frame[:, :7], observed], axis=1), np.concatenate([kept[:, :7], keep], axis=1)
+    assert _core.compare_rendering(direct, [first, second], [3, 5], longer, kept_longer, first=7)[2] == pytest.approx(sums, rel=1e-12)
+    with pytest.raises(ValueError, match="observed"):
+        _core.compare_rendering(direct, [first], [8], longer, kept_longer, first=8)

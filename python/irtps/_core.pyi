@@ -14,7 +14,7 @@ import numpy.typing as npt
 
 from irtps.scene import CornellBox, Floor
 
-__all__ = ["read_exr", "write_exr", "read_png", "write_png", "read_images", "photometric_stereo", "check_lights", "compare_rendering", "Renderer", "SparseCholesky", "MAX_IMAGE_PIXELS"]
+__all__ = ["read_exr", "write_exr", "read_png", "write_png", "read_images", "photometric_stereo", "check_lights", "compare_rendering", "denoise_indirect", "Renderer", "SparseCholesky", "MAX_IMAGE_PIXELS"]
 
 _F32 = npt.NDArray[np.float32]
 _Path = str | PathLike[str]
@@ -58,11 +58,24 @@ def compare_rendering(
     counts: Sequence[int],
     observed: _F32,
     keep: npt.NDArray[np.bool_] | None = None,
+    first: int = 0,
 ) -> tuple[_F32, npt.NDArray[np.float64], tuple[float, float, float, float]]:
-    """A rendering of N pixels under K lights against the observations, all (K, N, 3):
-    (the halves' inter-reflected light weighted by their path `counts`, each pixel's
-    Monte-Carlo noise energy (N,), (Σ|rendered − observed|, Σ|observed|, Σ|direct + each
-    half − observed|)), the sums over the observations whose `keep` (K, N) is true."""
+    """A rendering of N pixels under K lights, all (K, N, 3), against pixels `first..first + N`
+    of `observed` (K, T, 3): (the halves' inter-reflected light weighted by their path
+    `counts`, each pixel's Monte-Carlo noise energy (N,), (Σ|rendered − observed|,
+    Σ|observed|, Σ|direct + each half − observed|)), the sums over the observations whose
+    `keep` (K, T) is true."""
+
+def denoise_indirect(
+    indirect: _F32,
+    noise_energy: npt.NDArray[np.float64],
+    mask: npt.NDArray[np.bool_],
+    height_px: _F32,
+    albedo: _F32,
+) -> tuple[_F32, npt.NDArray[np.float64]]:
+    """The inter-reflection estimate (K, N, 3) at the N pixels of `mask` and their noise
+    energy (N,), filtered along the surface of heights `height_px` (H, W, in pixels) and
+    `albedo` (H, W, 3)."""
 
 @final
 class Renderer:
@@ -80,6 +93,10 @@ class Renderer:
         floor: Floor | None = None,
         cornell_box: CornellBox | None = None,
     ) -> Renderer: ...
+    def with_reflectance(self, albedo: _F32, light_irradiance: _F32) -> Renderer:
+        """The same scene with the object's albedo (H, W, 3) and each light's irradiance
+        (K, 3); the geometry, its BVH and the light visibility are kept."""
+
     @property
     def triangle_count(self) -> int:
         """Number of triangles in the scene."""

@@ -4,7 +4,8 @@ Each pass is one `irtps.pipeline.reconstruction_pass` (photometric stereo, integ
 placement); pass 0, on the input images A₀, is classic photometric stereo. After each pass the
 reconstruction (height, albedo, placement) is rendered again in its known surroundings:
 the light that reaches the camera after 1..r bounces (every path serves all K lights) is
-the next estimate of the inter-reflections, and the rendering's residual against A₀
+the next estimate of the inter-reflections (filtered along the surface, `irtps.denoise`), and the
+rendering's residual against A₀
 (`irtps.residual`) says how well the pass explains its images. The next pass fits the
 corrected images A₀ − Eₜ − Sₜ, where Sₜ is the light of the floor and box that the
 object's edge pixels see past the object's last triangles (`irtps.surroundings`), rendered
@@ -29,7 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from irtps.data import Dataset
+from irtps.data import Dataset, pixel_observations
+from irtps.denoise import denoise_indirect
 from irtps.errors import IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
@@ -136,6 +138,8 @@ def remove_interreflections(
           module); a number in (0, 2) fixes it (1 takes each new estimate whole);
         - ``early_stop``: stop after two passes in a row whose residual does not fall
           below the best so far by twice its Monte-Carlo noise;
+        - ``denoise``: filter each estimate along the surface before subtracting it
+          (`irtps.denoise.denoise_indirect`);
         - ``update``: ``"original"``: Aₜ₊₁ = A₀ − Eₜ − Sₜ (default; Sₜ the surroundings'
           light in the edge pixels, with the ``"physical"`` estimator only);
           ``"previous"``: the paper's literal Aₜ₊₁ = Aₜ − Eₜ. Corrected images are kept
@@ -172,7 +176,7 @@ def remove_interreflections(
     scene, mask = dataset.scene, dataset.mask
     original = dataset.images
     # After pass 0, the loop holds the mask's pixels only: photometric stereo fits nothing else.
-    observed = original[:, mask]
+    observed = pixel_observations(original, mask)
     saturated: np.ndarray | None = None if options.saturation is None else np.any(observed >= options.saturation, axis=-1, keepdims=True)
     usable = fitted_observations(dataset, options)
     images = original
@@ -223,7 +227,11 @@ def remove_interreflections(
             if options.estimator == "paper":
                 estimate, estimate_noise = paper_indirect(render_scene, current.height, render_albedo, mask, reflections=options.bounces, seed=seed)[:, mask], 0.0
             else:
-                estimate, estimate_noise = rerendering.indirect, float(rerendering.noise_energy.sum())
+                estimate, noise_energy = rerendering.indirect, rerendering.noise_energy
+                if options.denoise:
+                    with timed(timings, "denoise"):
+                        estimate, noise_energy = denoise_indirect(estimate, noise_energy, current.height, render_albedo, mask, scene.camera.pixel_size)
+                estimate_noise = float(noise_energy.sum())
             del rerendering
             if options.update == "original":
                 if estimate_used is None or previous_change is None:

@@ -267,7 +267,7 @@ class ReconstructOptions(_Options):
     )
     bounces: int = _option(3, "inter-reflection bounces estimated", int, low=1, high=MAX_BOUNCES, group="IRT-PS")
     iterations: int = _option(8, "largest number of corrections", int, low=0, high=MAX_ITERATIONS, group="IRT-PS")
-    samples: int = _option(256, "camera paths per pixel per estimate", int, low=1, high=MAX_SAMPLES, group="IRT-PS")
+    samples: int = _option(128, "camera paths per pixel per estimate", int, low=1, high=MAX_SAMPLES, group="IRT-PS")
     seed: int = _option(0, "random seed of the first estimate (pass t uses seed + t)", int, low=0, high=MAX_SEED, group="IRT-PS")
     albedo_scale: float | str = _option(
         "auto",
@@ -294,6 +294,7 @@ class ReconstructOptions(_Options):
         group="IRT-PS",
     )
     early_stop: bool = _option(True, "stop after two passes in a row whose residual does not fall below the best beyond its Monte-Carlo noise", bool, group="IRT-PS")
+    denoise: bool = _option(True, "filter each estimate along the surface (3x3, guided by heights, normals and albedo) before subtracting it", bool, group="IRT-PS")
     update: str = _option("original", "A0 - E (original) or the paper's A_t - E_t (previous)", str, choices=UPDATES, group="IRT-PS")
     stride: int = _option(1, "estimate at one pixel in SxS and interpolate (faster; 1: every pixel)", int, low=1, high=MAX_STRIDE, group="IRT-PS")
     estimator: str = _option("physical", "indirect estimate: physical, or the paper's heuristic", str, choices=ESTIMATORS, group="IRT-PS")
@@ -357,7 +358,7 @@ class TableOptions(_Options):
 
     bounces: tuple[int, ...] = _option((1, 2, 3), "IRT-PS variants: bounces estimated", int, low=1, high=MAX_BOUNCES, many=True)
     iterations: int = _option(8, "IRT-PS corrections at most", int, low=0, high=MAX_ITERATIONS)
-    samples: int = _option(256, "camera paths per pixel per estimate", int, low=1, high=MAX_SAMPLES)
+    samples: int = _option(128, "camera paths per pixel per estimate", int, low=1, high=MAX_SAMPLES)
     seed: int = _option(0, "random seed", int, low=0, high=MAX_SEED)
     paper: bool = _option(True, "also the paper's own estimator (columns Paper-rN)", bool)
 

@@ -195,9 +195,12 @@ def estimate_albedo_scale(
     pixel_list = pixels.tolist()
     height = np.asarray(height, dtype=np.float32)
 
+    # One geometry for every factor: only the reflectance and the irradiance change.
+    geometry = make_renderer(scene, height, scaled_albedo(albedo, high), mask)
+
     def residual(log_factor: float, path_seed: int = seed) -> float:
         factor = float(np.exp(log_factor))
-        renderer = make_renderer(scaled_scene(scene, factor), height, scaled_albedo(albedo, factor), mask)
+        renderer = geometry.with_reflectance(scaled_albedo(albedo, factor), scaled_scene(scene, factor).light_irradiance.astype(np.float32))
         planes = renderer.render_pixels(pixel_list, bounces, PATH_SAMPLES, DIRECT_SAMPLES, path_seed, False)
         return float(np.abs(planes.sum(axis=0) - observed)[compared].sum()) / total
 

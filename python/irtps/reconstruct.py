@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from irtps.atomic import atomic_output_dir
+from irtps.data import pixel_observations
 from irtps.dataset import Dataset, load_dataset, read_albedo_map, read_height_map, read_normal_map
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
 from irtps.imageio import read_mask, write_exr, write_png
@@ -257,7 +258,7 @@ def _check_input(dataset: Dataset, saturation: float | None, robust: str) -> Non
         check_lights(dataset.scene.light_directions, dataset.scene.light_irradiance)
     except IrtpsError as err:
         raise DatasetError(f"{source}: {err}") from None
-    observed = dataset.images[:, dataset.mask]
+    observed = pixel_observations(dataset.images, dataset.mask)
     if not (observed > 0).any():
         raise DatasetError(f"{source}: every image is black on the object (no value above 0 in the mask)")
     if saturation is None:

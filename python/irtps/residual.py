@@ -25,6 +25,7 @@ import numpy as np
 
 from irtps import _core
 from irtps._checks import check_array, check_mask
+from irtps.data import pixel_observations
 from irtps.errors import ArgumentError
 from irtps.render import check_counts, check_frame_memory, make_renderer, render_sparse
 from irtps.scene import Scene
@@ -161,16 +162,15 @@ def render_with_residual(
     seeds = (seed, seed + _SECOND_HALF_SEED)
     rendering = _Halves(renderer, bounces, counts, seeds, seed, stride)
     object_pixels = np.flatnonzero(mask)
-    observed = np.asarray(images[:, mask], dtype=np.float32)
-    compared = None if usable is None else usable[:, mask]
+    observed = pixel_observations(images, mask).astype(np.float32, copy=False)
+    compared = None if usable is None else np.ascontiguousarray(usable[:, mask, 0])
     indirect = np.empty(observed.shape, dtype=np.float32)
     noise_energy = np.zeros(len(object_pixels))
     sparse = rendering.sparse(mask)
     on_object, halves = np.zeros(2), np.zeros(2)
     for chunk in _chunks(len(object_pixels)):
         direct, parts = rendering.pixels(object_pixels[chunk], None if sparse is None else [half[:, chunk] for half in sparse])
-        keep = None if compared is None else compared[:, chunk, 0]
-        indirect[:, chunk], noise_energy[chunk], sums = _core.compare_rendering(direct, parts, counts, observed[:, chunk], keep)
+        indirect[:, chunk], noise_energy[chunk], sums = _core.compare_rendering(direct, parts, counts, observed, compared, chunk.start)
         on_object += sums[:2]
         if len(parts) == 2:
             halves += sums[2:]
