@@ -14,6 +14,7 @@ Usage::
     python benches/irtps_accuracy.py --only pedestal_cornell --passes 16
     python benches/irtps_accuracy.py --json accuracy.json
     python benches/irtps_accuracy.py --samples 128       # IRT-PS with 128 paths per pixel
+    python benches/irtps_accuracy.py --no-denoise        # its estimates not filtered
 """
 
 from __future__ import annotations
@@ -84,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", nargs="+", help="data set names to run (default: all)")
     parser.add_argument("--passes", type=int, help="also run this many passes without the early stop, and at most 5 (data sets with direct-only images)")
     parser.add_argument("--samples", type=int, help="camera paths per pixel of IRT-PS's estimates (default: irtps's)")
+    parser.add_argument("--no-denoise", action="store_true", help="IRT-PS without the filter of its estimates (irtps.denoise)")
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
     paths = sorted(p for group in ("mitsuba", "diligent") for p in (args.shared / group).glob("*") if p.is_dir())
@@ -96,7 +98,8 @@ def main(argv: list[str] | None = None) -> int:
     print("| data | classic PS | IRT-PS | floor | gap closed | passes (chosen) | placement | seconds |")
     print("|---|---|---|---|---|---|---|---|")
     for path in paths:
-        row = measure(path, args.passes, {} if args.samples is None else {"samples": args.samples})
+        settings = ({} if args.samples is None else {"samples": args.samples}) | ({"denoise": False} if args.no_denoise else {})
+        row = measure(path, args.passes, settings)
         rows.append(row)
         floor = "n/a" if row["floor_deg"] is None else f"{row['floor_deg']:.2f}°"
         closed = "n/a" if row["gap_closed"] is None else f"{100 * row['gap_closed']:.1f} %"

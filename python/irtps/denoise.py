@@ -10,9 +10,9 @@ by how far their normal turns from the pixel's and by their distance from its ta
 so that a crease or a step keeps its sides apart), and multiplies the pixel's albedo back.
 
 Measured with ``benches/irtps_accuracy.py`` on the shared Mitsuba scenes, the filtered
-estimate from 128 paths a pixel gives IRT-PS lower errors than the raw one from 256 (cap_cornell
-1.88° against 1.92°, grooves_dark 2.72° against 2.83°, pedestal_cornell 5.34° against 5.44°)
-at half the tracing; see benches/README.md.
+estimate from 64 paths a pixel gives IRT-PS lower errors than the raw one from 256 did
+(cap_cornell 1.90° against 1.92°, grooves_dark 2.73° against 2.83°, pedestal_cornell 5.40°
+against 5.44°) at a quarter of the tracing; see benches/README.md.
 """
 
 from __future__ import annotations

@@ -3,15 +3,14 @@
 Each pass is one `irtps.pipeline.reconstruction_pass` (photometric stereo, integration,
 placement); pass 0, on the input images A₀, is classic photometric stereo. After each pass the
 reconstruction (height, albedo, placement) is rendered again in its known surroundings:
-the light that reaches the camera after 1..r bounces (every path serves all K lights) is
-the next estimate of the inter-reflections (filtered along the surface, `irtps.denoise`), and the
-rendering's residual against A₀
-(`irtps.residual`) says how well the pass explains its images. The next pass fits the
-corrected images A₀ − Eₜ − Sₜ, where Sₜ is the light of the floor and box that the
-object's edge pixels see past the object's last triangles (`irtps.surroundings`), rendered
-from the same reconstruction where it does not hinge on sub-pixel detail. The result is the
-pass with the lowest residual, pass 0 included: IRT-PS never returns worse than classic
-photometric stereo by its own measure.
+the light that reaches the camera after 1..r bounces (every path serves all K lights),
+filtered along the surface (`irtps.denoise`), is the next estimate of the inter-reflections,
+and the rendering's residual against A₀ (`irtps.residual`) says how well the pass explains
+its images. The next pass fits the corrected images A₀ − Eₜ − Sₜ, where Sₜ is the light of
+the floor and box that the object's edge pixels see past the object's last triangles
+(`irtps.surroundings`), rendered from the same reconstruction where it does not hinge on
+sub-pixel detail. The result is the pass with the lowest residual, pass 0 included: IRT-PS
+never returns worse than classic photometric stereo by its own measure.
 
 When the data set's irradiance is relative, the reconstruction is rendered with the
 reflectance and irradiance of the albedo scale estimated at pass 0 (`irtps.radiometry`).

@@ -267,7 +267,7 @@ class ReconstructOptions(_Options):
     )
     bounces: int = _option(3, "inter-reflection bounces estimated", int, low=1, high=MAX_BOUNCES, group="IRT-PS")
     iterations: int = _option(8, "largest number of corrections", int, low=0, high=MAX_ITERATIONS, group="IRT-PS")
-    samples: int = _option(128, "camera paths per pixel per estimate", int, low=1, high=MAX_SAMPLES, group="IRT-PS")
+    samples: int = _option(64, "camera paths per pixel per estimate", int, low=1, high=MAX_SAMPLES, group="IRT-PS")
     seed: int = _option(0, "random seed of the first estimate (pass t uses seed + t)", int, low=0, high=MAX_SEED, group="IRT-PS")
     albedo_scale: float | str = _option(
         "auto",
@@ -358,7 +358,7 @@ class TableOptions(_Options):
 
     bounces: tuple[int, ...] = _option((1, 2, 3), "IRT-PS variants: bounces estimated", int, low=1, high=MAX_BOUNCES, many=True)
     iterations: int = _option(8, "IRT-PS corrections at most", int, low=0, high=MAX_ITERATIONS)
-    samples: int = _option(128, "camera paths per pixel per estimate", int, low=1, high=MAX_SAMPLES)
+    samples: int = _option(64, "camera paths per pixel per estimate", int, low=1, high=MAX_SAMPLES)
     seed: int = _option(0, "random seed", int, low=0, high=MAX_SEED)
     paper: bool = _option(True, "also the paper's own estimator (columns Paper-rN)", bool)
 

@@ -208,21 +208,24 @@ def compared_observations(
     # One image at a time: no temporary the size of the images.
     if saturation is not None:
         for kept, image in zip(usable, images):
-            kept[..., 0] = ~(image >= saturation).any(axis=-1)
+            kept[..., 0] = ~((image[..., 0] >= saturation) | (image[..., 1] >= saturation) | (image[..., 2] >= saturation))
     if robust:
         # Shadows are told apart on the object only: around it every observation is kept.
         irradiance = np.asarray(irradiance, dtype=np.float32)
-        rows, cols = np.nonzero(mask)
-        brightness = np.stack([_brightness(image[rows, cols], light) for image, light in zip(images, irradiance)]) if len(rows) else np.zeros((len(images), 0), np.float32)
+        pixels = np.flatnonzero(mask)
+        brightness = _brightness(pixel_observations(images, mask), irradiance[:, None, :])
         level = shadow_fraction * brightness.max(axis=0, initial=0.0)
-        usable[:, rows, cols, 0] &= brightness > level
+        flat = usable.reshape(len(images), -1)
+        flat[:, pixels] &= brightness > level
     return usable
 
 
 def _brightness(image: np.ndarray, irradiance: np.ndarray) -> np.ndarray:
     """Photometric stereo's brightness of observations (`irtps.ps.photometric_stereo`): their
     channels over their irradiance, summed. float32 (...) for (..., 3) observations."""
-    return (image / irradiance).sum(axis=-1, dtype=np.float32)
+    scaled = (image / irradiance).astype(np.float32, copy=False)
+    # The channels added one by one: numpy's sum over an axis of 3 is several times slower.
+    return scaled[..., 0] + scaled[..., 1] + scaled[..., 2]
 
 
 class _Halves:
