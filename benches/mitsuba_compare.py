@@ -95,7 +95,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ap.add_argument("--threads", type=int, default=2, help="threads for both renderers (default 2)")
     ap.add_argument("--repeats", type=int, default=3, help="timed irtps calls per sample count; medians are reported (default 3)")
     ap.add_argument("--paired-repeats", type=int, default=5, help="turns of the paired timing at equal error (default 5)")
-    ap.add_argument("--iteration-samples", type=parse_counts, help="irtps paths per pixel for the timed IRT-PS iteration (default: 256 and the equal-error count)")
+    ap.add_argument("--iteration-samples", type=parse_counts, help="irtps paths per pixel for the timed IRT-PS iteration (default: irtps's default, 256 and the equal-error count)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = ap.parse_args(argv)
@@ -524,7 +524,9 @@ def main(argv: list[str] | None = None) -> int:
     # 5. One IRT-PS iteration.
     counts = args.iteration_samples
     if counts is None:
-        counts = sorted({256} | {e["irtps_samples_timed"] for e in results.values() if "irtps_samples_timed" in e})
+        from irtps.options import ReconstructOptions
+
+        counts = sorted({ReconstructOptions().samples, 256} | {e["irtps_samples_timed"] for e in results.values() if "irtps_samples_timed" in e})
     iterations = []
     for spp in counts:
         it = time_iteration(case, spp, args.repeats, args.seed)
