@@ -292,9 +292,12 @@ class _AdaptiveStep:
     For a fixed-point map that contracts by ρ, a step ω leaves a fraction q = 1 − ω(1 − ρ)
     of each change in the next; q = <change, previous> / |previous|² (on the object's
     pixels) gives 1 − ρ, and the step that would have removed it all is ω / (1 − q),
-    within `STEP_BOUNDS`. Where the previous change is not above its noise, or the change
-    grew, nothing says how the loop contracts, and the step is 1 (a plain fixed-point
-    iteration). Both products are corrected for the Monte-Carlo noise of the estimates,
+    within `STEP_BOUNDS`. Where the previous change is not above its noise, the loop has
+    settled within that noise, and the step averages the running and the new estimate, each
+    weighed by its inverse noise (within `STEP_BOUNDS`): a step of 1 there took the whole
+    noise of one new estimate, and on pedestal_cornell the error jumped by 0.2° in the
+    pass after each such step. Where the change grew, nothing says how the loop contracts,
+    and the step is 1 (a plain fixed-point iteration). Both products are corrected for the Monte-Carlo noise of the estimates,
     which would otherwise pull q toward 0 (or below) once the changes are mostly noise: the
     noise energy of each new estimate is measured (its two halves), and that of the running
     estimate follows from the steps taken.
@@ -320,9 +323,13 @@ class _AdaptiveStep:
         shared = (1 - self.step) * self.previous_running - self.step * self.new_noise
         noise = self.new_noise + self.previous_running
         energy = float(np.vdot(before, before)) - noise
-        kept = (float(np.vdot(now, before)) - shared) / energy if energy > noise else 1.0
+        if energy <= noise:
+            # The changes are mostly noise: the loop has settled within it, and the step that
+            # averages the running and the new estimate best weighs each by its inverse noise.
+            return float(np.clip(self.running_noise / max(self.running_noise + self.new_noise, np.finfo(float).tiny), *STEP_BOUNDS))
+        kept = (float(np.vdot(now, before)) - shared) / energy
         if kept >= 1:
-            # The change is mostly noise, or grew: no sign of how the loop contracts.
+            # The change grew: no sign of how the loop contracts.
             return 1.0
         return float(np.clip(self.step / (1 - kept), *STEP_BOUNDS))
 
