@@ -4,10 +4,15 @@ Each IRT-PS pass estimates the light that reaches the camera after bounces by tr
 camera paths, and its Monte-Carlo noise goes straight into the corrected images and the
 next normals. The light a surface receives after bounces (its irradiance) changes slowly
 along a smooth surface, so a pixel's estimate can borrow from its neighbours': the filter
-(`irtps._core.denoise_indirect`, rust/denoise.rs) divides each pixel's estimate by its albedo,
-averages it over the 3×3 pixels around it on the same surface (weighted by their distance,
-by how far their normal turns from the pixel's and by their distance from its tangent plane,
-so that a crease or a step keeps its sides apart), and multiplies the pixel's albedo back.
+(`irtps._core.denoise_indirect`, rust/denoise.rs) estimates each pixel's irradiance from the
+3×3 pixels around it on the same surface, as their weighted light over their weighted albedo
+(weighted by their distance, by how far their normal turns from the pixel's and by their
+distance from its tangent plane, so that a crease or a step keeps its sides apart), and
+multiplies the pixel's albedo back.
+scikit-image's filters (`skimage.restoration.denoise_bilateral` and the like) weigh
+neighbours by the filtered image's own values; this one is guided by the surface the
+estimate was rendered on, filters K × 3 planes with one set of weights and carries the
+noise energy through them, which none of them does.
 
 Measured with ``benches/irtps_accuracy.py`` on the shared Mitsuba scenes, the filtered
 estimate from 64 paths a pixel gives IRT-PS lower errors than the raw one from 256 did
