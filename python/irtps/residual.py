@@ -163,7 +163,7 @@ def render_with_residual(
     rendering = _Halves(renderer, bounces, counts, seeds, seed, stride)
     object_pixels = np.flatnonzero(mask)
     observed = pixel_observations(images, mask).astype(np.float32, copy=False)
-    compared = None if usable is None else np.ascontiguousarray(usable[:, mask, 0])
+    compared = None if usable is None else np.ascontiguousarray(pixel_observations(usable, mask)[..., 0])
     indirect = np.empty(observed.shape, dtype=np.float32)
     noise_energy = np.zeros(len(object_pixels))
     sparse = rendering.sparse(mask)
