@@ -76,6 +76,22 @@ def test_a_task_that_dies_is_reported_and_the_others_finish(cluster, three_sets,
     assert results[1].status == "ok" and (tmp_path / "out" / "cap" / "normal.exr").is_file()
 
 
+def test_a_batch_on_its_client_ends_while_another_client_is_the_default(cluster, three_sets, tmp_path):
+    import distributed
+
+    # A client that could not connect stays the process's default client (the newest not
+    # closed) until it is garbage (here: while the error's traceback holds it), with a
+    # loop of its own that never wakes for the batch's futures. A batch that tracked its
+    # futures on the default client's loop waited there forever, its workers idle.
+    with pytest.raises(ValueError, match="unknown address scheme") as failed:
+        distributed.Client("nonsense://head-node")
+    assert distributed.default_client() is not cluster
+    cap, ball, _ = three_sets
+    results = reconstruct_many([cap, ball], tmp_path / "out", client=cluster)
+    assert [r.status for r in results] == ["ok", "ok"]
+    del failed
+
+
 def test_unknown_options_fail_before_anything_runs(cluster, three_sets, tmp_path):
     with pytest.raises(irtps.IrtpsError, match="bounce"):
         reconstruct_many(three_sets, tmp_path / "out", client=cluster, bounce=2)
@@ -212,6 +228,38 @@ def test_a_task_records_its_warnings_alone_while_others_run_in_other_threads(tmp
         records = list(pool.map(task, range(4)))
     assert records == [[(irtps.IrtpsWarning, f"task {index}")] for index in range(4)]
     assert (warnings.filters, warnings.showwarning) == before
+
+
+def test_recording_leaves_other_threads_warnings_and_their_catch_warnings_alone():
+    from concurrent.futures import ThreadPoolExecutor
+
+    from irtps.batch import _recorded_warnings
+
+    recording, warned, ended = threading.Event(), threading.Event(), threading.Event()
+
+    def task():
+        with _recorded_warnings() as recorded:
+            recording.set()
+            warned.wait()
+            warnings.warn("in the task", irtps.IrtpsWarning)
+        ended.set()
+        return recorded
+
+    before = (warnings.filters[:], warnings.showwarning, warnings._showwarnmsg)
+    with ThreadPoolExecutor(1) as pool:
+        future = pool.submit(task)
+        recording.wait()
+        # A catch_warnings of this thread that spans the task's end, and this thread's
+        # warnings filtered as before: the same warning from the same line shown once.
+        with warnings.catch_warnings(record=True) as shown:
+            for _ in range(2):
+                warnings.warn("in the main thread", UserWarning)
+            warned.set()
+            ended.wait()
+        recorded = future.result()
+    assert recorded == [(irtps.IrtpsWarning, "in the task")]
+    assert [str(w.message) for w in shown] == ["in the main thread"]
+    assert (warnings.filters, warnings.showwarning, warnings._showwarnmsg) == before
 
 
 def test_a_stopping_worker_finishes_the_write_under_way_then_exits_and_starts_no_other(monkeypatch, request):

@@ -37,7 +37,7 @@ import threading
 import time
 import warnings
 from collections import Counter
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, replace
 from multiprocessing import resource_tracker
@@ -301,7 +301,7 @@ def reconstruct_many(
         }
         outcomes = {}
         try:
-            with tqdm(distributed.as_completed(pending), total=len(pending), desc="batch", unit="set", disable=not progress, leave=False) as bar:
+            with tqdm(distributed.as_completed(pending, loop=active.loop), total=len(pending), desc="batch", unit="set", disable=not progress, leave=False) as bar:
                 for future in bar:
                     name, source = pending.pop(future)
                     outcomes[name] = outcome = _with_lost_workers(_result_of(future, name, source), lost[future.key])
@@ -641,22 +641,29 @@ def _shielded() -> Iterator[None]:
 _recording = threading.local()
 _recording_lock = threading.Lock()
 _recording_users = 0
-_recording_saved: tuple[list, object] | None = None
+_recording_shown: Callable | None = None  # warnings._showwarnmsg while tasks record
 
 
 @contextmanager
 def _recorded_warnings() -> Iterator[list[tuple[type[Warning], str]]]:
-    """The warnings raised in this thread for the duration, as (category, message) pairs;
-    every one is recorded (not only the first of a kind), none is shown. Other threads'
-    warnings are shown as before."""
-    global _recording_users, _recording_saved
+    """The warnings raised in this thread for the duration, as (category, message) pairs,
+    none shown; other threads' warnings are shown as before.
+
+    The warnings filters are the process's (Python's are global): a warning the filters
+    ignore is not recorded, and a repeated one (the same text, category and line) is
+    recorded at least once. The filters' registries start afresh, so that a warning that
+    an earlier task in this thread raised is recorded again. While any thread records,
+    ``warnings._showwarnmsg`` (which `warnings.catch_warnings` leaves alone) is a
+    dispatcher that keeps a recording thread's warnings and passes the others on.
+    """
+    global _recording_users, _recording_shown
     records: list[tuple[type[Warning], str]] = []
     with _recording_lock:
         if _recording_users == 0:
-            _recording_saved = (warnings.filters[:], warnings.showwarning)
-            warnings.simplefilter("always")
-            warnings.showwarning = _record_warning
+            _recording_shown = warnings._showwarnmsg  # type: ignore[attr-defined]
+            warnings._showwarnmsg = _dispatch_warning  # type: ignore[attr-defined]
         _recording_users += 1
+        warnings._filters_mutated()  # type: ignore[attr-defined]
     _recording.records = records
     try:
         yield records
@@ -665,22 +672,18 @@ def _recorded_warnings() -> Iterator[list[tuple[type[Warning], str]]]:
         with _recording_lock:
             _recording_users -= 1
             if _recording_users == 0:
-                filters, show = _recording_saved
-                warnings.filters[:] = filters
-                warnings._filters_mutated()
-                warnings.showwarning = show
-                _recording_saved = None
+                if warnings._showwarnmsg is _dispatch_warning:  # type: ignore[attr-defined]
+                    warnings._showwarnmsg = _recording_shown  # type: ignore[attr-defined]
+                _recording_shown = None
 
 
-def _record_warning(message, category, filename, lineno, file=None, line=None) -> None:
+def _dispatch_warning(message: warnings.WarningMessage) -> None:
     records = getattr(_recording, "records", None)
     if records is not None:
-        records.append((category, str(message)))
+        records.append((message.category, str(message.message)))
         return
-    saved = _recording_saved
-    show = warnings.showwarning if saved is None else saved[1]  # None: the recording has just ended
-    if show is not _record_warning:
-        show(message, category, filename, lineno, file, line)
+    shown = _recording_shown or warnings._showwarnmsg  # type: ignore[attr-defined]  # None: the recording has just ended
+    (warnings._showwarnmsg_impl if shown is _dispatch_warning else shown)(message)  # type: ignore[attr-defined]
 
 
 def _with_warnings(outcome: BatchResult, recorded: list[tuple[type[Warning], str]]) -> BatchResult:
