@@ -19,6 +19,7 @@ pub mod sampler;
 pub mod sparse_cholesky;
 pub mod scene;
 pub mod tracer;
+pub mod tukey;
 
 #[cfg(feature = "python")]
 mod python;

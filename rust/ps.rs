@@ -10,7 +10,7 @@
 //! pixel, the observations in shadow (whose summed `b` is below `shadow_fraction` of that
 //! pixel's brightest) and re-solves from the rest when at least 3 non-coplanar lights
 //! remain; otherwise it keeps the full fit and flags the pixel. The Tukey (default) and trim
-//! modes fit each pixel from its own observations ([`crate::robust_ps`]).
+//! modes fit each pixel from its own observations ([`crate::tukey`], [`crate::robust_ps`]).
 //!
 //! The plain and threshold fits run over tiles of pixels, streaming through each image's rows
 //! of the tile (twice in threshold mode: once for each pixel's brightest, once to
@@ -23,7 +23,7 @@ use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::robust_ps::{fit_pixels, Lights, Weighting};
+use crate::robust_ps::Lights;
 use crate::scene::Light;
 
 /// Pixels per tile.
@@ -43,7 +43,7 @@ pub enum Robust {
     /// [`crate::robust_ps::TRIM_BRIGHTEST`]), saturated ones counted as brightest and dropped.
     Trim,
     /// From the threshold fit, re-weight by Tukey's biweight of the residuals
-    /// ([`crate::robust_ps::TUKEY_SCALES`]).
+    /// ([`crate::tukey::TUKEY_SCALES`]).
     Tukey,
 }
 
@@ -137,13 +137,13 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
     }
     let fit = Fit::new(lights, gram, settings);
     let mut out = PsOutput { normals: vec![[0.0; 3]; n], albedo: vec![[0.0; 3]; n], flags: vec![flag::MASKED_OUT; n], used: vec![0; n] };
-    let weighting = match settings.robust {
-        Robust::Tukey => Weighting::Tukey,
-        Robust::Trim => Weighting::Trim,
+    let per_pixel = Lights::new(&fit.directions, &fit.scale, &fit.saturated_b, gram);
+    let fits = match settings.robust {
+        Robust::Tukey => crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction),
+        Robust::Trim => crate::robust_ps::fit_pixels(images, mask, &per_pixel),
         Robust::None | Robust::Threshold => return Ok(fit.streamed(images, mask, out)),
     };
-    let per_pixel = Lights::new(&fit.directions, &fit.scale, &fit.saturated_b, gram);
-    for (p, pixel) in fit_pixels(images, mask, &per_pixel, weighting, settings.shadow_fraction) {
+    for (p, pixel) in fits {
         (out.normals[p], out.albedo[p], out.flags[p], out.used[p]) = (pixel.normal, pixel.albedo, pixel.flag, pixel.used);
     }
     Ok(out)

@@ -388,7 +388,7 @@ fn photometric_stereo<'py>(
     let settings = PsSettings { robust, shadow_fraction, saturation };
     let out = py.detach(|| core_ps(data, mask_data, &lights, &settings)).map_err(to_py)?;
     let (h, w) = (shape[1], shape[2]);
-    let planar = |v: Vec<[f32; 3]>| Array::from_shape_vec(IxDyn(&[h, w, 3]), v.into_iter().flatten().collect());
+    let planar = |v: Vec<[f32; 3]>| Array::from_shape_vec(IxDyn(&[h, w, 3]), v.into_flattened());
     let err = |e: numpy::ndarray::ShapeError| PyValueError::new_err(e.to_string());
     Ok((
         planar(out.normals).map_err(err)?.into_pyarray(py),

@@ -1,37 +1,17 @@
-//! The per-pixel robust fits of photometric stereo: Tukey re-weighting and rank trimming.
+//! Rank trimming, the per-pixel robust fit that needs each pixel's observations together,
+//! and what it shares with the Tukey fit of [`crate::tukey`].
 //!
-//! Unlike the streaming least-squares fit of [`crate::ps`], these need each pixel's
-//! observations together. The object's pixels are taken in tiles of [`TILE`]; a tile's
-//! observations are gathered pixel-major (each pixel's channel-summed `b` of every light,
-//! then its RGB for the albedo) and each pixel is fitted on its own:
-//!
-//! - **Tukey** starts from the threshold fit (observations above `shadow_fraction` of the
-//!   pixel's brightest) and re-weights every observation that the fit lights (`l·g > 0`) by
-//!   Tukey's biweight `(1 − u²)²` of its residual `u` in units of [`TUKEY_SCALES`] robust
-//!   scales (1.4826 × the median absolute residual of the lit observations), until the fit
-//!   moves by less than [`TUKEY_SETTLED`] of its length. Soft and cast shadows fall below
-//!   the fit, highlights above it: both lose their weight, attached shadows carry none.
-//! - **Trim** keeps the observations between the darkest [`TRIM_DARKEST`] and the brightest
-//!   [`TRIM_BRIGHTEST`] of the pixel's.
-//!
-//! Saturated observations are left out of both. The weighted sums run over the lights in
-//! groups of [`LANES`] so that they vectorise.
+//! The object's pixels are taken in tiles of [`TILE`]; a tile's observations are gathered
+//! pixel-major (each pixel's channel-summed `b` of every light, then its RGB for the
+//! albedo) and each pixel keeps the observations between the darkest [`TRIM_DARKEST`] and
+//! the brightest [`TRIM_BRIGHTEST`] of its own. Saturated observations are left out. The
+//! weighted sums run over the lights in groups of [`LANES`] so that they vectorise.
 
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
 use crate::ps::{finish, flag, PixelFit, COPLANAR_RATIO};
 
-/// Tukey's biweight constant, in robust scales: an observation whose residual is beyond
-/// 2.5 scales carries no weight. Below the 4.685 of 95 % Gaussian efficiency, because the
-/// scale is measured on the contaminated observations themselves and so overstates the
-/// noise where shadows and highlights are many.
-pub const TUKEY_SCALES: f32 = 2.5;
-/// Largest number of re-weightings.
-pub const TUKEY_ITERATIONS: usize = 20;
-/// Re-weighting stops when the fit moves by less than this fraction of its length (a
-/// step of 0.17° or less).
-pub const TUKEY_SETTLED: f32 = 3e-3;
 /// The trim mode drops this fraction of each pixel's darkest observations...
 pub const TRIM_DARKEST: f32 = 0.4;
 /// ...and this fraction of its brightest.
@@ -40,34 +20,19 @@ pub const TRIM_BRIGHTEST: f32 = 0.2;
 const TILE: usize = 64;
 /// Lights summed side by side.
 const LANES: usize = 8;
-/// Fewest observations with weight that a re-weighted fit needs.
-const TUKEY_MIN: usize = 4;
-/// Median absolute deviation to the standard deviation of a normal distribution.
-const MAD_TO_SIGMA: f32 = 1.4826;
-/// Least robust scale, as a fraction of the fit's length (noise-free data).
-const SCALE_FLOOR: f32 = 1e-4;
-
-/// How a pixel's observations are weighted.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Weighting {
-    /// Tukey re-weighting from the threshold fit.
-    Tukey,
-    /// Rank trimming.
-    Trim,
-}
 
 /// The lights, structure of arrays, padded with zero directions to a multiple of [`LANES`].
 pub(crate) struct Lights {
     /// Number of real lights.
-    count: usize,
+    pub count: usize,
     /// x, y, z of each direction.
-    direction: [Vec<f32>; 3],
+    pub direction: [Vec<f32>; 3],
     /// xx, xy, xz, yy, yz, zz of each direction.
-    outer: [Vec<f32>; 6],
+    pub outer: [Vec<f32>; 6],
     /// π / E_kc, per light and channel.
-    scale: Vec<[f32; 3]>,
+    pub scale: Vec<[f32; 3]>,
     /// Raw saturation level times π / E_kc, per light and channel (∞ when off).
-    saturated_b: Vec<[f32; 3]>,
+    pub saturated_b: Vec<[f32; 3]>,
     /// Σ l lᵀ over every light.
     gram: Mat3,
 }
@@ -105,17 +70,11 @@ impl Lights {
     fn direction(&self, k: usize) -> Vec3 {
         Vec3::new(self.direction[0][k], self.direction[1][k], self.direction[2][k])
     }
-
-    /// `g · l_k`.
-    #[inline]
-    fn predicted(&self, g: Vec3, k: usize) -> f32 {
-        g.x * self.direction[0][k] + g.y * self.direction[1][k] + g.z * self.direction[2][k]
-    }
 }
 
 /// Channel-summed `b` of a saturated observation: so large that its residual gives it no
 /// weight, finite so that a zero weight times it adds nothing.
-const SATURATED: f32 = f32::MAX;
+pub(crate) const SATURATED: f32 = f32::MAX;
 
 /// One pixel's observations, pixel-major.
 struct Pixel<'a> {
@@ -136,20 +95,15 @@ struct Scratch {
 /// One pixel's working memory, one value per (padded) light.
 #[derive(Default)]
 struct Work {
-    /// Weights of the fit kept.
+    /// Weights of the fit.
     weight: Vec<f32>,
-    /// Weights tried next.
-    candidate: Vec<f32>,
-    residual: Vec<f32>,
-    /// Bits of each absolute residual (Tukey).
-    keys: Vec<u32>,
-    /// [`order_key`] of each observation, with the light in the low half (trim).
+    /// [`order_key`] of each observation, with the light in the low half.
     order: Vec<u64>,
 }
 
-/// Fits the pixels where `mask` is true from `images` laid out `(K, pixels, 3)`: (pixel
+/// Trims each pixel where `mask` is true, from `images` laid out `(K, pixels, 3)`: (pixel
 /// index, fit) in pixel order.
-pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, weighting: Weighting, shadow_fraction: f32) -> Vec<(usize, PixelFit)> {
+pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights) -> Vec<(usize, PixelFit)> {
     let n = mask.len();
     let pixels: Vec<usize> = mask.iter().enumerate().filter_map(|(i, &m)| m.then_some(i)).collect();
     let tiles: Vec<Vec<(usize, PixelFit)>> = pixels
@@ -163,11 +117,7 @@ pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, weighti
                     .map(|i| {
                         let Scratch { grey, rgb, work } = &mut **scratch;
                         let pixel = Pixel { grey: &grey[i * padded..][..padded], rgb: &rgb[i * lights.count..][..lights.count] };
-                        let fit = match weighting {
-                            Weighting::Tukey => tukey(&pixel, lights, shadow_fraction, work),
-                            Weighting::Trim => trim(&pixel, lights, work),
-                        };
-                        (tile[i], fit)
+                        (tile[i], trim(&pixel, lights, work))
                     })
                     .collect()
             },
@@ -224,7 +174,7 @@ fn weighted_sums(pixel: &Pixel, lights: &Lights, weight: &[f32]) -> (Mat3, Vec3)
 
 /// `g = G⁻¹ r` when at least `fewest` weighted observations fix it, their lights not
 /// (nearly) coplanar.
-fn solved(gram: Mat3, rhs: Vec3, count: usize, fewest: usize) -> Option<Vec3> {
+pub(crate) fn solved(gram: Mat3, rhs: Vec3, count: usize, fewest: usize) -> Option<Vec3> {
     if count < fewest || !well_posed(gram) {
         return None;
     }
@@ -243,10 +193,11 @@ fn well_posed(gram: Mat3) -> bool {
     gram.determinant() >= COPLANAR_RATIO * trace * minors && trace > 0.0
 }
 
-/// Normal and albedo from the final `weight`s (RGB sums for the albedo).
-fn weighted_fit(pixel: &Pixel, lights: &Lights, weight: &[f32], gram: Mat3, count: usize, fitted: u8) -> PixelFit {
+/// Normal and albedo of a pixel whose RGB `b` of each light is `rgb`, from its final
+/// `weight`s (Σ w l lᵀ = `gram`).
+pub(crate) fn weighted_fit(rgb: &[[f32; 3]], lights: &Lights, weight: &[f32], gram: Mat3, count: usize, fitted: u8) -> PixelFit {
     let mut rhs = [Vec3::ZERO; 3];
-    for (k, b) in pixel.rgb.iter().enumerate() {
+    for (k, b) in rgb.iter().enumerate() {
         if weight[k] > 0.0 {
             let l = lights.direction(k) * weight[k];
             for c in 0..3 {
@@ -260,11 +211,11 @@ fn weighted_fit(pixel: &Pixel, lights: &Lights, weight: &[f32], gram: Mat3, coun
     }
 }
 
-/// Plain least squares on every observation, saturated ones included: the fit kept when a
-/// robust selection leaves too few.
-fn full_fit(pixel: &Pixel, lights: &Lights) -> PixelFit {
+/// Plain least squares on every observation (RGB `b` of each light `rgb`), saturated ones
+/// included: the fit kept when a robust selection leaves too few.
+pub(crate) fn full_fit(rgb: &[[f32; 3]], lights: &Lights) -> PixelFit {
     let mut rhs = [Vec3::ZERO; 3];
-    for (k, b) in pixel.rgb.iter().enumerate() {
+    for (k, b) in rgb.iter().enumerate() {
         let l = lights.direction(k);
         for c in 0..3 {
             rhs[c] += l * b[c];
@@ -289,58 +240,6 @@ fn order_key(value: f32) -> u32 {
     }
 }
 
-fn tukey(pixel: &Pixel, lights: &Lights, shadow_fraction: f32, work: &mut Work) -> PixelFit {
-    let padded = lights.padded();
-    let brightest = pixel.grey.iter().copied().filter(|&b| b < SATURATED).fold(0.0f32, f32::max);
-    let level = shadow_fraction * brightest;
-    let Work { weight, candidate, residual, keys, .. } = work;
-    weight.clear();
-    weight.extend(pixel.grey.iter().map(|&b| if b > level && b < SATURATED { 1.0 } else { 0.0 }));
-    let mut count = weight.iter().filter(|&&w| w > 0.0).count();
-    let (mut gram, rhs) = weighted_sums(pixel, lights, weight);
-    let Some(mut g) = solved(gram, rhs, count, 3) else {
-        return full_fit(pixel, lights);
-    };
-    residual.resize(padded, 0.0);
-    candidate.resize(padded, 0.0);
-    keys.resize(padded, 0);
-    for _ in 0..TUKEY_ITERATIONS {
-        // Residuals of the unsaturated observations the fit lights; NaN for the others.
-        let mut lit = 0usize;
-        for k in 0..padded {
-            let (b, predicted) = (pixel.grey[k], lights.predicted(g, k));
-            let use_it = predicted > 0.0 && b < SATURATED;
-            let r = if use_it { b - predicted } else { f32::NAN };
-            residual[k] = r;
-            // The bits of |r| order as the values do, NaN after every number.
-            keys[k] = r.to_bits() & 0x7fff_ffff;
-            lit += usize::from(use_it);
-        }
-        if lit < TUKEY_MIN {
-            break;
-        }
-        // NaN keys sort last: the median of the lit observations' absolute residuals.
-        let median = f32::from_bits(*keys.select_nth_unstable(lit / 2).1);
-        let inverse = 1.0 / (TUKEY_SCALES * (MAD_TO_SIGMA * median).max(SCALE_FLOOR * g.length()));
-        let mut next_count = 0usize;
-        for (w, &r) in candidate.iter_mut().zip(residual.iter()) {
-            let u = r * inverse;
-            let inside = u.abs() < 1.0;
-            *w = if inside { (1.0 - u * u) * (1.0 - u * u) } else { 0.0 };
-            next_count += usize::from(inside);
-        }
-        let (next_gram, rhs) = weighted_sums(pixel, lights, candidate);
-        let Some(next) = solved(next_gram, rhs, next_count, TUKEY_MIN) else { break };
-        let settled = (next - g).length() <= TUKEY_SETTLED * g.length();
-        (g, gram, count) = (next, next_gram, next_count);
-        std::mem::swap(weight, candidate);
-        if settled {
-            break;
-        }
-    }
-    weighted_fit(pixel, lights, weight, gram, count, flag::OK)
-}
-
 fn trim(pixel: &Pixel, lights: &Lights, work: &mut Work) -> PixelFit {
     let count = lights.count;
     let Work { weight, order, .. } = work;
@@ -358,14 +257,14 @@ fn trim(pixel: &Pixel, lights: &Lights, work: &mut Work) -> PixelFit {
     let kept = weight.iter().filter(|&&w| w > 0.0).count();
     let (gram, rhs) = weighted_sums(pixel, lights, weight);
     if solved(gram, rhs, kept, 3).is_some() {
-        return weighted_fit(pixel, lights, weight, gram, kept, flag::OK);
+        return weighted_fit(pixel.rgb, lights, weight, gram, kept, flag::OK);
     }
     // Too few lights to trim: every unsaturated observation, flagged.
     weight.iter_mut().zip(pixel.grey).for_each(|(w, &b)| *w = if b < SATURATED { 1.0 } else { 0.0 });
     let unsaturated = weight[..count].iter().filter(|&&w| w > 0.0).count();
     let (gram, rhs) = weighted_sums(pixel, lights, weight);
     if solved(gram, rhs, unsaturated, 3).is_some() {
-        return weighted_fit(pixel, lights, weight, gram, unsaturated, flag::FULL_FIT);
+        return weighted_fit(pixel.rgb, lights, weight, gram, unsaturated, flag::FULL_FIT);
     }
-    full_fit(pixel, lights)
+    full_fit(pixel.rgb, lights)
 }

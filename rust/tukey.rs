@@ -1,0 +1,415 @@
+//! Tukey re-weighting of photometric stereo, [`WIDTH`] pixels side by side.
+//!
+//! Each pixel starts from the threshold fit (observations above `shadow_fraction` of the
+//! pixel's brightest) and re-weights every observation that the fit lights (`l·g > 0`) by
+//! Tukey's biweight `(1 − u²)²` of its residual `u` in units of [`TUKEY_SCALES`] robust
+//! scales (1.4826 × the median absolute residual of the lit observations), until the fit
+//! moves by less than [`TUKEY_SETTLED`] of its length. Soft and cast shadows fall below the
+//! fit, highlights above it: both lose their weight, attached shadows carry none. Saturated
+//! observations carry none either.
+//!
+//! The pixels of a chunk go through [`WIDTH`] lanes, structure of arrays (one value of each
+//! lane per light), so that the residuals, weights and sums of every lane are computed by
+//! the same vector instructions. A lane whose pixel has settled is refilled with the next
+//! pixel of the chunk at once, so pixels that need many re-weightings do not hold the others
+//! back. Each lane's median comes from counting, vectorised over the lanes: a bisection on the
+//! absolute residuals' bits, started from a bracket around the lane's previous median
+//! (widened until it holds the median).
+
+use std::ops::{BitAnd, BitXor};
+
+use glam::{Mat3, Vec3};
+use rayon::prelude::*;
+use wide::bytemuck::cast;
+use wide::{f32x8, i32x8};
+
+use crate::ps::{flag, PixelFit};
+use crate::robust_ps::{full_fit, solved, weighted_fit, Lights, SATURATED};
+
+/// Tukey's biweight constant, in robust scales: an observation whose residual is beyond
+/// 2.5 scales carries no weight. Below the 4.685 of 95 % Gaussian efficiency, because the
+/// scale is measured on the contaminated observations themselves and so overstates the
+/// noise where shadows and highlights are many.
+pub const TUKEY_SCALES: f32 = 2.5;
+/// Largest number of re-weightings.
+pub const TUKEY_ITERATIONS: u8 = 20;
+/// Re-weighting stops when the fit moves by less than this fraction of its length (a
+/// step of 0.17° or less).
+pub const TUKEY_SETTLED: f32 = 3e-3;
+/// Fewest observations with weight that a re-weighted fit needs.
+const TUKEY_MIN: usize = 4;
+/// Median absolute deviation to the standard deviation of a normal distribution.
+const MAD_TO_SIGMA: f32 = 1.4826;
+/// Least robust scale, as a fraction of the fit's length (noise-free data).
+const SCALE_FLOOR: f32 = 1e-4;
+/// Pixels side by side.
+const WIDTH: usize = 8;
+/// Pixels per parallel task.
+const CHUNK: usize = 512;
+/// Key of an observation the fit does not light: above every absolute residual's key.
+const UNLIT: i32 = i32::MAX;
+/// Half the width of the bracket tried around a lane's previous median, in key units
+/// (2²⁰ of the mantissa's 2²³ per octave: about ±9 %).
+const BRACKET: i32 = 1 << 20;
+
+/// One value per lane.
+type Lanes = f32x8;
+/// One integer per lane.
+type Counts = i32x8;
+
+/// Fits the pixels where `mask` is true from `images` laid out `(K, pixels, 3)`: (pixel
+/// index, fit) for each, in no particular order.
+pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, shadow_fraction: f32) -> Vec<(usize, PixelFit)> {
+    let pixels: Vec<usize> = mask.iter().enumerate().filter_map(|(i, &m)| m.then_some(i)).collect();
+    let source = Source { images, n: mask.len(), lights, shadow_fraction };
+    pixels
+        .par_chunks(CHUNK)
+        .map_init(
+            || Box::new(Machine::new(lights)),
+            |machine, chunk| {
+                let mut fits = Vec::with_capacity(chunk.len());
+                machine.run(&source, chunk, &mut fits);
+                fits
+            },
+        )
+        .flatten_iter()
+        .collect()
+}
+
+/// Where the pixels' observations come from.
+struct Source<'a> {
+    /// `(K, n, 3)`.
+    images: &'a [f32],
+    /// Pixels per image.
+    n: usize,
+    lights: &'a Lights,
+    shadow_fraction: f32,
+}
+
+/// What a lane is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    /// No pixel left for it.
+    Empty,
+    /// Its candidate weights are the threshold fit's.
+    Start,
+    /// Its candidate weights come from the residuals of its fit.
+    Reweight,
+}
+
+/// The lanes and their pixels' observations.
+struct Machine {
+    /// Number of lights.
+    lights: usize,
+    /// Each light's direction `l` (x, y, z) and `l lᵀ` (xx, xy, xz, yy, yz, zz).
+    light: Vec<[f32; 9]>,
+    /// Channel-summed `b` per light ([`SATURATED`] when saturated).
+    grey: Vec<Lanes>,
+    /// RGB `b` per lane and light, lane-major.
+    rgb: Vec<[f32; 3]>,
+    /// `b − l·g` per light.
+    residual: Vec<Lanes>,
+    /// Bits of `|b − l·g|` per light ([`UNLIT`] where the fit does not light it or it is
+    /// saturated): integers that order as the absolute residuals.
+    key: Vec<Counts>,
+    /// Weights of the fit kept, per light.
+    weight: Vec<Lanes>,
+    /// Weights tried next, per light.
+    candidate: Vec<Lanes>,
+    /// One lane's weights, light by light.
+    column: Vec<f32>,
+    /// The fit kept, `ρ n` summed over the channels.
+    g: [Vec3; WIDTH],
+    /// Σ w l lᵀ of the fit kept.
+    gram: [Mat3; WIDTH],
+    /// Observations with weight in the fit kept.
+    count: [usize; WIDTH],
+    phase: [Phase; WIDTH],
+    /// Pixel index of each lane.
+    pixel: [usize; WIDTH],
+    /// Re-weightings done.
+    iterations: [u8; WIDTH],
+    /// Each lane's last median key, 0 before the first.
+    median_key: [i32; WIDTH],
+}
+
+impl Machine {
+    fn new(source: &Lights) -> Machine {
+        let lights = source.count;
+        let light = (0..lights).map(|k| std::array::from_fn(|i| if i < 3 { source.direction[i][k] } else { source.outer[i - 3][k] })).collect();
+        Machine {
+            lights,
+            light,
+            grey: vec![Lanes::ZERO; lights],
+            rgb: vec![[0.0; 3]; lights * WIDTH],
+            residual: vec![Lanes::ZERO; lights],
+            key: vec![Counts::splat(UNLIT); lights],
+            weight: vec![Lanes::ZERO; lights],
+            candidate: vec![Lanes::ZERO; lights],
+            column: Vec::with_capacity(lights),
+            g: [Vec3::ZERO; WIDTH],
+            gram: [Mat3::ZERO; WIDTH],
+            count: [0; WIDTH],
+            phase: [Phase::Empty; WIDTH],
+            pixel: [0; WIDTH],
+            iterations: [0; WIDTH],
+            median_key: [0; WIDTH],
+        }
+    }
+
+    /// Fits every pixel of `chunk`, appending to `fits`.
+    fn run(&mut self, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
+        let mut queue = chunk.iter().copied();
+        for lane in 0..WIDTH {
+            self.load(source, lane, queue.next());
+        }
+        while self.phase.iter().any(|&p| p != Phase::Empty) {
+            let (inverse, too_few_lit) = self.residuals();
+            let (grams, rhs, counts) = self.candidate_sums(inverse);
+            let mut accept = [false; WIDTH];
+            let mut finished = [false; WIDTH];
+            for lane in 0..WIDTH {
+                let fewest = match self.phase[lane] {
+                    Phase::Empty => continue,
+                    Phase::Start => 3,
+                    Phase::Reweight if too_few_lit[lane] => {
+                        finished[lane] = true;
+                        continue;
+                    }
+                    Phase::Reweight => TUKEY_MIN,
+                };
+                let Some(next) = solved(grams[lane], rhs[lane], counts[lane], fewest) else {
+                    if self.phase[lane] == Phase::Start {
+                        fits.push((self.pixel[lane], full_fit(self.lane_rgb(lane), source.lights)));
+                        self.load(source, lane, queue.next());
+                    } else {
+                        finished[lane] = true;
+                    }
+                    continue;
+                };
+                if self.phase[lane] == Phase::Reweight {
+                    self.iterations[lane] += 1;
+                    let settled = (next - self.g[lane]).length() <= TUKEY_SETTLED * self.g[lane].length();
+                    finished[lane] = settled || self.iterations[lane] == TUKEY_ITERATIONS;
+                }
+                (self.g[lane], self.gram[lane], self.count[lane], self.phase[lane]) = (next, grams[lane], counts[lane], Phase::Reweight);
+                accept[lane] = true;
+            }
+            let accept = mask(accept);
+            for (weight, candidate) in self.weight.iter_mut().zip(&self.candidate) {
+                *weight = blend(accept, *candidate, *weight);
+            }
+            for lane in (0..WIDTH).filter(|&lane| finished[lane]) {
+                self.column.clear();
+                self.column.extend(self.weight.iter().map(|w| w.as_array()[lane]));
+                let fit = weighted_fit(self.lane_rgb(lane), source.lights, &self.column, self.gram[lane], self.count[lane], flag::OK);
+                fits.push((self.pixel[lane], fit));
+                self.load(source, lane, queue.next());
+            }
+        }
+    }
+
+    fn lane_rgb(&self, lane: usize) -> &[[f32; 3]] {
+        &self.rgb[lane * self.lights..][..self.lights]
+    }
+
+    /// Puts `pixel`'s observations in `lane` with the threshold fit's weights as its
+    /// candidate, or empties the lane.
+    fn load(&mut self, source: &Source, lane: usize, pixel: Option<usize>) {
+        let Some(pixel) = pixel else {
+            self.phase[lane] = Phase::Empty;
+            for (grey, candidate) in self.grey.iter_mut().zip(&mut self.candidate) {
+                (grey.as_mut_array()[lane], candidate.as_mut_array()[lane]) = (0.0, 0.0);
+            }
+            return;
+        };
+        let lights = source.lights;
+        let mut brightest = 0.0f32;
+        let rgb = &mut self.rgb[lane * self.lights..][..self.lights];
+        let observed = (0..self.lights).map(|k| &source.images[(k * source.n + pixel) * 3..][..3]);
+        for ((((raw, s), sat), b), grey) in observed.zip(&lights.scale).zip(&lights.saturated_b).zip(rgb).zip(&mut self.grey) {
+            *b = [raw[0] * s[0], raw[1] * s[1], raw[2] * s[2]];
+            let unsaturated = (b[0] < sat[0]) & (b[1] < sat[1]) & (b[2] < sat[2]);
+            let sum = b[0] + b[1] + b[2];
+            grey.as_mut_array()[lane] = if unsaturated { sum } else { SATURATED };
+            brightest = brightest.max(if unsaturated { sum } else { 0.0 });
+        }
+        let level = source.shadow_fraction * brightest;
+        for (grey, candidate) in self.grey.iter().zip(&mut self.candidate) {
+            let b = grey.as_array()[lane];
+            candidate.as_mut_array()[lane] = if b > level && b < SATURATED { 1.0 } else { 0.0 };
+        }
+        (self.phase[lane], self.pixel[lane], self.iterations[lane]) = (Phase::Start, pixel, 0);
+    }
+
+    /// The residuals of the lanes' fits and the Tukey scale of the re-weighting lanes' (1 /
+    /// ([`TUKEY_SCALES`] × robust scale), 0 for the others). Returns it and the lanes whose
+    /// fits light fewer than [`TUKEY_MIN`] unsaturated observations.
+    fn residuals(&mut self) -> ([f32; WIDTH], [bool; WIDTH]) {
+        let g = self.g;
+        let (gx, gy, gz) = (f32x8::new(g.map(|g| g.x)), f32x8::new(g.map(|g| g.y)), f32x8::new(g.map(|g| g.z)));
+        let (saturated, magnitude, unlit) = (Lanes::splat(SATURATED), Counts::splat(0x7fff_ffff), Counts::splat(UNLIT));
+        let mut lit = Counts::ZERO;
+        for (((grey, residual), key), l) in self.grey.iter().zip(&mut self.residual).zip(&mut self.key).zip(&self.light) {
+            let predicted = gx * l[0] + gy * l[1] + gz * l[2];
+            let use_it: Counts = cast(predicted.simd_gt(Lanes::ZERO) & grey.simd_lt(saturated));
+            *residual = *grey - predicted;
+            *key = blend(use_it, cast::<Lanes, Counts>(*residual) & magnitude, unlit);
+            lit -= use_it;
+        }
+        let lit = lit.to_array();
+        let too_few_lit: [bool; WIDTH] = std::array::from_fn(|lane| lit[lane] < TUKEY_MIN as i32);
+        let active: [bool; WIDTH] = std::array::from_fn(|lane| self.phase[lane] == Phase::Reweight && !too_few_lit[lane]);
+        let median = median_keys(&self.key, lit, self.median_key, active);
+        let mut inverse = [0.0f32; WIDTH];
+        for lane in (0..WIDTH).filter(|&lane| active[lane]) {
+            self.median_key[lane] = median[lane];
+            let scale = (MAD_TO_SIGMA * f32::from_bits(median[lane] as u32)).max(SCALE_FLOOR * g[lane].length());
+            inverse[lane] = 1.0 / (TUKEY_SCALES * scale);
+        }
+        (inverse, too_few_lit)
+    }
+
+    /// Sets the candidate weights of the lanes with a Tukey scale `inverse` (see
+    /// [`Machine::residuals`]) and returns, for every lane's candidate weights, Σ w l lᵀ,
+    /// Σ w l b (channel sum) and the number of observations with weight.
+    fn candidate_sums(&mut self, inverse: [f32; WIDTH]) -> ([Mat3; WIDTH], [Vec3; WIDTH], [usize; WIDTH]) {
+        let active = mask(inverse.map(|i| i > 0.0));
+        let (inverse, one, unlit) = (f32x8::new(inverse), Lanes::ONE, Counts::splat(UNLIT));
+        let mut gram = [Lanes::ZERO; 6];
+        let mut rhs = [Lanes::ZERO; 3];
+        let mut count = Counts::ZERO;
+        for ((((candidate, grey), residual), key), l) in self.candidate.iter_mut().zip(&self.grey).zip(&self.residual).zip(&self.key).zip(&self.light) {
+            let u = *residual * inverse;
+            let inside = u.abs().simd_lt(one) & cast::<Counts, Lanes>(key.simd_ne(unlit));
+            let tukey = (one - u * u) * (one - u * u);
+            *candidate = blend(active, tukey & inside, *candidate);
+            for (sum, &ll) in gram.iter_mut().zip(&l[3..]) {
+                *sum += *candidate * ll;
+            }
+            let weighted = *candidate * *grey;
+            for (sum, &l) in rhs.iter_mut().zip(&l[..3]) {
+                *sum += weighted * l;
+            }
+            count -= cast::<Lanes, Counts>(candidate.simd_gt(Lanes::ZERO));
+        }
+        let (gram, rhs, count) = (gram.map(f32x8::to_array), rhs.map(f32x8::to_array), count.to_array());
+        let grams = std::array::from_fn(|lane| {
+            let g = gram.map(|m| m[lane]);
+            Mat3::from_cols(Vec3::new(g[0], g[1], g[2]), Vec3::new(g[1], g[3], g[4]), Vec3::new(g[2], g[4], g[5]))
+        });
+        (grams, std::array::from_fn(|lane| Vec3::new(rhs[0][lane], rhs[1][lane], rhs[2][lane])), count.map(|c| c as usize))
+    }
+}
+
+/// `if_true` where `mask`'s bits are set, else `if_false`: `wide`'s `select` is a call
+/// where the target has no blend instruction (x86-64 before SSE4.1).
+#[inline(always)]
+fn blend<T: Copy + BitXor<Output = T> + BitAnd<Output = T>>(mask: T, if_true: T, if_false: T) -> T {
+    if_false ^ ((if_false ^ if_true) & mask)
+}
+
+/// A lane mask: all bits set where `lanes` is true.
+fn mask(lanes: [bool; WIDTH]) -> Lanes {
+    cast(Counts::new(lanes.map(|on| -i32::from(on))))
+}
+
+/// For each `active` lane, the `lit / 2`-th smallest (from 0) of its `keys` below
+/// [`UNLIT`], of which it has `lit`: a bisection on the keys' values, each step counting the
+/// keys below a threshold of each lane, until one key (or one value) is left in a lane's
+/// bracket. A lane with a `guess` (a positive key) first brackets its median by thresholds
+/// ±[`BRACKET`] around it, then 4, 16, 64... times as far on the side where the median lies,
+/// until one holds it.
+fn median_keys(keys: &[Counts], lit: [i32; WIDTH], guess: [i32; WIDTH], active: [bool; WIDTH]) -> [i32; WIDTH] {
+    let count_below = |threshold: [i32; WIDTH]| {
+        let threshold = Counts::new(threshold);
+        keys.iter().fold(Counts::ZERO, |below, key| below - key.simd_lt(threshold)).to_array()
+    };
+    let rank = lit.map(|lit| lit / 2);
+    // Invariant for each active lane: below(lo) ≤ rank < below(hi).
+    let (mut lo, mut below_lo) = ([0i32; WIDTH], [0i32; WIDTH]);
+    let (mut hi, mut below_hi) = ([UNLIT; WIDTH], lit);
+    // How far from the guess the next threshold of a lane still bracketing lies: below it
+    // when negative, above it when positive, 0 once the lane bisects.
+    let mut reach = [0i32; WIDTH];
+    let near_lo = guess.map(|guess| guess.saturating_sub(BRACKET).max(0));
+    let near_hi = guess.map(|guess| guess.saturating_add(BRACKET));
+    let (count_lo, count_hi) = (count_below(near_lo), count_below(near_hi));
+    for lane in 0..WIDTH {
+        if !active[lane] {
+            (hi[lane], below_hi[lane]) = (0, 0);
+        } else if guess[lane] <= 0 {
+            continue;
+        } else if count_lo[lane] > rank[lane] {
+            (hi[lane], below_hi[lane], reach[lane]) = (near_lo[lane], count_lo[lane], -4 * BRACKET);
+        } else if count_hi[lane] <= rank[lane] {
+            (lo[lane], below_lo[lane], reach[lane]) = (near_hi[lane], count_hi[lane], 4 * BRACKET);
+        } else {
+            (lo[lane], below_lo[lane], hi[lane], below_hi[lane]) = (near_lo[lane], count_lo[lane], near_hi[lane], count_hi[lane]);
+        }
+    }
+    loop {
+        let threshold: [i32; WIDTH] = std::array::from_fn(|lane| match reach[lane] {
+            0 if below_hi[lane] - below_lo[lane] > 1 && hi[lane] - lo[lane] > 1 => lo[lane] + (hi[lane] - lo[lane]) / 2,
+            0 => -1,
+            reach => guess[lane].saturating_add(reach).clamp(lo[lane], hi[lane]),
+        });
+        if threshold.iter().all(|&t| t < 0) {
+            break;
+        }
+        let below = count_below(threshold);
+        for lane in (0..WIDTH).filter(|&lane| threshold[lane] >= 0) {
+            let holds = below[lane] > rank[lane];
+            if holds {
+                (hi[lane], below_hi[lane]) = (threshold[lane], below[lane]);
+            } else {
+                (lo[lane], below_lo[lane]) = (threshold[lane], below[lane]);
+            }
+            // Still not bracketed: the median is below a threshold below the guess, or above
+            // one above it.
+            reach[lane] = if reach[lane] != 0 && holds == (reach[lane] < 0) { reach[lane].saturating_mul(4) } else { 0 };
+        }
+    }
+    // One key (or one value) is left in [lo, hi): the smallest key from lo.
+    let (lo, unlit) = (Counts::new(lo), Counts::splat(UNLIT));
+    keys.iter().fold(unlit, |smallest, key| blend(key.simd_lt(lo), unlit, *key).min(smallest)).to_array()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn median_keys_match_a_sort_for_ties_gaps_and_guesses_on_either_side() {
+        let mut state = 12345u32;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state
+        };
+        for trial in 0..200 {
+            let k_count = 4 + (next() % 93) as usize;
+            let mut keys = vec![Counts::splat(UNLIT); k_count];
+            for key in keys.iter_mut() {
+                for lane in key.as_mut_array().iter_mut() {
+                    let roll = next() % 10;
+                    *lane = match roll {
+                        0 => UNLIT,
+                        1 => 0x3c00_0000, // ties
+                        _ => (next() % 0x4000_0000) as i32 + if trial % 2 == 0 { 0x3000_0000 } else { 0 },
+                    };
+                }
+            }
+            let lit: [i32; WIDTH] = std::array::from_fn(|lane| keys.iter().filter(|k| k.as_array()[lane] != UNLIT).count() as i32);
+            let guess: [i32; WIDTH] = std::array::from_fn(|lane| [0, 0x3c00_0000, 0x3400_0000, 0x7000_0000][(lane + trial) % 4]);
+            let active: [bool; WIDTH] = std::array::from_fn(|lane| lit[lane] > 0);
+            let median = median_keys(&keys, lit, guess, active);
+            for lane in (0..WIDTH).filter(|&lane| active[lane]) {
+                let mut sorted: Vec<i32> = keys.iter().map(|k| k.as_array()[lane]).filter(|&k| k != UNLIT).collect();
+                sorted.sort_unstable();
+                assert_eq!(median[lane], sorted[lit[lane] as usize / 2], "trial {trial} lane {lane}");
+            }
+        }
+    }
+}
