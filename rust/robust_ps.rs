@@ -63,7 +63,7 @@ impl Lights {
         }
     }
 
-    fn padded(&self) -> usize {
+    pub(crate) fn padded(&self) -> usize {
         self.direction[0].len()
     }
 

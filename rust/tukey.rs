@@ -11,10 +11,11 @@
 //! The pixels of a chunk go through [`WIDTH`] lanes, structure of arrays (one value of each
 //! lane per light), so that the residuals, weights and sums of every lane are computed by
 //! the same vector instructions. A lane whose pixel has settled is refilled with the next
-//! pixel of the chunk at once, so pixels that need many re-weightings do not hold the others
-//! back. Each lane's median comes from counting, vectorised over the lanes: a bisection on the
-//! absolute residuals' bits, started from a bracket around the lane's previous median
-//! (widened until it holds the median).
+//! pixel of the chunk at once (its threshold fit summed as it is read, over the lights side
+//! by side), so pixels that need many re-weightings do not hold the others back. Each lane's
+//! median comes from counting, vectorised over the lanes: a bisection on the absolute
+//! residuals' bits, started from a bracket around the lane's previous median, twice as wide
+//! as that median's last move (widened until it holds the median).
 
 use std::ops::{BitAnd, BitXor};
 
@@ -48,9 +49,12 @@ const WIDTH: usize = 8;
 const CHUNK: usize = 512;
 /// Key of an observation the fit does not light: above every absolute residual's key.
 const UNLIT: i32 = i32::MAX;
-/// Half the width of the bracket tried around a lane's previous median, in key units
-/// (2²⁰ of the mantissa's 2²³ per octave: about ±9 %).
+/// Widest half-width of the first bracket tried around a lane's previous median, in key
+/// units (2²⁰ of the mantissa's 2²³ per octave: about ±9 %): the bracket of a pixel's first
+/// median, whose guess is the previous pixel's.
 const BRACKET: i32 = 1 << 20;
+/// Narrowest half-width of that bracket (about ±0.1 %).
+const BRACKET_MIN: i32 = 1 << 13;
 
 /// One value per lane.
 type Lanes = f32x8;
@@ -86,17 +90,6 @@ struct Source<'a> {
     shadow_fraction: f32,
 }
 
-/// What a lane is doing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Phase {
-    /// No pixel left for it.
-    Empty,
-    /// Its candidate weights are the threshold fit's.
-    Start,
-    /// Its candidate weights come from the residuals of its fit.
-    Reweight,
-}
-
 /// The lanes and their pixels' observations.
 struct Machine {
     /// Number of lights.
@@ -112,25 +105,34 @@ struct Machine {
     /// Bits of `|b − l·g|` per light ([`UNLIT`] where the fit does not light it or it is
     /// saturated): integers that order as the absolute residuals.
     key: Vec<Counts>,
-    /// Weights of the fit kept, per light.
+    /// Weights of the fit kept, per light, once a lane has re-weighted (before, see
+    /// [`Machine::lane_weights`]).
     weight: Vec<Lanes>,
     /// Weights tried next, per light.
     candidate: Vec<Lanes>,
     /// One lane's weights, light by light.
     column: Vec<f32>,
+    /// The pixel being loaded's channel-summed `b`, light by light, padded with
+    /// [`SATURATED`] like [`Lights`].
+    own: Vec<f32>,
+    /// Each lane's shadow level (its threshold fit's).
+    level: [f32; WIDTH],
     /// The fit kept, `ρ n` summed over the channels.
     g: [Vec3; WIDTH],
     /// Σ w l lᵀ of the fit kept.
     gram: [Mat3; WIDTH],
     /// Observations with weight in the fit kept.
     count: [usize; WIDTH],
-    phase: [Phase; WIDTH],
+    /// Whether the lane holds a pixel.
+    occupied: [bool; WIDTH],
     /// Pixel index of each lane.
     pixel: [usize; WIDTH],
     /// Re-weightings done.
     iterations: [u8; WIDTH],
     /// Each lane's last median key, 0 before the first.
     median_key: [i32; WIDTH],
+    /// Half-width of the bracket tried around it next, in key units.
+    bracket: [i32; WIDTH],
 }
 
 impl Machine {
@@ -147,13 +149,16 @@ impl Machine {
             weight: vec![Lanes::ZERO; lights],
             candidate: vec![Lanes::ZERO; lights],
             column: Vec::with_capacity(lights),
+            own: vec![SATURATED; source.padded()],
+            level: [0.0; WIDTH],
             g: [Vec3::ZERO; WIDTH],
             gram: [Mat3::ZERO; WIDTH],
             count: [0; WIDTH],
-            phase: [Phase::Empty; WIDTH],
+            occupied: [false; WIDTH],
             pixel: [0; WIDTH],
             iterations: [0; WIDTH],
             median_key: [0; WIDTH],
+            bracket: [BRACKET; WIDTH],
         }
     }
 
@@ -161,38 +166,23 @@ impl Machine {
     fn run(&mut self, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
         let mut queue = chunk.iter().copied();
         for lane in 0..WIDTH {
-            self.load(source, lane, queue.next());
+            self.load(source, lane, &mut queue, fits);
         }
-        while self.phase.iter().any(|&p| p != Phase::Empty) {
+        while self.occupied.iter().any(|&o| o) {
             let (inverse, too_few_lit) = self.residuals();
             let (grams, rhs, counts) = self.candidate_sums(inverse);
             let mut accept = [false; WIDTH];
             let mut finished = [false; WIDTH];
-            for lane in 0..WIDTH {
-                let fewest = match self.phase[lane] {
-                    Phase::Empty => continue,
-                    Phase::Start => 3,
-                    Phase::Reweight if too_few_lit[lane] => {
-                        finished[lane] = true;
-                        continue;
-                    }
-                    Phase::Reweight => TUKEY_MIN,
-                };
-                let Some(next) = solved(grams[lane], rhs[lane], counts[lane], fewest) else {
-                    if self.phase[lane] == Phase::Start {
-                        fits.push((self.pixel[lane], full_fit(self.lane_rgb(lane), source.lights)));
-                        self.load(source, lane, queue.next());
-                    } else {
-                        finished[lane] = true;
-                    }
+            for lane in (0..WIDTH).filter(|&lane| self.occupied[lane]) {
+                let next = if too_few_lit[lane] { None } else { solved(grams[lane], rhs[lane], counts[lane], TUKEY_MIN) };
+                let Some(next) = next else {
+                    finished[lane] = true;
                     continue;
                 };
-                if self.phase[lane] == Phase::Reweight {
-                    self.iterations[lane] += 1;
-                    let settled = (next - self.g[lane]).length() <= TUKEY_SETTLED * self.g[lane].length();
-                    finished[lane] = settled || self.iterations[lane] == TUKEY_ITERATIONS;
-                }
-                (self.g[lane], self.gram[lane], self.count[lane], self.phase[lane]) = (next, grams[lane], counts[lane], Phase::Reweight);
+                self.iterations[lane] += 1;
+                let settled = (next - self.g[lane]).length() <= TUKEY_SETTLED * self.g[lane].length();
+                finished[lane] = settled || self.iterations[lane] == TUKEY_ITERATIONS;
+                (self.g[lane], self.gram[lane], self.count[lane]) = (next, grams[lane], counts[lane]);
                 accept[lane] = true;
             }
             let accept = mask(accept);
@@ -200,11 +190,10 @@ impl Machine {
                 *weight = blend(accept, *candidate, *weight);
             }
             for lane in (0..WIDTH).filter(|&lane| finished[lane]) {
-                self.column.clear();
-                self.column.extend(self.weight.iter().map(|w| w.as_array()[lane]));
+                self.lane_weights(lane);
                 let fit = weighted_fit(self.lane_rgb(lane), source.lights, &self.column, self.gram[lane], self.count[lane], flag::OK);
                 fits.push((self.pixel[lane], fit));
-                self.load(source, lane, queue.next());
+                self.load(source, lane, &mut queue, fits);
             }
         }
     }
@@ -213,33 +202,56 @@ impl Machine {
         &self.rgb[lane * self.lights..][..self.lights]
     }
 
-    /// Puts `pixel`'s observations in `lane` with the threshold fit's weights as its
-    /// candidate, or empties the lane.
-    fn load(&mut self, source: &Source, lane: usize, pixel: Option<usize>) {
-        let Some(pixel) = pixel else {
-            self.phase[lane] = Phase::Empty;
-            for (grey, candidate) in self.grey.iter_mut().zip(&mut self.candidate) {
-                (grey.as_mut_array()[lane], candidate.as_mut_array()[lane]) = (0.0, 0.0);
+    /// Puts the next pixel of `queue` in `lane`, with its threshold fit as the fit kept; a
+    /// pixel without one gets the full fit (in `fits`) and the next is tried. Empties the lane
+    /// when `queue` is.
+    fn load(&mut self, source: &Source, lane: usize, queue: &mut impl Iterator<Item = usize>, fits: &mut Vec<(usize, PixelFit)>) {
+        for pixel in queue {
+            let level = source.shadow_fraction * self.gather(source, lane, pixel);
+            let (gram, rhs, count) = threshold_sums(&self.own, level, source.lights);
+            if let Some(g) = solved(gram, rhs, count, 3) {
+                (self.g[lane], self.gram[lane], self.count[lane], self.level[lane]) = (g, gram, count, level);
+                (self.occupied[lane], self.pixel[lane], self.iterations[lane], self.bracket[lane]) = (true, pixel, 0, BRACKET);
+                return;
             }
-            return;
-        };
+            fits.push((pixel, full_fit(self.lane_rgb(lane), source.lights)));
+        }
+        self.occupied[lane] = false;
+        for grey in &mut self.grey {
+            grey.as_mut_array()[lane] = 0.0;
+        }
+    }
+
+    /// Reads `pixel`'s observations into `lane` (and its channel sums into `own`) and returns
+    /// its brightest unsaturated channel-summed `b`.
+    fn gather(&mut self, source: &Source, lane: usize, pixel: usize) -> f32 {
         let lights = source.lights;
-        let mut brightest = 0.0f32;
         let rgb = &mut self.rgb[lane * self.lights..][..self.lights];
-        let observed = (0..self.lights).map(|k| &source.images[(k * source.n + pixel) * 3..][..3]);
-        for ((((raw, s), sat), b), grey) in observed.zip(&lights.scale).zip(&lights.saturated_b).zip(rgb).zip(&mut self.grey) {
+        let images = source.images.chunks_exact(source.n * 3);
+        let constants = lights.scale.iter().zip(&lights.saturated_b);
+        let mut brightest = 0.0f32;
+        for ((((image, (s, sat)), b), grey), own) in images.zip(constants).zip(rgb).zip(&mut self.grey).zip(&mut self.own) {
+            let raw = &image[pixel * 3..pixel * 3 + 3];
             *b = [raw[0] * s[0], raw[1] * s[1], raw[2] * s[2]];
             let unsaturated = (b[0] < sat[0]) & (b[1] < sat[1]) & (b[2] < sat[2]);
             let sum = b[0] + b[1] + b[2];
-            grey.as_mut_array()[lane] = if unsaturated { sum } else { SATURATED };
-            brightest = brightest.max(if unsaturated { sum } else { 0.0 });
+            let value = if unsaturated { sum } else { SATURATED };
+            (grey.as_mut_array()[lane], *own) = (value, value);
+            brightest = if unsaturated && sum > brightest { sum } else { brightest };
         }
-        let level = source.shadow_fraction * brightest;
-        for (grey, candidate) in self.grey.iter().zip(&mut self.candidate) {
-            let b = grey.as_array()[lane];
-            candidate.as_mut_array()[lane] = if b > level && b < SATURATED { 1.0 } else { 0.0 };
+        brightest
+    }
+
+    /// `lane`'s weights of the fit kept: the threshold fit's before the first re-weighting.
+    fn lane_weights(&mut self, lane: usize) -> &[f32] {
+        self.column.clear();
+        if self.iterations[lane] == 0 {
+            let level = self.level[lane];
+            self.column.extend(self.grey.iter().map(|grey| grey.as_array()[lane]).map(|b| if b > level && b < SATURATED { 1.0 } else { 0.0 }));
+        } else {
+            self.column.extend(self.weight.iter().map(|w| w.as_array()[lane]));
         }
-        (self.phase[lane], self.pixel[lane], self.iterations[lane]) = (Phase::Start, pixel, 0);
+        &self.column
     }
 
     /// The residuals of the lanes' fits and the Tukey scale of the re-weighting lanes' (1 /
@@ -259,10 +271,12 @@ impl Machine {
         }
         let lit = lit.to_array();
         let too_few_lit: [bool; WIDTH] = std::array::from_fn(|lane| lit[lane] < TUKEY_MIN as i32);
-        let active: [bool; WIDTH] = std::array::from_fn(|lane| self.phase[lane] == Phase::Reweight && !too_few_lit[lane]);
-        let median = median_keys(&self.key, lit, self.median_key, active);
+        let active: [bool; WIDTH] = std::array::from_fn(|lane| self.occupied[lane] && !too_few_lit[lane]);
+        let median = median_keys(&self.key, lit, self.median_key, self.bracket, active);
         let mut inverse = [0.0f32; WIDTH];
         for lane in (0..WIDTH).filter(|&lane| active[lane]) {
+            let moved = median[lane].abs_diff(self.median_key[lane]).min(BRACKET as u32) as i32;
+            self.bracket[lane] = (2 * moved).clamp(BRACKET_MIN, BRACKET);
             self.median_key[lane] = median[lane];
             let scale = (MAD_TO_SIGMA * f32::from_bits(median[lane] as u32)).max(SCALE_FLOOR * g[lane].length());
             inverse[lane] = 1.0 / (TUKEY_SCALES * scale);
@@ -270,34 +284,33 @@ impl Machine {
         (inverse, too_few_lit)
     }
 
-    /// Sets the candidate weights of the lanes with a Tukey scale `inverse` (see
-    /// [`Machine::residuals`]) and returns, for every lane's candidate weights, Σ w l lᵀ,
-    /// Σ w l b (channel sum) and the number of observations with weight.
+    /// Sets the candidate weights from the residuals and the Tukey scale `inverse` (see
+    /// [`Machine::residuals`]; meaningless in the lanes where it is 0) and returns, for every
+    /// lane, Σ w l lᵀ, Σ w l b (channel sum) and the number of observations with weight.
     fn candidate_sums(&mut self, inverse: [f32; WIDTH]) -> ([Mat3; WIDTH], [Vec3; WIDTH], [usize; WIDTH]) {
-        let active = mask(inverse.map(|i| i > 0.0));
         let (inverse, one, unlit) = (f32x8::new(inverse), Lanes::ONE, Counts::splat(UNLIT));
         let mut gram = [Lanes::ZERO; 6];
         let mut rhs = [Lanes::ZERO; 3];
         let mut count = Counts::ZERO;
+        // Two passes, so that each one's sums stay in registers without AVX.
         for ((((candidate, grey), residual), key), l) in self.candidate.iter_mut().zip(&self.grey).zip(&self.residual).zip(&self.key).zip(&self.light) {
             let u = *residual * inverse;
-            let inside = u.abs().simd_lt(one) & cast::<Counts, Lanes>(key.simd_ne(unlit));
+            let inside = u.abs().simd_lt(one) & cast::<Counts, Lanes>(key.simd_lt(unlit));
             let tukey = (one - u * u) * (one - u * u);
-            *candidate = blend(active, tukey & inside, *candidate);
-            for (sum, &ll) in gram.iter_mut().zip(&l[3..]) {
-                *sum += *candidate * ll;
-            }
+            *candidate = tukey & inside;
             let weighted = *candidate * *grey;
             for (sum, &l) in rhs.iter_mut().zip(&l[..3]) {
                 *sum += weighted * l;
             }
             count -= cast::<Lanes, Counts>(candidate.simd_gt(Lanes::ZERO));
         }
+        for (candidate, l) in self.candidate.iter().zip(&self.light) {
+            for (sum, &ll) in gram.iter_mut().zip(&l[3..]) {
+                *sum += *candidate * ll;
+            }
+        }
         let (gram, rhs, count) = (gram.map(f32x8::to_array), rhs.map(f32x8::to_array), count.to_array());
-        let grams = std::array::from_fn(|lane| {
-            let g = gram.map(|m| m[lane]);
-            Mat3::from_cols(Vec3::new(g[0], g[1], g[2]), Vec3::new(g[1], g[3], g[4]), Vec3::new(g[2], g[4], g[5]))
-        });
+        let grams = std::array::from_fn(|lane| symmetric(gram.map(|m| m[lane])));
         (grams, std::array::from_fn(|lane| Vec3::new(rhs[0][lane], rhs[1][lane], rhs[2][lane])), count.map(|c| c as usize))
     }
 }
@@ -309,6 +322,34 @@ fn blend<T: Copy + BitXor<Output = T> + BitAnd<Output = T>>(mask: T, if_true: T,
     if_false ^ ((if_false ^ if_true) & mask)
 }
 
+/// Σ w l lᵀ, Σ w l b and Σ w of the threshold fit of a pixel whose channel-summed `b` are
+/// `grey` (padded like `lights`): weight 1 above `level` and below [`SATURATED`], else 0.
+fn threshold_sums(grey: &[f32], level: f32, lights: &Lights) -> (Mat3, Vec3, usize) {
+    let (level, saturated, one) = (Lanes::splat(level), Lanes::splat(SATURATED), Lanes::ONE);
+    let mut gram = [Lanes::ZERO; 6];
+    let mut rhs = [Lanes::ZERO; 3];
+    let mut count = Counts::ZERO;
+    let lanes = |values: &[f32], at: usize| Lanes::new(values[at..at + WIDTH].try_into().expect("padded to whole lanes"));
+    for at in (0..grey.len()).step_by(WIDTH) {
+        let b = lanes(grey, at);
+        let lit = b.simd_gt(level) & b.simd_lt(saturated);
+        for (sum, outer) in gram.iter_mut().zip(&lights.outer) {
+            *sum += (one & lit) * lanes(outer, at);
+        }
+        for (sum, direction) in rhs.iter_mut().zip(&lights.direction) {
+            *sum += (b & lit) * lanes(direction, at);
+        }
+        count -= cast::<Lanes, Counts>(lit);
+    }
+    let total = |lanes: Lanes| lanes.to_array().iter().sum::<f32>();
+    (symmetric(gram.map(total)), Vec3::from_array(rhs.map(total)), count.to_array().iter().sum::<i32>() as usize)
+}
+
+/// The symmetric matrix of xx, xy, xz, yy, yz, zz.
+fn symmetric(m: [f32; 6]) -> Mat3 {
+    Mat3::from_cols(Vec3::new(m[0], m[1], m[2]), Vec3::new(m[1], m[3], m[4]), Vec3::new(m[2], m[4], m[5]))
+}
+
 /// A lane mask: all bits set where `lanes` is true.
 fn mask(lanes: [bool; WIDTH]) -> Lanes {
     cast(Counts::new(lanes.map(|on| -i32::from(on))))
@@ -318,9 +359,9 @@ fn mask(lanes: [bool; WIDTH]) -> Lanes {
 /// [`UNLIT`], of which it has `lit`: a bisection on the keys' values, each step counting the
 /// keys below a threshold of each lane, until one key (or one value) is left in a lane's
 /// bracket. A lane with a `guess` (a positive key) first brackets its median by thresholds
-/// ±[`BRACKET`] around it, then 4, 16, 64... times as far on the side where the median lies,
+/// ±`bracket` around it, then 4, 16, 64... times as far on the side where the median lies,
 /// until one holds it.
-fn median_keys(keys: &[Counts], lit: [i32; WIDTH], guess: [i32; WIDTH], active: [bool; WIDTH]) -> [i32; WIDTH] {
+fn median_keys(keys: &[Counts], lit: [i32; WIDTH], guess: [i32; WIDTH], bracket: [i32; WIDTH], active: [bool; WIDTH]) -> [i32; WIDTH] {
     let count_below = |threshold: [i32; WIDTH]| {
         let threshold = Counts::new(threshold);
         keys.iter().fold(Counts::ZERO, |below, key| below - key.simd_lt(threshold)).to_array()
@@ -332,8 +373,8 @@ fn median_keys(keys: &[Counts], lit: [i32; WIDTH], guess: [i32; WIDTH], active: 
     // How far from the guess the next threshold of a lane still bracketing lies: below it
     // when negative, above it when positive, 0 once the lane bisects.
     let mut reach = [0i32; WIDTH];
-    let near_lo = guess.map(|guess| guess.saturating_sub(BRACKET).max(0));
-    let near_hi = guess.map(|guess| guess.saturating_add(BRACKET));
+    let near_lo: [i32; WIDTH] = std::array::from_fn(|lane| guess[lane].saturating_sub(bracket[lane]).max(0));
+    let near_hi: [i32; WIDTH] = std::array::from_fn(|lane| guess[lane].saturating_add(bracket[lane]));
     let (count_lo, count_hi) = (count_below(near_lo), count_below(near_hi));
     for lane in 0..WIDTH {
         if !active[lane] {
@@ -341,9 +382,9 @@ fn median_keys(keys: &[Counts], lit: [i32; WIDTH], guess: [i32; WIDTH], active: 
         } else if guess[lane] <= 0 {
             continue;
         } else if count_lo[lane] > rank[lane] {
-            (hi[lane], below_hi[lane], reach[lane]) = (near_lo[lane], count_lo[lane], -4 * BRACKET);
+            (hi[lane], below_hi[lane], reach[lane]) = (near_lo[lane], count_lo[lane], -4 * bracket[lane]);
         } else if count_hi[lane] <= rank[lane] {
-            (lo[lane], below_lo[lane], reach[lane]) = (near_hi[lane], count_hi[lane], 4 * BRACKET);
+            (lo[lane], below_lo[lane], reach[lane]) = (near_hi[lane], count_hi[lane], 4 * bracket[lane]);
         } else {
             (lo[lane], below_lo[lane], hi[lane], below_hi[lane]) = (near_lo[lane], count_lo[lane], near_hi[lane], count_hi[lane]);
         }
@@ -404,7 +445,8 @@ mod tests {
             let lit: [i32; WIDTH] = std::array::from_fn(|lane| keys.iter().filter(|k| k.as_array()[lane] != UNLIT).count() as i32);
             let guess: [i32; WIDTH] = std::array::from_fn(|lane| [0, 0x3c00_0000, 0x3400_0000, 0x7000_0000][(lane + trial) % 4]);
             let active: [bool; WIDTH] = std::array::from_fn(|lane| lit[lane] > 0);
-            let median = median_keys(&keys, lit, guess, active);
+            let bracket: [i32; WIDTH] = std::array::from_fn(|lane| [BRACKET, BRACKET_MIN, 1 << 16][(lane + trial) % 3]);
+            let median = median_keys(&keys, lit, guess, bracket, active);
             for lane in (0..WIDTH).filter(|&lane| active[lane]) {
                 let mut sorted: Vec<i32> = keys.iter().map(|k| k.as_array()[lane]).filter(|&k| k != UNLIT).collect();
                 sorted.sort_unstable();
