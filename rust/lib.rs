@@ -10,6 +10,7 @@ mod escape_cone;
 pub mod geometry;
 pub mod height_field_accel;
 pub mod image_io;
+mod lanes;
 pub mod light_cache;
 pub mod ps;
 pub mod robust_ps;

@@ -10,7 +10,7 @@
 //!
 //! The pixels of a chunk go through [`WIDTH`] lanes, structure of arrays (one value of each
 //! lane per light), so that the residuals, weights and sums of every lane are computed by
-//! the same vector instructions. A lane whose pixel has settled is refilled with the next
+//! the same vector instructions (AVX2 where the CPU has it, see [`crate::lanes`]). A lane whose pixel has settled is refilled with the next
 //! pixel of the chunk at once (its threshold fit summed as it is read, over the lights side
 //! by side), so pixels that need many re-weightings do not hold the others back. Each lane's
 //! median comes from counting, vectorised over the lanes: a bisection on the absolute
@@ -21,9 +21,7 @@ use std::ops::{BitAnd, BitXor};
 
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
-use wide::bytemuck::cast;
-use wide::{f32x8, i32x8};
-
+use crate::lanes::{Floats, Ints, Isa, Portable, WIDTH};
 use crate::ps::{flag, PixelFit};
 use crate::robust_ps::{full_fit, solved, weighted_fit, Lights, SATURATED};
 
@@ -43,8 +41,6 @@ const TUKEY_MIN: usize = 4;
 const MAD_TO_SIGMA: f32 = 1.4826;
 /// Least robust scale, as a fraction of the fit's length (noise-free data).
 const SCALE_FLOOR: f32 = 1e-4;
-/// Pixels side by side.
-const WIDTH: usize = 8;
 /// Pixels per parallel task.
 const CHUNK: usize = 512;
 /// Key of an observation the fit does not light: above every absolute residual's key.
@@ -55,11 +51,6 @@ const UNLIT: i32 = i32::MAX;
 const BRACKET: i32 = 1 << 20;
 /// Narrowest half-width of that bracket (about ±0.1 %).
 const BRACKET_MIN: i32 = 1 << 13;
-
-/// One value per lane.
-type Lanes = f32x8;
-/// One integer per lane.
-type Counts = i32x8;
 
 /// Fits the pixels where `mask` is true from `images` laid out `(K, pixels, 3)`: (pixel
 /// index, fit) for each, in no particular order.
@@ -97,19 +88,19 @@ struct Machine {
     /// Each light's direction `l` (x, y, z) and `l lᵀ` (xx, xy, xz, yy, yz, zz).
     light: Vec<[f32; 9]>,
     /// Channel-summed `b` per light ([`SATURATED`] when saturated).
-    grey: Vec<Lanes>,
+    grey: Vec<[f32; WIDTH]>,
     /// RGB `b` per lane and light, lane-major.
     rgb: Vec<[f32; 3]>,
     /// `b − l·g` per light.
-    residual: Vec<Lanes>,
+    residual: Vec<[f32; WIDTH]>,
     /// Bits of `|b − l·g|` per light ([`UNLIT`] where the fit does not light it or it is
     /// saturated): integers that order as the absolute residuals.
-    key: Vec<Counts>,
+    key: Vec<[i32; WIDTH]>,
     /// Weights of the fit kept, per light, once a lane has re-weighted (before, see
     /// [`Machine::lane_weights`]).
-    weight: Vec<Lanes>,
+    weight: Vec<[f32; WIDTH]>,
     /// Weights tried next, per light.
-    candidate: Vec<Lanes>,
+    candidate: Vec<[f32; WIDTH]>,
     /// One lane's weights, light by light.
     column: Vec<f32>,
     /// The pixel being loaded's channel-summed `b`, light by light, padded with
@@ -142,12 +133,12 @@ impl Machine {
         Machine {
             lights,
             light,
-            grey: vec![Lanes::ZERO; lights],
+            grey: vec![[0.0; WIDTH]; lights],
             rgb: vec![[0.0; 3]; lights * WIDTH],
-            residual: vec![Lanes::ZERO; lights],
-            key: vec![Counts::splat(UNLIT); lights],
-            weight: vec![Lanes::ZERO; lights],
-            candidate: vec![Lanes::ZERO; lights],
+            residual: vec![[0.0; WIDTH]; lights],
+            key: vec![[UNLIT; WIDTH]; lights],
+            weight: vec![[0.0; WIDTH]; lights],
+            candidate: vec![[0.0; WIDTH]; lights],
             column: Vec::with_capacity(lights),
             own: vec![SATURATED; source.padded()],
             level: [0.0; WIDTH],
@@ -162,15 +153,34 @@ impl Machine {
         }
     }
 
-    /// Fits every pixel of `chunk`, appending to `fits`.
+    /// Fits every pixel of `chunk`, appending to `fits`, in AVX2 registers when the CPU has
+    /// them (the same results either way).
     fn run(&mut self, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx2) = crate::lanes::Avx2::detect() {
+            // SAFETY: `detect` found AVX2.
+            return unsafe { self.run_avx2(avx2, source, chunk, fits) };
+        }
+        self.run_in(Portable, source, chunk, fits);
+    }
+
+    /// [`Machine::run`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn run_avx2(&mut self, isa: crate::lanes::Avx2, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
+        self.run_in(isa, source, chunk, fits);
+    }
+
+    /// [`Machine::run`] in the registers of `isa`.
+    #[inline(always)]
+    fn run_in<V: Isa>(&mut self, isa: V, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
         let mut queue = chunk.iter().copied();
         for lane in 0..WIDTH {
-            self.load(source, lane, &mut queue, fits);
+            self.load(isa, source, lane, &mut queue, fits);
         }
         while self.occupied.iter().any(|&o| o) {
-            let (inverse, too_few_lit) = self.residuals();
-            let (grams, rhs, counts) = self.candidate_sums(inverse);
+            let (inverse, too_few_lit) = self.residuals(isa);
+            let (grams, rhs, counts) = self.candidate_sums(isa, inverse);
             let mut accept = [false; WIDTH];
             let mut finished = [false; WIDTH];
             for lane in (0..WIDTH).filter(|&lane| self.occupied[lane]) {
@@ -185,15 +195,15 @@ impl Machine {
                 (self.g[lane], self.gram[lane], self.count[lane]) = (next, grams[lane], counts[lane]);
                 accept[lane] = true;
             }
-            let accept = mask(accept);
+            let accept = isa.ints(accept.map(|on| -i32::from(on))).to_floats();
             for (weight, candidate) in self.weight.iter_mut().zip(&self.candidate) {
-                *weight = blend(accept, *candidate, *weight);
+                *weight = blend(accept, isa.floats(*candidate), isa.floats(*weight)).to_array();
             }
             for lane in (0..WIDTH).filter(|&lane| finished[lane]) {
                 self.lane_weights(lane);
                 let fit = weighted_fit(self.lane_rgb(lane), source.lights, &self.column, self.gram[lane], self.count[lane], flag::OK);
                 fits.push((self.pixel[lane], fit));
-                self.load(source, lane, &mut queue, fits);
+                self.load(isa, source, lane, &mut queue, fits);
             }
         }
     }
@@ -205,10 +215,11 @@ impl Machine {
     /// Puts the next pixel of `queue` in `lane`, with its threshold fit as the fit kept; a
     /// pixel without one gets the full fit (in `fits`) and the next is tried. Empties the lane
     /// when `queue` is.
-    fn load(&mut self, source: &Source, lane: usize, queue: &mut impl Iterator<Item = usize>, fits: &mut Vec<(usize, PixelFit)>) {
+    #[inline(always)]
+    fn load<V: Isa>(&mut self, isa: V, source: &Source, lane: usize, queue: &mut impl Iterator<Item = usize>, fits: &mut Vec<(usize, PixelFit)>) {
         for pixel in queue {
             let level = source.shadow_fraction * self.gather(source, lane, pixel);
-            let (gram, rhs, count) = threshold_sums(&self.own, level, source.lights);
+            let (gram, rhs, count) = threshold_sums(isa, &self.own, level, source.lights);
             if let Some(g) = solved(gram, rhs, count, 3) {
                 (self.g[lane], self.gram[lane], self.count[lane], self.level[lane]) = (g, gram, count, level);
                 (self.occupied[lane], self.pixel[lane], self.iterations[lane], self.bracket[lane]) = (true, pixel, 0, BRACKET);
@@ -218,12 +229,13 @@ impl Machine {
         }
         self.occupied[lane] = false;
         for grey in &mut self.grey {
-            grey.as_mut_array()[lane] = 0.0;
+            grey[lane] = 0.0;
         }
     }
 
     /// Reads `pixel`'s observations into `lane` (and its channel sums into `own`) and returns
     /// its brightest unsaturated channel-summed `b`.
+    #[inline(always)]
     fn gather(&mut self, source: &Source, lane: usize, pixel: usize) -> f32 {
         let lights = source.lights;
         let rgb = &mut self.rgb[lane * self.lights..][..self.lights];
@@ -236,7 +248,7 @@ impl Machine {
             let unsaturated = (b[0] < sat[0]) & (b[1] < sat[1]) & (b[2] < sat[2]);
             let sum = b[0] + b[1] + b[2];
             let value = if unsaturated { sum } else { SATURATED };
-            (grey.as_mut_array()[lane], *own) = (value, value);
+            (grey[lane], *own) = (value, value);
             brightest = if unsaturated && sum > brightest { sum } else { brightest };
         }
         brightest
@@ -247,9 +259,9 @@ impl Machine {
         self.column.clear();
         if self.iterations[lane] == 0 {
             let level = self.level[lane];
-            self.column.extend(self.grey.iter().map(|grey| grey.as_array()[lane]).map(|b| if b > level && b < SATURATED { 1.0 } else { 0.0 }));
+            self.column.extend(self.grey.iter().map(|grey| if grey[lane] > level && grey[lane] < SATURATED { 1.0 } else { 0.0 }));
         } else {
-            self.column.extend(self.weight.iter().map(|w| w.as_array()[lane]));
+            self.column.extend(self.weight.iter().map(|w| w[lane]));
         }
         &self.column
     }
@@ -257,22 +269,25 @@ impl Machine {
     /// The residuals of the lanes' fits and the Tukey scale of the re-weighting lanes' (1 /
     /// ([`TUKEY_SCALES`] × robust scale), 0 for the others). Returns it and the lanes whose
     /// fits light fewer than [`TUKEY_MIN`] unsaturated observations.
-    fn residuals(&mut self) -> ([f32; WIDTH], [bool; WIDTH]) {
+    #[inline(always)]
+    fn residuals<V: Isa>(&mut self, isa: V) -> ([f32; WIDTH], [bool; WIDTH]) {
         let g = self.g;
-        let (gx, gy, gz) = (f32x8::new(g.map(|g| g.x)), f32x8::new(g.map(|g| g.y)), f32x8::new(g.map(|g| g.z)));
-        let (saturated, magnitude, unlit) = (Lanes::splat(SATURATED), Counts::splat(0x7fff_ffff), Counts::splat(UNLIT));
-        let mut lit = Counts::ZERO;
+        let (gx, gy, gz) = (isa.floats(g.map(|g| g.x)), isa.floats(g.map(|g| g.y)), isa.floats(g.map(|g| g.z)));
+        let (zero, saturated, magnitude, unlit) = (isa.splat(0.0), isa.splat(SATURATED), isa.splat_int(0x7fff_ffff), isa.splat_int(UNLIT));
+        let mut lit = isa.splat_int(0);
         for (((grey, residual), key), l) in self.grey.iter().zip(&mut self.residual).zip(&mut self.key).zip(&self.light) {
+            let grey = isa.floats(*grey);
             let predicted = gx * l[0] + gy * l[1] + gz * l[2];
-            let use_it: Counts = cast(predicted.simd_gt(Lanes::ZERO) & grey.simd_lt(saturated));
-            *residual = *grey - predicted;
-            *key = blend(use_it, cast::<Lanes, Counts>(*residual) & magnitude, unlit);
+            let use_it = (predicted.simd_gt(zero) & grey.simd_lt(saturated)).to_bits();
+            let difference = grey - predicted;
+            *residual = difference.to_array();
+            *key = blend(use_it, difference.to_bits() & magnitude, unlit).to_array();
             lit -= use_it;
         }
         let lit = lit.to_array();
         let too_few_lit: [bool; WIDTH] = std::array::from_fn(|lane| lit[lane] < TUKEY_MIN as i32);
         let active: [bool; WIDTH] = std::array::from_fn(|lane| self.occupied[lane] && !too_few_lit[lane]);
-        let median = median_keys(&self.key, lit, self.median_key, self.bracket, active);
+        let median = median_keys(isa, &self.key, lit, self.median_key, self.bracket, active);
         let mut inverse = [0.0f32; WIDTH];
         for lane in (0..WIDTH).filter(|&lane| active[lane]) {
             let moved = median[lane].abs_diff(self.median_key[lane]).min(BRACKET as u32) as i32;
@@ -287,36 +302,39 @@ impl Machine {
     /// Sets the candidate weights from the residuals and the Tukey scale `inverse` (see
     /// [`Machine::residuals`]; meaningless in the lanes where it is 0) and returns, for every
     /// lane, Σ w l lᵀ, Σ w l b (channel sum) and the number of observations with weight.
-    fn candidate_sums(&mut self, inverse: [f32; WIDTH]) -> ([Mat3; WIDTH], [Vec3; WIDTH], [usize; WIDTH]) {
-        let (inverse, one, unlit) = (f32x8::new(inverse), Lanes::ONE, Counts::splat(UNLIT));
-        let mut gram = [Lanes::ZERO; 6];
-        let mut rhs = [Lanes::ZERO; 3];
-        let mut count = Counts::ZERO;
+    #[inline(always)]
+    fn candidate_sums<V: Isa>(&mut self, isa: V, inverse: [f32; WIDTH]) -> ([Mat3; WIDTH], [Vec3; WIDTH], [usize; WIDTH]) {
+        let (inverse, zero, one, unlit) = (isa.floats(inverse), isa.splat(0.0), isa.splat(1.0), isa.splat_int(UNLIT));
+        let mut gram = [zero; 6];
+        let mut rhs = [zero; 3];
+        let mut count = isa.splat_int(0);
         // Two passes, so that each one's sums stay in registers without AVX.
         for ((((candidate, grey), residual), key), l) in self.candidate.iter_mut().zip(&self.grey).zip(&self.residual).zip(&self.key).zip(&self.light) {
-            let u = *residual * inverse;
-            let inside = u.abs().simd_lt(one) & cast::<Counts, Lanes>(key.simd_lt(unlit));
+            let u = isa.floats(*residual) * inverse;
+            let inside = u.abs().simd_lt(one) & isa.ints(*key).simd_lt(unlit).to_floats();
             let tukey = (one - u * u) * (one - u * u);
-            *candidate = tukey & inside;
-            let weighted = *candidate * *grey;
+            let weight = tukey & inside;
+            *candidate = weight.to_array();
+            let weighted = weight * isa.floats(*grey);
             for (sum, &l) in rhs.iter_mut().zip(&l[..3]) {
                 *sum += weighted * l;
             }
-            count -= cast::<Lanes, Counts>(candidate.simd_gt(Lanes::ZERO));
+            count -= weight.simd_gt(zero).to_bits();
         }
         for (candidate, l) in self.candidate.iter().zip(&self.light) {
+            let weight = isa.floats(*candidate);
             for (sum, &ll) in gram.iter_mut().zip(&l[3..]) {
-                *sum += *candidate * ll;
+                *sum += weight * ll;
             }
         }
-        let (gram, rhs, count) = (gram.map(f32x8::to_array), rhs.map(f32x8::to_array), count.to_array());
+        let (gram, rhs, count) = (lanes_of(gram), lanes_of(rhs), count.to_array());
         let grams = std::array::from_fn(|lane| symmetric(gram.map(|m| m[lane])));
         (grams, std::array::from_fn(|lane| Vec3::new(rhs[0][lane], rhs[1][lane], rhs[2][lane])), count.map(|c| c as usize))
     }
 }
 
-/// `if_true` where `mask`'s bits are set, else `if_false`: `wide`'s `select` is a call
-/// where the target has no blend instruction (x86-64 before SSE4.1).
+/// `if_true` where `mask`'s bits are set, else `if_false` (`wide`'s `select` is a call on
+/// x86-64 before SSE4.1).
 #[inline(always)]
 fn blend<T: Copy + BitXor<Output = T> + BitAnd<Output = T>>(mask: T, if_true: T, if_false: T) -> T {
     if_false ^ ((if_false ^ if_true) & mask)
@@ -324,35 +342,47 @@ fn blend<T: Copy + BitXor<Output = T> + BitAnd<Output = T>>(mask: T, if_true: T,
 
 /// Σ w l lᵀ, Σ w l b and Σ w of the threshold fit of a pixel whose channel-summed `b` are
 /// `grey` (padded like `lights`): weight 1 above `level` and below [`SATURATED`], else 0.
-fn threshold_sums(grey: &[f32], level: f32, lights: &Lights) -> (Mat3, Vec3, usize) {
-    let (level, saturated, one) = (Lanes::splat(level), Lanes::splat(SATURATED), Lanes::ONE);
-    let mut gram = [Lanes::ZERO; 6];
-    let mut rhs = [Lanes::ZERO; 3];
-    let mut count = Counts::ZERO;
-    let lanes = |values: &[f32], at: usize| Lanes::new(values[at..at + WIDTH].try_into().expect("padded to whole lanes"));
+#[inline(always)]
+fn threshold_sums<V: Isa>(isa: V, grey: &[f32], level: f32, lights: &Lights) -> (Mat3, Vec3, usize) {
+    let (level, saturated, one) = (isa.splat(level), isa.splat(SATURATED), isa.splat(1.0));
+    let mut gram = [isa.splat(0.0); 6];
+    let mut rhs = [isa.splat(0.0); 3];
+    let mut count = isa.splat_int(0);
     for at in (0..grey.len()).step_by(WIDTH) {
-        let b = lanes(grey, at);
+        let b = isa.floats(eight(grey, at));
         let lit = b.simd_gt(level) & b.simd_lt(saturated);
         for (sum, outer) in gram.iter_mut().zip(&lights.outer) {
-            *sum += (one & lit) * lanes(outer, at);
+            *sum += (one & lit) * isa.floats(eight(outer, at));
         }
         for (sum, direction) in rhs.iter_mut().zip(&lights.direction) {
-            *sum += (b & lit) * lanes(direction, at);
+            *sum += (b & lit) * isa.floats(eight(direction, at));
         }
-        count -= cast::<Lanes, Counts>(lit);
+        count -= lit.to_bits();
     }
-    let total = |lanes: Lanes| lanes.to_array().iter().sum::<f32>();
-    (symmetric(gram.map(total)), Vec3::from_array(rhs.map(total)), count.to_array().iter().sum::<i32>() as usize)
+    let total = |lanes: [f32; WIDTH]| lanes.iter().sum::<f32>();
+    (symmetric(lanes_of(gram).map(total)), Vec3::from_array(lanes_of(rhs).map(total)), count.to_array().iter().sum::<i32>() as usize)
+}
+
+/// The eight values of `values` from `at`.
+#[inline(always)]
+fn eight(values: &[f32], at: usize) -> [f32; WIDTH] {
+    values[at..at + WIDTH].try_into().expect("padded to whole lanes")
+}
+
+/// The lanes of each of `sums`. (A loop, not a closure: a closure would not be compiled for
+/// the instruction set of its caller.)
+#[inline(always)]
+fn lanes_of<F: Floats, const N: usize>(sums: [F; N]) -> [[f32; WIDTH]; N] {
+    let mut lanes = [[0.0; WIDTH]; N];
+    for (lane, sum) in lanes.iter_mut().zip(sums) {
+        *lane = sum.to_array();
+    }
+    lanes
 }
 
 /// The symmetric matrix of xx, xy, xz, yy, yz, zz.
 fn symmetric(m: [f32; 6]) -> Mat3 {
     Mat3::from_cols(Vec3::new(m[0], m[1], m[2]), Vec3::new(m[1], m[3], m[4]), Vec3::new(m[2], m[4], m[5]))
-}
-
-/// A lane mask: all bits set where `lanes` is true.
-fn mask(lanes: [bool; WIDTH]) -> Lanes {
-    cast(Counts::new(lanes.map(|on| -i32::from(on))))
 }
 
 /// For each `active` lane, the `lit / 2`-th smallest (from 0) of its `keys` below
@@ -361,11 +391,8 @@ fn mask(lanes: [bool; WIDTH]) -> Lanes {
 /// bracket. A lane with a `guess` (a positive key) first brackets its median by thresholds
 /// ±`bracket` around it, then 4, 16, 64... times as far on the side where the median lies,
 /// until one holds it.
-fn median_keys(keys: &[Counts], lit: [i32; WIDTH], guess: [i32; WIDTH], bracket: [i32; WIDTH], active: [bool; WIDTH]) -> [i32; WIDTH] {
-    let count_below = |threshold: [i32; WIDTH]| {
-        let threshold = Counts::new(threshold);
-        keys.iter().fold(Counts::ZERO, |below, key| below - key.simd_lt(threshold)).to_array()
-    };
+#[inline(always)]
+fn median_keys<V: Isa>(isa: V, keys: &[[i32; WIDTH]], lit: [i32; WIDTH], guess: [i32; WIDTH], bracket: [i32; WIDTH], active: [bool; WIDTH]) -> [i32; WIDTH] {
     let rank = lit.map(|lit| lit / 2);
     // Invariant for each active lane: below(lo) ≤ rank < below(hi).
     let (mut lo, mut below_lo) = ([0i32; WIDTH], [0i32; WIDTH]);
@@ -375,7 +402,7 @@ fn median_keys(keys: &[Counts], lit: [i32; WIDTH], guess: [i32; WIDTH], bracket:
     let mut reach = [0i32; WIDTH];
     let near_lo: [i32; WIDTH] = std::array::from_fn(|lane| guess[lane].saturating_sub(bracket[lane]).max(0));
     let near_hi: [i32; WIDTH] = std::array::from_fn(|lane| guess[lane].saturating_add(bracket[lane]));
-    let (count_lo, count_hi) = (count_below(near_lo), count_below(near_hi));
+    let (count_lo, count_hi) = (count_below(isa, keys, near_lo), count_below(isa, keys, near_hi));
     for lane in 0..WIDTH {
         if !active[lane] {
             (hi[lane], below_hi[lane]) = (0, 0);
@@ -398,7 +425,7 @@ fn median_keys(keys: &[Counts], lit: [i32; WIDTH], guess: [i32; WIDTH], bracket:
         if threshold.iter().all(|&t| t < 0) {
             break;
         }
-        let below = count_below(threshold);
+        let below = count_below(isa, keys, threshold);
         for lane in (0..WIDTH).filter(|&lane| threshold[lane] >= 0) {
             let holds = below[lane] > rank[lane];
             if holds {
@@ -412,8 +439,24 @@ fn median_keys(keys: &[Counts], lit: [i32; WIDTH], guess: [i32; WIDTH], bracket:
         }
     }
     // One key (or one value) is left in [lo, hi): the smallest key from lo.
-    let (lo, unlit) = (Counts::new(lo), Counts::splat(UNLIT));
-    keys.iter().fold(unlit, |smallest, key| blend(key.simd_lt(lo), unlit, *key).min(smallest)).to_array()
+    let (lo, unlit) = (isa.ints(lo), isa.splat_int(UNLIT));
+    let mut smallest = unlit;
+    for key in keys {
+        let key = isa.ints(*key);
+        smallest = blend(key.simd_lt(lo), unlit, key).min(smallest);
+    }
+    smallest.to_array()
+}
+
+/// How many of each lane's `keys` are below its `threshold`.
+#[inline(always)]
+fn count_below<V: Isa>(isa: V, keys: &[[i32; WIDTH]], threshold: [i32; WIDTH]) -> [i32; WIDTH] {
+    let threshold = isa.ints(threshold);
+    let mut below = isa.splat_int(0);
+    for key in keys {
+        below -= isa.ints(*key).simd_lt(threshold);
+    }
+    below.to_array()
 }
 
 #[cfg(test)]
@@ -422,6 +465,14 @@ mod tests {
 
     #[test]
     fn median_keys_match_a_sort_for_ties_gaps_and_guesses_on_either_side() {
+        check_median_keys(Portable);
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx2) = crate::lanes::Avx2::detect() {
+            check_median_keys(avx2);
+        }
+    }
+
+    fn check_median_keys<V: Isa>(isa: V) {
         let mut state = 12345u32;
         let mut next = || {
             state ^= state << 13;
@@ -431,9 +482,9 @@ mod tests {
         };
         for trial in 0..200 {
             let k_count = 4 + (next() % 93) as usize;
-            let mut keys = vec![Counts::splat(UNLIT); k_count];
+            let mut keys = vec![[UNLIT; WIDTH]; k_count];
             for key in keys.iter_mut() {
-                for lane in key.as_mut_array().iter_mut() {
+                for lane in key.iter_mut() {
                     let roll = next() % 10;
                     *lane = match roll {
                         0 => UNLIT,
@@ -442,13 +493,13 @@ mod tests {
                     };
                 }
             }
-            let lit: [i32; WIDTH] = std::array::from_fn(|lane| keys.iter().filter(|k| k.as_array()[lane] != UNLIT).count() as i32);
+            let lit: [i32; WIDTH] = std::array::from_fn(|lane| keys.iter().filter(|k| k[lane] != UNLIT).count() as i32);
             let guess: [i32; WIDTH] = std::array::from_fn(|lane| [0, 0x3c00_0000, 0x3400_0000, 0x7000_0000][(lane + trial) % 4]);
             let active: [bool; WIDTH] = std::array::from_fn(|lane| lit[lane] > 0);
             let bracket: [i32; WIDTH] = std::array::from_fn(|lane| [BRACKET, BRACKET_MIN, 1 << 16][(lane + trial) % 3]);
-            let median = median_keys(&keys, lit, guess, bracket, active);
+            let median = median_keys(isa, &keys, lit, guess, bracket, active);
             for lane in (0..WIDTH).filter(|&lane| active[lane]) {
-                let mut sorted: Vec<i32> = keys.iter().map(|k| k.as_array()[lane]).filter(|&k| k != UNLIT).collect();
+                let mut sorted: Vec<i32> = keys.iter().map(|k| k[lane]).filter(|&k| k != UNLIT).collect();
                 sorted.sort_unstable();
                 assert_eq!(median[lane], sorted[lit[lane] as usize / 2], "trial {trial} lane {lane}");
             }
