@@ -194,15 +194,15 @@ fn well_posed(gram: Mat3) -> bool {
 }
 
 /// Normal and albedo of a pixel whose RGB `b` of each light is `rgb`, from its final
-/// `weight`s (Σ w l lᵀ = `gram`).
-pub(crate) fn weighted_fit(rgb: &[[f32; 3]], lights: &Lights, weight: &[f32], gram: Mat3, count: usize, fitted: u8) -> PixelFit {
+/// `weights`, light by light (Σ w l lᵀ = `gram`).
+pub(crate) fn weighted_fit(rgb: &[[f32; 3]], lights: &Lights, weights: impl IntoIterator<Item = f32>, gram: Mat3, count: usize, fitted: u8) -> PixelFit {
     let mut rhs = [Vec3::ZERO; 3];
-    for (k, b) in rgb.iter().enumerate() {
-        if weight[k] > 0.0 {
-            let l = lights.direction(k) * weight[k];
-            for c in 0..3 {
-                rhs[c] += l * b[c];
-            }
+    for (k, (b, weight)) in rgb.iter().zip(weights).enumerate() {
+        // A select, not a branch (which light has weight is unpredictable); an observation
+        // without weight adds zeros, whatever its value.
+        let (l, b) = if weight > 0.0 { (lights.direction(k) * weight, *b) } else { (Vec3::ZERO, [0.0; 3]) };
+        for c in 0..3 {
+            rhs[c] += l * b[c];
         }
     }
     match finish(gram, rhs) {
@@ -257,14 +257,14 @@ fn trim(pixel: &Pixel, lights: &Lights, work: &mut Work) -> PixelFit {
     let kept = weight.iter().filter(|&&w| w > 0.0).count();
     let (gram, rhs) = weighted_sums(pixel, lights, weight);
     if solved(gram, rhs, kept, 3).is_some() {
-        return weighted_fit(pixel.rgb, lights, weight, gram, kept, flag::OK);
+        return weighted_fit(pixel.rgb, lights, weight.iter().copied(), gram, kept, flag::OK);
     }
     // Too few lights to trim: every unsaturated observation, flagged.
     weight.iter_mut().zip(pixel.grey).for_each(|(w, &b)| *w = if b < SATURATED { 1.0 } else { 0.0 });
     let unsaturated = weight[..count].iter().filter(|&&w| w > 0.0).count();
     let (gram, rhs) = weighted_sums(pixel, lights, weight);
     if solved(gram, rhs, unsaturated, 3).is_some() {
-        return weighted_fit(pixel.rgb, lights, weight, gram, unsaturated, flag::FULL_FIT);
+        return weighted_fit(pixel.rgb, lights, weight.iter().copied(), gram, unsaturated, flag::FULL_FIT);
     }
     full_fit(pixel.rgb, lights)
 }

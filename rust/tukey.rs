@@ -97,12 +97,10 @@ struct Machine {
     /// saturated): integers that order as the absolute residuals.
     key: Vec<[i32; WIDTH]>,
     /// Weights of the fit kept, per light, once a lane has re-weighted (before, see
-    /// [`Machine::lane_weights`]).
+    /// [`Machine::lane_fit`]).
     weight: Vec<[f32; WIDTH]>,
     /// Weights tried next, per light.
     candidate: Vec<[f32; WIDTH]>,
-    /// One lane's weights, light by light.
-    column: Vec<f32>,
     /// The pixel being loaded's channel-summed `b`, light by light, padded with
     /// [`SATURATED`] like [`Lights`].
     own: Vec<f32>,
@@ -139,7 +137,6 @@ impl Machine {
             key: vec![[UNLIT; WIDTH]; lights],
             weight: vec![[0.0; WIDTH]; lights],
             candidate: vec![[0.0; WIDTH]; lights],
-            column: Vec::with_capacity(lights),
             own: vec![SATURATED; source.padded()],
             level: [0.0; WIDTH],
             g: [Vec3::ZERO; WIDTH],
@@ -200,9 +197,7 @@ impl Machine {
                 *weight = blend(accept, isa.floats(*candidate), isa.floats(*weight)).to_array();
             }
             for lane in (0..WIDTH).filter(|&lane| finished[lane]) {
-                self.lane_weights(lane);
-                let fit = weighted_fit(self.lane_rgb(lane), source.lights, &self.column, self.gram[lane], self.count[lane], flag::OK);
-                fits.push((self.pixel[lane], fit));
+                fits.push((self.pixel[lane], self.lane_fit(lane, source.lights)));
                 self.load(isa, source, lane, &mut queue, fits);
             }
         }
@@ -254,16 +249,17 @@ impl Machine {
         brightest
     }
 
-    /// `lane`'s weights of the fit kept: the threshold fit's before the first re-weighting.
-    fn lane_weights(&mut self, lane: usize) -> &[f32] {
-        self.column.clear();
+    /// The normal and albedo of `lane`'s fit kept, whose weights are the threshold fit's
+    /// before the first re-weighting.
+    fn lane_fit(&self, lane: usize, lights: &Lights) -> PixelFit {
+        let (rgb, gram, count) = (self.lane_rgb(lane), self.gram[lane], self.count[lane]);
         if self.iterations[lane] == 0 {
             let level = self.level[lane];
-            self.column.extend(self.grey.iter().map(|grey| if grey[lane] > level && grey[lane] < SATURATED { 1.0 } else { 0.0 }));
+            let weights = self.grey.iter().map(|grey| if grey[lane] > level && grey[lane] < SATURATED { 1.0 } else { 0.0 });
+            weighted_fit(rgb, lights, weights, gram, count, flag::OK)
         } else {
-            self.column.extend(self.weight.iter().map(|w| w[lane]));
+            weighted_fit(rgb, lights, self.weight.iter().map(|w| w[lane]), gram, count, flag::OK)
         }
-        &self.column
     }
 
     /// The residuals of the lanes' fits and the Tukey scale of the re-weighting lanes' (1 /
@@ -470,6 +466,54 @@ mod tests {
         if let Some(avx2) = crate::lanes::Avx2::detect() {
             check_median_keys(avx2);
         }
+    }
+
+    /// The fits of `pixels` pixels of random normals and albedos under 40 lights, with soft
+    /// shadows, highlights and saturated observations among them: by [`Machine::run`] (AVX2
+    /// where the CPU has it) or in [`Portable`] lanes.
+    fn fits_of_noisy_pixels(pixels: usize, portable: bool) -> Vec<(usize, PixelFit)> {
+        let mut state = 99u32;
+        let mut uniform = || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state as f32 / u32::MAX as f32
+        };
+        let directions: Vec<Vec3> = (0..40).map(|k| Vec3::new((k as f32 * 2.4).cos(), (k as f32 * 2.4).sin(), 1.0 + k as f32 / 20.0).normalize()).collect();
+        let gram = directions.iter().fold(Mat3::ZERO, |m, &l| m + crate::ps::outer(l));
+        let lights = Lights::new(&directions, &vec![[1.0; 3]; 40], &vec![[1.5; 3]; 40], gram);
+        let mut images = vec![0.0f32; 40 * pixels * 3];
+        for p in 0..pixels {
+            let normal = Vec3::new(uniform() - 0.5, uniform() - 0.5, 1.0).normalize();
+            let albedo = 0.2 + 0.6 * uniform();
+            for (k, l) in directions.iter().enumerate() {
+                let mut value = albedo * l.dot(normal).max(0.0);
+                match (uniform() * 10.0) as u32 {
+                    0 => value *= 0.3 * uniform(),
+                    1 => value += 0.8 * uniform(),
+                    _ => value *= 1.0 + 0.01 * (uniform() - 0.5),
+                }
+                images[(k * pixels + p) * 3..][..3].fill(value);
+            }
+        }
+        let mask = vec![true; pixels];
+        let pixels: Vec<usize> = (0..pixels).collect();
+        let source = Source { images: &images, n: mask.len(), lights: &lights, shadow_fraction: 0.05 };
+        let (mut machine, mut fits) = (Machine::new(&lights), Vec::new());
+        if portable {
+            machine.run_in(Portable, &source, &pixels, &mut fits);
+        } else {
+            machine.run(&source, &pixels, &mut fits);
+        }
+        fits
+    }
+
+    #[test]
+    fn the_fit_gives_the_same_bits_in_every_instruction_set() {
+        let portable = fits_of_noisy_pixels(300, true);
+        assert_eq!(portable.len(), 300);
+        assert!(portable.iter().all(|(_, fit)| fit.normal[2] > 0.5), "fits of upward normals");
+        assert_eq!(fits_of_noisy_pixels(300, false), portable);
     }
 
     fn check_median_keys<V: Isa>(isa: V) {
