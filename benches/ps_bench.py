@@ -1,12 +1,13 @@
 """Photometric stereo speed: irtps (Rust) against the obvious numpy implementation.
 
-Both run in this process on the same DiLiGenT-size input (96 lights, 612x512 RGB float32) and
-the medians of several runs are compared: over every pixel (plain least squares), and over
-the object's pixels, which is what ``irtps reconstruct`` fits (numpy's plain least squares
-against each robust mode of irtps). Uses DiLiGenT ball (and reading, when present) from
+Both run in this process on the same DiLiGenT-size input (96 lights, 612x512 RGB float32),
+interleaved (each repeat runs numpy, then irtps), so that a machine whose speed wanders
+slows both alike: the figures are the median times and the median of the per-repeat ratios,
+over every pixel (plain least squares) and over the object's pixels, which is what ``irtps
+reconstruct`` fits (numpy's plain least squares against each robust mode of irtps). Uses DiLiGenT ball (and reading, when present) from
 ``../shared``, else synthetic images of the same size with a disc for the object.
 
-    python benches/ps_bench.py [--repeats 5] [--json ps.json]
+    python benches/ps_bench.py [--repeats 11] [--json ps.json]
 """
 
 from __future__ import annotations
@@ -53,31 +54,45 @@ def load_inputs() -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, 
     return [(images, disc, directions, np.ones((96, 3)), "random 96x512x612")]
 
 
-def median_seconds(run, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+#: Pause after each run: OpenBLAS's threads spin for a while after numpy's matrix product,
+#: and would take the cores from the run that follows.
+SETTLE_S = 0.2
+
+
+def seconds(run) -> float:
+    start = time.perf_counter()
+    run()
+    elapsed = time.perf_counter() - start
+    time.sleep(SETTLE_S)
+    return elapsed
 
 
 def measure(images: np.ndarray, mask: np.ndarray, d32: np.ndarray, e32: np.ndarray, repeats: int) -> dict:
-    """Median seconds of numpy's plain fit and of each irtps mode, every pixel and the object's."""
+    """Median seconds of numpy's plain fit and of each irtps mode, every pixel and the
+    object's, and the median of each one's per-repeat speed-up over numpy (``*_x``)."""
     all_pixels = np.ones(mask.shape, bool)
-    figures = {
-        "numpy_plain_all_s": median_seconds(lambda: numpy_ps(images, d32, e32), repeats),
-        "irtps_plain_all_s": median_seconds(lambda: _core.photometric_stereo(images, all_pixels, d32, e32, "none"), repeats),
-        "numpy_plain_object_s": median_seconds(lambda: numpy_ps(images[:, mask][:, :, None], d32, e32), repeats),
+    runs = {
+        "numpy_plain_all": lambda: numpy_ps(images, d32, e32),
+        "irtps_plain_all": lambda: _core.photometric_stereo(images, all_pixels, d32, e32, "none"),
+        "numpy_plain_object": lambda: numpy_ps(images[:, mask][:, :, None], d32, e32),
     }
     for mode in ROBUST_MODES:
-        figures[f"irtps_{mode}_object_s"] = median_seconds(lambda mode=mode: _core.photometric_stereo(images, mask, d32, e32, mode), repeats)
+        runs[f"irtps_{mode}_object"] = lambda mode=mode: _core.photometric_stereo(images, mask, d32, e32, mode)
+    times: dict[str, list[float]] = {name: [] for name in runs}
+    for _ in range(repeats):
+        for name, run in runs.items():
+            times[name].append(seconds(run))
+    figures = {f"{name}_s": statistics.median(values) for name, values in times.items()}
+    for name, values in times.items():
+        if name.startswith("irtps"):
+            baseline = times["numpy_plain_all" if name.endswith("_all") else "numpy_plain_object"]
+            figures[f"{name}_x"] = statistics.median(b / t for b, t in zip(baseline, values))
     return figures
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=11)
     parser.add_argument("--json", type=Path, help="write the figures here")
     args = parser.parse_args()
     results = []
@@ -86,11 +101,11 @@ def main() -> None:
         figures["input"] = f"{name}: {images.shape[0]} lights, {images.shape[2]}x{images.shape[1]} RGB float32, {int(mask.sum())} object pixels"
         print(f"{figures['input']} (median of {args.repeats})")
         numpy_all, numpy_object = figures["numpy_plain_all_s"], figures["numpy_plain_object_s"]
-        print(f"  every pixel:  numpy pinv(L) @ images {numpy_all:.3f} s   irtps none {figures['irtps_plain_all_s']:.3f} s   {numpy_all / figures['irtps_plain_all_s']:.1f}x numpy")
+        print(f"  every pixel:  numpy pinv(L) @ images {numpy_all:.3f} s   irtps none {figures['irtps_plain_all_s']:.3f} s   {figures['irtps_plain_all_x']:.1f}x numpy")
         print(f"  object only:  numpy pinv(L) @ images {numpy_object:.3f} s")
         for mode in ROBUST_MODES:
-            seconds = figures[f"irtps_{mode}_object_s"]
-            print(f"                irtps {mode:<9}  {seconds:.3f} s   {numpy_object / seconds:.1f}x numpy plain")
+            elapsed = figures[f"irtps_{mode}_object_s"]
+            print(f"                irtps {mode:<9}  {elapsed:.3f} s   {figures[f'irtps_{mode}_object_x']:.1f}x numpy plain")
         results.append(figures)
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))

@@ -33,6 +33,7 @@ pub trait Ints: Copy + Sub<Output = Self> + SubAssign + BitAnd<Output = Self> + 
     /// Mask of `self < other`.
     fn simd_lt(self, other: Self) -> Self;
     fn min(self, other: Self) -> Self;
+    fn max(self, other: Self) -> Self;
     /// The floats whose bits these are.
     fn to_floats(self) -> Self::Floats;
     fn to_array(self) -> [i32; WIDTH];
@@ -115,6 +116,11 @@ impl Ints for wide::i32x8 {
     #[inline(always)]
     fn min(self, other: Self) -> Self {
         wide::i32x8::min(self, other)
+    }
+
+    #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        wide::i32x8::max(self, other)
     }
 
     #[inline(always)]
@@ -275,6 +281,11 @@ mod avx2 {
         }
 
         #[inline(always)]
+        fn max(self, other: I) -> I {
+            I(avx!(_mm256_max_epi32(self.0, other.0)))
+        }
+
+        #[inline(always)]
         fn to_floats(self) -> F {
             F(avx!(_mm256_castsi256_ps(self.0)))
         }
@@ -312,6 +323,7 @@ mod tests {
         let j = isa.splat_int(2);
         assert_eq!(i.simd_lt(j).to_array(), [0, -1, 0, -1, 0, 0, -1, 0]);
         assert_eq!(i.min(j).to_array(), [2, -1, 2, 0, 2, 2, -8, 2]);
+        assert_eq!(i.max(j).to_array(), [5, 2, i32::MAX, 2, 7, 7, 2, 2]);
         let mut count = isa.splat_int(0);
         count -= i.simd_lt(j);
         assert_eq!(count.to_array(), [0, 1, 0, 1, 0, 0, 1, 0]);

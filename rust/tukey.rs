@@ -49,6 +49,8 @@ const UNLIT: i32 = i32::MAX;
 /// units (2²⁰ of the mantissa's 2²³ per octave: about ±9 %): the bracket of a pixel's first
 /// median, whose guess is the previous pixel's.
 const BRACKET: i32 = 1 << 20;
+/// Keys left in a lane's bracket when its median's bisection stops.
+const SELECT: usize = 4;
 /// Narrowest half-width of that bracket (about ±0.1 %).
 const BRACKET_MIN: i32 = 1 << 13;
 
@@ -383,7 +385,8 @@ fn symmetric(m: [f32; 6]) -> Mat3 {
 
 /// For each `active` lane, the `lit / 2`-th smallest (from 0) of its `keys` below
 /// [`UNLIT`], of which it has `lit`: a bisection on the keys' values, each step counting the
-/// keys below a threshold of each lane, until one key (or one value) is left in a lane's
+/// keys below a threshold of each lane, until at most [`SELECT`] keys (or one value) are left
+/// in a lane's bracket, then one pass that sorts each lane's smallest [`SELECT`] keys of the
 /// bracket. A lane with a `guess` (a positive key) first brackets its median by thresholds
 /// ±`bracket` around it, then 4, 16, 64... times as far on the side where the median lies,
 /// until one holds it.
@@ -414,7 +417,7 @@ fn median_keys<V: Isa>(isa: V, keys: &[[i32; WIDTH]], lit: [i32; WIDTH], guess: 
     }
     loop {
         let threshold: [i32; WIDTH] = std::array::from_fn(|lane| match reach[lane] {
-            0 if below_hi[lane] - below_lo[lane] > 1 && hi[lane] - lo[lane] > 1 => lo[lane] + (hi[lane] - lo[lane]) / 2,
+            0 if below_hi[lane] - below_lo[lane] > SELECT as i32 && hi[lane] - lo[lane] > 1 => lo[lane] + (hi[lane] - lo[lane]) / 2,
             0 => -1,
             reach => guess[lane].saturating_add(reach).clamp(lo[lane], hi[lane]),
         });
@@ -434,14 +437,23 @@ fn median_keys<V: Isa>(isa: V, keys: &[[i32; WIDTH]], lit: [i32; WIDTH], guess: 
             reach[lane] = if reach[lane] != 0 && holds == (reach[lane] < 0) { reach[lane].saturating_mul(4) } else { 0 };
         }
     }
-    // One key (or one value) is left in [lo, hi): the smallest key from lo.
-    let (lo, unlit) = (isa.ints(lo), isa.splat_int(UNLIT));
-    let mut smallest = unlit;
+    // At most SELECT keys, or one value, are left in [lo, hi): the keys from lo go down a
+    // cascade that keeps the SELECT smallest in order.
+    let (from, unlit) = (isa.ints(lo), isa.splat_int(UNLIT));
+    let mut smallest = [unlit; SELECT];
     for key in keys {
         let key = isa.ints(*key);
-        smallest = blend(key.simd_lt(lo), unlit, key).min(smallest);
+        let mut carried = blend(key.simd_lt(from), unlit, key);
+        for slot in &mut smallest {
+            (*slot, carried) = (slot.min(carried), slot.max(carried));
+        }
     }
-    smallest.to_array()
+    let mut sorted = [[0; WIDTH]; SELECT];
+    for (lanes, slot) in sorted.iter_mut().zip(smallest) {
+        *lanes = slot.to_array();
+    }
+    // More keys than SELECT are left only when they all have the value lo.
+    std::array::from_fn(|lane| sorted.get((rank[lane] - below_lo[lane]) as usize).map_or(lo[lane], |keys| keys[lane]))
 }
 
 /// How many of each lane's `keys` are below its `threshold`.
