@@ -10,17 +10,19 @@
 //!
 //! The pixels of a chunk go through [`WIDTH`] lanes, structure of arrays (one value of each
 //! lane per light), so that the residuals, weights and sums of every lane are computed by
-//! the same vector instructions (AVX2 where the CPU has it, see [`crate::lanes`]). A lane whose pixel has settled is refilled with the next
-//! pixel of the chunk at once (its threshold fit summed as it is read, over the lights side
-//! by side), so pixels that need many re-weightings do not hold the others back. Each lane's
-//! median comes from counting, vectorised over the lanes: a bisection on the absolute
-//! residuals' bits, started from a bracket around the lane's previous median, twice as wide
-//! as that median's last move (widened until it holds the median).
+//! the same vector instructions (AVX2 where the CPU has it, see [`crate::lanes`]). A lane
+//! whose pixel has settled is refilled with the next pixel of the chunk at once (its
+//! threshold fit summed as it is read, over the lights side by side), so pixels that need
+//! many re-weightings do not hold the others back. Each lane's median comes from counting,
+//! vectorised over the lanes: a bisection on the absolute residuals' bits, started from a
+//! bracket around the lane's previous median, twice as wide as that median's last move
+//! (widened until it holds the median), until a few keys are left, which one pass sorts.
 
 use std::ops::{BitAnd, BitXor};
 
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
+
 use crate::lanes::{Floats, Ints, Isa, Portable, WIDTH};
 use crate::ps::{flag, PixelFit};
 use crate::robust_ps::{full_fit, solved, weighted_fit, Lights, SATURATED};
@@ -49,10 +51,10 @@ const UNLIT: i32 = i32::MAX;
 /// units (2²⁰ of the mantissa's 2²³ per octave: about ±9 %): the bracket of a pixel's first
 /// median, whose guess is the previous pixel's.
 const BRACKET: i32 = 1 << 20;
-/// Keys left in a lane's bracket when its median's bisection stops.
-const SELECT: usize = 4;
 /// Narrowest half-width of that bracket (about ±0.1 %).
 const BRACKET_MIN: i32 = 1 << 13;
+/// Keys left in a lane's bracket when its median's bisection stops.
+const SELECT: usize = 4;
 
 /// Fits the pixels where `mask` is true from `images` laid out `(K, pixels, 3)`: (pixel
 /// index, fit) for each, in no particular order.
