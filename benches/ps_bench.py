@@ -4,8 +4,9 @@ Both run in this process on the same DiLiGenT-size input (96 lights, 612x512 RGB
 interleaved (each repeat runs numpy, then irtps), so that a machine whose speed wanders
 slows both alike: the figures are the median times and the median of the per-repeat ratios,
 over every pixel (plain least squares) and over the object's pixels, which is what ``irtps
-reconstruct`` fits (numpy's plain least squares against each robust mode of irtps). Uses DiLiGenT ball (and reading, when present) from
-``../shared``, else synthetic images of the same size with a disc for the object.
+reconstruct`` fits (numpy's plain least squares against each robust mode of irtps). Uses
+DiLiGenT ball (and reading, when present) from ``../shared``, else synthetic images of the
+same size with a disc for the object.
 
     python benches/ps_bench.py [--repeats 11] [--json ps.json]
 """
