@@ -60,7 +60,7 @@ pub fn denoise(surface: &Surface<'_>, indirect: &[f32], noise_energy: &[f64]) ->
     if n > 0 && (surface.pixels.windows(2).any(|w| w[0] >= w[1]) || surface.pixels[n - 1] >= width * height) {
         return Err(Error::input("pixels", format!("expected ascending indices below {}", width * height)));
     }
-    if n == 0 || indirect.len() % (3 * n) != 0 {
+    if n == 0 || !indirect.len().is_multiple_of(3 * n) {
         return if indirect.is_empty() {
             Ok(Denoised { indirect: Vec::new(), noise_energy: noise_energy.to_vec() })
         } else {

@@ -27,11 +27,15 @@ pub trait Floats: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = 
 }
 
 /// Eight `i32` in registers.
-pub trait Ints: Copy + Sub<Output = Self> + SubAssign + BitAnd<Output = Self> + BitXor<Output = Self> {
+pub trait Ints: Copy + Add<Output = Self> + Sub<Output = Self> + SubAssign + BitAnd<Output = Self> + BitXor<Output = Self> {
     /// The floats of the same instruction set.
     type Floats: Floats<Ints = Self>;
     /// Mask of `self < other`.
     fn simd_lt(self, other: Self) -> Self;
+    /// Mask of `self == other`.
+    fn simd_eq(self, other: Self) -> Self;
+    /// Each value shifted right by one bit, its sign kept (halved, rounded down).
+    fn halved(self) -> Self;
     fn min(self, other: Self) -> Self;
     fn max(self, other: Self) -> Self;
     /// The floats whose bits these are.
@@ -111,6 +115,16 @@ impl Ints for wide::i32x8 {
     #[inline(always)]
     fn simd_lt(self, other: Self) -> Self {
         wide::i32x8::simd_lt(self, other)
+    }
+
+    #[inline(always)]
+    fn simd_eq(self, other: Self) -> Self {
+        wide::i32x8::simd_eq(self, other)
+    }
+
+    #[inline(always)]
+    fn halved(self) -> Self {
+        self >> 1u32
     }
 
     #[inline(always)]
@@ -210,6 +224,7 @@ mod avx2 {
     binary!(F, Mul, mul, _mm256_mul_ps);
     binary!(F, BitAnd, bitand, _mm256_and_ps);
     binary!(F, BitXor, bitxor, _mm256_xor_ps);
+    binary!(I, Add, add, _mm256_add_epi32);
     binary!(I, Sub, sub, _mm256_sub_epi32);
     binary!(I, BitAnd, bitand, _mm256_and_si256);
     binary!(I, BitXor, bitxor, _mm256_xor_si256);
@@ -276,6 +291,16 @@ mod avx2 {
         }
 
         #[inline(always)]
+        fn simd_eq(self, other: I) -> I {
+            I(avx!(_mm256_cmpeq_epi32(self.0, other.0)))
+        }
+
+        #[inline(always)]
+        fn halved(self) -> I {
+            I(avx!(_mm256_srai_epi32::<1>(self.0)))
+        }
+
+        #[inline(always)]
         fn min(self, other: I) -> I {
             I(avx!(_mm256_min_epi32(self.0, other.0)))
         }
@@ -317,18 +342,21 @@ mod tests {
         assert_eq!(a.abs().to_array(), [1.0, 2.0, 3.0, 4.0, 0.5, 6.0, 0.0, 8.0]);
         assert_eq!(a.simd_lt(b).to_bits().to_array(), [-1, -1, 0, -1, -1, 0, -1, 0]);
         assert_eq!((a & a.simd_gt(b)).to_array(), [0.0, 0.0, 3.0, 0.0, 0.0, 6.0, 0.0, 8.0]);
-        assert_eq!((a ^ a).to_array(), [0.0; WIDTH]);
+        assert_eq!((a ^ isa.splat(-0.0)).to_array(), [-1.0, 2.0, -3.0, 4.0, -0.5, -6.0, 0.0, -8.0]);
         assert_eq!(a.to_bits().to_floats().to_array(), a.to_array());
         let i = isa.ints([5, -1, i32::MAX, 0, 7, 7, -8, 2]);
         let j = isa.splat_int(2);
         assert_eq!(i.simd_lt(j).to_array(), [0, -1, 0, -1, 0, 0, -1, 0]);
+        assert_eq!(i.simd_eq(j).to_array(), [0, 0, 0, 0, 0, 0, 0, -1]);
+        assert_eq!(i.halved().to_array(), [2, -1, i32::MAX / 2, 0, 3, 3, -4, 1]);
         assert_eq!(i.min(j).to_array(), [2, -1, 2, 0, 2, 2, -8, 2]);
         assert_eq!(i.max(j).to_array(), [5, 2, i32::MAX, 2, 7, 7, 2, 2]);
         let mut count = isa.splat_int(0);
         count -= i.simd_lt(j);
         assert_eq!(count.to_array(), [0, 1, 0, 1, 0, 0, 1, 0]);
+        assert_eq!((i + j).to_array()[6], -6);
         assert_eq!((i & j).to_array()[2], 2);
-        assert_eq!((i ^ i).to_array(), [0; WIDTH]);
+        assert_eq!((i ^ j).to_array(), [7, -3, i32::MAX ^ 2, 2, 5, 5, -6, 0]);
     }
 
     #[test]

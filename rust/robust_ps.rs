@@ -153,16 +153,16 @@ fn weighted_sums(pixel: &Pixel, lights: &Lights, weight: &[f32]) -> (Mat3, Vec3)
     for start in (0..weight.len()).step_by(LANES) {
         let w = &weight[start..start + LANES];
         let b = &pixel.grey[start..start + LANES];
-        for m in 0..6 {
-            let ll = &lights.outer[m][start..start + LANES];
+        for (sums, outer) in gram.iter_mut().zip(&lights.outer) {
+            let ll = &outer[start..start + LANES];
             for i in 0..LANES {
-                gram[m][i] += w[i] * ll[i];
+                sums[i] += w[i] * ll[i];
             }
         }
-        for j in 0..3 {
-            let l = &lights.direction[j][start..start + LANES];
+        for (sums, direction) in rhs.iter_mut().zip(&lights.direction) {
+            let l = &direction[start..start + LANES];
             for i in 0..LANES {
-                rhs[j][i] += w[i] * b[i] * l[i];
+                sums[i] += w[i] * b[i] * l[i];
             }
         }
     }

@@ -14,9 +14,12 @@
 //! whose pixel has settled is refilled with the next pixel of the chunk at once (its
 //! threshold fit summed as it is read, over the lights side by side), so pixels that need
 //! many re-weightings do not hold the others back. Each lane's median comes from counting,
-//! vectorised over the lanes: a bisection on the absolute residuals' bits, started from a
-//! bracket around the lane's previous median, twice as wide as that median's last move
-//! (widened until it holds the median), until a few keys are left, which one pass sorts.
+//! vectorised over the lanes: a bisection on the absolute residuals' bits (every lane's
+//! bounds in vector registers too, so that no branch waits on a lane's count), started from
+//! a bracket around the lane's previous median, twice as wide as that median's last move
+//! (widened until it holds the median), until a few keys are left, which one pass sorts. A
+//! settled pixel's RGB albedo is each channel's scale along its normal, summed over the
+//! lights side by side.
 
 use std::ops::{BitAnd, BitXor};
 
@@ -25,7 +28,7 @@ use rayon::prelude::*;
 
 use crate::lanes::{Floats, Ints, Isa, Portable, WIDTH};
 use crate::ps::{flag, PixelFit};
-use crate::robust_ps::{full_fit, solved, weighted_fit, Lights, SATURATED};
+use crate::robust_ps::{full_fit, solved, Lights, SATURATED};
 
 /// Tukey's biweight constant, in robust scales: an observation whose residual is beyond
 /// 2.5 scales carries no weight. Below the 4.685 of 95 % Gaussian efficiency, because the
@@ -53,6 +56,9 @@ const UNLIT: i32 = i32::MAX;
 const BRACKET: i32 = 1 << 20;
 /// Narrowest half-width of that bracket (about ±0.1 %).
 const BRACKET_MIN: i32 = 1 << 13;
+/// Farthest step of a lane still bracketing its median that is quadrupled, in key units:
+/// beyond, the next step goes to the end of the keys' range.
+const REACH_MAX: i32 = 1 << 28;
 /// Keys left in a lane's bracket when its median's bisection stops.
 const SELECT: usize = 4;
 
@@ -93,8 +99,13 @@ struct Machine {
     light: Vec<[f32; 9]>,
     /// Channel-summed `b` per light ([`SATURATED`] when saturated).
     grey: Vec<[f32; WIDTH]>,
-    /// RGB `b` per lane and light, lane-major.
-    rgb: Vec<[f32; 3]>,
+    /// Lights padded to whole lanes, like [`Lights`].
+    padded: usize,
+    /// `b` per lane, channel and (padded) light: lane by lane, each lane's red, green and
+    /// blue rows.
+    channel: Vec<f32>,
+    /// The weights of the lane being finished, per (padded) light.
+    finishing: Vec<f32>,
     /// `b − l·g` per light.
     residual: Vec<[f32; WIDTH]>,
     /// Bits of `|b − l·g|` per light ([`UNLIT`] where the fit does not light it or it is
@@ -136,7 +147,9 @@ impl Machine {
             lights,
             light,
             grey: vec![[0.0; WIDTH]; lights],
-            rgb: vec![[0.0; 3]; lights * WIDTH],
+            padded: source.padded(),
+            channel: vec![0.0; WIDTH * 3 * source.padded()],
+            finishing: vec![0.0; source.padded()],
             residual: vec![[0.0; WIDTH]; lights],
             key: vec![[UNLIT; WIDTH]; lights],
             weight: vec![[0.0; WIDTH]; lights],
@@ -201,14 +214,18 @@ impl Machine {
                 *weight = blend(accept, isa.floats(*candidate), isa.floats(*weight)).to_array();
             }
             for lane in (0..WIDTH).filter(|&lane| finished[lane]) {
-                fits.push((self.pixel[lane], self.lane_fit(lane, source.lights)));
+                fits.push((self.pixel[lane], self.lane_fit(isa, lane, source.lights)));
                 self.load(isa, source, lane, &mut queue, fits);
             }
         }
     }
 
-    fn lane_rgb(&self, lane: usize) -> &[[f32; 3]] {
-        &self.rgb[lane * self.lights..][..self.lights]
+    /// The red, green and blue `b` of `lane`, each per (padded) light.
+    fn lane_channels(&self, lane: usize) -> (&[f32], &[f32], &[f32]) {
+        let rows = &self.channel[lane * 3 * self.padded..][..3 * self.padded];
+        let (red, rest) = rows.split_at(self.padded);
+        let (green, blue) = rest.split_at(self.padded);
+        (red, green, blue)
     }
 
     /// Puts the next pixel of `queue` in `lane`, with its threshold fit as the fit kept; a
@@ -224,7 +241,9 @@ impl Machine {
                 (self.occupied[lane], self.pixel[lane], self.iterations[lane], self.bracket[lane]) = (true, pixel, 0, BRACKET);
                 return;
             }
-            fits.push((pixel, full_fit(self.lane_rgb(lane), source.lights)));
+            let (red, green, blue) = self.lane_channels(lane);
+            let rgb: Vec<[f32; 3]> = (0..self.lights).map(|k| [red[k], green[k], blue[k]]).collect();
+            fits.push((pixel, full_fit(&rgb, source.lights)));
         }
         self.occupied[lane] = false;
         for grey in &mut self.grey {
@@ -237,13 +256,16 @@ impl Machine {
     #[inline(always)]
     fn gather(&mut self, source: &Source, lane: usize, pixel: usize) -> f32 {
         let lights = source.lights;
-        let rgb = &mut self.rgb[lane * self.lights..][..self.lights];
+        let rows = &mut self.channel[lane * 3 * self.padded..][..3 * self.padded];
+        let (red, rest) = rows.split_at_mut(self.padded);
+        let (green, blue) = rest.split_at_mut(self.padded);
         let images = source.images.chunks_exact(source.n * 3);
         let constants = lights.scale.iter().zip(&lights.saturated_b);
         let mut brightest = 0.0f32;
-        for ((((image, (s, sat)), b), grey), own) in images.zip(constants).zip(rgb).zip(&mut self.grey).zip(&mut self.own) {
+        for ((((((image, (s, sat)), red), green), blue), grey), own) in images.zip(constants).zip(red).zip(green).zip(blue).zip(&mut self.grey).zip(&mut self.own) {
             let raw = &image[pixel * 3..pixel * 3 + 3];
-            *b = [raw[0] * s[0], raw[1] * s[1], raw[2] * s[2]];
+            let b = [raw[0] * s[0], raw[1] * s[1], raw[2] * s[2]];
+            (*red, *green, *blue) = (b[0], b[1], b[2]);
             let unsaturated = (b[0] < sat[0]) & (b[1] < sat[1]) & (b[2] < sat[2]);
             let sum = b[0] + b[1] + b[2];
             let value = if unsaturated { sum } else { SATURATED };
@@ -254,16 +276,37 @@ impl Machine {
     }
 
     /// The normal and albedo of `lane`'s fit kept, whose weights are the threshold fit's
-    /// before the first re-weighting.
-    fn lane_fit(&self, lane: usize, lights: &Lights) -> PixelFit {
-        let (rgb, gram, count) = (self.lane_rgb(lane), self.gram[lane], self.count[lane]);
+    /// before the first re-weighting: the normal `g/|g|` and each channel's albedo the
+    /// weighted least-squares scale along it, Σ w (n·l) b / Σ w (n·l)², summed over the
+    /// lights side by side.
+    #[inline(always)]
+    fn lane_fit<V: Isa>(&mut self, isa: V, lane: usize, lights: &Lights) -> PixelFit {
+        let (g, gram, count) = (self.g[lane], self.gram[lane], self.count[lane]);
         if self.iterations[lane] == 0 {
             let level = self.level[lane];
-            let weights = self.grey.iter().map(|grey| if grey[lane] > level && grey[lane] < SATURATED { 1.0 } else { 0.0 });
-            weighted_fit(rgb, lights, weights, gram, count, flag::OK)
+            for (weight, grey) in self.finishing.iter_mut().zip(&self.grey) {
+                *weight = if grey[lane] > level && grey[lane] < SATURATED { 1.0 } else { 0.0 };
+            }
         } else {
-            weighted_fit(rgb, lights, self.weight.iter().map(|w| w[lane]), gram, count, flag::OK)
+            for (weight, kept) in self.finishing.iter_mut().zip(&self.weight) {
+                *weight = kept[lane];
+            }
         }
+        let normal = g.normalize();
+        let (nx, ny, nz) = (isa.splat(normal.x), isa.splat(normal.y), isa.splat(normal.z));
+        let mut sums = [isa.splat(0.0); 3];
+        let (red, green, blue) = self.lane_channels(lane);
+        for at in (0..self.padded).step_by(WIDTH) {
+            let shading = nx * isa.floats(eight(&lights.direction[0], at)) + ny * isa.floats(eight(&lights.direction[1], at)) + nz * isa.floats(eight(&lights.direction[2], at));
+            let weighted = isa.floats(eight(&self.finishing, at)) * shading;
+            for (sum, channel) in sums.iter_mut().zip([red, green, blue]) {
+                *sum += weighted * isa.floats(eight(channel, at));
+            }
+        }
+        let denominator = normal.dot(gram * normal);
+        let total = |lanes: [f32; WIDTH]| lanes.iter().sum::<f32>();
+        let sums = lanes_of(sums).map(total);
+        PixelFit { normal: normal.to_array(), albedo: sums.map(|sum| (sum / denominator).max(0.0)), flag: flag::OK, used: count as u16 }
     }
 
     /// The residuals of the lanes' fits and the Tukey scale of the re-weighting lanes' (1 /
@@ -305,29 +348,35 @@ impl Machine {
     #[inline(always)]
     fn candidate_sums<V: Isa>(&mut self, isa: V, inverse: [f32; WIDTH]) -> ([Mat3; WIDTH], [Vec3; WIDTH], [usize; WIDTH]) {
         let (inverse, zero, one, unlit) = (isa.floats(inverse), isa.splat(0.0), isa.splat(1.0), isa.splat_int(UNLIT));
-        let mut gram = [zero; 6];
-        let mut rhs = [zero; 3];
-        let mut count = isa.splat_int(0);
-        // Two passes, so that each one's sums stay in registers without AVX.
-        for ((((candidate, grey), residual), key), l) in self.candidate.iter_mut().zip(&self.grey).zip(&self.residual).zip(&self.key).zip(&self.light) {
-            let u = isa.floats(*residual) * inverse;
-            let inside = u.abs().simd_lt(one) & isa.ints(*key).simd_lt(unlit).to_floats();
-            let tukey = (one - u * u) * (one - u * u);
-            let weight = tukey & inside;
-            *candidate = weight.to_array();
-            let weighted = weight * isa.floats(*grey);
-            for (sum, &l) in rhs.iter_mut().zip(&l[..3]) {
-                *sum += weighted * l;
-            }
-            count -= weight.simd_gt(zero).to_bits();
-        }
-        for (candidate, l) in self.candidate.iter().zip(&self.light) {
-            let weight = isa.floats(*candidate);
-            for (sum, &ll) in gram.iter_mut().zip(&l[3..]) {
-                *sum += weight * ll;
+        // Two passes, so that each one's sums stay in registers without AVX; each sum in two
+        // halves (even and odd lights), so that an addition need not wait for the last.
+        let mut rhs = [[zero; 3]; 2];
+        let mut count = [isa.splat_int(0); 2];
+        let pairs = self.candidate.chunks_mut(2).zip(self.grey.chunks(2)).zip(self.residual.chunks(2)).zip(self.key.chunks(2)).zip(self.light.chunks(2));
+        for ((((candidate, grey), residual), key), l) in pairs {
+            for half in 0..candidate.len() {
+                let u = isa.floats(residual[half]) * inverse;
+                let inside = u.abs().simd_lt(one) & isa.ints(key[half]).simd_lt(unlit).to_floats();
+                let tukey = (one - u * u) * (one - u * u);
+                let weight = tukey & inside;
+                candidate[half] = weight.to_array();
+                let weighted = weight * isa.floats(grey[half]);
+                for (sum, &l) in rhs[half].iter_mut().zip(&l[half][..3]) {
+                    *sum += weighted * l;
+                }
+                count[half] -= weight.simd_gt(zero).to_bits();
             }
         }
-        let (gram, rhs, count) = (lanes_of(gram), lanes_of(rhs), count.to_array());
+        let mut gram = [[zero; 6]; 2];
+        for (candidate, l) in self.candidate.chunks(2).zip(self.light.chunks(2)) {
+            for half in 0..candidate.len() {
+                let weight = isa.floats(candidate[half]);
+                for (sum, &ll) in gram[half].iter_mut().zip(&l[half][3..]) {
+                    *sum += weight * ll;
+                }
+            }
+        }
+        let (gram, rhs, count) = (lanes_of(pairwise(gram)), lanes_of(pairwise(rhs)), (count[0] + count[1]).to_array());
         let grams = std::array::from_fn(|lane| symmetric(gram.map(|m| m[lane])));
         (grams, std::array::from_fn(|lane| Vec3::new(rhs[0][lane], rhs[1][lane], rhs[2][lane])), count.map(|c| c as usize))
     }
@@ -380,6 +429,16 @@ fn lanes_of<F: Floats, const N: usize>(sums: [F; N]) -> [[f32; WIDTH]; N] {
     lanes
 }
 
+/// The sums of the two halves of each of `sums`.
+#[inline(always)]
+fn pairwise<F: Floats, const N: usize>(halves: [[F; N]; 2]) -> [F; N] {
+    let [mut sums, odd] = halves;
+    for (sum, odd) in sums.iter_mut().zip(odd) {
+        *sum += odd;
+    }
+    sums
+}
+
 /// The symmetric matrix of xx, xy, xz, yy, yz, zz.
 fn symmetric(m: [f32; 6]) -> Mat3 {
     Mat3::from_cols(Vec3::new(m[0], m[1], m[2]), Vec3::new(m[1], m[3], m[4]), Vec3::new(m[2], m[4], m[5]))
@@ -403,7 +462,7 @@ fn median_keys<V: Isa>(isa: V, keys: &[[i32; WIDTH]], lit: [i32; WIDTH], guess: 
     let mut reach = [0i32; WIDTH];
     let near_lo: [i32; WIDTH] = std::array::from_fn(|lane| guess[lane].saturating_sub(bracket[lane]).max(0));
     let near_hi: [i32; WIDTH] = std::array::from_fn(|lane| guess[lane].saturating_add(bracket[lane]));
-    let (count_lo, count_hi) = (count_below(isa, keys, near_lo), count_below(isa, keys, near_hi));
+    let (count_lo, count_hi) = (count_below(isa, keys, isa.ints(near_lo)).to_array(), count_below(isa, keys, isa.ints(near_hi)).to_array());
     for lane in 0..WIDTH {
         if !active[lane] {
             (hi[lane], below_hi[lane]) = (0, 0);
@@ -417,28 +476,39 @@ fn median_keys<V: Isa>(isa: V, keys: &[[i32; WIDTH]], lit: [i32; WIDTH], guess: 
             (lo[lane], below_lo[lane], hi[lane], below_hi[lane]) = (near_lo[lane], count_lo[lane], near_hi[lane], count_hi[lane]);
         }
     }
+    // The bisection, every lane's bounds side by side (no branch on a lane's count).
+    let (zero, none, select, one) = (isa.splat_int(0), isa.splat_int(-1), isa.splat_int(SELECT as i32), isa.splat_int(1));
+    let (rank, guess, farthest, unbounded) = (isa.ints(rank), isa.ints(guess), isa.splat_int(REACH_MAX), isa.splat_int(i32::MAX));
+    let (mut lo, mut below_lo, mut hi, mut below_hi, mut reach) = (isa.ints(lo), isa.ints(below_lo), isa.ints(hi), isa.ints(below_hi), isa.ints(reach));
     loop {
-        let threshold: [i32; WIDTH] = std::array::from_fn(|lane| match reach[lane] {
-            0 if below_hi[lane] - below_lo[lane] > SELECT as i32 && hi[lane] - lo[lane] > 1 => lo[lane] + (hi[lane] - lo[lane]) / 2,
-            0 => -1,
-            reach => guess[lane].saturating_add(reach).clamp(lo[lane], hi[lane]),
-        });
-        if threshold.iter().all(|&t| t < 0) {
+        // Lanes still bracketing try `guess + reach` within [lo, hi] (computed so that it
+        // cannot overflow); bisecting lanes the middle of a bracket that holds more than
+        // SELECT keys and values, the others nothing (-1).
+        let above = guess + (hi - guess).min(reach);
+        let beneath = guess - (guess - lo).min(zero - reach);
+        let toward = blend(zero.simd_lt(reach), above.max(lo), beneath.min(hi));
+        let open = select.simd_lt(below_hi - below_lo) & one.simd_lt(hi - lo);
+        let middle = blend(open, lo + (hi - lo).halved(), none);
+        let bisecting = reach.simd_eq(zero);
+        let threshold = blend(bisecting, middle, toward);
+        if threshold.to_array().iter().all(|&t| t < 0) {
             break;
         }
         let below = count_below(isa, keys, threshold);
-        for lane in (0..WIDTH).filter(|&lane| threshold[lane] >= 0) {
-            let holds = below[lane] > rank[lane];
-            if holds {
-                (hi[lane], below_hi[lane]) = (threshold[lane], below[lane]);
-            } else {
-                (lo[lane], below_lo[lane]) = (threshold[lane], below[lane]);
-            }
-            // Still not bracketed: the median is below a threshold below the guess, or above
-            // one above it.
-            reach[lane] = if reach[lane] != 0 && holds == (reach[lane] < 0) { reach[lane].saturating_mul(4) } else { 0 };
-        }
+        let counted = threshold.simd_lt(zero) ^ none;
+        let holds = rank.simd_lt(below);
+        let (lowers_hi, raises_lo) = (counted & holds, counted & (holds ^ none));
+        (hi, below_hi) = (blend(lowers_hi, threshold, hi), blend(lowers_hi, below, below_hi));
+        (lo, below_lo) = (blend(raises_lo, threshold, lo), blend(raises_lo, below, below_lo));
+        // Still not bracketed (the median below a threshold below the guess, or above one
+        // above it): four times as far next.
+        let unbracketed = ((holds ^ reach.simd_lt(zero)) ^ none) & (bisecting ^ none);
+        let capped = reach.min(farthest).max(zero - farthest);
+        let quadrupled = (capped + capped) + (capped + capped);
+        let grown = blend(farthest.simd_lt(reach), unbounded, blend(reach.simd_lt(zero - farthest), zero - unbounded, quadrupled));
+        reach = grown & (unbracketed & counted);
     }
+    let (lo, below_lo, rank) = (lo.to_array(), below_lo.to_array(), rank.to_array());
     // At most SELECT keys, or one value, are left in [lo, hi): the keys from lo go down a
     // cascade that keeps the SELECT smallest in order.
     let (from, unlit) = (isa.ints(lo), isa.splat_int(UNLIT));
@@ -460,13 +530,20 @@ fn median_keys<V: Isa>(isa: V, keys: &[[i32; WIDTH]], lit: [i32; WIDTH], guess: 
 
 /// How many of each lane's `keys` are below its `threshold`.
 #[inline(always)]
-fn count_below<V: Isa>(isa: V, keys: &[[i32; WIDTH]], threshold: [i32; WIDTH]) -> [i32; WIDTH] {
-    let threshold = isa.ints(threshold);
-    let mut below = isa.splat_int(0);
-    for key in keys {
-        below -= isa.ints(*key).simd_lt(threshold);
+fn count_below<V: Isa>(isa: V, keys: &[[i32; WIDTH]], threshold: V::I) -> V::I {
+    // Four counts side by side: each one's subtractions wait on its own last only.
+    let mut below = [isa.splat_int(0); 4];
+    let mut quads = keys.chunks_exact(4);
+    for quad in &mut quads {
+        for (count, key) in below.iter_mut().zip(quad) {
+            *count -= isa.ints(*key).simd_lt(threshold);
+        }
     }
-    below.to_array()
+    for (count, key) in below.iter_mut().zip(quads.remainder()) {
+        *count -= isa.ints(*key).simd_lt(threshold);
+    }
+    let [a, b, c, d] = below;
+    (a + b) + (c + d)
 }
 
 #[cfg(test)]
