@@ -347,34 +347,38 @@ impl Machine {
     /// lane, Σ w l lᵀ, Σ w l b (channel sum) and the number of observations with weight.
     #[inline(always)]
     fn candidate_sums<V: Isa>(&mut self, isa: V, inverse: [f32; WIDTH]) -> ([Mat3; WIDTH], [Vec3; WIDTH], [usize; WIDTH]) {
-        let (inverse, zero, one, unlit) = (isa.floats(inverse), isa.splat(0.0), isa.splat(1.0), isa.splat_int(UNLIT));
+        let (inverse, zero) = (isa.floats(inverse), isa.splat(0.0));
         // Two passes, so that each one's sums stay in registers without AVX; each sum in two
-        // halves (even and odd lights), so that an addition need not wait for the last.
+        // halves (even and odd lights), so that an addition need not wait for the last. (The
+        // halves by constant index, in pairs of lights and then the odd one out, so that they
+        // stay in registers.)
         let mut rhs = [[zero; 3]; 2];
         let mut count = [isa.splat_int(0); 2];
-        let pairs = self.candidate.chunks_mut(2).zip(self.grey.chunks(2)).zip(self.residual.chunks(2)).zip(self.key.chunks(2)).zip(self.light.chunks(2));
-        for ((((candidate, grey), residual), key), l) in pairs {
-            for half in 0..candidate.len() {
-                let u = isa.floats(residual[half]) * inverse;
-                let inside = u.abs().simd_lt(one) & isa.ints(key[half]).simd_lt(unlit).to_floats();
-                let tukey = (one - u * u) * (one - u * u);
-                let weight = tukey & inside;
+        let mut candidates = self.candidate.chunks_exact_mut(2);
+        let (greys, residuals, keys, lights) = (self.grey.chunks_exact(2), self.residual.chunks_exact(2), self.key.chunks_exact(2), self.light.chunks_exact(2));
+        let rest = (greys.remainder(), residuals.remainder(), keys.remainder(), lights.remainder());
+        for ((((candidate, grey), residual), key), l) in (&mut candidates).zip(greys).zip(residuals).zip(keys).zip(lights) {
+            for half in 0..2 {
+                let weight = tukey_weight(isa, inverse, residual[half], key[half]);
                 candidate[half] = weight.to_array();
-                let weighted = weight * isa.floats(grey[half]);
-                for (sum, &l) in rhs[half].iter_mut().zip(&l[half][..3]) {
-                    *sum += weighted * l;
-                }
-                count[half] -= weight.simd_gt(zero).to_bits();
+                add_weighted(isa, weight, grey[half], &l[half], &mut rhs[half], &mut count[half]);
             }
         }
+        for ((((candidate, grey), residual), key), l) in candidates.into_remainder().iter_mut().zip(rest.0).zip(rest.1).zip(rest.2).zip(rest.3) {
+            let weight = tukey_weight(isa, inverse, *residual, *key);
+            *candidate = weight.to_array();
+            add_weighted(isa, weight, *grey, l, &mut rhs[0], &mut count[0]);
+        }
         let mut gram = [[zero; 6]; 2];
-        for (candidate, l) in self.candidate.chunks(2).zip(self.light.chunks(2)) {
-            for half in 0..candidate.len() {
-                let weight = isa.floats(candidate[half]);
-                for (sum, &ll) in gram[half].iter_mut().zip(&l[half][3..]) {
-                    *sum += weight * ll;
-                }
+        let (candidates, lights) = (self.candidate.chunks_exact(2), self.light.chunks_exact(2));
+        let rest = (candidates.remainder(), lights.remainder());
+        for (candidate, l) in candidates.zip(lights) {
+            for half in 0..2 {
+                add_outer(isa.floats(candidate[half]), &l[half], &mut gram[half]);
             }
+        }
+        for (candidate, l) in rest.0.iter().zip(rest.1) {
+            add_outer(isa.floats(*candidate), l, &mut gram[0]);
         }
         let (gram, rhs, count) = (lanes_of(pairwise(gram)), lanes_of(pairwise(rhs)), (count[0] + count[1]).to_array());
         let grams = std::array::from_fn(|lane| symmetric(gram.map(|m| m[lane])));
@@ -427,6 +431,36 @@ fn lanes_of<F: Floats, const N: usize>(sums: [F; N]) -> [[f32; WIDTH]; N] {
         *lane = sum.to_array();
     }
     lanes
+}
+
+/// Tukey's weight of an observation whose residual is `residual` for the scale `inverse`
+/// (see [`Machine::residuals`]), 0 where its `key` is [`UNLIT`].
+#[inline(always)]
+fn tukey_weight<V: Isa>(isa: V, inverse: V::F, residual: [f32; WIDTH], key: [i32; WIDTH]) -> V::F {
+    let one = isa.splat(1.0);
+    let u = isa.floats(residual) * inverse;
+    let inside = u.abs().simd_lt(one) & isa.ints(key).simd_lt(isa.splat_int(UNLIT)).to_floats();
+    let tukey = (one - u * u) * (one - u * u);
+    tukey & inside
+}
+
+/// Adds `weight` times an observation's channel-summed `grey` times its light's direction
+/// (the first three of `l`) to `rhs`, and its lanes with weight to `count`.
+#[inline(always)]
+fn add_weighted<V: Isa>(isa: V, weight: V::F, grey: [f32; WIDTH], l: &[f32; 9], rhs: &mut [V::F; 3], count: &mut V::I) {
+    let weighted = weight * isa.floats(grey);
+    for (sum, &l) in rhs.iter_mut().zip(&l[..3]) {
+        *sum += weighted * l;
+    }
+    *count -= weight.simd_gt(isa.splat(0.0)).to_bits();
+}
+
+/// Adds `weight` times the light's `l lᵀ` (the last six of `l`) to `gram`.
+#[inline(always)]
+fn add_outer<F: Floats>(weight: F, l: &[f32; 9], gram: &mut [F; 6]) {
+    for (sum, &ll) in gram.iter_mut().zip(&l[3..]) {
+        *sum += weight * ll;
+    }
 }
 
 /// The sums of the two halves of each of `sums`.
