@@ -124,10 +124,10 @@ def test_an_interrupted_batch_prints_one_line_and_leaves_no_worker_and_no_partia
     out = tmp_path / "out"
     data = [inputs / "missing", inputs / "tiny", inputs / "slow", inputs / "slow-b", inputs / "slow-c"]
     command = _Command("batch", *data, "--out", out, "--method", "irtps", "--samples", "2048", "--workers", "2")
-    # the missing and the tiny data set are done (the tiny one's output is in place; the bar
-    # may skip its "2/5" when both end within its refresh interval): both workers are on slow
-    # ones (seconds each)
-    command.wait_until(lambda: (out / "tiny").is_dir())
+    # the missing and the tiny data set are done (the tiny one's warning printed and its output
+    # in place; the bar may skip its "2/5" when both end within its refresh interval): both
+    # workers are on slow ones (seconds each)
+    command.wait_until(lambda: TINY_KEPT_CLASSIC_PS.search(command.err) and (out / "tiny").is_dir())
     if whole_group:  # as a terminal does: the workers are signalled too
         os.killpg(command.process.pid, signum)
     else:
