@@ -593,10 +593,14 @@ mod tests {
         }
     }
 
-    /// The fits of `pixels` pixels of random normals and albedos under 40 lights, with soft
-    /// shadows, highlights and saturated observations among them: by [`Machine::run`] (AVX2
-    /// where the CPU has it) or in [`Portable`] lanes.
-    fn fits_of_noisy_pixels(pixels: usize, portable: bool) -> Vec<(usize, PixelFit)> {
+    /// A pixel's true normal and albedo.
+    type Truth = (Vec3, f32);
+
+    /// The fits of `pixels` pixels of random normals and albedos under `count` lights, with
+    /// soft shadows, highlights and saturated observations among them, by [`Machine::run`]
+    /// (AVX2 where the CPU has it) or in [`Portable`] lanes, and each pixel's true normal and
+    /// albedo.
+    fn fits_of_noisy_pixels(pixels: usize, count: usize, portable: bool) -> (Vec<(usize, PixelFit)>, Vec<Truth>) {
         let mut state = 99u32;
         let mut uniform = || {
             state ^= state << 13;
@@ -604,13 +608,15 @@ mod tests {
             state ^= state << 5;
             state as f32 / u32::MAX as f32
         };
-        let directions: Vec<Vec3> = (0..40).map(|k| Vec3::new((k as f32 * 2.4).cos(), (k as f32 * 2.4).sin(), 1.0 + k as f32 / 20.0).normalize()).collect();
+        let directions: Vec<Vec3> = (0..count).map(|k| Vec3::new((k as f32 * 2.4).cos(), (k as f32 * 2.4).sin(), 1.0 + k as f32 / 20.0).normalize()).collect();
         let gram = directions.iter().fold(Mat3::ZERO, |m, &l| m + crate::ps::outer(l));
-        let lights = Lights::new(&directions, &vec![[1.0; 3]; 40], &vec![[1.5; 3]; 40], gram);
-        let mut images = vec![0.0f32; 40 * pixels * 3];
+        let lights = Lights::new(&directions, &vec![[1.0; 3]; count], &vec![[1.5; 3]; count], gram);
+        let mut images = vec![0.0f32; count * pixels * 3];
+        let mut truth = Vec::with_capacity(pixels);
         for p in 0..pixels {
             let normal = Vec3::new(uniform() - 0.5, uniform() - 0.5, 1.0).normalize();
             let albedo = 0.2 + 0.6 * uniform();
+            truth.push((normal, albedo));
             for (k, l) in directions.iter().enumerate() {
                 let mut value = albedo * l.dot(normal).max(0.0);
                 match (uniform() * 10.0) as u32 {
@@ -630,15 +636,24 @@ mod tests {
         } else {
             machine.run(&source, &pixels, &mut fits);
         }
-        fits
+        (fits, truth)
     }
 
     #[test]
-    fn the_fit_gives_the_same_bits_in_every_instruction_set() {
-        let portable = fits_of_noisy_pixels(300, true);
-        assert_eq!(portable.len(), 300);
-        assert!(portable.iter().all(|(_, fit)| fit.normal[2] > 0.5), "fits of upward normals");
-        assert_eq!(fits_of_noisy_pixels(300, false), portable);
+    fn the_fit_finds_the_true_normals_and_albedos_with_the_same_bits_in_every_instruction_set() {
+        // 37: lights that fill no whole lane group and an odd one out in the pairwise sums.
+        for count in [40, 37] {
+            let (portable, truth) = fits_of_noisy_pixels(300, count, true);
+            assert_eq!(portable.len(), 300);
+            let (mut angle_deg, mut albedo_error) = (0.0, 0.0);
+            for (pixel, fit) in &portable {
+                let (normal, albedo) = truth[*pixel];
+                angle_deg += Vec3::from(fit.normal).dot(normal).clamp(-1.0, 1.0).acos().to_degrees() / 300.0;
+                albedo_error += fit.albedo.iter().map(|a| (a - albedo).abs()).sum::<f32>() / 900.0;
+            }
+            assert!(angle_deg < 0.5 && albedo_error < 0.005, "{count} lights: mean error {angle_deg}°, albedo {albedo_error}");
+            assert_eq!(fits_of_noisy_pixels(300, count, false).0, portable, "{count} lights");
+        }
     }
 
     fn check_median_keys<V: Isa>(isa: V) {
