@@ -304,7 +304,6 @@ impl Machine {
             }
         }
         let denominator = normal.dot(gram * normal);
-        let total = |lanes: [f32; WIDTH]| lanes.iter().sum::<f32>();
         let sums = lanes_of(sums).map(total);
         PixelFit { normal: normal.to_array(), albedo: sums.map(|sum| (sum / denominator).max(0.0)), flag: flag::OK, used: count as u16 }
     }
@@ -412,7 +411,6 @@ fn threshold_sums<V: Isa>(isa: V, grey: &[f32], level: f32, lights: &Lights) -> 
         }
         count -= lit.to_bits();
     }
-    let total = |lanes: [f32; WIDTH]| lanes.iter().sum::<f32>();
     (symmetric(lanes_of(gram).map(total)), Vec3::from_array(lanes_of(rhs).map(total)), count.to_array().iter().sum::<i32>() as usize)
 }
 
@@ -461,6 +459,11 @@ fn add_outer<F: Floats>(weight: F, l: &[f32; 9], gram: &mut [F; 6]) {
     for (sum, &ll) in gram.iter_mut().zip(&l[3..]) {
         *sum += weight * ll;
     }
+}
+
+/// The sum of the lanes of a sum taken side by side, in lane order.
+fn total(lanes: [f32; WIDTH]) -> f32 {
+    lanes.iter().sum()
 }
 
 /// The sums of the two halves of each of `sums`.
