@@ -97,6 +97,10 @@ struct Machine {
     lights: usize,
     /// Each light's direction `l` (x, y, z) and `l lᵀ` (xx, xy, xz, yy, yz, zz).
     light: Vec<[f32; 9]>,
+    /// π / E per channel, each a row over the (padded, with 0) lights.
+    scale: [Vec<f32>; 3],
+    /// The saturated level of `b` per channel, each a row over the (padded, with 0) lights.
+    saturated_b: [Vec<f32>; 3],
     /// Channel-summed `b` per light ([`SATURATED`] when saturated).
     grey: Vec<[f32; WIDTH]>,
     /// Lights padded to whole lanes, like [`Lights`].
@@ -143,9 +147,12 @@ impl Machine {
     fn new(source: &Lights) -> Machine {
         let lights = source.count;
         let light = (0..lights).map(|k| std::array::from_fn(|i| if i < 3 { source.direction[i][k] } else { source.outer[i - 3][k] })).collect();
+        let row = |per_light: &[[f32; 3]], channel: usize| (0..source.padded()).map(|k| per_light.get(k).map_or(0.0, |values| values[channel])).collect();
         Machine {
             lights,
             light,
+            scale: std::array::from_fn(|channel| row(&source.scale, channel)),
+            saturated_b: std::array::from_fn(|channel| row(&source.saturated_b, channel)),
             grey: vec![[0.0; WIDTH]; lights],
             padded: source.padded(),
             channel: vec![0.0; WIDTH * 3 * source.padded()],
@@ -234,7 +241,7 @@ impl Machine {
     #[inline(always)]
     fn load<V: Isa>(&mut self, isa: V, source: &Source, lane: usize, queue: &mut impl Iterator<Item = usize>, fits: &mut Vec<(usize, PixelFit)>) {
         for pixel in queue {
-            let level = source.shadow_fraction * self.gather(source, lane, pixel);
+            let level = source.shadow_fraction * self.gather(isa, source, lane, pixel);
             let (gram, rhs, count) = threshold_sums(isa, &self.own, level, source.lights);
             if let Some(g) = solved(gram, rhs, count, 3) {
                 (self.g[lane], self.gram[lane], self.count[lane], self.level[lane]) = (g, gram, count, level);
@@ -252,27 +259,36 @@ impl Machine {
     }
 
     /// Reads `pixel`'s observations into `lane` (and its channel sums into `own`) and returns
-    /// its brightest unsaturated channel-summed `b`.
+    /// its brightest unsaturated channel-summed `b`: the raw values copied light by light,
+    /// then scaled, tested for saturation and summed over the lights side by side.
     #[inline(always)]
-    fn gather(&mut self, source: &Source, lane: usize, pixel: usize) -> f32 {
-        let lights = source.lights;
+    fn gather<V: Isa>(&mut self, isa: V, source: &Source, lane: usize, pixel: usize) -> f32 {
         let rows = &mut self.channel[lane * 3 * self.padded..][..3 * self.padded];
         let (red, rest) = rows.split_at_mut(self.padded);
         let (green, blue) = rest.split_at_mut(self.padded);
-        let images = source.images.chunks_exact(source.n * 3);
-        let constants = lights.scale.iter().zip(&lights.saturated_b);
-        let mut brightest = 0.0f32;
-        for ((((((image, (s, sat)), red), green), blue), grey), own) in images.zip(constants).zip(red).zip(green).zip(blue).zip(&mut self.grey).zip(&mut self.own) {
+        for (((image, red), green), blue) in source.images.chunks_exact(source.n * 3).zip(&mut *red).zip(&mut *green).zip(&mut *blue) {
             let raw = &image[pixel * 3..pixel * 3 + 3];
-            let b = [raw[0] * s[0], raw[1] * s[1], raw[2] * s[2]];
-            (*red, *green, *blue) = (b[0], b[1], b[2]);
-            let unsaturated = (b[0] < sat[0]) & (b[1] < sat[1]) & (b[2] < sat[2]);
-            let sum = b[0] + b[1] + b[2];
-            let value = if unsaturated { sum } else { SATURATED };
-            (grey[lane], *own) = (value, value);
-            brightest = if unsaturated && sum > brightest { sum } else { brightest };
+            (*red, *green, *blue) = (raw[0], raw[1], raw[2]);
         }
-        brightest
+        let saturated = isa.splat(SATURATED);
+        let mut brightest = isa.splat(0.0);
+        for at in (0..self.padded).step_by(WIDTH) {
+            let mut b = [isa.splat(0.0); 3];
+            for ((b, row), scale) in b.iter_mut().zip([&mut *red, &mut *green, &mut *blue]).zip(&self.scale) {
+                *b = isa.floats(eight(row, at)) * isa.floats(eight(scale, at));
+                row[at..at + WIDTH].copy_from_slice(&b.to_array());
+            }
+            let [r, g, b] = b;
+            let [red_level, green_level, blue_level] = &self.saturated_b;
+            let unsaturated = r.simd_lt(isa.floats(eight(red_level, at))) & g.simd_lt(isa.floats(eight(green_level, at))) & b.simd_lt(isa.floats(eight(blue_level, at)));
+            let sum = r + g + b;
+            self.own[at..at + WIDTH].copy_from_slice(&blend(unsaturated, sum, saturated).to_array());
+            brightest = blend(unsaturated & sum.simd_gt(brightest), sum, brightest);
+        }
+        for (grey, &own) in self.grey.iter_mut().zip(&self.own) {
+            grey[lane] = own;
+        }
+        brightest.to_array().into_iter().fold(0.0, f32::max)
     }
 
     /// The normal and albedo of `lane`'s fit kept, whose weights are the threshold fit's
