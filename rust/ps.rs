@@ -138,15 +138,48 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
     let fit = Fit::new(lights, gram, settings);
     let mut out = PsOutput { normals: vec![[0.0; 3]; n], albedo: vec![[0.0; 3]; n], flags: vec![flag::MASKED_OUT; n], used: vec![0; n] };
     let per_pixel = Lights::new(&fit.directions, &fit.scale, &fit.saturated_b, gram);
-    let fits = match settings.robust {
-        Robust::Tukey => crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction),
-        Robust::Trim => crate::robust_ps::fit_pixels(images, mask, &per_pixel),
+    match settings.robust {
+        Robust::Tukey => crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out),
+        Robust::Trim => crate::robust_ps::fit_pixels(images, mask, &per_pixel, &mut out),
         Robust::None | Robust::Threshold => return Ok(fit.streamed(images, mask, out)),
-    };
-    for (p, pixel) in fits {
-        (out.normals[p], out.albedo[p], out.flags[p], out.used[p]) = (pixel.normal, pixel.albedo, pixel.flag, pixel.used);
     }
     Ok(out)
+}
+
+/// Fits the pixels where `mask` is true, `chunk` of them at a time in parallel, into `out`:
+/// `fit` appends (pixel, fit) for each pixel of a chunk (pixel indices in increasing order),
+/// with the working state that `init` makes for each parallel task, and each chunk's fits go
+/// straight into its own rows of `out`.
+pub(crate) fn fit_masked<S>(mask: &[bool], chunk: usize, out: &mut PsOutput, init: impl Fn() -> S + Sync + Send, fit: impl Fn(&mut S, &[usize], &mut Vec<(usize, PixelFit)>) + Sync + Send) {
+    let pixels: Vec<usize> = mask.iter().enumerate().filter_map(|(i, &m)| m.then_some(i)).collect();
+    let chunks: Vec<&[usize]> = pixels.chunks(chunk).collect();
+    let mut windows = Vec::with_capacity(chunks.len());
+    let (mut normals, mut albedo, mut flags, mut used) = (&mut out.normals[..], &mut out.albedo[..], &mut out.flags[..], &mut out.used[..]);
+    let mut start = 0;
+    for next in chunks.iter().skip(1).map(|chunk| chunk[0]).chain([mask.len()]) {
+        let rows = next - start;
+        let window;
+        (window, normals, albedo, flags, used) = {
+            let (n, normals) = normals.split_at_mut(rows);
+            let (a, albedo) = albedo.split_at_mut(rows);
+            let (f, flags) = flags.split_at_mut(rows);
+            let (u, used) = used.split_at_mut(rows);
+            ((start, n, a, f, u), normals, albedo, flags, used)
+        };
+        windows.push(window);
+        start = next;
+    }
+    chunks.into_par_iter().zip(windows).for_each_init(
+        || (init(), Vec::with_capacity(chunk)),
+        |(state, fits), (pixels, (first, normals, albedo, flags, used))| {
+            fits.clear();
+            fit(state, pixels, fits);
+            for (p, pixel) in fits.drain(..) {
+                let i = p - first;
+                (normals[i], albedo[i], flags[i], used[i]) = (pixel.normal, pixel.albedo, pixel.flag, pixel.used);
+            }
+        },
+    );
 }
 
 impl Fit {

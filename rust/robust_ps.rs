@@ -8,9 +8,8 @@
 //! weighted sums run over the lights in groups of [`LANES`] so that they vectorise.
 
 use glam::{Mat3, Vec3};
-use rayon::prelude::*;
 
-use crate::ps::{finish, flag, PixelFit, COPLANAR_RATIO};
+use crate::ps::{finish, fit_masked, flag, PixelFit, PsOutput, COPLANAR_RATIO};
 
 /// The trim mode drops this fraction of each pixel's darkest observations...
 pub const TRIM_DARKEST: f32 = 0.4;
@@ -101,29 +100,18 @@ struct Work {
     order: Vec<u64>,
 }
 
-/// Trims each pixel where `mask` is true, from `images` laid out `(K, pixels, 3)`: (pixel
-/// index, fit) in pixel order.
-pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights) -> Vec<(usize, PixelFit)> {
+/// Trims each pixel where `mask` is true, from `images` laid out `(K, pixels, 3)`, into `out`.
+pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, out: &mut PsOutput) {
     let n = mask.len();
-    let pixels: Vec<usize> = mask.iter().enumerate().filter_map(|(i, &m)| m.then_some(i)).collect();
-    let tiles: Vec<Vec<(usize, PixelFit)>> = pixels
-        .par_chunks(TILE)
-        .map_init(
-            || Box::new(Scratch::default()),
-            |scratch, tile| {
-                gather(images, n, tile, lights, scratch);
-                let padded = lights.padded();
-                (0..tile.len())
-                    .map(|i| {
-                        let Scratch { grey, rgb, work } = &mut **scratch;
-                        let pixel = Pixel { grey: &grey[i * padded..][..padded], rgb: &rgb[i * lights.count..][..lights.count] };
-                        (tile[i], trim(&pixel, lights, work))
-                    })
-                    .collect()
-            },
-        )
-        .collect();
-    tiles.into_iter().flatten().collect()
+    fit_masked(mask, TILE, out, || Box::new(Scratch::default()), |scratch, tile, fits| {
+        gather(images, n, tile, lights, scratch);
+        let padded = lights.padded();
+        let Scratch { grey, rgb, work } = &mut **scratch;
+        for (i, &p) in tile.iter().enumerate() {
+            let pixel = Pixel { grey: &grey[i * padded..][..padded], rgb: &rgb[i * lights.count..][..lights.count] };
+            fits.push((p, trim(&pixel, lights, work)));
+        }
+    });
 }
 
 /// Copies the tile's observations into `scratch`, pixel-major.

@@ -24,10 +24,8 @@
 use std::ops::{BitAnd, BitXor};
 
 use glam::{Mat3, Vec3};
-use rayon::prelude::*;
-
 use crate::lanes::{Floats, Ints, Isa, Portable, WIDTH};
-use crate::ps::{flag, PixelFit};
+use crate::ps::{fit_masked, flag, PixelFit, PsOutput};
 use crate::robust_ps::{full_fit, solved, Lights, SATURATED};
 
 /// Tukey's biweight constant, in robust scales: an observation whose residual is beyond
@@ -62,23 +60,10 @@ const REACH_MAX: i32 = 1 << 28;
 /// Keys left in a lane's bracket when its median's bisection stops.
 const SELECT: usize = 4;
 
-/// Fits the pixels where `mask` is true from `images` laid out `(K, pixels, 3)`: (pixel
-/// index, fit) for each, in no particular order.
-pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, shadow_fraction: f32) -> Vec<(usize, PixelFit)> {
-    let pixels: Vec<usize> = mask.iter().enumerate().filter_map(|(i, &m)| m.then_some(i)).collect();
+/// Fits the pixels where `mask` is true from `images` laid out `(K, pixels, 3)` into `out`.
+pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, shadow_fraction: f32, out: &mut PsOutput) {
     let source = Source { images, n: mask.len(), lights, shadow_fraction };
-    pixels
-        .par_chunks(CHUNK)
-        .map_init(
-            || Box::new(Machine::new(lights)),
-            |machine, chunk| {
-                let mut fits = Vec::with_capacity(chunk.len());
-                machine.run(&source, chunk, &mut fits);
-                fits
-            },
-        )
-        .flatten_iter()
-        .collect()
+    fit_masked(mask, CHUNK, out, || Box::new(Machine::new(lights)), |machine, chunk, fits| machine.run(&source, chunk, fits));
 }
 
 /// Where the pixels' observations come from.
