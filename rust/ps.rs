@@ -14,8 +14,8 @@
 //!
 //! The plain and threshold fits run over tiles of pixels, streaming through each image's rows
 //! of the tile (twice in threshold mode: once for each pixel's brightest, once to
-//! accumulate); the sums are kept per pixel in structure-of-arrays form so that the loops run
-//! over contiguous pixels.
+//! accumulate); only the tile's masked pixels are de-interleaved and summed, their sums kept
+//! in structure-of-arrays form so that the loops run over contiguous values.
 
 use std::f32::consts::PI;
 
@@ -198,14 +198,14 @@ impl Fit {
                 |sums, (tile, (((normals, albedo), flags), used))| {
                     let start = tile * TILE;
                     let pixels = normals.len();
-                    let tile_mask = &mask[start..start + pixels];
-                    if !tile_mask.iter().any(|&m| m) {
+                    let kept = sums.keep(&mask[start..start + pixels]);
+                    if kept == 0 {
                         return;
                     }
                     let src = |k: usize| &images[(k * n + start) * 3..][..pixels * 3];
-                    self.accumulate_tile(src, sums, pixels);
-                    for (p, _) in tile_mask.iter().enumerate().filter(|(_, &m)| m) {
-                        let (normal, rho, f, count) = self.solve(sums, p, || (0..k_count).map(|k| self.observation(src(k), k, p)));
+                    self.accumulate_tile(src, sums, kept, kept == pixels);
+                    for (i, &p) in sums.at[..kept].iter().enumerate() {
+                        let (normal, rho, f, count) = self.solve(sums, i, || (0..k_count).map(|k| self.observation(src(k), k, p)));
                         normals[p] = normal;
                         albedo[p] = rho;
                         flags[p] = f;
@@ -217,8 +217,11 @@ impl Fit {
     }
 }
 
-/// Per-pixel sums of a tile, structure of arrays so that loops run over contiguous pixels.
+/// Per-pixel sums of the masked pixels of a tile, structure of arrays so that loops run over
+/// contiguous pixels.
 struct Sums {
+    /// The tile's masked pixels (offsets in the tile), whose sums these are in order.
+    at: [usize; TILE],
     /// Σ w l_j b_c, index `j·3 + c`.
     rhs: [[f32; TILE]; 9],
     /// Σ w l lᵀ: xx, xy, xz, yy, yz, zz.
@@ -233,7 +236,19 @@ struct Sums {
 
 impl Default for Sums {
     fn default() -> Self {
-        Sums { rhs: [[0.0; TILE]; 9], gram: [[0.0; TILE]; 6], count: [0.0; TILE], brightest: [0.0; TILE], b: [[0.0; TILE]; 3] }
+        Sums { at: [0; TILE], rhs: [[0.0; TILE]; 9], gram: [[0.0; TILE]; 6], count: [0.0; TILE], brightest: [0.0; TILE], b: [[0.0; TILE]; 3] }
+    }
+}
+
+impl Sums {
+    /// Takes the pixels of a tile where `tile_mask` is true; returns how many.
+    fn keep(&mut self, tile_mask: &[bool]) -> usize {
+        let mut kept = 0;
+        for (p, &on) in tile_mask.iter().enumerate() {
+            self.at[kept] = p;
+            kept += usize::from(on);
+        }
+        kept
     }
 }
 
@@ -263,44 +278,54 @@ impl Fit {
         [src[p * 3] * s[0], src[p * 3 + 1] * s[1], src[p * 3 + 2] * s[2]]
     }
 
-    fn load(&self, sums: &mut Sums, src: &[f32], k: usize, pixels: usize) {
+    /// De-interleaves light k's `b` of the kept pixels of a tile (`dense` when they are all
+    /// of its pixels) from that light's interleaved tile data.
+    fn load(&self, sums: &mut Sums, src: &[f32], k: usize, kept: usize, dense: bool) {
         let s = self.scale[k];
         for c in 0..3 {
-            for (p, d) in sums.b[c][..pixels].iter_mut().enumerate() {
-                *d = src[p * 3 + c] * s[c];
+            let b = &mut sums.b[c][..kept];
+            if dense {
+                for (p, d) in b.iter_mut().enumerate() {
+                    *d = src[p * 3 + c] * s[c];
+                }
+            } else {
+                for (d, &p) in b.iter_mut().zip(&sums.at[..kept]) {
+                    *d = src[p * 3 + c] * s[c];
+                }
             }
         }
     }
 
-    /// Fills `sums` for one tile; `src(k)` is light k's interleaved data of the tile.
-    fn accumulate_tile<'a>(&self, src: impl Fn(usize) -> &'a [f32], sums: &mut Sums, pixels: usize) {
+    /// Fills `sums` for the `kept` pixels of one tile (`dense` when they are all of its
+    /// pixels); `src(k)` is light k's interleaved data of the tile.
+    fn accumulate_tile<'a>(&self, src: impl Fn(usize) -> &'a [f32], sums: &mut Sums, kept: usize, dense: bool) {
         for row in sums.rhs.iter_mut().chain(sums.gram.iter_mut()) {
-            row[..pixels].fill(0.0);
+            row[..kept].fill(0.0);
         }
-        sums.count[..pixels].fill(0.0);
-        sums.brightest[..pixels].fill(0.0);
+        sums.count[..kept].fill(0.0);
+        sums.brightest[..kept].fill(0.0);
         if self.settings.robust == Robust::Threshold {
             for k in 0..self.directions.len() {
-                self.load(sums, src(k), k, pixels);
+                self.load(sums, src(k), k, kept, dense);
                 let Sums { b, brightest, .. } = sums;
-                for p in 0..pixels {
+                for p in 0..kept {
                     brightest[p] = brightest[p].max(b[0][p] + b[1][p] + b[2][p]);
                 }
             }
             let fraction = self.settings.shadow_fraction;
-            for v in &mut sums.brightest[..pixels] {
+            for v in &mut sums.brightest[..kept] {
                 *v *= fraction;
             }
         } else {
-            sums.brightest[..pixels].fill(f32::NEG_INFINITY);
+            sums.brightest[..kept].fill(f32::NEG_INFINITY);
         }
         for (k, l) in self.directions.iter().enumerate() {
-            self.load(sums, src(k), k, pixels);
+            self.load(sums, src(k), k, kept, dense);
             let sat = self.saturated_b[k];
             let ll = [l.x * l.x, l.x * l.y, l.x * l.z, l.y * l.y, l.y * l.z, l.z * l.z];
             let lj = [l.x, l.y, l.z];
-            let Sums { rhs, gram, count, brightest, b } = sums;
-            for p in 0..pixels {
+            let Sums { rhs, gram, count, brightest, b, .. } = sums;
+            for p in 0..kept {
                 let (b0, b1, b2) = (b[0][p], b[1][p], b[2][p]);
                 let keep = b0 + b1 + b2 > brightest[p] && b0 < sat[0] && b1 < sat[1] && b2 < sat[2];
                 let w = if keep { 1.0 } else { 0.0 };
@@ -318,8 +343,8 @@ impl Fit {
         }
     }
 
-    /// Fits tile pixel `p` from its sums; `all` yields every observation of the pixel, for
-    /// the full fit when the robust selection is not enough. Returns (normal, albedo, flag,
+    /// Fits the tile's `p`-th kept pixel from its sums; `all` yields every observation of the
+    /// pixel, for the full fit when the robust selection is not enough. Returns (normal, albedo, flag,
     /// observations used).
     fn solve<I: Iterator<Item = [f32; 3]>>(&self, sums: &Sums, p: usize, all: impl Fn() -> I) -> ([f32; 3], [f32; 3], u8, u16) {
         let k_count = self.directions.len();
