@@ -59,6 +59,9 @@ const BRACKET_MIN: i32 = 1 << 13;
 const REACH_MAX: i32 = 1 << 28;
 /// Keys left in a lane's bracket when its median's bisection stops.
 const SELECT: usize = 4;
+/// Values left unused after each image's row of a staged chunk (a cache line), so that the
+/// rows' values of one pixel do not all fall in the same cache set.
+const STAGE_GAP: usize = 16;
 
 /// Fits the pixels where `mask` is true from `images` laid out `(K, pixels, 3)` into `out`.
 pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, shadow_fraction: f32, out: &mut PsOutput) {
@@ -86,6 +89,11 @@ struct Machine {
     scale: [Vec<f32>; 3],
     /// The saturated level of `b` per channel, each a row over the (padded, with 0) lights.
     saturated_b: [Vec<f32>; 3],
+    /// The raw observations of the chunk being fitted, image by image: a row per image of its
+    /// pixels' RGB in chunk order, [`STAGE_GAP`] values between rows.
+    staged: Vec<f32>,
+    /// Values from one image's row of `staged` to the next.
+    staged_stride: usize,
     /// Channel-summed `b` per light ([`SATURATED`] when saturated).
     grey: Vec<[f32; WIDTH]>,
     /// Lights padded to whole lanes, like [`Lights`].
@@ -138,6 +146,8 @@ impl Machine {
             light,
             scale: std::array::from_fn(|channel| row(&source.scale, channel)),
             saturated_b: std::array::from_fn(|channel| row(&source.saturated_b, channel)),
+            staged: Vec::new(),
+            staged_stride: 0,
             grey: vec![[0.0; WIDTH]; lights],
             padded: source.padded(),
             channel: vec![0.0; WIDTH * 3 * source.padded()],
@@ -180,7 +190,8 @@ impl Machine {
     /// [`Machine::run`] in the registers of `isa`.
     #[inline(always)]
     fn run_in<V: Isa>(&mut self, isa: V, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
-        let mut queue = chunk.iter().copied();
+        self.stage(source, chunk);
+        let mut queue = chunk.iter().copied().enumerate();
         for lane in 0..WIDTH {
             self.load(isa, source, lane, &mut queue, fits);
         }
@@ -224,9 +235,9 @@ impl Machine {
     /// pixel without one gets the full fit (in `fits`) and the next is tried. Empties the lane
     /// when `queue` is.
     #[inline(always)]
-    fn load<V: Isa>(&mut self, isa: V, source: &Source, lane: usize, queue: &mut impl Iterator<Item = usize>, fits: &mut Vec<(usize, PixelFit)>) {
-        for pixel in queue {
-            let level = source.shadow_fraction * self.gather(isa, source, lane, pixel);
+    fn load<V: Isa>(&mut self, isa: V, source: &Source, lane: usize, queue: &mut impl Iterator<Item = (usize, usize)>, fits: &mut Vec<(usize, PixelFit)>) {
+        for (at, pixel) in queue {
+            let level = source.shadow_fraction * self.gather(isa, lane, at);
             let (gram, rhs, count) = threshold_sums(isa, &self.own, level, source.lights);
             if let Some(g) = solved(gram, rhs, count, 3) {
                 (self.g[lane], self.gram[lane], self.count[lane], self.level[lane]) = (g, gram, count, level);
@@ -243,16 +254,39 @@ impl Machine {
         }
     }
 
-    /// Reads `pixel`'s observations into `lane` (and its channel sums into `own`) and returns
-    /// its brightest unsaturated channel-summed `b`: the raw values copied light by light,
-    /// then scaled, tested for saturation and summed over the lights side by side.
+    /// Copies the observations of the pixels of `chunk` (increasing indices) into `staged`,
+    /// image by image, each run of consecutive pixels at once: reading the images' rows in
+    /// order is much faster than reading every image's value of one pixel after another.
+    fn stage(&mut self, source: &Source, chunk: &[usize]) {
+        self.staged_stride = chunk.len() * 3 + STAGE_GAP;
+        self.staged.resize(self.lights * self.staged_stride, 0.0);
+        let mut runs: Vec<(usize, usize)> = Vec::new();
+        for &pixel in chunk {
+            match runs.last_mut() {
+                Some((first, length)) if *first + *length == pixel => *length += 1,
+                _ => runs.push((pixel, 1)),
+            }
+        }
+        for (image, row) in source.images.chunks_exact(source.n * 3).zip(self.staged.chunks_exact_mut(self.staged_stride)) {
+            let mut at = 0;
+            for &(first, length) in &runs {
+                row[at * 3..(at + length) * 3].copy_from_slice(&image[first * 3..(first + length) * 3]);
+                at += length;
+            }
+        }
+    }
+
+    /// Reads the observations of the chunk's `at`-th pixel into `lane` (and its channel sums
+    /// into `own`) and returns its brightest unsaturated channel-summed `b`: the raw values
+    /// copied light by light from `staged`, then scaled, tested for saturation and summed
+    /// over the lights side by side.
     #[inline(always)]
-    fn gather<V: Isa>(&mut self, isa: V, source: &Source, lane: usize, pixel: usize) -> f32 {
+    fn gather<V: Isa>(&mut self, isa: V, lane: usize, at: usize) -> f32 {
         let rows = &mut self.channel[lane * 3 * self.padded..][..3 * self.padded];
         let (red, rest) = rows.split_at_mut(self.padded);
         let (green, blue) = rest.split_at_mut(self.padded);
-        for (((image, red), green), blue) in source.images.chunks_exact(source.n * 3).zip(&mut *red).zip(&mut *green).zip(&mut *blue) {
-            let raw = &image[pixel * 3..pixel * 3 + 3];
+        for (((image, red), green), blue) in self.staged.chunks_exact(self.staged_stride).zip(&mut *red).zip(&mut *green).zip(&mut *blue) {
+            let raw = &image[at * 3..at * 3 + 3];
             (*red, *green, *blue) = (raw[0], raw[1], raw[2]);
         }
         let saturated = isa.splat(SATURATED);
