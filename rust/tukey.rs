@@ -8,22 +8,25 @@
 //! fit, highlights above it: both lose their weight, attached shadows carry none. Saturated
 //! observations carry none either.
 //!
-//! The pixels of a chunk go through [`WIDTH`] lanes, structure of arrays (one value of each
-//! lane per light), so that the residuals, weights and sums of every lane are computed by
-//! the same vector instructions (AVX2 where the CPU has it, see [`crate::lanes`]). A lane
-//! whose pixel has settled is refilled with the next pixel of the chunk at once (its
-//! threshold fit summed as it is read, over the lights side by side), so pixels that need
-//! many re-weightings do not hold the others back. Each lane's median comes from counting,
-//! vectorised over the lanes: a bisection on the absolute residuals' bits (every lane's
-//! bounds in vector registers too, so that no branch waits on a lane's count), started from
-//! a bracket around the lane's previous median, twice as wide as that median's last move
-//! (widened until it holds the median), until a few keys are left, which one pass sorts. A
-//! settled pixel's RGB albedo is each channel's scale along its normal, summed over the
-//! lights side by side.
+//! A chunk's observations are first copied out of the images image by image (runs of
+//! consecutive pixels at once), so that the images are read in order rather than one value
+//! of each of K images per pixel. The pixels of a chunk go through [`WIDTH`] lanes,
+//! structure of arrays (one value of each lane per light), so that the residuals, weights
+//! and sums of every lane are computed by the same vector instructions (AVX2 where the CPU
+//! has it, see [`crate::lanes`]). A lane whose pixel has settled is refilled with the next
+//! pixel of the chunk at once (its threshold fit summed as it is read, over the lights side
+//! by side), so pixels that need many re-weightings do not hold the others back. Each
+//! lane's median comes from counting, vectorised over the lanes: a bisection on the
+//! absolute residuals' bits (every lane's bounds in vector registers too, so that no branch
+//! waits on a lane's count), started from a bracket around the lane's previous median,
+//! twice as wide as that median's last move (widened until it holds the median), until a
+//! few keys are left, which one pass sorts. A settled pixel's RGB albedo is each channel's
+//! scale along its normal, summed over the lights side by side.
 
 use std::ops::{BitAnd, BitXor};
 
 use glam::{Mat3, Vec3};
+
 use crate::lanes::{Floats, Ints, Isa, Portable, WIDTH};
 use crate::ps::{fit_masked, flag, PixelFit, PsOutput};
 use crate::robust_ps::{full_fit, solved, Lights, SATURATED};
