@@ -505,6 +505,49 @@ mod tests {
     }
 
     #[test]
+    fn every_mode_fits_a_pixel_alike_whichever_other_pixels_the_mask_holds() {
+        // 1500 pixels: several chunks and tiles of every mode; some shadowed or highlighted
+        // observations; a mask with runs and gaps of every length. Each pixel fitted alone,
+        // with every pixel and with some must come out the same.
+        let (ls, pixels) = (ring(), 1500);
+        let mut images = vec![0.0; ls.len() * pixels * 3];
+        for p in 0..pixels {
+            let (u, v) = ((p % 50) as f32 / 50.0 - 0.5, (p / 50) as f32 / 30.0 - 0.5);
+            let observed = render(Vec3::new(u, v, 1.0).normalize(), [0.3 + 0.4 * u.abs(), 0.5, 0.7 - 0.3 * v.abs()], &ls);
+            for (k, rgb) in observed.chunks_exact(3).enumerate() {
+                let factor = match (p * 7 + k * 13) % 17 {
+                    0 => 0.3,
+                    1 => 2.0,
+                    _ => 1.0,
+                };
+                for (c, value) in rgb.iter().enumerate() {
+                    images[(k * pixels + p) * 3 + c] = value * factor;
+                }
+            }
+        }
+        let every = vec![true; pixels];
+        let some: Vec<bool> = (0..pixels).map(|p| (p * p / 7 + p / 11) % 3 != 0 && !(600..700).contains(&p)).collect();
+        for robust in [Robust::None, Robust::Threshold, Robust::Trim, Robust::Tukey] {
+            let settings = PsSettings { robust, ..Default::default() };
+            let (all, part) = (photometric_stereo(&images, &every, &ls, &settings).unwrap(), photometric_stereo(&images, &some, &ls, &settings).unwrap());
+            assert!(all.flags.iter().all(|&f| f != flag::MASKED_OUT), "{robust:?}");
+            for p in (0..pixels).step_by(97) {
+                let alone: Vec<f32> = (0..ls.len()).flat_map(|k| images[(k * pixels + p) * 3..][..3].to_vec()).collect();
+                let one = photometric_stereo(&alone, &[true], &ls, &settings).unwrap();
+                assert_eq!((one.normals[0], one.albedo[0], one.used[0]), (all.normals[p], all.albedo[p], all.used[p]), "{robust:?} pixel {p} alone");
+            }
+            for (p, &kept) in some.iter().enumerate() {
+                if kept {
+                    let bits = |out: &PsOutput| (out.normals[p].map(f32::to_bits), out.albedo[p].map(f32::to_bits), out.flags[p], out.used[p]);
+                    assert_eq!(bits(&part), bits(&all), "{robust:?} pixel {p}");
+                } else {
+                    assert_eq!((part.normals[p], part.flags[p]), ([0.0; 3], flag::MASKED_OUT), "{robust:?} pixel {p}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn too_few_or_coplanar_lights_are_errors() {
         let two = lights(&[[0.0, 0.0, 1.0], [0.5, 0.0, 0.8]]);
         assert!(check_lights(&two).unwrap_err().to_string().contains("at least 3"));
