@@ -218,7 +218,7 @@ impl Fit {
 }
 
 /// Per-pixel sums of the masked pixels of a tile, structure of arrays so that loops run over
-/// contiguous pixels.
+/// contiguous values.
 struct Sums {
     /// The tile's masked pixels (offsets in the tile), whose sums these are in order.
     at: [usize; TILE],
@@ -344,8 +344,8 @@ impl Fit {
     }
 
     /// Fits the tile's `p`-th kept pixel from its sums; `all` yields every observation of the
-    /// pixel, for the full fit when the robust selection is not enough. Returns (normal, albedo, flag,
-    /// observations used).
+    /// pixel, for the full fit when the robust selection is not enough. Returns (normal,
+    /// albedo, flag, observations used).
     fn solve<I: Iterator<Item = [f32; 3]>>(&self, sums: &Sums, p: usize, all: impl Fn() -> I) -> ([f32; 3], [f32; 3], u8, u16) {
         let k_count = self.directions.len();
         let g = |m: usize| sums.gram[m][p];

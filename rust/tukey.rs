@@ -234,13 +234,13 @@ impl Machine {
         (red, green, blue)
     }
 
-    /// Puts the next pixel of `queue` in `lane`, with its threshold fit as the fit kept; a
-    /// pixel without one gets the full fit (in `fits`) and the next is tried. Empties the lane
-    /// when `queue` is.
+    /// Puts the next pixel of `queue` ((position in the chunk, pixel index)) in `lane`, with
+    /// its threshold fit as the fit kept; a pixel without one gets the full fit (in `fits`)
+    /// and the next is tried. Empties the lane when `queue` is.
     #[inline(always)]
     fn load<V: Isa>(&mut self, isa: V, source: &Source, lane: usize, queue: &mut impl Iterator<Item = (usize, usize)>, fits: &mut Vec<(usize, PixelFit)>) {
-        for (at, pixel) in queue {
-            let level = source.shadow_fraction * self.gather(isa, lane, at);
+        for (position, pixel) in queue {
+            let level = source.shadow_fraction * self.gather(isa, lane, position);
             let (gram, rhs, count) = threshold_sums(isa, &self.own, level, source.lights);
             if let Some(g) = solved(gram, rhs, count, 3) {
                 (self.g[lane], self.gram[lane], self.count[lane], self.level[lane]) = (g, gram, count, level);
@@ -259,7 +259,7 @@ impl Machine {
 
     /// Copies the observations of the pixels of `chunk` (increasing indices) into `staged`,
     /// image by image, each run of consecutive pixels at once: reading the images' rows in
-    /// order is much faster than reading every image's value of one pixel after another.
+    /// order is faster than reading every image's value of one pixel after another.
     fn stage(&mut self, source: &Source, chunk: &[usize]) {
         self.staged_stride = chunk.len() * 3 + STAGE_GAP;
         self.staged.resize(self.lights * self.staged_stride, 0.0);
@@ -279,17 +279,17 @@ impl Machine {
         }
     }
 
-    /// Reads the observations of the chunk's `at`-th pixel into `lane` (and its channel sums
-    /// into `own`) and returns its brightest unsaturated channel-summed `b`: the raw values
+    /// Reads the observations of the chunk's `position`-th pixel into `lane` (and its channel
+    /// sums into `own`) and returns its brightest unsaturated channel-summed `b`: the raw values
     /// copied light by light from `staged`, then scaled, tested for saturation and summed
     /// over the lights side by side.
     #[inline(always)]
-    fn gather<V: Isa>(&mut self, isa: V, lane: usize, at: usize) -> f32 {
+    fn gather<V: Isa>(&mut self, isa: V, lane: usize, position: usize) -> f32 {
         let rows = &mut self.channel[lane * 3 * self.padded..][..3 * self.padded];
         let (red, rest) = rows.split_at_mut(self.padded);
         let (green, blue) = rest.split_at_mut(self.padded);
         for (((image, red), green), blue) in self.staged.chunks_exact(self.staged_stride).zip(&mut *red).zip(&mut *green).zip(&mut *blue) {
-            let raw = &image[at * 3..at * 3 + 3];
+            let raw = &image[position * 3..position * 3 + 3];
             (*red, *green, *blue) = (raw[0], raw[1], raw[2]);
         }
         let saturated = isa.splat(SATURATED);
