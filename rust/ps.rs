@@ -18,6 +18,7 @@
 //! in structure-of-arrays form so that the loops run over contiguous values.
 
 use std::f32::consts::PI;
+use std::sync::{Mutex, PoisonError};
 
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
@@ -169,17 +170,23 @@ pub(crate) fn fit_masked<S>(mask: &[bool], chunk: usize, out: &mut PsOutput, ini
         windows.push(window);
         start = next;
     }
-    chunks.into_par_iter().zip(windows).for_each_init(
-        || (init(), Vec::with_capacity(chunk)),
-        |(state, fits), (pixels, (first, normals, albedo, flags, used))| {
+    // One working state per thread, each thread taking the next chunk when it is done with
+    // one (rayon's own splitting would make a state for every piece of work it splits off).
+    let queue = Mutex::new(chunks.into_iter().zip(windows));
+    (0..rayon::current_num_threads()).into_par_iter().for_each(|_| {
+        let (mut state, mut fits) = (init(), Vec::with_capacity(chunk));
+        loop {
+            // Its own statement, so that the lock is let go before the chunk is fitted.
+            let next = queue.lock().unwrap_or_else(PoisonError::into_inner).next();
+            let Some((pixels, (first, normals, albedo, flags, used))) = next else { break };
             fits.clear();
-            fit(state, pixels, fits);
+            fit(&mut state, pixels, &mut fits);
             for (p, pixel) in fits.drain(..) {
                 let i = p - first;
                 (normals[i], albedo[i], flags[i], used[i]) = (pixel.normal, pixel.albedo, pixel.flag, pixel.used);
             }
-        },
-    );
+        }
+    });
 }
 
 impl Fit {
