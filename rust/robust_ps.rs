@@ -20,7 +20,7 @@ const TILE: usize = 64;
 /// Lights summed side by side.
 const LANES: usize = 8;
 
-/// The lights, structure of arrays, padded with zero directions to a multiple of [`LANES`].
+/// The lights, structure of arrays, padded with zeros to a multiple of [`LANES`].
 pub(crate) struct Lights {
     /// Number of real lights.
     pub count: usize,
@@ -28,10 +28,10 @@ pub(crate) struct Lights {
     pub direction: [Vec<f32>; 3],
     /// xx, xy, xz, yy, yz, zz of each direction.
     pub outer: [Vec<f32>; 6],
-    /// π / E_kc, per light and channel.
-    pub scale: Vec<[f32; 3]>,
-    /// Raw saturation level times π / E_kc, per light and channel (∞ when off).
-    pub saturated_b: Vec<[f32; 3]>,
+    /// π / E_kc of each light, a row per channel.
+    pub scale: [Vec<f32>; 3],
+    /// Raw saturation level times π / E_kc of each light (∞ when off), a row per channel.
+    pub saturated_b: [Vec<f32>; 3],
     /// Σ l lᵀ over every light.
     gram: Mat3,
 }
@@ -42,6 +42,11 @@ impl Lights {
         let padded = directions.len().div_ceil(LANES) * LANES;
         let component = |f: &dyn Fn(Vec3) -> f32| {
             let mut v: Vec<f32> = directions.iter().map(|&l| f(l)).collect();
+            v.resize(padded, 0.0);
+            v
+        };
+        let channel = |per_light: &[[f32; 3]], c: usize| {
+            let mut v: Vec<f32> = per_light.iter().map(|values| values[c]).collect();
             v.resize(padded, 0.0);
             v
         };
@@ -56,8 +61,8 @@ impl Lights {
                 component(&|l| l.y * l.z),
                 component(&|l| l.z * l.z),
             ],
-            scale: scale.to_vec(),
-            saturated_b: saturated_b.to_vec(),
+            scale: std::array::from_fn(|c| channel(scale, c)),
+            saturated_b: std::array::from_fn(|c| channel(saturated_b, c)),
             gram,
         }
     }
@@ -121,7 +126,7 @@ fn gather(images: &[f32], n: usize, tile: &[usize], lights: &Lights, scratch: &m
     scratch.grey.resize(tile.len() * padded, 0.0);
     scratch.rgb.resize(tile.len() * count, [0.0; 3]);
     for k in 0..count {
-        let (s, sat) = (lights.scale[k], lights.saturated_b[k]);
+        let (s, sat) = (lights.scale.each_ref().map(|row| row[k]), lights.saturated_b.each_ref().map(|row| row[k]));
         let image = &images[k * n * 3..][..n * 3];
         for (i, &pixel) in tile.iter().enumerate() {
             let raw = &image[pixel * 3..pixel * 3 + 3];

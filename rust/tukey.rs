@@ -88,10 +88,6 @@ struct Machine {
     lights: usize,
     /// Each light's direction `l` (x, y, z) and `l lᵀ` (xx, xy, xz, yy, yz, zz).
     light: Vec<[f32; 9]>,
-    /// π / E per channel, each a row over the (padded, with 0) lights.
-    scale: [Vec<f32>; 3],
-    /// The saturated level of `b` per channel, each a row over the (padded, with 0) lights.
-    saturated_b: [Vec<f32>; 3],
     /// The raw observations of the chunk being fitted, image by image: a row per image of its
     /// pixels' RGB in chunk order, [`STAGE_GAP`] values between rows.
     staged: Vec<f32>,
@@ -143,12 +139,9 @@ impl Machine {
     fn new(source: &Lights) -> Machine {
         let lights = source.count;
         let light = (0..lights).map(|k| std::array::from_fn(|i| if i < 3 { source.direction[i][k] } else { source.outer[i - 3][k] })).collect();
-        let row = |per_light: &[[f32; 3]], channel: usize| (0..source.padded()).map(|k| per_light.get(k).map_or(0.0, |values| values[channel])).collect();
         Machine {
             lights,
             light,
-            scale: std::array::from_fn(|channel| row(&source.scale, channel)),
-            saturated_b: std::array::from_fn(|channel| row(&source.saturated_b, channel)),
             staged: Vec::new(),
             staged_stride: 0,
             grey: vec![[0.0; WIDTH]; lights],
@@ -240,7 +233,7 @@ impl Machine {
     #[inline(always)]
     fn load<V: Isa>(&mut self, isa: V, source: &Source, lane: usize, queue: &mut impl Iterator<Item = (usize, usize)>, fits: &mut Vec<(usize, PixelFit)>) {
         for (position, pixel) in queue {
-            let level = source.shadow_fraction * self.gather(isa, lane, position);
+            let level = source.shadow_fraction * self.gather(isa, source.lights, lane, position);
             let (gram, rhs, count) = threshold_sums(isa, &self.own, level, source.lights);
             if let Some(g) = solved(gram, rhs, count, 3) {
                 (self.g[lane], self.gram[lane], self.count[lane], self.level[lane]) = (g, gram, count, level);
@@ -284,7 +277,7 @@ impl Machine {
     /// copied light by light from `staged`, then scaled, tested for saturation and summed
     /// over the lights side by side.
     #[inline(always)]
-    fn gather<V: Isa>(&mut self, isa: V, lane: usize, position: usize) -> f32 {
+    fn gather<V: Isa>(&mut self, isa: V, lights: &Lights, lane: usize, position: usize) -> f32 {
         let rows = &mut self.channel[lane * 3 * self.padded..][..3 * self.padded];
         let (red, rest) = rows.split_at_mut(self.padded);
         let (green, blue) = rest.split_at_mut(self.padded);
@@ -296,12 +289,12 @@ impl Machine {
         let mut brightest = isa.splat(0.0);
         for at in (0..self.padded).step_by(WIDTH) {
             let mut b = [isa.splat(0.0); 3];
-            for ((b, row), scale) in b.iter_mut().zip([&mut *red, &mut *green, &mut *blue]).zip(&self.scale) {
+            for ((b, row), scale) in b.iter_mut().zip([&mut *red, &mut *green, &mut *blue]).zip(&lights.scale) {
                 *b = isa.floats(eight(row, at)) * isa.floats(eight(scale, at));
                 row[at..at + WIDTH].copy_from_slice(&b.to_array());
             }
             let [r, g, b] = b;
-            let [red_level, green_level, blue_level] = &self.saturated_b;
+            let [red_level, green_level, blue_level] = &lights.saturated_b;
             let unsaturated = r.simd_lt(isa.floats(eight(red_level, at))) & g.simd_lt(isa.floats(eight(green_level, at))) & b.simd_lt(isa.floats(eight(blue_level, at)));
             let sum = r + g + b;
             self.own[at..at + WIDTH].copy_from_slice(&blend(unsaturated, sum, saturated).to_array());
