@@ -149,7 +149,7 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
 
 /// Fits the pixels where `mask` is true, `chunk` of them at a time in parallel, into `out`:
 /// `fit` appends (pixel, fit) for each pixel of a chunk (pixel indices in increasing order),
-/// with the working state that `init` makes for each parallel task, and each chunk's fits go
+/// with the working state that `init` makes for each thread, and each chunk's fits go
 /// straight into its own rows of `out`.
 pub(crate) fn fit_masked<S>(mask: &[bool], chunk: usize, out: &mut PsOutput, init: impl Fn() -> S + Sync + Send, fit: impl Fn(&mut S, &[usize], &mut Vec<(usize, PixelFit)>) + Sync + Send) {
     let pixels: Vec<usize> = mask.iter().enumerate().filter_map(|(i, &m)| m.then_some(i)).collect();
@@ -170,21 +170,29 @@ pub(crate) fn fit_masked<S>(mask: &[bool], chunk: usize, out: &mut PsOutput, ini
         windows.push(window);
         start = next;
     }
-    // One working state per thread, each thread taking the next chunk when it is done with
-    // one (rayon's own splitting would make a state for every piece of work it splits off).
-    let queue = Mutex::new(chunks.into_iter().zip(windows));
+    let init = || (init(), Vec::with_capacity(chunk));
+    for_each_with(chunks.into_iter().zip(windows), init, |(state, fits), (pixels, (first, normals, albedo, flags, used))| {
+        fits.clear();
+        fit(state, pixels, fits);
+        for (p, pixel) in fits.drain(..) {
+            let i = p - first;
+            (normals[i], albedo[i], flags[i], used[i]) = (pixel.normal, pixel.albedo, pixel.flag, pixel.used);
+        }
+    });
+}
+
+/// Runs `work` on every item of `items`, in parallel, with one working state that `init`
+/// makes per thread: each thread takes the next item when it is done with one (rayon's
+/// `for_each_init` makes a state for every piece of work it splits off).
+fn for_each_with<T: Send, S>(items: impl Iterator<Item = T> + Send, init: impl Fn() -> S + Sync, work: impl Fn(&mut S, T) + Sync) {
+    let queue = Mutex::new(items);
     (0..rayon::current_num_threads()).into_par_iter().for_each(|_| {
-        let (mut state, mut fits) = (init(), Vec::with_capacity(chunk));
+        let mut state = init();
         loop {
-            // Its own statement, so that the lock is let go before the chunk is fitted.
+            // Its own statement, so that the lock is let go before the item is worked on.
             let next = queue.lock().unwrap_or_else(PoisonError::into_inner).next();
-            let Some((pixels, (first, normals, albedo, flags, used))) = next else { break };
-            fits.clear();
-            fit(&mut state, pixels, &mut fits);
-            for (p, pixel) in fits.drain(..) {
-                let i = p - first;
-                (normals[i], albedo[i], flags[i], used[i]) = (pixel.normal, pixel.albedo, pixel.flag, pixel.used);
-            }
+            let Some(item) = next else { break };
+            work(&mut state, item);
         }
     });
 }
@@ -194,32 +202,24 @@ impl Fit {
     fn streamed(&self, images: &[f32], mask: &[bool], mut out: PsOutput) -> PsOutput {
         let k_count = self.directions.len();
         let n = mask.len();
-        out.normals
-            .par_chunks_mut(TILE)
-            .zip(out.albedo.par_chunks_mut(TILE))
-            .zip(out.flags.par_chunks_mut(TILE))
-            .zip(out.used.par_chunks_mut(TILE))
-            .enumerate()
-            .for_each_init(
-                || Box::new(Sums::default()),
-                |sums, (tile, (((normals, albedo), flags), used))| {
-                    let start = tile * TILE;
-                    let pixels = normals.len();
-                    let kept = sums.keep(&mask[start..start + pixels]);
-                    if kept == 0 {
-                        return;
-                    }
-                    let src = |k: usize| &images[(k * n + start) * 3..][..pixels * 3];
-                    self.accumulate_tile(src, sums, kept, kept == pixels);
-                    for (i, &p) in sums.at[..kept].iter().enumerate() {
-                        let (normal, rho, f, count) = self.solve(sums, i, || (0..k_count).map(|k| self.observation(src(k), k, p)));
-                        normals[p] = normal;
-                        albedo[p] = rho;
-                        flags[p] = f;
-                        used[p] = count;
-                    }
-                },
-            );
+        let tiles = out.normals.chunks_mut(TILE).zip(out.albedo.chunks_mut(TILE)).zip(out.flags.chunks_mut(TILE)).zip(out.used.chunks_mut(TILE)).enumerate();
+        for_each_with(tiles, || Box::new(Sums::default()), |sums, (tile, (((normals, albedo), flags), used))| {
+            let start = tile * TILE;
+            let pixels = normals.len();
+            let kept = sums.keep(&mask[start..start + pixels]);
+            if kept == 0 {
+                return;
+            }
+            let src = |k: usize| &images[(k * n + start) * 3..][..pixels * 3];
+            self.accumulate_tile(src, sums, kept, kept == pixels);
+            for (i, &p) in sums.at[..kept].iter().enumerate() {
+                let (normal, rho, f, count) = self.solve(sums, i, || (0..k_count).map(|k| self.observation(src(k), k, p)));
+                normals[p] = normal;
+                albedo[p] = rho;
+                flags[p] = f;
+                used[p] = count;
+            }
+        });
         out
     }
 }
