@@ -16,17 +16,16 @@ pub const WIDTH: usize = 8;
 pub trait Floats: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Mul<f32, Output = Self> + BitAnd<Output = Self> + BitXor<Output = Self> + AddAssign {
     /// The integers of the same instruction set.
     type Ints: Ints<Floats = Self>;
-    /// Mask of `self < other`.
+    /// Mask of `self < other` (false where either is a NaN).
     fn simd_lt(self, other: Self) -> Self;
     /// Mask of `self > other`.
     fn simd_gt(self, other: Self) -> Self;
-    fn abs(self) -> Self;
     /// The bits of each value.
     fn to_bits(self) -> Self::Ints;
     fn to_array(self) -> [f32; WIDTH];
 }
 
-/// Eight `i32` in registers.
+/// Eight `i32` in registers (additions and subtractions wrap).
 pub trait Ints: Copy + Add<Output = Self> + Sub<Output = Self> + SubAssign + BitAnd<Output = Self> + BitXor<Output = Self> {
     /// The floats of the same instruction set.
     type Floats: Floats<Ints = Self>;
@@ -91,11 +90,6 @@ impl Floats for wide::f32x8 {
     #[inline(always)]
     fn simd_gt(self, other: Self) -> Self {
         wide::f32x8::simd_gt(self, other)
-    }
-
-    #[inline(always)]
-    fn abs(self) -> Self {
-        wide::f32x8::abs(self)
     }
 
     #[inline(always)]
@@ -265,11 +259,6 @@ mod avx2 {
         }
 
         #[inline(always)]
-        fn abs(self) -> F {
-            F(avx!(_mm256_and_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(i32::MAX)))))
-        }
-
-        #[inline(always)]
         fn to_bits(self) -> I {
             I(avx!(_mm256_castps_si256(self.0)))
         }
@@ -339,7 +328,10 @@ mod tests {
         let mut sum = a;
         sum += b;
         assert_eq!(sum.to_array()[0], 3.0);
-        assert_eq!(a.abs().to_array(), [1.0, 2.0, 3.0, 4.0, 0.5, 6.0, 0.0, 8.0]);
+        let nan = isa.splat_int(i32::MAX).to_floats();
+        for mask in [nan.simd_lt(a), nan.simd_gt(a), a.simd_lt(nan), (nan * 0.0).simd_lt(a)] {
+            assert_eq!(mask.to_bits().to_array(), [0; WIDTH], "no comparison with a NaN holds");
+        }
         assert_eq!(a.simd_lt(b).to_bits().to_array(), [-1, -1, 0, -1, -1, 0, -1, 0]);
         assert_eq!((a & a.simd_gt(b)).to_array(), [0.0, 0.0, 3.0, 0.0, 0.0, 6.0, 0.0, 8.0]);
         assert_eq!((a ^ isa.splat(-0.0)).to_array(), [-1.0, 2.0, -3.0, 4.0, -0.5, -6.0, 0.0, -8.0]);
@@ -347,6 +339,8 @@ mod tests {
         let i = isa.ints([5, -1, i32::MAX, 0, 7, 7, -8, 2]);
         let j = isa.splat_int(2);
         assert_eq!(i.simd_lt(j).to_array(), [0, -1, 0, -1, 0, 0, -1, 0]);
+        assert_eq!(((i + j) - j).to_array()[2], i32::MAX, "integers wrap");
+        assert_eq!((i + j).to_array()[2], i32::MIN + 1, "integers wrap");
         assert_eq!(i.simd_eq(j).to_array(), [0, 0, 0, 0, 0, 0, 0, -1]);
         assert_eq!(i.halved().to_array(), [2, -1, i32::MAX / 2, 0, 3, 3, -4, 1]);
         assert_eq!(i.min(j).to_array(), [2, -1, 2, 0, 2, 2, -8, 2]);

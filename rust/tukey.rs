@@ -49,7 +49,8 @@ const MAD_TO_SIGMA: f32 = 1.4826;
 const SCALE_FLOOR: f32 = 1e-4;
 /// Pixels per parallel task.
 const CHUNK: usize = 512;
-/// Key of an observation the fit does not light: above every absolute residual's key.
+/// Key of an observation the fit does not light: above every absolute residual's key, and
+/// the bits of a NaN.
 const UNLIT: i32 = i32::MAX;
 /// Widest half-width of the first bracket tried around a lane's previous median, in key
 /// units (2²⁰ of the mantissa's 2²³ per octave: about ±9 %): the bracket of a pixel's first
@@ -102,16 +103,15 @@ struct Machine {
     channel: Vec<f32>,
     /// The weights of the lane being finished, per (padded) light.
     finishing: Vec<f32>,
-    /// `b − l·g` per light.
-    residual: Vec<[f32; WIDTH]>,
-    /// Bits of `|b − l·g|` per light ([`UNLIT`] where the fit does not light it or it is
-    /// saturated): integers that order as the absolute residuals.
+    /// Bits of `|b − l·g|` per light ([`UNLIT`], a NaN's bits, where the fit does not
+    /// light it or it is saturated): integers that order as the absolute residuals.
     key: Vec<[i32; WIDTH]>,
-    /// Weights of the fit kept, per light, once a lane has re-weighted (before, see
-    /// [`Machine::lane_fit`]).
-    weight: Vec<[f32; WIDTH]>,
-    /// Weights tried next, per light.
+    /// Weights tried by the last re-weighting, per light: a lane's fit kept when it took
+    /// them.
     candidate: Vec<[f32; WIDTH]>,
+    /// Weights tried by the re-weighting before, per light: the fit kept of a lane that did
+    /// not take the last ones (before its first re-weighting, see [`Machine::lane_fit`]).
+    previous: Vec<[f32; WIDTH]>,
     /// The pixel being loaded's channel-summed `b`, light by light, padded with
     /// [`SATURATED`] like [`Lights`].
     own: Vec<f32>,
@@ -148,10 +148,9 @@ impl Machine {
             padded: source.padded(),
             channel: vec![0.0; WIDTH * 3 * source.padded()],
             finishing: vec![0.0; source.padded()],
-            residual: vec![[0.0; WIDTH]; lights],
             key: vec![[UNLIT; WIDTH]; lights],
-            weight: vec![[0.0; WIDTH]; lights],
             candidate: vec![[0.0; WIDTH]; lights],
+            previous: vec![[0.0; WIDTH]; lights],
             own: vec![SATURATED; source.padded()],
             level: [0.0; WIDTH],
             g: [Vec3::ZERO; WIDTH],
@@ -193,6 +192,7 @@ impl Machine {
         }
         while self.occupied.iter().any(|&o| o) {
             let (inverse, too_few_lit) = self.residuals(isa);
+            std::mem::swap(&mut self.candidate, &mut self.previous);
             let (grams, rhs, counts) = self.candidate_sums(isa, inverse);
             let mut accept = [false; WIDTH];
             let mut finished = [false; WIDTH];
@@ -208,12 +208,8 @@ impl Machine {
                 (self.g[lane], self.gram[lane], self.count[lane]) = (next, grams[lane], counts[lane]);
                 accept[lane] = true;
             }
-            let accept = isa.ints(accept.map(|on| -i32::from(on))).to_floats();
-            for (weight, candidate) in self.weight.iter_mut().zip(&self.candidate) {
-                *weight = blend(accept, isa.floats(*candidate), isa.floats(*weight)).to_array();
-            }
             for lane in (0..WIDTH).filter(|&lane| finished[lane]) {
-                fits.push((self.pixel[lane], self.lane_fit(isa, lane, source.lights)));
+                fits.push((self.pixel[lane], self.lane_fit(isa, lane, accept[lane], source.lights)));
                 self.load(isa, source, lane, &mut queue, fits);
             }
         }
@@ -306,12 +302,13 @@ impl Machine {
         brightest.to_array().into_iter().fold(0.0, f32::max)
     }
 
-    /// The normal and albedo of `lane`'s fit kept, whose weights are the threshold fit's
-    /// before the first re-weighting: the normal `g/|g|` and each channel's albedo the
-    /// weighted least-squares scale along it, Σ w (n·l) b / Σ w (n·l)², summed over the
-    /// lights side by side.
+    /// The normal and albedo of `lane`'s fit kept (from the last re-weighting's weights if
+    /// the lane took them (`took_last`), else the one's before, or the threshold fit's before
+    /// the first re-weighting): the normal `g/|g|` and each channel's albedo the weighted
+    /// least-squares scale along it, Σ w (n·l) b / Σ w (n·l)², summed over the lights side by
+    /// side.
     #[inline(always)]
-    fn lane_fit<V: Isa>(&mut self, isa: V, lane: usize, lights: &Lights) -> PixelFit {
+    fn lane_fit<V: Isa>(&mut self, isa: V, lane: usize, took_last: bool, lights: &Lights) -> PixelFit {
         let (g, gram, count) = (self.g[lane], self.gram[lane], self.count[lane]);
         if self.iterations[lane] == 0 {
             let level = self.level[lane];
@@ -319,7 +316,8 @@ impl Machine {
                 *weight = if grey[lane] > level && grey[lane] < SATURATED { 1.0 } else { 0.0 };
             }
         } else {
-            for (weight, kept) in self.finishing.iter_mut().zip(&self.weight) {
+            let kept = if took_last { &self.candidate } else { &self.previous };
+            for (weight, kept) in self.finishing.iter_mut().zip(kept) {
                 *weight = kept[lane];
             }
         }
@@ -348,13 +346,11 @@ impl Machine {
         let (gx, gy, gz) = (isa.floats(g.map(|g| g.x)), isa.floats(g.map(|g| g.y)), isa.floats(g.map(|g| g.z)));
         let (zero, saturated, magnitude, unlit) = (isa.splat(0.0), isa.splat(SATURATED), isa.splat_int(0x7fff_ffff), isa.splat_int(UNLIT));
         let mut lit = isa.splat_int(0);
-        for (((grey, residual), key), l) in self.grey.iter().zip(&mut self.residual).zip(&mut self.key).zip(&self.light) {
+        for ((grey, key), l) in self.grey.iter().zip(&mut self.key).zip(&self.light) {
             let grey = isa.floats(*grey);
             let predicted = gx * l[0] + gy * l[1] + gz * l[2];
             let use_it = (predicted.simd_gt(zero) & grey.simd_lt(saturated)).to_bits();
-            let difference = grey - predicted;
-            *residual = difference.to_array();
-            *key = blend(use_it, difference.to_bits() & magnitude, unlit).to_array();
+            *key = blend(use_it, (grey - predicted).to_bits() & magnitude, unlit).to_array();
             lit -= use_it;
         }
         let lit = lit.to_array();
@@ -385,17 +381,17 @@ impl Machine {
         let mut rhs = [[zero; 3]; 2];
         let mut count = [isa.splat_int(0); 2];
         let mut candidates = self.candidate.chunks_exact_mut(2);
-        let (greys, residuals, keys, lights) = (self.grey.chunks_exact(2), self.residual.chunks_exact(2), self.key.chunks_exact(2), self.light.chunks_exact(2));
-        let rest = (greys.remainder(), residuals.remainder(), keys.remainder(), lights.remainder());
-        for ((((candidate, grey), residual), key), l) in (&mut candidates).zip(greys).zip(residuals).zip(keys).zip(lights) {
+        let (greys, keys, lights) = (self.grey.chunks_exact(2), self.key.chunks_exact(2), self.light.chunks_exact(2));
+        let rest = (greys.remainder(), keys.remainder(), lights.remainder());
+        for (((candidate, grey), key), l) in (&mut candidates).zip(greys).zip(keys).zip(lights) {
             for half in 0..2 {
-                let weight = tukey_weight(isa, inverse, residual[half], key[half]);
+                let weight = tukey_weight(isa, inverse, key[half]);
                 candidate[half] = weight.to_array();
                 add_weighted(isa, weight, grey[half], &l[half], &mut rhs[half], &mut count[half]);
             }
         }
-        for ((((candidate, grey), residual), key), l) in candidates.into_remainder().iter_mut().zip(rest.0).zip(rest.1).zip(rest.2).zip(rest.3) {
-            let weight = tukey_weight(isa, inverse, *residual, *key);
+        for (((candidate, grey), key), l) in candidates.into_remainder().iter_mut().zip(rest.0).zip(rest.1).zip(rest.2) {
+            let weight = tukey_weight(isa, inverse, *key);
             *candidate = weight.to_array();
             add_weighted(isa, weight, *grey, l, &mut rhs[0], &mut count[0]);
         }
@@ -462,13 +458,14 @@ fn lanes_of<F: Floats, const N: usize>(sums: [F; N]) -> [[f32; WIDTH]; N] {
     lanes
 }
 
-/// Tukey's weight of an observation whose residual is `residual` for the scale `inverse`
-/// (see [`Machine::residuals`]), 0 where its `key` is [`UNLIT`].
+/// Tukey's weight of an observation whose absolute residual has the bits `key`, for the
+/// scale `inverse` (see [`Machine::residuals`]): 0 where `key` is [`UNLIT`], a NaN that no
+/// comparison holds for.
 #[inline(always)]
-fn tukey_weight<V: Isa>(isa: V, inverse: V::F, residual: [f32; WIDTH], key: [i32; WIDTH]) -> V::F {
+fn tukey_weight<V: Isa>(isa: V, inverse: V::F, key: [i32; WIDTH]) -> V::F {
     let one = isa.splat(1.0);
-    let u = isa.floats(residual) * inverse;
-    let inside = u.abs().simd_lt(one) & isa.ints(key).simd_lt(isa.splat_int(UNLIT)).to_floats();
+    let u = isa.ints(key).to_floats() * inverse;
+    let inside = u.simd_lt(one);
     let tukey = (one - u * u) * (one - u * u);
     tukey & inside
 }
@@ -576,22 +573,22 @@ fn median_keys<V: Isa>(isa: V, keys: &[[i32; WIDTH]], lit: [i32; WIDTH], guess: 
         let grown = blend(farthest.simd_lt(reach), unbounded, blend(reach.simd_lt(zero - farthest), zero - unbounded, quadrupled));
         reach = grown & (unbracketed & counted);
     }
-    let (lo, below_lo, rank) = (lo.to_array(), below_lo.to_array(), rank.to_array());
-    // At most SELECT keys, or one value, are left in [lo, hi): the keys from lo go down a
-    // cascade that keeps the SELECT smallest in order.
-    let (from, unlit) = (isa.ints(lo), isa.splat_int(UNLIT));
-    let mut smallest = [unlit; SELECT];
+    // At most SELECT keys, or one value, are left in [lo, hi): the keys go down a cascade
+    // that keeps the SELECT smallest in order, each shifted by `lo + i32::MIN` (wrapping) so
+    // that the keys from lo come first and those below it last.
+    let offset = lo + isa.splat_int(i32::MIN);
+    let mut smallest = [isa.splat_int(i32::MAX); SELECT];
     for key in keys {
-        let key = isa.ints(*key);
-        let mut carried = blend(key.simd_lt(from), unlit, key);
+        let mut carried = isa.ints(*key) - offset;
         for slot in &mut smallest {
             (*slot, carried) = (slot.min(carried), slot.max(carried));
         }
     }
     let mut sorted = [[0; WIDTH]; SELECT];
     for (lanes, slot) in sorted.iter_mut().zip(smallest) {
-        *lanes = slot.to_array();
+        *lanes = (slot + offset).to_array();
     }
+    let (lo, below_lo, rank) = (lo.to_array(), below_lo.to_array(), rank.to_array());
     // More keys than SELECT are left only when they all have the value lo.
     std::array::from_fn(|lane| sorted.get((rank[lane] - below_lo[lane]) as usize).map_or(lo[lane], |keys| keys[lane]))
 }
