@@ -3,9 +3,11 @@
 //!
 //! Such code is generic over an [`Isa`] and is compiled once per instruction set: with
 //! [`Portable`] (the `wide` crate: two SSE2 halves on x86-64, whatever the target has
-//! elsewhere) and, on x86-64 CPUs that have it, with [`Avx2`] (one 256-bit register) inside a
-//! function compiled for AVX2. Both compute the same bits: the same operations in the same
-//! order, no fused multiply-add. Comparisons return masks, all bits set where true.
+//! elsewhere) and, on x86-64 CPUs that have AVX2 and FMA, with [`Avx2`] (one 256-bit
+//! register) inside a function compiled for them. Both compute the same bits: the same
+//! operations in the same order, each multiply-add rounded once (on a target without FMA
+//! instructions [`Portable`] does it in software, correctly but slowly). Comparisons return
+//! masks, all bits set where true.
 
 use std::ops::{Add, AddAssign, BitAnd, BitXor, Mul, Sub, SubAssign};
 
@@ -20,6 +22,8 @@ pub trait Floats: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = 
     fn simd_lt(self, other: Self) -> Self;
     /// Mask of `self > other`.
     fn simd_gt(self, other: Self) -> Self;
+    /// `self × a + b`, rounded once.
+    fn mul_add(self, a: Self, b: Self) -> Self;
     /// The bits of each value.
     fn to_bits(self) -> Self::Ints;
     fn to_array(self) -> [f32; WIDTH];
@@ -80,6 +84,21 @@ impl Isa for Portable {
 }
 
 impl Floats for wide::f32x8 {
+    #[inline(always)]
+    fn mul_add(self, a: Self, b: Self) -> Self {
+        // `wide` rounds once only where the target has fused multiply-adds.
+        if cfg!(any(target_feature = "fma", all(target_arch = "aarch64", target_feature = "neon"))) {
+            wide::f32x8::mul_add(self, a, b)
+        } else {
+            let (x, y, z) = (self.to_array(), a.to_array(), b.to_array());
+            let mut fused = [0.0; WIDTH];
+            for (i, value) in fused.iter_mut().enumerate() {
+                *value = x[i].mul_add(y[i], z[i]);
+            }
+            wide::f32x8::new(fused)
+        }
+    }
+
     type Ints = wide::i32x8;
 
     #[inline(always)]
@@ -148,21 +167,21 @@ pub use avx2::Avx2;
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
     //! AVX2 registers. A value of these types exists only once [`Avx2::detect`] has found
-    //! AVX2 on this CPU, which is what makes their intrinsics safe to call.
+    //! AVX2 and FMA on this CPU, which is what makes their intrinsics safe to call.
 
     use std::arch::x86_64::*;
     use std::ops::{Add, AddAssign, BitAnd, BitXor, Mul, Sub, SubAssign};
 
     use super::{Floats, Ints, Isa, WIDTH};
 
-    /// Proof that this CPU has AVX2.
+    /// Proof that this CPU has AVX2 and FMA.
     #[derive(Debug, Clone, Copy)]
     pub struct Avx2(());
 
     impl Avx2 {
-        /// `Some` when this CPU has AVX2.
+        /// `Some` when this CPU has AVX2 and FMA.
         pub fn detect() -> Option<Avx2> {
-            std::arch::is_x86_feature_detected!("avx2").then_some(Avx2(()))
+            (std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")).then_some(Avx2(()))
         }
     }
 
@@ -192,7 +211,7 @@ mod avx2 {
     }
 
     /// `$body` over AVX2 intrinsics: sound because a value of these types exists only on a
-    /// CPU with AVX2 (module documentation).
+    /// CPU with AVX2 and FMA (module documentation).
     macro_rules! avx {
         ($body:expr) => {
             // SAFETY: see the macro's documentation.
@@ -247,6 +266,11 @@ mod avx2 {
 
     impl Floats for F {
         type Ints = I;
+
+        #[inline(always)]
+        fn mul_add(self, a: F, b: F) -> F {
+            F(avx!(_mm256_fmadd_ps(self.0, a.0, b.0)))
+        }
 
         #[inline(always)]
         fn simd_lt(self, other: F) -> F {
@@ -328,6 +352,9 @@ mod tests {
         let mut sum = a;
         sum += b;
         assert_eq!(sum.to_array()[0], 3.0);
+        let near_one = isa.splat(1.0 + f32::EPSILON * 2048.0);
+        let fused = near_one.mul_add(near_one, isa.splat(-(1.0 + f32::EPSILON * 4096.0)));
+        assert_eq!(fused.to_array(), [f32::EPSILON / 2.0; WIDTH], "a multiply-add rounds once (twice would give 0)");
         let nan = isa.splat_int(i32::MAX).to_floats();
         for mask in [nan.simd_lt(a), nan.simd_gt(a), a.simd_lt(nan), (nan * 0.0).simd_lt(a)] {
             assert_eq!(mask.to_bits().to_array(), [0; WIDTH], "no comparison with a NaN holds");

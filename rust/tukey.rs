@@ -12,8 +12,9 @@
 //! consecutive pixels at once), so that the images are read in order rather than one value
 //! of each of K images per pixel. The pixels of a chunk go through [`WIDTH`] lanes,
 //! structure of arrays (one value of each lane per light), so that the residuals, weights
-//! and sums of every lane are computed by the same vector instructions (AVX2 where the CPU
-//! has it, see [`crate::lanes`]). A lane whose pixel has settled is refilled with the next
+//! and sums of every lane are computed by the same vector instructions (AVX2 and FMA where
+//! the CPU has them, see [`crate::lanes`]; the weights and their sums in one pass of fused
+//! multiply-adds). A lane whose pixel has settled is refilled with the next
 //! pixel of the chunk at once (its threshold fit summed as it is read, over the lights side
 //! by side), so pixels that need many re-weightings do not hold the others back. Each
 //! lane's median comes from counting, vectorised over the lanes: a bisection on the
@@ -169,15 +170,15 @@ impl Machine {
     fn run(&mut self, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
         #[cfg(target_arch = "x86_64")]
         if let Some(avx2) = crate::lanes::Avx2::detect() {
-            // SAFETY: `detect` found AVX2.
+            // SAFETY: `detect` found AVX2 and FMA.
             return unsafe { self.run_avx2(avx2, source, chunk, fits) };
         }
         self.run_in(Portable, source, chunk, fits);
     }
 
-    /// [`Machine::run`] compiled for AVX2.
+    /// [`Machine::run`] compiled for AVX2 and FMA.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,fma")]
     fn run_avx2(&mut self, isa: crate::lanes::Avx2, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
         self.run_in(isa, source, chunk, fits);
     }
@@ -348,7 +349,7 @@ impl Machine {
         let mut lit = isa.splat_int(0);
         for ((grey, key), l) in self.grey.iter().zip(&mut self.key).zip(&self.light) {
             let grey = isa.floats(*grey);
-            let predicted = gx * l[0] + gy * l[1] + gz * l[2];
+            let predicted = gz.mul_add(isa.splat(l[2]), gy.mul_add(isa.splat(l[1]), gx * l[0]));
             let use_it = (predicted.simd_gt(zero) & grey.simd_lt(saturated)).to_bits();
             *key = blend(use_it, (grey - predicted).to_bits() & magnitude, unlit).to_array();
             lit -= use_it;
@@ -373,40 +374,25 @@ impl Machine {
     /// lane, Σ w l lᵀ, Σ w l b (channel sum) and the number of observations with weight.
     #[inline(always)]
     fn candidate_sums<V: Isa>(&mut self, isa: V, inverse: [f32; WIDTH]) -> ([Mat3; WIDTH], [Vec3; WIDTH], [usize; WIDTH]) {
+        // One pass: its ten sums stay in AVX2's registers, and as each takes one fused
+        // multiply-add a light, none waits on its last.
         let (inverse, zero) = (isa.floats(inverse), isa.splat(0.0));
-        // Two passes, so that each one's sums stay in registers without AVX; each sum in two
-        // halves (even and odd lights), so that an addition need not wait for the last. (The
-        // halves by constant index, in pairs of lights and then the odd one out, so that they
-        // stay in registers.)
-        let mut rhs = [[zero; 3]; 2];
-        let mut count = [isa.splat_int(0); 2];
-        let mut candidates = self.candidate.chunks_exact_mut(2);
-        let (greys, keys, lights) = (self.grey.chunks_exact(2), self.key.chunks_exact(2), self.light.chunks_exact(2));
-        let rest = (greys.remainder(), keys.remainder(), lights.remainder());
-        for (((candidate, grey), key), l) in (&mut candidates).zip(greys).zip(keys).zip(lights) {
-            for half in 0..2 {
-                let weight = tukey_weight(isa, inverse, key[half]);
-                candidate[half] = weight.to_array();
-                add_weighted(isa, weight, grey[half], &l[half], &mut rhs[half], &mut count[half]);
-            }
-        }
-        for (((candidate, grey), key), l) in candidates.into_remainder().iter_mut().zip(rest.0).zip(rest.1).zip(rest.2) {
+        let mut rhs = [zero; 3];
+        let mut gram = [zero; 6];
+        let mut count = isa.splat_int(0);
+        for (((candidate, grey), key), l) in self.candidate.iter_mut().zip(&self.grey).zip(&self.key).zip(&self.light) {
             let weight = tukey_weight(isa, inverse, *key);
             *candidate = weight.to_array();
-            add_weighted(isa, weight, *grey, l, &mut rhs[0], &mut count[0]);
-        }
-        let mut gram = [[zero; 6]; 2];
-        let (candidates, lights) = (self.candidate.chunks_exact(2), self.light.chunks_exact(2));
-        let rest = (candidates.remainder(), lights.remainder());
-        for (candidate, l) in candidates.zip(lights) {
-            for half in 0..2 {
-                add_outer(isa.floats(candidate[half]), &l[half], &mut gram[half]);
+            let weighted = weight * isa.floats(*grey);
+            for (sum, &l) in rhs.iter_mut().zip(&l[..3]) {
+                *sum = weighted.mul_add(isa.splat(l), *sum);
+            }
+            count -= weight.simd_gt(zero).to_bits();
+            for (sum, &ll) in gram.iter_mut().zip(&l[3..]) {
+                *sum = weight.mul_add(isa.splat(ll), *sum);
             }
         }
-        for (candidate, l) in rest.0.iter().zip(rest.1) {
-            add_outer(isa.floats(*candidate), l, &mut gram[0]);
-        }
-        let (gram, rhs, count) = (lanes_of(pairwise(gram)), lanes_of(pairwise(rhs)), (count[0] + count[1]).to_array());
+        let (gram, rhs, count) = (lanes_of(gram), lanes_of(rhs), count.to_array());
         let grams = std::array::from_fn(|lane| symmetric(gram.map(|m| m[lane])));
         (grams, std::array::from_fn(|lane| Vec3::new(rhs[0][lane], rhs[1][lane], rhs[2][lane])), count.map(|c| c as usize))
     }
@@ -466,42 +452,13 @@ fn tukey_weight<V: Isa>(isa: V, inverse: V::F, key: [i32; WIDTH]) -> V::F {
     let one = isa.splat(1.0);
     let u = isa.ints(key).to_floats() * inverse;
     let inside = u.simd_lt(one);
-    let tukey = (one - u * u) * (one - u * u);
-    tukey & inside
-}
-
-/// Adds `weight` times an observation's channel-summed `grey` times its light's direction
-/// (the first three of `l`) to `rhs`, and its lanes with weight to `count`.
-#[inline(always)]
-fn add_weighted<V: Isa>(isa: V, weight: V::F, grey: [f32; WIDTH], l: &[f32; 9], rhs: &mut [V::F; 3], count: &mut V::I) {
-    let weighted = weight * isa.floats(grey);
-    for (sum, &l) in rhs.iter_mut().zip(&l[..3]) {
-        *sum += weighted * l;
-    }
-    *count -= weight.simd_gt(isa.splat(0.0)).to_bits();
-}
-
-/// Adds `weight` times the light's `l lᵀ` (the last six of `l`) to `gram`.
-#[inline(always)]
-fn add_outer<F: Floats>(weight: F, l: &[f32; 9], gram: &mut [F; 6]) {
-    for (sum, &ll) in gram.iter_mut().zip(&l[3..]) {
-        *sum += weight * ll;
-    }
+    let tukey = (u ^ isa.splat(-0.0)).mul_add(u, one);
+    (tukey * tukey) & inside
 }
 
 /// The sum of the lanes of a sum taken side by side, in lane order.
 fn total(lanes: [f32; WIDTH]) -> f32 {
     lanes.iter().sum()
-}
-
-/// The sums of the two halves of each of `sums`.
-#[inline(always)]
-fn pairwise<F: Floats, const N: usize>(halves: [[F; N]; 2]) -> [F; N] {
-    let [mut sums, odd] = halves;
-    for (sum, odd) in sums.iter_mut().zip(odd) {
-        *sum += odd;
-    }
-    sums
 }
 
 /// The symmetric matrix of xx, xy, xz, yy, yz, zz.
