@@ -84,6 +84,8 @@ impl Isa for Portable {
 }
 
 impl Floats for wide::f32x8 {
+    type Ints = wide::i32x8;
+
     #[inline(always)]
     fn mul_add(self, a: Self, b: Self) -> Self {
         // `wide` rounds once only where the target has fused multiply-adds.
@@ -98,8 +100,6 @@ impl Floats for wide::f32x8 {
             wide::f32x8::new(fused)
         }
     }
-
-    type Ints = wide::i32x8;
 
     #[inline(always)]
     fn simd_lt(self, other: Self) -> Self {

@@ -303,11 +303,11 @@ impl Machine {
         brightest.to_array().into_iter().fold(0.0, f32::max)
     }
 
-    /// The normal and albedo of `lane`'s fit kept (from the last re-weighting's weights if
-    /// the lane took them (`took_last`), else the one's before, or the threshold fit's before
-    /// the first re-weighting): the normal `g/|g|` and each channel's albedo the weighted
-    /// least-squares scale along it, Σ w (n·l) b / Σ w (n·l)², summed over the lights side by
-    /// side.
+    /// The normal and albedo of `lane`'s fit kept (with the last re-weighting's weights if
+    /// the lane took them, `took_last`, else with the weights of the one before; with the
+    /// threshold fit's before the first re-weighting): the normal `g/|g|` and each channel's
+    /// albedo the weighted least-squares scale along it, Σ w (n·l) b / Σ w (n·l)², summed
+    /// over the lights side by side.
     #[inline(always)]
     fn lane_fit<V: Isa>(&mut self, isa: V, lane: usize, took_last: bool, lights: &Lights) -> PixelFit {
         let (g, gram, count) = (self.g[lane], self.gram[lane], self.count[lane]);
@@ -452,6 +452,7 @@ fn tukey_weight<V: Isa>(isa: V, inverse: V::F, key: [i32; WIDTH]) -> V::F {
     let one = isa.splat(1.0);
     let u = isa.ints(key).to_floats() * inverse;
     let inside = u.simd_lt(one);
+    // 1 − u², rounded once.
     let tukey = (u ^ isa.splat(-0.0)).mul_add(u, one);
     (tukey * tukey) & inside
 }
