@@ -1,5 +1,7 @@
 """Helpers shared by the tests that run the ``irtps`` command as a user would."""
 
+import signal
+
 from irtps import _core
 from irtps.cli import main
 
@@ -22,3 +24,11 @@ def saturate(folder, images=6):
         image, bits = _core.read_png(str(folder / name))
         image[20:26, 20:26] = 1.0
         _core.write_png(str(folder / name), image, bits)
+
+
+def interruptible() -> None:
+    """In a child process before it runs the command: Ctrl-C (SIGINT) back to its default.
+    A shell starts background jobs with SIGINT ignored (a CI script launched with ``&``),
+    a program keeps an ignored signal ignored, and the tests that press Ctrl-C would then
+    see the command run on."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

@@ -17,7 +17,7 @@ import pytest
 from irtps.dataset import save_dataset
 from irtps.synth import synthesize
 
-from cli_helpers import saturate
+from cli_helpers import interruptible, saturate
 
 pytest.importorskip("distributed")
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads the process table in /proc")
@@ -47,7 +47,7 @@ class _Command:
 
     def __init__(self, *args):
         command = [sys.executable, "-m", "irtps.cli", *map(str, args)]
-        self.process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0, start_new_session=True)
+        self.process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0, start_new_session=True, preexec_fn=interruptible)
         self._err, self._out, self._lock = [], [], threading.Lock()
         self._readers = [threading.Thread(target=self._read, args=(stream, chunks), daemon=True) for stream, chunks in ((self.process.stderr, self._err), (self.process.stdout, self._out))]
         for reader in self._readers:

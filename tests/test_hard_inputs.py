@@ -21,7 +21,7 @@ import pytest
 from irtps import DatasetError, _core
 from irtps.cli import main
 
-from cli_helpers import saturate
+from cli_helpers import interruptible, saturate
 
 DATA = Path(__file__).parent / "data"
 MITSUBA = DATA / "mitsuba_small" / "cap_cornell"  # 96x96, 3 lights, floor and Cornell box
@@ -583,7 +583,7 @@ def test_a_full_disk_while_writing_leaves_the_previous_output(tmp_path, previous
 @pytest.mark.parametrize("signum, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_killed_process_leaves_the_previous_output(tmp_path, previous_output, signum, status):
     command = [sys.executable, "-m", "irtps.cli", "render", str(MITSUBA), "--out", str(previous_output), "--samples", "8192"]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=interruptible)
     assert process.stderr.read(1)  # the progress bar has started: rendering is under way
     process.send_signal(signum)
     _, err = process.communicate(timeout=120)
