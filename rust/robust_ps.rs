@@ -40,16 +40,9 @@ impl Lights {
     /// From unit `directions`, `scale` = π / E and the saturated level of `b` per light.
     pub fn new(directions: &[Vec3], scale: &[[f32; 3]], saturated_b: &[[f32; 3]], gram: Mat3) -> Lights {
         let padded = directions.len().div_ceil(LANES) * LANES;
-        let component = |f: &dyn Fn(Vec3) -> f32| {
-            let mut v: Vec<f32> = directions.iter().map(|&l| f(l)).collect();
-            v.resize(padded, 0.0);
-            v
-        };
-        let channel = |per_light: &[[f32; 3]], c: usize| {
-            let mut v: Vec<f32> = per_light.iter().map(|values| values[c]).collect();
-            v.resize(padded, 0.0);
-            v
-        };
+        let row = |values: &mut dyn Iterator<Item = f32>| -> Vec<f32> { values.chain(std::iter::repeat(0.0)).take(padded).collect() };
+        let component = |f: &dyn Fn(Vec3) -> f32| row(&mut directions.iter().map(|&l| f(l)));
+        let channel = |per_light: &[[f32; 3]], c: usize| row(&mut per_light.iter().map(|values| values[c]));
         Lights {
             count: directions.len(),
             direction: [component(&|l| l.x), component(&|l| l.y), component(&|l| l.z)],
