@@ -18,7 +18,7 @@ pub const TRIM_BRIGHTEST: f32 = 0.2;
 /// Pixels per tile: a tile's observations stay in the core's caches.
 const TILE: usize = 64;
 /// Lights summed side by side.
-const LANES: usize = 8;
+pub(crate) const LANES: usize = 8;
 
 /// The lights, structure of arrays, padded with zeros to a multiple of [`LANES`].
 pub(crate) struct Lights {

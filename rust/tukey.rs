@@ -1,4 +1,4 @@
-//! Tukey re-weighting of photometric stereo, [`WIDTH`] pixels side by side.
+//! Tukey re-weighting of photometric stereo, [`W`] pixels side by side.
 //!
 //! Each pixel starts from the threshold fit (observations above `shadow_fraction` of the
 //! pixel's brightest) and re-weights every observation that the fit lights (`l·g > 0`) by
@@ -10,7 +10,7 @@
 //!
 //! A chunk's observations are first copied out of the images image by image (runs of
 //! consecutive pixels at once), so that the images are read in order rather than one value
-//! of each of K images per pixel. The pixels of a chunk go through [`WIDTH`] lanes,
+//! of each of K images per pixel. The pixels of a chunk go through [`W`] lanes,
 //! structure of arrays (one value of each lane per light), so that the residuals, weights
 //! and sums of every lane are computed by the same vector instructions (AVX2 and FMA where
 //! the CPU has them, see [`crate::lanes`]; the weights and their sums in one pass of fused
@@ -28,9 +28,9 @@ use std::ops::{BitAnd, BitXor};
 
 use glam::{Mat3, Vec3};
 
-use crate::lanes::{Floats, Ints, Isa, Portable, WIDTH};
+use crate::lanes::{Floats, Ints, Isa, Portable};
 use crate::ps::{fit_masked, flag, PixelFit, PsOutput};
-use crate::robust_ps::{full_fit, solved, Lights, SATURATED};
+use crate::robust_ps::{full_fit, solved, Lights, LANES, SATURATED};
 
 /// Tukey's biweight constant, in robust scales: an observation whose residual is beyond
 /// 2.5 scales carries no weight. Below the 4.685 of 95 % Gaussian efficiency, because the
@@ -68,10 +68,22 @@ const SELECT: usize = 4;
 /// rows' values of one pixel do not all fall in the same cache set.
 const STAGE_GAP: usize = 16;
 
-/// Fits the pixels where `mask` is true from `images` laid out `(K, pixels, 3)` into `out`.
+/// Fits the pixels where `mask` is true from `images` laid out `(K, pixels, 3)` into `out`,
+/// in the widest registers the CPU has (the same results in each).
 pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, shadow_fraction: f32, out: &mut PsOutput) {
     let source = Source { images, n: mask.len(), lights, shadow_fraction };
-    fit_masked(mask, CHUNK, out, || Box::new(Machine::new(lights)), |machine, chunk, fits| machine.run(&source, chunk, fits));
+    #[cfg(target_arch = "x86_64")]
+    {
+        if let Some(avx512) = crate::lanes::Avx512::detect() {
+            // SAFETY: `detect` found AVX-512F, AVX2 and FMA.
+            return fit_masked(mask, CHUNK, out, || Box::new(Machine::new(lights)), |machine, chunk, fits| unsafe { machine.run_avx512(avx512, &source, chunk, fits) });
+        }
+        if let Some(avx2) = crate::lanes::Avx2::detect() {
+            // SAFETY: `detect` found AVX2 and FMA.
+            return fit_masked(mask, CHUNK, out, || Box::new(Machine::new(lights)), |machine, chunk, fits| unsafe { machine.run_avx2(avx2, &source, chunk, fits) });
+        }
+    }
+    fit_masked(mask, CHUNK, out, || Box::new(Machine::<8>::new(lights)), |machine, chunk, fits| machine.run_in(Portable, Portable, &source, chunk, fits));
 }
 
 /// Where the pixels' observations come from.
@@ -84,8 +96,8 @@ struct Source<'a> {
     shadow_fraction: f32,
 }
 
-/// The lanes and their pixels' observations.
-struct Machine {
+/// `W` lanes and their pixels' observations.
+struct Machine<const W: usize> {
     /// Number of lights.
     lights: usize,
     /// Each light's direction `l` (x, y, z) and `l lᵀ` (xx, xy, xz, yy, yz, zz).
@@ -96,7 +108,7 @@ struct Machine {
     /// Values from one image's row of `staged` to the next.
     staged_stride: usize,
     /// Channel-summed `b` per light ([`SATURATED`] when saturated).
-    grey: Vec<[f32; WIDTH]>,
+    grey: Vec<[f32; W]>,
     /// Lights padded to whole lanes, like [`Lights`].
     padded: usize,
     /// `b` per lane, channel and (padded) light: lane by lane, each lane's red, green and
@@ -106,38 +118,38 @@ struct Machine {
     finishing: Vec<f32>,
     /// Bits of `|b − l·g|` per light ([`UNLIT`], a NaN's bits, where the fit does not
     /// light it or it is saturated): integers that order as the absolute residuals.
-    key: Vec<[i32; WIDTH]>,
+    key: Vec<[i32; W]>,
     /// Weights tried by the last re-weighting, per light: a lane's fit kept when it took
     /// them.
-    candidate: Vec<[f32; WIDTH]>,
+    candidate: Vec<[f32; W]>,
     /// Weights tried by the re-weighting before, per light: the fit kept of a lane that did
     /// not take the last ones (before its first re-weighting, see [`Machine::lane_fit`]).
-    previous: Vec<[f32; WIDTH]>,
+    previous: Vec<[f32; W]>,
     /// The pixel being loaded's channel-summed `b`, light by light, padded with
     /// [`SATURATED`] like [`Lights`].
     own: Vec<f32>,
     /// Each lane's shadow level (its threshold fit's).
-    level: [f32; WIDTH],
+    level: [f32; W],
     /// The fit kept, `ρ n` summed over the channels.
-    g: [Vec3; WIDTH],
+    g: [Vec3; W],
     /// Σ w l lᵀ of the fit kept.
-    gram: [Mat3; WIDTH],
+    gram: [Mat3; W],
     /// Observations with weight in the fit kept.
-    count: [usize; WIDTH],
+    count: [usize; W],
     /// Whether the lane holds a pixel.
-    occupied: [bool; WIDTH],
+    occupied: [bool; W],
     /// Pixel index of each lane.
-    pixel: [usize; WIDTH],
+    pixel: [usize; W],
     /// Re-weightings done.
-    iterations: [u8; WIDTH],
+    iterations: [u8; W],
     /// Each lane's last median key, 0 before the first.
-    median_key: [i32; WIDTH],
+    median_key: [i32; W],
     /// Half-width of the bracket tried around it next, in key units.
-    bracket: [i32; WIDTH],
+    bracket: [i32; W],
 }
 
-impl Machine {
-    fn new(source: &Lights) -> Machine {
+impl<const W: usize> Machine<W> {
+    fn new(source: &Lights) -> Machine<W> {
         let lights = source.count;
         let light = (0..lights).map(|k| std::array::from_fn(|i| if i < 3 { source.direction[i][k] } else { source.outer[i - 3][k] })).collect();
         Machine {
@@ -145,59 +157,42 @@ impl Machine {
             light,
             staged: Vec::new(),
             staged_stride: 0,
-            grey: vec![[0.0; WIDTH]; lights],
+            grey: vec![[0.0; W]; lights],
             padded: source.padded(),
-            channel: vec![0.0; WIDTH * 3 * source.padded()],
+            channel: vec![0.0; W * 3 * source.padded()],
             finishing: vec![0.0; source.padded()],
-            key: vec![[UNLIT; WIDTH]; lights],
-            candidate: vec![[0.0; WIDTH]; lights],
-            previous: vec![[0.0; WIDTH]; lights],
+            key: vec![[UNLIT; W]; lights],
+            candidate: vec![[0.0; W]; lights],
+            previous: vec![[0.0; W]; lights],
             own: vec![SATURATED; source.padded()],
-            level: [0.0; WIDTH],
-            g: [Vec3::ZERO; WIDTH],
-            gram: [Mat3::ZERO; WIDTH],
-            count: [0; WIDTH],
-            occupied: [false; WIDTH],
-            pixel: [0; WIDTH],
-            iterations: [0; WIDTH],
-            median_key: [0; WIDTH],
-            bracket: [BRACKET; WIDTH],
+            level: [0.0; W],
+            g: [Vec3::ZERO; W],
+            gram: [Mat3::ZERO; W],
+            count: [0; W],
+            occupied: [false; W],
+            pixel: [0; W],
+            iterations: [0; W],
+            median_key: [0; W],
+            bracket: [BRACKET; W],
         }
     }
 
-    /// Fits every pixel of `chunk`, appending to `fits`, in AVX2 registers when the CPU has
-    /// them (the same results either way).
-    fn run(&mut self, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
-        #[cfg(target_arch = "x86_64")]
-        if let Some(avx2) = crate::lanes::Avx2::detect() {
-            // SAFETY: `detect` found AVX2 and FMA.
-            return unsafe { self.run_avx2(avx2, source, chunk, fits) };
-        }
-        self.run_in(Portable, source, chunk, fits);
-    }
-
-    /// [`Machine::run`] compiled for AVX2 and FMA.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn run_avx2(&mut self, isa: crate::lanes::Avx2, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
-        self.run_in(isa, source, chunk, fits);
-    }
-
-    /// [`Machine::run`] in the registers of `isa`.
+    /// Fits every pixel of `chunk`, appending to `fits`: the lanes in the registers of
+    /// `isa`, each pixel's lights side by side in those of `light`.
     #[inline(always)]
-    fn run_in<V: Isa>(&mut self, isa: V, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
+    fn run_in<V: Isa<W>, E: Isa<LANES>>(&mut self, isa: V, light: E, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
         self.stage(source, chunk);
         let mut queue = chunk.iter().copied().enumerate();
-        for lane in 0..WIDTH {
-            self.load(isa, source, lane, &mut queue, fits);
+        for lane in 0..W {
+            self.load(light, source, lane, &mut queue, fits);
         }
         while self.occupied.iter().any(|&o| o) {
             let (inverse, too_few_lit) = self.residuals(isa);
             std::mem::swap(&mut self.candidate, &mut self.previous);
             let (grams, rhs, counts) = self.candidate_sums(isa, inverse);
-            let mut accept = [false; WIDTH];
-            let mut finished = [false; WIDTH];
-            for lane in (0..WIDTH).filter(|&lane| self.occupied[lane]) {
+            let mut accept = [false; W];
+            let mut finished = [false; W];
+            for lane in (0..W).filter(|&lane| self.occupied[lane]) {
                 let next = if too_few_lit[lane] { None } else { solved(grams[lane], rhs[lane], counts[lane], TUKEY_MIN) };
                 let Some(next) = next else {
                     finished[lane] = true;
@@ -209,9 +204,9 @@ impl Machine {
                 (self.g[lane], self.gram[lane], self.count[lane]) = (next, grams[lane], counts[lane]);
                 accept[lane] = true;
             }
-            for lane in (0..WIDTH).filter(|&lane| finished[lane]) {
-                fits.push((self.pixel[lane], self.lane_fit(isa, lane, accept[lane], source.lights)));
-                self.load(isa, source, lane, &mut queue, fits);
+            for lane in (0..W).filter(|&lane| finished[lane]) {
+                fits.push((self.pixel[lane], self.lane_fit(light, lane, accept[lane], source.lights)));
+                self.load(light, source, lane, &mut queue, fits);
             }
         }
     }
@@ -228,10 +223,10 @@ impl Machine {
     /// its threshold fit as the fit kept; a pixel without one gets the full fit (in `fits`)
     /// and the next is tried. Empties the lane when `queue` is.
     #[inline(always)]
-    fn load<V: Isa>(&mut self, isa: V, source: &Source, lane: usize, queue: &mut impl Iterator<Item = (usize, usize)>, fits: &mut Vec<(usize, PixelFit)>) {
+    fn load<E: Isa<LANES>>(&mut self, light: E, source: &Source, lane: usize, queue: &mut impl Iterator<Item = (usize, usize)>, fits: &mut Vec<(usize, PixelFit)>) {
         for (position, pixel) in queue {
-            let level = source.shadow_fraction * self.gather(isa, source.lights, lane, position);
-            let (gram, rhs, count) = threshold_sums(isa, &self.own, level, source.lights);
+            let level = source.shadow_fraction * self.gather(light, source.lights, lane, position);
+            let (gram, rhs, count) = threshold_sums(light, &self.own, level, source.lights);
             if let Some(g) = solved(gram, rhs, count, 3) {
                 (self.g[lane], self.gram[lane], self.count[lane], self.level[lane]) = (g, gram, count, level);
                 (self.occupied[lane], self.pixel[lane], self.iterations[lane], self.bracket[lane]) = (true, pixel, 0, BRACKET);
@@ -274,7 +269,7 @@ impl Machine {
     /// copied light by light from `staged`, then scaled, tested for saturation and summed
     /// over the lights side by side.
     #[inline(always)]
-    fn gather<V: Isa>(&mut self, isa: V, lights: &Lights, lane: usize, position: usize) -> f32 {
+    fn gather<E: Isa<LANES>>(&mut self, light: E, lights: &Lights, lane: usize, position: usize) -> f32 {
         let rows = &mut self.channel[lane * 3 * self.padded..][..3 * self.padded];
         let (red, rest) = rows.split_at_mut(self.padded);
         let (green, blue) = rest.split_at_mut(self.padded);
@@ -282,19 +277,19 @@ impl Machine {
             let raw = &image[position * 3..position * 3 + 3];
             (*red, *green, *blue) = (raw[0], raw[1], raw[2]);
         }
-        let saturated = isa.splat(SATURATED);
-        let mut brightest = isa.splat(0.0);
-        for at in (0..self.padded).step_by(WIDTH) {
-            let mut b = [isa.splat(0.0); 3];
+        let saturated = light.splat(SATURATED);
+        let mut brightest = light.splat(0.0);
+        for at in (0..self.padded).step_by(LANES) {
+            let mut b = [light.splat(0.0); 3];
             for ((b, row), scale) in b.iter_mut().zip([&mut *red, &mut *green, &mut *blue]).zip(&lights.scale) {
-                *b = isa.floats(eight(row, at)) * isa.floats(eight(scale, at));
-                row[at..at + WIDTH].copy_from_slice(&b.to_array());
+                *b = light.floats(eight(row, at)) * light.floats(eight(scale, at));
+                row[at..at + LANES].copy_from_slice(&b.to_array());
             }
             let [r, g, b] = b;
             let [red_level, green_level, blue_level] = &lights.saturated_b;
-            let unsaturated = r.simd_lt(isa.floats(eight(red_level, at))) & g.simd_lt(isa.floats(eight(green_level, at))) & b.simd_lt(isa.floats(eight(blue_level, at)));
+            let unsaturated = r.simd_lt(light.floats(eight(red_level, at))) & g.simd_lt(light.floats(eight(green_level, at))) & b.simd_lt(light.floats(eight(blue_level, at)));
             let sum = r + g + b;
-            self.own[at..at + WIDTH].copy_from_slice(&blend(unsaturated, sum, saturated).to_array());
+            self.own[at..at + LANES].copy_from_slice(&blend(unsaturated, sum, saturated).to_array());
             brightest = blend(unsaturated & sum.simd_gt(brightest), sum, brightest);
         }
         for (grey, &own) in self.grey.iter_mut().zip(&self.own) {
@@ -309,7 +304,7 @@ impl Machine {
     /// albedo the weighted least-squares scale along it, Σ w (n·l) b / Σ w (n·l)², summed
     /// over the lights side by side.
     #[inline(always)]
-    fn lane_fit<V: Isa>(&mut self, isa: V, lane: usize, took_last: bool, lights: &Lights) -> PixelFit {
+    fn lane_fit<E: Isa<LANES>>(&mut self, light: E, lane: usize, took_last: bool, lights: &Lights) -> PixelFit {
         let (g, gram, count) = (self.g[lane], self.gram[lane], self.count[lane]);
         if self.iterations[lane] == 0 {
             let level = self.level[lane];
@@ -323,14 +318,14 @@ impl Machine {
             }
         }
         let normal = g.normalize();
-        let (nx, ny, nz) = (isa.splat(normal.x), isa.splat(normal.y), isa.splat(normal.z));
-        let mut sums = [isa.splat(0.0); 3];
+        let (nx, ny, nz) = (light.splat(normal.x), light.splat(normal.y), light.splat(normal.z));
+        let mut sums = [light.splat(0.0); 3];
         let (red, green, blue) = self.lane_channels(lane);
-        for at in (0..self.padded).step_by(WIDTH) {
-            let shading = nx * isa.floats(eight(&lights.direction[0], at)) + ny * isa.floats(eight(&lights.direction[1], at)) + nz * isa.floats(eight(&lights.direction[2], at));
-            let weighted = isa.floats(eight(&self.finishing, at)) * shading;
+        for at in (0..self.padded).step_by(LANES) {
+            let shading = nx * light.floats(eight(&lights.direction[0], at)) + ny * light.floats(eight(&lights.direction[1], at)) + nz * light.floats(eight(&lights.direction[2], at));
+            let weighted = light.floats(eight(&self.finishing, at)) * shading;
             for (sum, channel) in sums.iter_mut().zip([red, green, blue]) {
-                *sum += weighted * isa.floats(eight(channel, at));
+                *sum += weighted * light.floats(eight(channel, at));
             }
         }
         let denominator = normal.dot(gram * normal);
@@ -342,7 +337,7 @@ impl Machine {
     /// ([`TUKEY_SCALES`] × robust scale), 0 for the others). Returns it and the lanes whose
     /// fits light fewer than [`TUKEY_MIN`] unsaturated observations.
     #[inline(always)]
-    fn residuals<V: Isa>(&mut self, isa: V) -> ([f32; WIDTH], [bool; WIDTH]) {
+    fn residuals<V: Isa<W>>(&mut self, isa: V) -> ([f32; W], [bool; W]) {
         let g = self.g;
         let (gx, gy, gz) = (isa.floats(g.map(|g| g.x)), isa.floats(g.map(|g| g.y)), isa.floats(g.map(|g| g.z)));
         let (zero, saturated, magnitude, unlit) = (isa.splat(0.0), isa.splat(SATURATED), isa.splat_int(0x7fff_ffff), isa.splat_int(UNLIT));
@@ -355,11 +350,11 @@ impl Machine {
             lit -= use_it;
         }
         let lit = lit.to_array();
-        let too_few_lit: [bool; WIDTH] = std::array::from_fn(|lane| lit[lane] < TUKEY_MIN as i32);
-        let active: [bool; WIDTH] = std::array::from_fn(|lane| self.occupied[lane] && !too_few_lit[lane]);
+        let too_few_lit: [bool; W] = std::array::from_fn(|lane| lit[lane] < TUKEY_MIN as i32);
+        let active: [bool; W] = std::array::from_fn(|lane| self.occupied[lane] && !too_few_lit[lane]);
         let median = median_keys(isa, &self.key, lit, self.median_key, self.bracket, active);
-        let mut inverse = [0.0f32; WIDTH];
-        for lane in (0..WIDTH).filter(|&lane| active[lane]) {
+        let mut inverse = [0.0f32; W];
+        for lane in (0..W).filter(|&lane| active[lane]) {
             let moved = median[lane].abs_diff(self.median_key[lane]).min(BRACKET as u32) as i32;
             self.bracket[lane] = (2 * moved).clamp(BRACKET_MIN, BRACKET);
             self.median_key[lane] = median[lane];
@@ -373,7 +368,7 @@ impl Machine {
     /// [`Machine::residuals`]; meaningless in the lanes where it is 0) and returns, for every
     /// lane, Σ w l lᵀ, Σ w l b (channel sum) and the number of observations with weight.
     #[inline(always)]
-    fn candidate_sums<V: Isa>(&mut self, isa: V, inverse: [f32; WIDTH]) -> ([Mat3; WIDTH], [Vec3; WIDTH], [usize; WIDTH]) {
+    fn candidate_sums<V: Isa<W>>(&mut self, isa: V, inverse: [f32; W]) -> ([Mat3; W], [Vec3; W], [usize; W]) {
         // One pass: its ten sums stay in AVX2's registers, and as each takes one fused
         // multiply-add a light, none waits on its last.
         let (inverse, zero) = (isa.floats(inverse), isa.splat(0.0));
@@ -398,6 +393,25 @@ impl Machine {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+impl Machine<8> {
+    /// [`Machine::run_in`] in AVX2 registers, compiled for AVX2 and FMA.
+    #[target_feature(enable = "avx2,fma")]
+    fn run_avx2(&mut self, isa: crate::lanes::Avx2, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
+        self.run_in(isa, isa, source, chunk, fits);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Machine<16> {
+    /// [`Machine::run_in`] with sixteen lanes in AVX-512 registers (each pixel's lights
+    /// eight at a time in AVX2 registers, as in [`Machine::run_avx2`]), compiled for them.
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    fn run_avx512(&mut self, isa: crate::lanes::Avx512, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
+        self.run_in(isa, isa.avx2(), source, chunk, fits);
+    }
+}
+
 /// `if_true` where `mask`'s bits are set, else `if_false` (`wide`'s `select` is a call on
 /// x86-64 before SSE4.1).
 #[inline(always)]
@@ -408,19 +422,19 @@ fn blend<T: Copy + BitXor<Output = T> + BitAnd<Output = T>>(mask: T, if_true: T,
 /// Σ w l lᵀ, Σ w l b and Σ w of the threshold fit of a pixel whose channel-summed `b` are
 /// `grey` (padded like `lights`): weight 1 above `level` and below [`SATURATED`], else 0.
 #[inline(always)]
-fn threshold_sums<V: Isa>(isa: V, grey: &[f32], level: f32, lights: &Lights) -> (Mat3, Vec3, usize) {
-    let (level, saturated, one) = (isa.splat(level), isa.splat(SATURATED), isa.splat(1.0));
-    let mut gram = [isa.splat(0.0); 6];
-    let mut rhs = [isa.splat(0.0); 3];
-    let mut count = isa.splat_int(0);
-    for at in (0..grey.len()).step_by(WIDTH) {
-        let b = isa.floats(eight(grey, at));
+fn threshold_sums<E: Isa<LANES>>(light: E, grey: &[f32], level: f32, lights: &Lights) -> (Mat3, Vec3, usize) {
+    let (level, saturated, one) = (light.splat(level), light.splat(SATURATED), light.splat(1.0));
+    let mut gram = [light.splat(0.0); 6];
+    let mut rhs = [light.splat(0.0); 3];
+    let mut count = light.splat_int(0);
+    for at in (0..grey.len()).step_by(LANES) {
+        let b = light.floats(eight(grey, at));
         let lit = b.simd_gt(level) & b.simd_lt(saturated);
         for (sum, outer) in gram.iter_mut().zip(&lights.outer) {
-            *sum += (one & lit) * isa.floats(eight(outer, at));
+            *sum += (one & lit) * light.floats(eight(outer, at));
         }
         for (sum, direction) in rhs.iter_mut().zip(&lights.direction) {
-            *sum += (b & lit) * isa.floats(eight(direction, at));
+            *sum += (b & lit) * light.floats(eight(direction, at));
         }
         count -= lit.to_bits();
     }
@@ -429,15 +443,15 @@ fn threshold_sums<V: Isa>(isa: V, grey: &[f32], level: f32, lights: &Lights) -> 
 
 /// The eight values of `values` from `at`.
 #[inline(always)]
-fn eight(values: &[f32], at: usize) -> [f32; WIDTH] {
-    values[at..at + WIDTH].try_into().expect("padded to whole lanes")
+fn eight(values: &[f32], at: usize) -> [f32; LANES] {
+    values[at..at + LANES].try_into().expect("padded to whole lanes")
 }
 
 /// The lanes of each of `sums`. (A loop, not a closure: a closure would not be compiled for
 /// the instruction set of its caller.)
 #[inline(always)]
-fn lanes_of<F: Floats, const N: usize>(sums: [F; N]) -> [[f32; WIDTH]; N] {
-    let mut lanes = [[0.0; WIDTH]; N];
+fn lanes_of<F: Floats<W>, const W: usize, const N: usize>(sums: [F; N]) -> [[f32; W]; N] {
+    let mut lanes = [[0.0; W]; N];
     for (lane, sum) in lanes.iter_mut().zip(sums) {
         *lane = sum.to_array();
     }
@@ -448,7 +462,7 @@ fn lanes_of<F: Floats, const N: usize>(sums: [F; N]) -> [[f32; WIDTH]; N] {
 /// scale `inverse` (see [`Machine::residuals`]): 0 where `key` is [`UNLIT`], a NaN that no
 /// comparison holds for.
 #[inline(always)]
-fn tukey_weight<V: Isa>(isa: V, inverse: V::F, key: [i32; WIDTH]) -> V::F {
+fn tukey_weight<V: Isa<W>, const W: usize>(isa: V, inverse: V::F, key: [i32; W]) -> V::F {
     let one = isa.splat(1.0);
     let u = isa.ints(key).to_floats() * inverse;
     let inside = u.simd_lt(one);
@@ -458,7 +472,7 @@ fn tukey_weight<V: Isa>(isa: V, inverse: V::F, key: [i32; WIDTH]) -> V::F {
 }
 
 /// The sum of the lanes of a sum taken side by side, in lane order.
-fn total(lanes: [f32; WIDTH]) -> f32 {
+fn total(lanes: [f32; LANES]) -> f32 {
     lanes.iter().sum()
 }
 
@@ -475,18 +489,18 @@ fn symmetric(m: [f32; 6]) -> Mat3 {
 /// ±`bracket` around it, then 4, 16, 64... times as far on the side where the median lies,
 /// until one holds it.
 #[inline(always)]
-fn median_keys<V: Isa>(isa: V, keys: &[[i32; WIDTH]], lit: [i32; WIDTH], guess: [i32; WIDTH], bracket: [i32; WIDTH], active: [bool; WIDTH]) -> [i32; WIDTH] {
+fn median_keys<V: Isa<W>, const W: usize>(isa: V, keys: &[[i32; W]], lit: [i32; W], guess: [i32; W], bracket: [i32; W], active: [bool; W]) -> [i32; W] {
     let rank = lit.map(|lit| lit / 2);
     // Invariant for each active lane: below(lo) ≤ rank < below(hi).
-    let (mut lo, mut below_lo) = ([0i32; WIDTH], [0i32; WIDTH]);
-    let (mut hi, mut below_hi) = ([UNLIT; WIDTH], lit);
+    let (mut lo, mut below_lo) = ([0i32; W], [0i32; W]);
+    let (mut hi, mut below_hi) = ([UNLIT; W], lit);
     // How far from the guess the next threshold of a lane still bracketing lies: below it
     // when negative, above it when positive, 0 once the lane bisects.
-    let mut reach = [0i32; WIDTH];
-    let near_lo: [i32; WIDTH] = std::array::from_fn(|lane| guess[lane].saturating_sub(bracket[lane]).max(0));
-    let near_hi: [i32; WIDTH] = std::array::from_fn(|lane| guess[lane].saturating_add(bracket[lane]));
+    let mut reach = [0i32; W];
+    let near_lo: [i32; W] = std::array::from_fn(|lane| guess[lane].saturating_sub(bracket[lane]).max(0));
+    let near_hi: [i32; W] = std::array::from_fn(|lane| guess[lane].saturating_add(bracket[lane]));
     let (count_lo, count_hi) = (count_below(isa, keys, isa.ints(near_lo)).to_array(), count_below(isa, keys, isa.ints(near_hi)).to_array());
-    for lane in 0..WIDTH {
+    for lane in 0..W {
         if !active[lane] {
             (hi[lane], below_hi[lane]) = (0, 0);
         } else if guess[lane] <= 0 {
@@ -542,7 +556,7 @@ fn median_keys<V: Isa>(isa: V, keys: &[[i32; WIDTH]], lit: [i32; WIDTH], guess: 
             (*slot, carried) = (slot.min(carried), slot.max(carried));
         }
     }
-    let mut sorted = [[0; WIDTH]; SELECT];
+    let mut sorted = [[0; W]; SELECT];
     for (lanes, slot) in sorted.iter_mut().zip(smallest) {
         *lanes = (slot + offset).to_array();
     }
@@ -553,7 +567,7 @@ fn median_keys<V: Isa>(isa: V, keys: &[[i32; WIDTH]], lit: [i32; WIDTH], guess: 
 
 /// How many of each lane's `keys` are below its `threshold`.
 #[inline(always)]
-fn count_below<V: Isa>(isa: V, keys: &[[i32; WIDTH]], threshold: V::I) -> V::I {
+fn count_below<V: Isa<W>, const W: usize>(isa: V, keys: &[[i32; W]], threshold: V::I) -> V::I {
     // Four counts side by side: each one's subtractions wait on its own last only.
     let mut below = [isa.splat_int(0); 4];
     let mut quads = keys.chunks_exact(4);
@@ -580,16 +594,41 @@ mod tests {
         if let Some(avx2) = crate::lanes::Avx2::detect() {
             check_median_keys(avx2);
         }
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx512) = crate::lanes::Avx512::detect() {
+            check_median_keys(avx512);
+        }
+    }
+
+    /// The registers a test runs the fit in.
+    #[derive(Debug, Clone, Copy)]
+    enum Registers {
+        Portable,
+        #[cfg(target_arch = "x86_64")]
+        Avx2,
+        #[cfg(target_arch = "x86_64")]
+        Avx512,
+    }
+
+    /// The registers of this CPU besides [`Registers::Portable`].
+    fn wider_registers() -> Vec<Registers> {
+        #[cfg(target_arch = "x86_64")]
+        {
+            let avx2 = crate::lanes::Avx2::detect().map(|_| Registers::Avx2);
+            let avx512 = crate::lanes::Avx512::detect().map(|_| Registers::Avx512);
+            avx2.into_iter().chain(avx512).collect()
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        Vec::new()
     }
 
     /// A pixel's true normal and albedo.
     type Truth = (Vec3, f32);
 
     /// The fits of `pixels` pixels of random normals and albedos under `count` lights, with
-    /// soft shadows, highlights and saturated observations among them, by [`Machine::run`]
-    /// (AVX2 where the CPU has it) or in [`Portable`] lanes, and each pixel's true normal and
-    /// albedo.
-    fn fits_of_noisy_pixels(pixels: usize, count: usize, portable: bool) -> (Vec<(usize, PixelFit)>, Vec<Truth>) {
+    /// soft shadows, highlights and saturated observations among them, in `registers`, and
+    /// each pixel's true normal and albedo.
+    fn fits_of_noisy_pixels(pixels: usize, count: usize, registers: Registers) -> (Vec<(usize, PixelFit)>, Vec<Truth>) {
         let mut state = 99u32;
         let mut uniform = || {
             state ^= state << 13;
@@ -619,11 +658,15 @@ mod tests {
         let mask = vec![true; pixels];
         let pixels: Vec<usize> = (0..pixels).collect();
         let source = Source { images: &images, n: mask.len(), lights: &lights, shadow_fraction: 0.05 };
-        let (mut machine, mut fits) = (Machine::new(&lights), Vec::new());
-        if portable {
-            machine.run_in(Portable, &source, &pixels, &mut fits);
-        } else {
-            machine.run(&source, &pixels, &mut fits);
+        let mut fits = Vec::new();
+        match registers {
+            Registers::Portable => Machine::<8>::new(&lights).run_in(Portable, Portable, &source, &pixels, &mut fits),
+            // SAFETY: `wider_registers` found the instructions.
+            #[cfg(target_arch = "x86_64")]
+            Registers::Avx2 => unsafe { Machine::new(&lights).run_avx2(crate::lanes::Avx2::detect().expect("AVX2"), &source, &pixels, &mut fits) },
+            // SAFETY: as above.
+            #[cfg(target_arch = "x86_64")]
+            Registers::Avx512 => unsafe { Machine::new(&lights).run_avx512(crate::lanes::Avx512::detect().expect("AVX-512"), &source, &pixels, &mut fits) },
         }
         (fits, truth)
     }
@@ -632,7 +675,7 @@ mod tests {
     fn the_fit_finds_the_true_normals_and_albedos_with_the_same_bits_in_every_instruction_set() {
         // 37: lights that fill no whole lane group and an odd one out in the pairwise sums.
         for count in [40, 37] {
-            let (portable, truth) = fits_of_noisy_pixels(300, count, true);
+            let (portable, truth) = fits_of_noisy_pixels(300, count, Registers::Portable);
             assert_eq!(portable.len(), 300);
             let (mut angle_deg, mut albedo_error) = (0.0, 0.0);
             for (pixel, fit) in &portable {
@@ -641,11 +684,19 @@ mod tests {
                 albedo_error += fit.albedo.iter().map(|a| (a - albedo).abs()).sum::<f32>() / 900.0;
             }
             assert!(angle_deg < 0.5 && albedo_error < 0.005, "{count} lights: mean error {angle_deg}°, albedo {albedo_error}");
-            assert_eq!(fits_of_noisy_pixels(300, count, false).0, portable, "{count} lights");
+            // Sixteen lanes finish the pixels in another order: compare them pixel by pixel.
+            let by_pixel = |mut fits: Vec<(usize, PixelFit)>| {
+                fits.sort_by_key(|&(pixel, _)| pixel);
+                fits
+            };
+            let portable = by_pixel(portable);
+            for registers in wider_registers() {
+                assert_eq!(by_pixel(fits_of_noisy_pixels(300, count, registers).0), portable, "{count} lights, {registers:?}");
+            }
         }
     }
 
-    fn check_median_keys<V: Isa>(isa: V) {
+    fn check_median_keys<V: Isa<W>, const W: usize>(isa: V) {
         let mut state = 12345u32;
         let mut next = || {
             state ^= state << 13;
@@ -655,7 +706,7 @@ mod tests {
         };
         for trial in 0..200 {
             let k_count = 4 + (next() % 93) as usize;
-            let mut keys = vec![[UNLIT; WIDTH]; k_count];
+            let mut keys = vec![[UNLIT; W]; k_count];
             for key in keys.iter_mut() {
                 for lane in key.iter_mut() {
                     let roll = next() % 10;
@@ -666,12 +717,12 @@ mod tests {
                     };
                 }
             }
-            let lit: [i32; WIDTH] = std::array::from_fn(|lane| keys.iter().filter(|k| k[lane] != UNLIT).count() as i32);
-            let guess: [i32; WIDTH] = std::array::from_fn(|lane| [0, 0x3c00_0000, 0x3400_0000, 0x7000_0000][(lane + trial) % 4]);
-            let active: [bool; WIDTH] = std::array::from_fn(|lane| lit[lane] > 0);
-            let bracket: [i32; WIDTH] = std::array::from_fn(|lane| [BRACKET, BRACKET_MIN, 1 << 16][(lane + trial) % 3]);
+            let lit: [i32; W] = std::array::from_fn(|lane| keys.iter().filter(|k| k[lane] != UNLIT).count() as i32);
+            let guess: [i32; W] = std::array::from_fn(|lane| [0, 0x3c00_0000, 0x3400_0000, 0x7000_0000][(lane + trial) % 4]);
+            let active: [bool; W] = std::array::from_fn(|lane| lit[lane] > 0);
+            let bracket: [i32; W] = std::array::from_fn(|lane| [BRACKET, BRACKET_MIN, 1 << 16][(lane + trial) % 3]);
             let median = median_keys(isa, &keys, lit, guess, bracket, active);
-            for lane in (0..WIDTH).filter(|&lane| active[lane]) {
+            for lane in (0..W).filter(|&lane| active[lane]) {
                 let mut sorted: Vec<i32> = keys.iter().map(|k| k[lane]).filter(|&k| k != UNLIT).collect();
                 sorted.sort_unstable();
                 assert_eq!(median[lane], sorted[lit[lane] as usize / 2], "trial {trial} lane {lane}");
