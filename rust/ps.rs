@@ -152,7 +152,7 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
 /// with the working state that `init` makes for each thread, and each chunk's fits go
 /// straight into its own rows of `out`.
 pub(crate) fn fit_masked<S>(mask: &[bool], chunk: usize, out: &mut PsOutput, init: impl Fn() -> S + Sync + Send, fit: impl Fn(&mut S, &[usize], &mut Vec<(usize, PixelFit)>) + Sync + Send) {
-    let pixels: Vec<usize> = mask.iter().enumerate().filter_map(|(i, &m)| m.then_some(i)).collect();
+    let pixels = masked_pixels(mask);
     let chunks: Vec<&[usize]> = pixels.chunks(chunk).collect();
     let mut windows = Vec::with_capacity(chunks.len());
     let (mut normals, mut albedo, mut flags, mut used) = (&mut out.normals[..], &mut out.albedo[..], &mut out.flags[..], &mut out.used[..]);
@@ -179,6 +179,20 @@ pub(crate) fn fit_masked<S>(mask: &[bool], chunk: usize, out: &mut PsOutput, ini
             (normals[i], albedo[i], flags[i], used[i]) = (pixel.normal, pixel.albedo, pixel.flag, pixel.used);
         }
     });
+}
+
+/// The indices where `mask` is true, in increasing order (before the threads start: blocks
+/// of the mask with none are skipped).
+fn masked_pixels(mask: &[bool]) -> Vec<usize> {
+    const BLOCK: usize = 64;
+    let mut pixels = Vec::new();
+    for (block, flags) in mask.chunks(BLOCK).enumerate() {
+        // Without an early exit, so that it runs over whole registers.
+        if flags.iter().fold(false, |any, &m| any | m) {
+            pixels.extend(flags.iter().enumerate().filter_map(|(i, &m)| m.then_some(block * BLOCK + i)));
+        }
+    }
+    pixels
 }
 
 /// Runs `work` on every item of `items`, in parallel, with one working state that `init`
@@ -551,6 +565,15 @@ mod tests {
                     assert_eq!((part.normals[p], part.flags[p]), ([0.0; 3], flag::MASKED_OUT), "{robust:?} pixel {p}");
                 }
             }
+        }
+    }
+
+    #[test]
+    fn masked_pixels_are_the_true_indices_across_empty_full_and_partial_blocks() {
+        for n in [0, 1, 63, 64, 65, 200, 1000] {
+            let mask: Vec<bool> = (0..n).map(|i: usize| (i / 70) % 3 == 1 || i % 97 == 5 || i + 1 == n).collect();
+            let expected: Vec<usize> = (0..n).filter(|&i| mask[i]).collect();
+            assert_eq!(masked_pixels(&mask), expected, "{n} pixels");
         }
     }
 
