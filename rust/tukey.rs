@@ -1,4 +1,4 @@
-//! Tukey re-weighting of photometric stereo, [`W`] pixels side by side.
+//! Tukey re-weighting of photometric stereo, 8 or 16 pixels side by side.
 //!
 //! Each pixel starts from the threshold fit (observations above `shadow_fraction` of the
 //! pixel's brightest) and re-weights every observation that the fit lights (`l·g > 0`) by
@@ -10,11 +10,13 @@
 //!
 //! A chunk's observations are first copied out of the images image by image (runs of
 //! consecutive pixels at once), so that the images are read in order rather than one value
-//! of each of K images per pixel. The pixels of a chunk go through [`W`] lanes,
-//! structure of arrays (one value of each lane per light), so that the residuals, weights
-//! and sums of every lane are computed by the same vector instructions (AVX2 and FMA where
-//! the CPU has them, see [`crate::lanes`]; the weights and their sums in one pass of fused
-//! multiply-adds). A lane whose pixel has settled is refilled with the next
+//! of each of K images per pixel. The pixels of a chunk go through `W` lanes, structure of
+//! arrays (one value of each lane per light), so that the residuals, weights and sums of
+//! every lane are computed by the same vector instructions (16 lanes in AVX-512 registers,
+//! or 8 in AVX2 and FMA ones, where the CPU has them, see [`crate::lanes`]; the weights and
+//! their sums in one pass of fused multiply-adds). A pixel's own loops over its lights run
+//! 8 lights side by side whatever `W` is, so that its results are the same bits in every
+//! instruction set. A lane whose pixel has settled is refilled with the next
 //! pixel of the chunk at once (its threshold fit summed as it is read, over the lights side
 //! by side), so pixels that need many re-weightings do not hold the others back. Each
 //! lane's median comes from counting, vectorised over the lanes: a bisection on the
@@ -369,8 +371,8 @@ impl<const W: usize> Machine<W> {
     /// lane, Σ w l lᵀ, Σ w l b (channel sum) and the number of observations with weight.
     #[inline(always)]
     fn candidate_sums<V: Isa<W>>(&mut self, isa: V, inverse: [f32; W]) -> ([Mat3; W], [Vec3; W], [usize; W]) {
-        // One pass: its ten sums stay in AVX2's registers, and as each takes one fused
-        // multiply-add a light, none waits on its last.
+        // One pass: its ten sums stay in registers, and as each takes one fused multiply-add
+        // a light, none waits on its last.
         let (inverse, zero) = (isa.floats(inverse), isa.splat(0.0));
         let mut rhs = [zero; 3];
         let mut gram = [zero; 6];
