@@ -108,3 +108,36 @@ def test_unusable_lights_are_clear_errors(directions, message):
 def test_shape_mismatch_names_images():
     with pytest.raises(IrtpsError, match="images"):
         photometric_stereo(np.ones((3, 2, 2)), np.eye(3), np.ones((3, 3)))
+
+
+def _microfacet_plastic(normals: np.ndarray, lights: np.ndarray, alpha: float) -> np.ndarray:
+    """(K, P, 1, 3) images of a Lambertian albedo 0.5 under a GGX lobe (Cook-Torrance:
+    Smith-Schlick shadowing, Fresnel 0.04) for unit irradiance π, camera along -z."""
+    n_l = normals @ lights.T
+    half = lights + [0.0, 0.0, 1.0]
+    half /= np.linalg.norm(half, axis=1, keepdims=True)
+    n_h, n_v = normals @ half.T, normals[:, 2:3]
+    distribution = alpha**2 / (np.pi * ((alpha**2 - 1) * n_h**2 + 1) ** 2)
+    shadowing = n_v * n_l / ((n_v * (1 - alpha / 2) + alpha / 2) * (n_l * (1 - alpha / 2) + alpha / 2))
+    fresnel = 0.04 + 0.96 * (1 - half[:, 2]) ** 5
+    lobe_times_n_l = distribution * shadowing * fresnel / (4 * n_v)
+    radiance = np.where(n_l > 0, 0.5 / np.pi * n_l + lobe_times_n_l, 0.0)
+    return np.repeat(np.pi * radiance.T[:, :, None, None], 3, axis=3).astype(np.float32)
+
+
+def test_tukey_sets_a_microfacet_highlight_aside():
+    rng = np.random.default_rng(3)
+    azimuth, zenith = rng.uniform(0, 2 * np.pi, 400), np.radians(rng.uniform(0, 60, 400))
+    normals = np.stack([np.sin(zenith) * np.cos(azimuth), np.sin(zenith) * np.sin(azimuth), np.cos(zenith)], axis=1)
+    k = np.arange(24)
+    light_zenith = np.radians(10 + 40 * k / 23)
+    lights = np.stack([np.sin(light_zenith) * np.cos(2.4 * k), np.sin(light_zenith) * np.sin(2.4 * k), np.cos(light_zenith)], axis=1)
+    images = _microfacet_plastic(normals, lights, alpha=0.2)
+    errors = {}
+    for mode in ("none", "threshold", "tukey"):
+        fit = photometric_stereo(images, lights, np.full((24, 3), np.pi), robust=mode)
+        errors[mode] = float(angular_error_deg(fit.normals, normals[:, None], np.ones((400, 1), bool)).mean())
+    # Measured: least squares 3.78°, threshold 3.50°, Tukey 1.15° (24 lights, not 96).
+    assert errors["none"] > 3.0  # the highlight bends plain least squares
+    assert errors["tukey"] < 1.5
+    assert errors["tukey"] < 0.5 * errors["threshold"]

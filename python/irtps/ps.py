@@ -95,7 +95,9 @@ def photometric_stereo(
           (1.4826 × the median absolute residual; weight 0 beyond 2.5 scales), until the fit
           settles. Soft and cast shadows fall below the fit, highlights above it.
         - ``"threshold"``: drop observations in shadow (channel sum below `shadow_fraction`
-          of the pixel's brightest) and re-solve from the rest.
+          of the pixel's brightest) and re-solve from the rest. The better choice on very
+          rough matte surfaces (plaster, unglazed clay), whose fall-off departs from
+          Lambert's on every observation.
         - ``"trim"``: keep the observations between the darkest 40 % and the brightest
           20 % of the pixel's.
         - ``"none"``: plain least squares on every observation.
