@@ -121,6 +121,7 @@ def rough_matte_pixels(directions: np.ndarray, sigma: float, albedo: float = 0.6
 
 
 def synthetic_row(name: str, images: np.ndarray, truth: np.ndarray, directions: np.ndarray, irradiance: np.ndarray) -> str:
+    """The table row of every mode's mean angular error on synthetic pixels."""
     mask = np.ones(truth.shape[:2], bool)
     errors = [mean_error_deg(photometric_stereo(images, directions, irradiance, mask, robust=mode).normals, truth, mask) for mode in ROBUST_MODES]
     return _row(name, errors)
