@@ -6,10 +6,10 @@ this prints the mean angular error on the shared data sets (DiLiGenT objects; Mi
 renders, with and without inter-reflection) and on synthetic pixels whose normals cover
 the visible hemisphere, under 96 lights spread like DiLiGenT's: a Lambertian term plus a
 Blinn-Phong highlight of several exponents, with soft cast shadows (the observation scaled
-by 0 to 0.3) on a random share of the observations; then materials that are not Lambertian
-anywhere, where every mode's model is wrong: microfacet plastics and metals (GGX lobe with
-Smith shadowing and Schlick's Fresnel term, as physically based renderers use) and rough
-matte surfaces (Oren-Nayar). The synthetic part needs no shared data.
+by 0 to 0.3) on a random share of the observations; then reflectance that Lambert's law with a few
+outliers does not describe: microfacet plastics and metals (a GGX lobe with Smith
+shadowing and Schlick's Fresnel term, as physically based renderers use, spread over many
+lights) and rough matte surfaces (Oren-Nayar, non-Lambertian on every observation). The synthetic part needs no shared data.
 
 Usage::
 
