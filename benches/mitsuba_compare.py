@@ -61,6 +61,7 @@ import statistics
 import subprocess
 import sys
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -405,15 +406,20 @@ def spread(count: int, total: int) -> list[int]:
 def time_iteration(case: Case, samples: int, repeats: int, seed: int) -> dict:
     """Seconds of one IRT-PS pass (photometric stereo, integration, indirect estimate with the
     residual's direct image); the placement is given, as its search runs once per data set."""
+    from irtps.errors import IrtpsWarning
     from irtps.interreflection import remove_interreflections
 
-    remove_interreflections(case.dataset, bounces=case.bounces, iterations=1, samples=1, seed=seed)  # warm-up (imports, caches)
     totals, stages = [], []
-    for r in range(repeats):
-        result = remove_interreflections(case.dataset, bounces=case.bounces, iterations=1, samples=samples, seed=seed + r, base_height="boundary")
-        timings = result.history[0].timings
-        totals.append(sum(timings.values()))
-        stages.append(timings)
+    with warnings.catch_warnings():
+        # Only the pass's time counts here: whether one pass (or the 1-path warm-up) explains
+        # the images better than classic photometric stereo is the accuracy benchmarks' job.
+        warnings.simplefilter("ignore", IrtpsWarning)
+        remove_interreflections(case.dataset, bounces=case.bounces, iterations=1, samples=1, seed=seed)  # warm-up (imports, caches)
+        for r in range(repeats):
+            result = remove_interreflections(case.dataset, bounces=case.bounces, iterations=1, samples=samples, seed=seed + r, base_height="boundary")
+            timings = result.history[0].timings
+            totals.append(sum(timings.values()))
+            stages.append(timings)
     median = statistics.median(totals)
     chosen = stages[totals.index(sorted(totals)[len(totals) // 2])]
     return {"samples": samples, "seconds": median, "runs": totals, "stages": chosen}
