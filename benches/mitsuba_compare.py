@@ -141,7 +141,7 @@ assert float(image.numpy().mean()) > 0, "a black image"
 def probe_failure(variant: str) -> str | None:
     """None when a small render runs in `variant`, else what went wrong. It runs in a child
     process: a libLLVM that Dr.Jit loads but cannot compile every kernel with aborts its
-    process (LLVM 15 with Dr.Jit 1.5: "LLVM ERROR: Cannot select ... fmaximum")."""
+    process (LLVM 15 with Dr.Jit 1.5: "LLVM ERROR: Cannot select: ..." in its first real kernel)."""
     try:
         child = subprocess.run([sys.executable, "-c", RENDER_PROBE, variant], capture_output=True, text=True, timeout=600)
     except subprocess.TimeoutExpired:
