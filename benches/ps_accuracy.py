@@ -57,6 +57,12 @@ def hemisphere_normals(count: int, rng: np.random.Generator) -> np.ndarray:
     return normals / np.linalg.norm(normals, axis=1, keepdims=True)
 
 
+def half_vectors(directions: np.ndarray) -> np.ndarray:
+    """(K, 3) unit vectors halfway between each light and the camera (along +z)."""
+    half = directions + np.array([0.0, 0.0, 1.0])
+    return half / np.linalg.norm(half, axis=1, keepdims=True)
+
+
 def as_images(shading: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """(K, count, 1, 3) images of (count, K) shading (radiance × π / E), with 0.5 % noise."""
     shading = shading * (1 + 0.005 * rng.normal(size=shading.shape))
@@ -68,8 +74,7 @@ def glossy_pixels(directions: np.ndarray, exponent: float, strength: float, shad
     rng = np.random.default_rng(seed)
     normals = hemisphere_normals(count, rng)
     cosine = normals @ directions.T
-    half = directions + np.array([0.0, 0.0, 1.0])
-    half /= np.linalg.norm(half, axis=1, keepdims=True)
+    half = half_vectors(directions)
     highlight = strength * (exponent + 8) / 8 * np.clip(normals @ half.T, 0, None) ** exponent * (cosine > 0)
     shading = 0.6 * np.clip(cosine, 0, None) + highlight
     shadow = np.where(rng.random(shading.shape) < shadowed, 0.3 * rng.random(shading.shape), 1.0)
@@ -87,8 +92,7 @@ def microfacet_pixels(directions: np.ndarray, alpha: float, fresnel0: float, dif
     normals = hemisphere_normals(count, rng)
     cosine = normals @ directions.T
     lit = np.clip(cosine, 1e-4, 1)
-    half = directions + np.array([0.0, 0.0, 1.0])
-    half /= np.linalg.norm(half, axis=1, keepdims=True)
+    half = half_vectors(directions)
     n_h, n_v, v_h = np.clip(normals @ half.T, 0, 1), normals[:, 2:3], half[:, 2]
     spread = n_h**2 * (alpha**2 - 1) + 1
     distribution = alpha**2 / (np.pi * spread**2)
