@@ -20,10 +20,13 @@ import sys
 import warnings
 from pathlib import Path
 
+import numpy as np
 from irtps_accuracy import angular_error, floor_error
 
 import irtps
+from irtps.data import Dataset, GroundTruth
 from irtps.errors import IrtpsWarning
+from irtps.scene import Light
 
 #: (label, synthesize keywords)
 CASES = [
@@ -37,15 +40,64 @@ CASES = [
 ]
 
 
+#: Mitsuba's depths and samples per pixel, as the shared scenes were rendered.
+MITSUBA_BOUNCES, MITSUBA_SAMPLES, MITSUBA_DIRECT_SAMPLES = 4, 256, 64
+#: Largest mean absolute difference between Mitsuba's and irtps's direct images, over their mean.
+DIRECT_TOLERANCE = 0.03
+
+
+def random_lights(count: int, rng: np.random.Generator) -> tuple[Light, ...]:
+    """`count` lights of irradiance π, uniform over the cap 10–45° from the camera axis."""
+    cos_z = rng.uniform(np.cos(np.radians(45)), np.cos(np.radians(10)), count)
+    azimuth = rng.uniform(0, 2 * np.pi, count)
+    radial = np.sqrt(1 - cos_z**2)
+    directions = np.stack([radial * np.cos(azimuth), radial * np.sin(azimuth), cos_z], axis=1)
+    return tuple(Light(direction=d, irradiance=np.full(3, np.pi)) for d in directions)
+
+
+def mitsuba_dataset(mi, variant: str, keywords: dict, seed: int) -> Dataset:
+    """The case's object and surroundings under random lights, rendered by Mitsuba."""
+    from dataclasses import replace
+
+    from mitsuba_compare import MitsubaScene
+
+    from irtps.render import make_renderer, render
+
+    geometry, _ = irtps.synthesize(size=80, lights=12, bounces=0, samples=1, **keywords)
+    gt, mask = geometry.gt, geometry.mask
+    scene = replace(geometry.scene, lights=random_lights(12, np.random.default_rng(seed)))
+    renderer = make_renderer(scene, gt.height, gt.albedo, mask)
+    mitsuba = MitsubaScene(mi, variant, renderer, scene, MITSUBA_BOUNCES, "independent")
+    count = len(scene.lights)
+    images = np.stack([mitsuba.render(k, MITSUBA_SAMPLES, seed + k)[0] for k in range(count)])
+    direct = np.stack([mitsuba.render(k, MITSUBA_DIRECT_SAMPLES, seed + count + k, direct_only=True)[0] for k in range(count)])
+    ours = render(scene, gt.height, gt.albedo, mask, bounces=0, samples=MITSUBA_DIRECT_SAMPLES, direct_samples=MITSUBA_DIRECT_SAMPLES, seed=seed).direct
+    difference = float(np.abs(direct - ours).mean() / ours.mean())
+    if difference > DIRECT_TOLERANCE:
+        sys.exit(f"Mitsuba's direct images differ from irtps's by {100 * difference:.1f} % of their mean: not the same scene")
+    truth = GroundTruth(height=gt.height, normal=gt.normal, albedo=gt.albedo, direct=direct)
+    return Dataset(scene=scene, images=images, mask=mask, gt=truth, source=f"mitsuba:{geometry.source}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--renderer", choices=["irtps", "mitsuba"], default="irtps", help="which renderer makes the images (default: irtps)")
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
+    if args.renderer == "mitsuba":
+        from mitsuba_compare import import_mitsuba
+
+        mi, _, usable = import_mitsuba(["llvm_ad_rgb", "scalar_rgb"], threads=2)
+        if not usable:
+            sys.exit("no usable Mitsuba variant")
     rows = []
     print("| case | classic PS | IRT-PS | floor | gap closed |")
     print("|---|---|---|---|---|")
-    for label, keywords in CASES:
-        dataset, _ = irtps.synthesize(size=80, lights=12, bounces=4, samples=256, **keywords)
+    for index, (label, keywords) in enumerate(CASES):
+        if args.renderer == "mitsuba":
+            dataset = mitsuba_dataset(mi, usable[0], keywords, seed=1000 * (index + 1))
+        else:
+            dataset, _ = irtps.synthesize(size=80, lights=12, bounces=4, samples=256, **keywords)
         classic = angular_error(dataset, irtps.reconstruct(dataset).normals)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", IrtpsWarning)
