@@ -193,14 +193,17 @@ class Stopwatch:
 
 
 class MitsubaScene:
-    """The irtps scene as a Mitsuba scene with one directional light, re-aimed per light."""
+    """The irtps scene as a Mitsuba scene with one directional light, re-aimed per light.
 
-    def __init__(self, mi, variant: str, renderer, scene, bounces: int, sampler: str):
+    Every triangle is Lambertian with the scene's per-vertex albedo, unless `bsdf` gives
+    another Mitsuba BSDF (a dictionary for ``mi.load_dict``) for all of them."""
+
+    def __init__(self, mi, variant: str, renderer, scene, bounces: int, sampler: str, bsdf: dict | None = None):
         mi.set_variant(variant)
         self.mi, self.variant, self.scene, self.bounces = mi, variant, scene, bounces
         positions, triangles, albedo, _ = renderer.mesh_arrays()
         props = mi.Properties()
-        props["bsdf"] = mi.load_dict({"type": "diffuse", "reflectance": {"type": "mesh_attribute", "name": "vertex_color"}})
+        props["bsdf"] = mi.load_dict(bsdf or {"type": "diffuse", "reflectance": {"type": "mesh_attribute", "name": "vertex_color"}})
         mesh = mi.Mesh("irtps_scene", len(positions), len(triangles), props, has_vertex_normals=False, has_vertex_texcoords=False)
         params = mi.traverse(mesh)
         floats, ints = type(params["vertex_positions"]), type(params["faces"])
