@@ -18,6 +18,7 @@ import argparse
 import json
 import sys
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -57,8 +58,6 @@ def random_lights(count: int, rng: np.random.Generator) -> tuple[Light, ...]:
 
 def mitsuba_dataset(mi, variant: str, keywords: dict, seed: int) -> Dataset:
     """The case's object and surroundings under random lights, rendered by Mitsuba."""
-    from dataclasses import replace
-
     from mitsuba_compare import MitsubaScene
 
     from irtps.render import make_renderer, render

@@ -74,11 +74,18 @@ def render_material(mi, variant: str, height: np.ndarray, mask: np.ndarray, dire
     return np.stack([mitsuba.render(k, samples, seed=k)[0] for k in range(len(lights))])
 
 
+def positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not a positive integer")
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--objects", nargs="+", default=["ballPNG", "readingPNG"], help="DiLiGenT objects whose shapes to render (default: ballPNG readingPNG)")
-    parser.add_argument("--downsample", type=int, default=2, help="block size of the shape's pixels (default: 2)")
-    parser.add_argument("--samples", type=int, default=32, help="Mitsuba samples per pixel (default: 32)")
+    parser.add_argument("--downsample", type=positive_int, default=2, help="block size of the shape's pixels (default: 2)")
+    parser.add_argument("--samples", type=positive_int, default=32, help="Mitsuba samples per pixel (default: 32)")
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
     missing = [name for name in args.objects if not (DILIGENT / name).is_dir()]
