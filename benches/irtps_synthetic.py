@@ -99,17 +99,16 @@ def mitsuba_dataset(mi, variant: str, keywords: dict, seed: int, changes: dict |
     albedo = gt.albedo
     if "albedo" in changes:
         albedo = np.where(mask[..., None], np.asarray(changes["albedo"], dtype=np.float32), 0.0).astype(np.float32)
-    gt = GroundTruth(height=gt.height, normal=gt.normal, albedo=albedo)
-    renderer = make_renderer(scene, gt.height, gt.albedo, mask)
+    renderer = make_renderer(scene, gt.height, albedo, mask)
     mitsuba = MitsubaScene(mi, variant, renderer, scene, MITSUBA_BOUNCES, "independent")
     count = len(scene.lights)
     images = np.stack([mitsuba.render(k, MITSUBA_SAMPLES, seed + k)[0] for k in range(count)])
     direct = np.stack([mitsuba.render(k, MITSUBA_DIRECT_SAMPLES, seed + count + k, direct_only=True)[0] for k in range(count)])
-    ours = render(scene, gt.height, gt.albedo, mask, bounces=0, samples=MITSUBA_DIRECT_SAMPLES, direct_samples=MITSUBA_DIRECT_SAMPLES, seed=seed).direct
+    ours = render(scene, gt.height, albedo, mask, bounces=0, samples=MITSUBA_DIRECT_SAMPLES, direct_samples=MITSUBA_DIRECT_SAMPLES, seed=seed).direct
     difference = float(np.abs(direct - ours).mean() / ours.mean())
     if difference > DIRECT_TOLERANCE:
         sys.exit(f"Mitsuba's direct images differ from irtps's by {100 * difference:.1f} % of their mean: not the same scene")
-    truth = GroundTruth(height=gt.height, normal=gt.normal, albedo=gt.albedo, direct=direct)
+    truth = GroundTruth(height=gt.height, normal=gt.normal, albedo=albedo, direct=direct)
     return Dataset(scene=scene, images=images, mask=mask, gt=truth, source=f"mitsuba:{geometry.source}")
 
 

@@ -65,13 +65,19 @@ def diligent_shape(folder: Path, downsample: int) -> tuple[np.ndarray, np.ndarra
     return height, mask, dataset.scene.light_directions
 
 
-def render_material(mi, variant: str, height: np.ndarray, mask: np.ndarray, directions: np.ndarray, bsdf: dict, samples: int) -> np.ndarray:
-    """(K, H, W, 3) images of the shape in `bsdf` under each light, 4 bounces."""
+def shape_scene(height: np.ndarray, mask: np.ndarray, directions: np.ndarray):
+    """(scene, renderer) of the shape alone in the dark under each direction (irradiance π),
+    albedo `BASE`: the triangles that every material's Mitsuba scene takes."""
     lights = tuple(Light(direction=d, irradiance=np.full(3, np.pi)) for d in directions)
     scene = Scene(camera=Camera(mask.shape[1], mask.shape[0], 1.0), lights=lights)
     albedo = np.where(mask[..., None], BASE, 0.0).repeat(3, axis=2).astype(np.float32)
-    mitsuba = MitsubaScene(mi, variant, make_renderer(scene, height, albedo, mask), scene, 4, "independent", bsdf=bsdf)
-    return np.stack([mitsuba.render(k, samples, seed=k)[0] for k in range(len(lights))])
+    return scene, make_renderer(scene, height, albedo, mask)
+
+
+def render_material(mi, variant: str, scene, renderer, bsdf: dict, samples: int) -> np.ndarray:
+    """(K, H, W, 3) images of the shape in `bsdf` under each light, 4 bounces."""
+    mitsuba = MitsubaScene(mi, variant, renderer, scene, 4, "independent", bsdf=bsdf)
+    return np.stack([mitsuba.render(k, samples, seed=k)[0] for k in range(len(scene.lights))])
 
 
 def positive_int(text: str) -> int:
@@ -102,9 +108,10 @@ def main(argv: list[str] | None = None) -> int:
         height, mask, directions = diligent_shape(DILIGENT / name, args.downsample)
         truth = height_to_normals(height, mask)
         irradiance = np.full((len(directions), 3), np.pi, dtype=np.float32)
+        scene, renderer = shape_scene(height, mask, directions)
         for material, bsdf in MATERIALS:
             start = time.perf_counter()
-            images = render_material(mi, usable[0], height, mask, directions, bsdf, args.samples)
+            images = render_material(mi, usable[0], scene, renderer, bsdf, args.samples)
             errors = {mode: mean_error_deg(photometric_stereo(images, directions, irradiance, mask, robust=mode).normals, truth, mask) for mode in ROBUST_MODES}
             change = errors["tukey"] / errors["none"] - 1
             label = f"{name} ({mask.shape[1]}×{mask.shape[0]}, {int(mask.sum())} px)"
