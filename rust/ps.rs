@@ -46,6 +46,9 @@ pub enum Robust {
     /// From the threshold fit, re-weight by Tukey's biweight of the residuals
     /// ([`crate::tukey::TUKEY_SCALES`]).
     Tukey,
+    /// From the Tukey fit, a Lambertian base plus one specular lobe per pixel, re-weighted
+    /// by Tukey's biweight ([`crate::lobe`]): for glossy and metallic objects.
+    Lobe,
 }
 
 /// How to fit.
@@ -76,6 +79,9 @@ pub mod flag {
     pub const DARK: u8 = 2;
     /// Outside the mask.
     pub const MASKED_OUT: u8 = 3;
+    /// Lobe mode: fitted with a specular lobe ([`crate::lobe`]); the albedo is the diffuse
+    /// term's.
+    pub const LOBE: u8 = 4;
 }
 
 /// Per-pixel results, row-major.
@@ -141,6 +147,10 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
     let per_pixel = Lights::new(&fit.directions, &fit.scale, &fit.saturated_b, gram);
     match settings.robust {
         Robust::Tukey => crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out),
+        Robust::Lobe => {
+            crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out);
+            crate::lobe::fit_pixels(images, mask, &per_pixel, &mut out);
+        }
         Robust::Trim => crate::robust_ps::fit_pixels(images, mask, &per_pixel, &mut out),
         Robust::None | Robust::Threshold => return Ok(fit.streamed(images, mask, out)),
     }
@@ -453,7 +463,7 @@ mod tests {
         let ls = lights(&[[0.0, 0.0, 1.0], [0.5, 0.1, 0.8], [-0.3, 0.4, 0.8], [0.1, -0.5, 0.8]]);
         let normal = Vec3::new(0.1, -0.2, 1.0).normalize();
         let images = render(normal, [0.9, 0.5, 0.2], &ls);
-        for robust in [Robust::None, Robust::Threshold, Robust::Trim, Robust::Tukey] {
+        for robust in [Robust::None, Robust::Threshold, Robust::Trim, Robust::Tukey, Robust::Lobe] {
             let out = photometric_stereo(&images, &[true], &ls, &PsSettings { robust, ..Default::default() }).unwrap();
             assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5, "{robust:?} {:?}", out.normals[0]);
             for (got, want) in out.albedo[0].iter().zip([0.9, 0.5, 0.2]) {
@@ -548,7 +558,7 @@ mod tests {
         }
         let every = vec![true; pixels];
         let some: Vec<bool> = (0..pixels).map(|p| (p * p / 7 + p / 11) % 3 != 0 && !(600..700).contains(&p)).collect();
-        for robust in [Robust::None, Robust::Threshold, Robust::Trim, Robust::Tukey] {
+        for robust in [Robust::None, Robust::Threshold, Robust::Trim, Robust::Tukey, Robust::Lobe] {
             let settings = PsSettings { robust, ..Default::default() };
             let (all, part) = (photometric_stereo(&images, &every, &ls, &settings).unwrap(), photometric_stereo(&images, &some, &ls, &settings).unwrap());
             assert!(all.flags.iter().all(|&f| f != flag::MASKED_OUT), "{robust:?}");

@@ -354,7 +354,7 @@ type PsArrays<'py> = (Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<f32>>, 
 
 /// Calibrated Lambertian photometric stereo on C-contiguous float32 images (K, H, W, 3):
 /// (normals (H, W, 3), albedo (H, W, 3), flags (H, W) uint8, observations used (H, W) uint16).
-/// `robust` is "none", "threshold", "trim" or "tukey".
+/// `robust` is "none", "threshold", "trim", "tukey" or "lobe".
 #[pyfunction]
 #[pyo3(signature = (images, mask, light_directions, light_irradiance, robust="tukey", shadow_fraction=0.05, saturation=None))]
 #[allow(clippy::too_many_arguments)]
@@ -373,7 +373,8 @@ fn photometric_stereo<'py>(
         "threshold" => Robust::Threshold,
         "trim" => Robust::Trim,
         "tukey" => Robust::Tukey,
-        other => return Err(argument_error("robust", format!("unknown mode {other:?}; expected none, threshold, trim or tukey"))),
+        "lobe" => Robust::Lobe,
+        other => return Err(argument_error("robust", format!("unknown mode {other:?}; expected none, threshold, trim, tukey or lobe"))),
     };
     let shape = images.shape().to_vec();
     if shape[3] != 3 || mask.shape() != [shape[1], shape[2]] {

@@ -83,9 +83,11 @@ struct Pixel<'a> {
 
 /// A tile's working memory.
 #[derive(Default)]
-struct Scratch {
-    grey: Vec<f32>,
-    rgb: Vec<[f32; 3]>,
+pub(crate) struct Scratch {
+    /// Channel-summed `b` of each pixel, per padded light ([`SATURATED`] when saturated).
+    pub grey: Vec<f32>,
+    /// RGB `b` of each pixel, per light.
+    pub rgb: Vec<[f32; 3]>,
     work: Work,
 }
 
@@ -113,7 +115,7 @@ pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, out: &m
 }
 
 /// Copies the tile's observations into `scratch`, pixel-major.
-fn gather(images: &[f32], n: usize, tile: &[usize], lights: &Lights, scratch: &mut Scratch) {
+pub(crate) fn gather(images: &[f32], n: usize, tile: &[usize], lights: &Lights, scratch: &mut Scratch) {
     let (count, padded) = (lights.count, lights.padded());
     scratch.grey.clear();
     scratch.grey.resize(tile.len() * padded, 0.0);
