@@ -7,13 +7,18 @@
 //! `c ≥ 0` the lobe's height (a Blinn-Phong lobe on a Lambertian base; `c = 0` is the
 //! Lambertian fit). For each exponent p of [`LOBE_EXPONENTS`] and from two starts, the Tukey
 //! normal and the half vector of the pixel's brightest observation, it alternates the linear
-//! fit of (a, c) with a damped Gauss-Newton step of the normal on its tangent plane, every
-//! observation re-weighted, from the second round on, by Tukey's biweight of its residual in
-//! units of [`LOBE_SCALES`] robust scales (1.4826 × the median absolute residual of the lit
+//! fit of (a, c) with a damped Gauss-Newton step of the normal on its tangent plane
+//! (variable projection: the step allows for (a, c) following it), every observation
+//! re-weighted, from the second round on, by Tukey's biweight of its residual in units of
+//! [`LOBE_SCALES`] robust scales (1.4826 × the median absolute residual of the lit
 //! observations): shadows and inter-reflections that neither term explains lose their
-//! weight. The fit with the least weighted mean squared residual is kept. Each channel's
-//! albedo is its own diffuse scale under the kept fit's weights: the highlight goes to the
-//! lobe, not to the albedo. Saturated observations carry no weight.
+//! weight.
+//!
+//! A lobe fit replaces the Tukey fit only where it lowers Tukey's loss, summed over every
+//! unsaturated observation at the Tukey fit's robust scale, by more than the Bayesian
+//! information criterion asks for its two extra parameters (twice that from the second
+//! start). Each channel's albedo is its own diffuse scale under the kept fit's weights: the
+//! highlight goes to the lobe, not to the albedo. Saturated observations carry no weight.
 //!
 //! A pixel whose Tukey fit has too few observations (or none lit) keeps that fit.
 
@@ -178,11 +183,13 @@ fn refit(grey: &[f32], rgb: &[[f32; 3]], lights: &Lights, half: &HalfVectors, st
     let observations = work.usable.iter().sum::<f32>();
     let penalty = 3.0 / (LOBE_SCALES * LOBE_SCALES) * LOBE_PARAMETERS * observations.ln();
     let start_cost = loss(albedo, 0.0, reach, work) - penalty;
+    // A fit from the second start (a different basin, sought where the first found none)
+    // must beat the best from the Tukey normal by the same margin again.
     let mut best: Option<LobeFit> = None;
-    for from in [normal, half.get(brightest)] {
+    for (from, margin) in [(normal, 0.0), (half.get(brightest), penalty)] {
         for shift in 0..LOBE_EXPONENTS {
             let fit = fit_exponent(lights, half, from, shift, reach, work);
-            if fit.cost < best.as_ref().map_or(start_cost, |b| b.cost) {
+            if fit.cost + margin < best.as_ref().map_or(start_cost, |b| b.cost) {
                 work.best_weight.copy_from_slice(&work.weight);
                 best = Some(fit);
             }
