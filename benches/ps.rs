@@ -59,6 +59,12 @@ fn bench(c: &mut Criterion) {
         group.bench_function(name, |b| b.iter(|| black_box(photometric_stereo(&images, &mask, &lights, &settings).unwrap())));
     }
     group.finish();
+    // The lobe mode fits 16 candidate lobes per pixel: seconds per run, so fewer samples.
+    let mut group = c.benchmark_group("photometric_stereo_lobe");
+    group.throughput(Throughput::Elements((SIZE * SIZE) as u64)).sample_size(10);
+    let settings = PsSettings { robust: Robust::Lobe, ..Default::default() };
+    group.bench_function("lobe", |b| b.iter(|| black_box(photometric_stereo(&images, &mask, &lights, &settings).unwrap())));
+    group.finish();
 }
 
 criterion_group!(benches, bench);

@@ -25,7 +25,7 @@
 use glam::Vec3;
 
 use crate::ps::{fit_masked, flag, PixelFit, PsOutput};
-use crate::robust_ps::{gather, Lights, Scratch, SATURATED};
+use crate::robust_ps::{gather, Lights, Scratch, LANES, SATURATED};
 
 /// The lobe exponents tried, as powers of two: `p = 2^s` for `s` in `0..LOBE_EXPONENTS`
 /// (1 to 128: lobes from about 60° to about 6° wide at half height).
@@ -44,8 +44,8 @@ const SCALE_FLOOR: f32 = 1e-4;
 const STEP_MAX: f32 = 0.2;
 /// Levenberg-Marquardt damping, as a fraction of the normal equations' trace.
 const DAMPING: f32 = 1e-3;
-/// A round whose step is shorter than this (about 0.006°) ends the exponent's fit.
-const STEP_SETTLED: f32 = 1e-4;
+/// A round whose step is shorter than this (about 0.06°) ends the exponent's fit.
+const STEP_SETTLED: f32 = 1e-3;
 /// Least `n·h` (so that `(n·h)^(p−1)` stays finite).
 const NH_MIN: f32 = 1e-6;
 /// Pixels per parallel task.
@@ -107,6 +107,8 @@ struct Work {
     /// `[n·l]₊` and `[n·l]₊ (n·h)^p` of the current normal.
     diffuse: Vec<f32>,
     specular: Vec<f32>,
+    /// `n·h` of the current normal (at least [`NH_MIN`]).
+    nh: Vec<f32>,
     /// Absolute residuals of the lit observations, for their median.
     spread: Vec<f32>,
     /// The best fit's weights so far.
@@ -116,7 +118,7 @@ struct Work {
 /// A fit of one exponent from one start.
 struct LobeFit {
     normal: Vec3,
-    /// Weighted mean squared residual.
+    /// Its [`loss`].
     cost: f32,
     /// `log2 p`.
     shift: u32,
@@ -169,7 +171,7 @@ fn refit(grey: &[f32], rgb: &[[f32; 3]], lights: &Lights, half: &HalfVectors, st
         b.push(if ok { value } else { 0.0 });
         usable.push(if ok { 1.0 } else { 0.0 });
     }
-    for v in [&mut work.weight, &mut work.diffuse, &mut work.specular, &mut work.best_weight] {
+    for v in [&mut work.weight, &mut work.diffuse, &mut work.specular, &mut work.nh, &mut work.best_weight] {
         v.clear();
         v.resize(padded, 0.0);
     }
@@ -187,6 +189,10 @@ fn refit(grey: &[f32], rgb: &[[f32; 3]], lights: &Lights, half: &HalfVectors, st
     // must beat the best from the Tukey normal by the same margin again.
     let mut best: Option<LobeFit> = None;
     for (from, margin) in [(normal, 0.0), (half.get(brightest), penalty)] {
+        // The loss is never negative: no fit can clear a bar below the margin.
+        if best.as_ref().map_or(start_cost, |b| b.cost) <= margin {
+            continue;
+        }
         for shift in 0..LOBE_EXPONENTS {
             let fit = fit_exponent(lights, half, from, shift, reach, work);
             if fit.cost + margin < best.as_ref().map_or(start_cost, |b| b.cost) {
@@ -204,12 +210,14 @@ fn shading(lights: &Lights, half: &HalfVectors, n: Vec3, shift: u32, work: &mut 
     let [hx, hy, hz] = &half.0;
     for k in 0..work.diffuse.len() {
         let nl = (n.x * lx[k] + n.y * ly[k] + n.z * lz[k]).max(0.0);
-        let mut lobe = (n.x * hx[k] + n.y * hy[k] + n.z * hz[k]).max(NH_MIN);
+        let nh = (n.x * hx[k] + n.y * hy[k] + n.z * hz[k]).max(NH_MIN);
+        let mut lobe = nh;
         for _ in 0..shift {
             lobe *= lobe;
         }
         work.diffuse[k] = nl;
         work.specular[k] = nl * lobe;
+        work.nh[k] = nh;
     }
 }
 
@@ -219,8 +227,6 @@ fn fit_exponent(lights: &Lights, half: &HalfVectors, from: Vec3, shift: u32, rea
     let p = (1u32 << shift) as f32;
     let mut n = from;
     work.weight.copy_from_slice(&work.usable);
-    let [lx, ly, lz] = &lights.direction;
-    let [hx, hy, hz] = &half.0;
     for round in 0..LOBE_ROUNDS {
         shading(lights, half, n, shift, work);
         let (a, c) = lobe_scales(work);
@@ -229,33 +235,24 @@ fn fit_exponent(lights: &Lights, half: &HalfVectors, from: Vec3, shift: u32, rea
             reweight(a, c, work);
         }
         // d model / d n = (a + c (n·h)^p) l + c p [n·l]₊ (n·h)^(p−1) h, where n·l > 0; the
-        // normal equations of its two tangent components with (a, c) re-solved after the
-        // step (variable projection, Kaufman's form): each column less its weighted
-        // projection on the free ones of [n·l]₊ and [n·l]₊ (n·h)^p.
-        // Columns j1, j2 (the tangent components), [n·l]₊, [n·l]₊ (n·h)^p: their weighted
-        // products, and j1's and j2's with the residual.
-        let mut products = [[0.0f32; 4]; 4];
-        let (mut q1, mut q2) = (0.0f32, 0.0f32);
-        for k in 0..work.diffuse.len() {
+        // normal equations of its two tangent components j1, j2 with (a, c) re-solved after
+        // the step (variable projection, Kaufman's form): each column less its weighted
+        // projection on the free ones of [n·l]₊ and [n·l]₊ (n·h)^p. The sums: the weighted
+        // products of those four columns, and j1's and j2's with the residual.
+        let (l, h) = (&lights.direction, &half.0);
+        let [m11, m12, m22, f1, f2, s1, s2, ff, fs, ss, q1, q2] = summed(work.diffuse.len(), |k| {
             let (nl, lit_lobe) = (work.diffuse[k], work.specular[k]);
-            if nl <= 0.0 || work.weight[k] == 0.0 {
-                continue;
-            }
-            let nh = (n.x * hx[k] + n.y * hy[k] + n.z * hz[k]).max(NH_MIN);
-            let (l, h) = (Vec3::new(lx[k], ly[k], lz[k]), Vec3::new(hx[k], hy[k], hz[k]));
-            let derivative = (a + c * lit_lobe / nl) * l + (c * p * lit_lobe / nh) * h;
-            let columns = [derivative.dot(t1), derivative.dot(t2), nl, lit_lobe];
-            let w = work.weight[k];
-            for (row, &x) in products.iter_mut().zip(&columns) {
-                for (sum, &y) in row.iter_mut().zip(&columns) {
-                    *sum += w * x * y;
-                }
-            }
+            // Unlit observations (and padding) add zeros: a select, not a branch.
+            let w = if nl > 0.0 { work.weight[k] } else { 0.0 };
+            let along_l = a + c * lit_lobe / nl.max(NH_MIN);
+            let along_h = c * p * lit_lobe / work.nh[k];
+            let derivative = [0, 1, 2].map(|axis| along_l * l[axis][k] + along_h * h[axis][k]);
+            let j1 = derivative[0] * t1.x + derivative[1] * t1.y + derivative[2] * t1.z;
+            let j2 = derivative[0] * t2.x + derivative[1] * t2.y + derivative[2] * t2.z;
             let r = work.b[k] - a * nl - c * lit_lobe;
-            q1 += w * columns[0] * r;
-            q2 += w * columns[1] * r;
-        }
-        let [[m11, m12, f1, s1], [_, m22, f2, s2], [_, _, ff, fs], [_, _, _, ss]] = products;
+            let (wj1, wj2, wf, ws) = (w * j1, w * j2, w * nl, w * lit_lobe);
+            [wj1 * j1, wj1 * j2, wj2 * j2, wf * j1, wf * j2, ws * j1, ws * j2, wf * nl, wf * lit_lobe, ws * lit_lobe, wj1 * r, wj2 * r]
+        });
         let (p11, p12, p22) = projected(a > 0.0, c > 0.0, [ff, fs, ss], [f1, s1], [f2, s2]);
         let (m11, m12, m22) = (m11 - p11, m12 - p12, m22 - p22);
         let damping = DAMPING * (m11 + m22) + 1e-12;
@@ -295,17 +292,27 @@ fn projected(diffuse: bool, lobe: bool, [ff, fs, ss]: [f32; 3], u1: [f32; 2], u2
     }
 }
 
+/// The sums over `0..len` (a multiple of [`LANES`]) of each of the `N` values that `term`
+/// gives for an index, [`LANES`] indices side by side (so that they vectorise).
+#[inline(always)]
+fn summed<const N: usize>(len: usize, term: impl Fn(usize) -> [f32; N]) -> [f32; N] {
+    let mut lanes = [[0.0f32; LANES]; N];
+    for start in (0..len).step_by(LANES) {
+        for i in 0..LANES {
+            for (lane, value) in lanes.iter_mut().zip(term(start + i)) {
+                lane[i] += value;
+            }
+        }
+    }
+    lanes.map(|lane| lane.iter().sum())
+}
+
 /// `(a, c)` of the current shading and weights.
 fn lobe_scales(work: &Work) -> (f32, f32) {
-    let (mut ff, mut fs, mut ss, mut fb, mut sb) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
-    for k in 0..work.diffuse.len() {
-        let (w, f, s, b) = (work.weight[k], work.diffuse[k], work.specular[k], work.b[k]);
-        ff += w * f * f;
-        fs += w * f * s;
-        ss += w * s * s;
-        fb += w * f * b;
-        sb += w * s * b;
-    }
+    let [ff, fs, ss, fb, sb] = summed(work.diffuse.len(), |k| {
+        let (wf, ws, b) = (work.weight[k] * work.diffuse[k], work.weight[k] * work.specular[k], work.b[k]);
+        [wf * work.diffuse[k], wf * work.specular[k], ws * work.specular[k], wf * b, ws * b]
+    });
     diffuse_and_lobe(ff, fs, ss, fb, sb)
 }
 
@@ -343,12 +350,11 @@ fn robust_scale(a: f32, c: f32, work: &mut Work) -> Option<f32> {
 /// Σ over the unsaturated observations of Tukey's loss `1 − (1 − u²)³` (1 beyond `|u| = 1`)
 /// of the residual `u` under the model `a`, `c`, times `reach`.
 fn loss(a: f32, c: f32, reach: f32, work: &Work) -> f32 {
-    let mut sum = 0.0f32;
-    for k in 0..work.diffuse.len() {
+    let [sum] = summed(work.diffuse.len(), |k| {
         let u = (work.b[k] - a * work.diffuse[k] - c * work.specular[k]) * reach;
         let t = (1.0 - u * u).max(0.0);
-        sum += work.usable[k] * (1.0 - t * t * t);
-    }
+        [work.usable[k] * (1.0 - t * t * t)]
+    });
     sum
 }
 
