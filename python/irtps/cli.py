@@ -296,6 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
         "  irtps reconstruct cavity --out cavity_ps --integration mestimator\n"
         "  irtps reconstruct capture --out capture_ps --saturation 0.99 --base-height boundary\n"
         "  irtps reconstruct shared/data/diligent/readingPNG --out reading --robust trim\n"
+        "  irtps reconstruct metal_capture --out metal --robust lobe\n"
         "  irtps reconstruct rig_capture --out rig --method irtps --albedo-scale 0.8",
     )
     p.add_argument("data", type=Path, help="data set folder")
