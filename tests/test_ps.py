@@ -179,14 +179,25 @@ def test_reconstruct_robust_lobe_on_a_metallic_object(tmp_path, capsys):
     images = data.images.copy()
     images[:, data.mask] = shading[:, :, 0] * (data.scene.light_irradiance[:, None, :] / np.pi)
     irtps.save_dataset(dataclasses.replace(data, images=images), tmp_path / "metal")
-    errors = {}
+    errors, advice = {}, {}
     for mode in ("tukey", "lobe"):
         out = tmp_path / mode
         assert main(["reconstruct", str(tmp_path / "metal"), "--out", str(out), "--robust", mode, "--quiet"]) == 0
-        capsys.readouterr()
+        advice[mode] = "--robust lobe" in capsys.readouterr().err
         assert main(["evaluate", str(out), "--gt", str(tmp_path / "metal"), "--json"]) == 0
         errors[mode] = json.loads(capsys.readouterr().out)["normal_mean_angular_deg"]
-    flags = json.loads((tmp_path / "lobe" / "run.json").read_text())["flags"]
+    tukey_run, lobe_run = (json.loads((tmp_path / mode / "run.json").read_text()) for mode in ("tukey", "lobe"))
     # Measured: Tukey 17.96°, lobe 5.29°; 579 of 688 pixels fitted with a lobe.
     assert errors["lobe"] < 0.5 * errors["tukey"]
-    assert flags["fitted with a specular lobe"] > flags["fitted"]
+    assert lobe_run["flags"]["fitted with a specular lobe"] > lobe_run["flags"]["fitted"]
+    # The default run saw the lobe and said so; the lobe run had nothing to advise.
+    assert tukey_run["lobe_share"] > 0.5 and advice == {"tukey": True, "lobe": False}
+    assert lobe_run["lobe_share"] is None
+
+
+@pytest.mark.parametrize("name, most", [("diligent_ball_small", 0.05), ("diligent_reading_small", 0.3)])
+def test_no_lobe_advice_on_the_small_diligent_copies(tmp_path, capsys, name, most):
+    # Measured: 1.1 % of ball's pixels take a lobe, 17.2 % of reading's (8 and 24 lights).
+    assert main(["reconstruct", str(DATA / name), "--out", str(tmp_path / name), "--quiet"]) == 0
+    assert "--robust lobe" not in capsys.readouterr().err
+    assert json.loads((tmp_path / name / "run.json").read_text())["lobe_share"] < most

@@ -7,7 +7,7 @@ from irtps.dataset import load_dataset, load_ground_truth, load_scene_object, sa
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
 from irtps.evaluate import Metrics, angular_error_deg, evaluate
 from irtps.integrate import integrate_normals, place_height
-from irtps.ps import PsResult, photometric_stereo
+from irtps.ps import PsResult, lobe_share, photometric_stereo
 from irtps.reconstruct import Reconstruction, reconstruct, save_reconstruction
 from irtps.render import Rendering, render, render_indirect
 from irtps.scene import Camera, CornellBox, Floor, Light, Scene, load_scene
@@ -44,6 +44,7 @@ __all__ = [
     "load_ground_truth",
     "load_scene",
     "load_scene_object",
+    "lobe_share",
     "photometric_stereo",
     "place_height",
     "reconstruct",

@@ -102,9 +102,9 @@ def photometric_stereo(
           is each channel's diffuse term, without the highlight. A pixel keeps its Tukey
           fit unless the lobe lowers Tukey's loss by more than the Bayesian information
           criterion asks for its two extra parameters; pixels fitted with a lobe are
-          flagged (``FLAGS[4]``). Several times slower than
-          ``"tukey"``, and worse than it on matte objects with deep folds, where it takes
-          inter-reflected light for a lobe.
+          flagged (``FLAGS[4]``). A hundred or more times slower than
+          ``"tukey"`` (seconds on a DiLiGenT object), and worse than it on matte objects
+          with deep folds, where it can take inter-reflected light for a lobe.
         - ``"threshold"``: drop observations in shadow (channel sum below `shadow_fraction`
           of the pixel's brightest) and re-solve from the rest. The better choice on very
           rough matte surfaces (plaster, unglazed clay), whose fall-off departs from
@@ -154,3 +154,71 @@ def photometric_stereo(
         saturation = check_positive("saturation", saturation)
     normals, albedo, flags, used = _core.photometric_stereo(images, mask, directions, irradiance, robust, shadow_fraction, saturation)
     return PsResult(normals=normals, albedo=albedo, flags=flags, used=used)
+
+
+#: The flag of the pixels that the lobe mode fitted with a specular lobe.
+LOBE_FITTED = 4
+#: Object pixels `lobe_share` fits by default.
+LOBE_SAMPLE = 1000
+
+
+def lobe_share(
+    images: np.ndarray,
+    light_directions: np.ndarray,
+    light_irradiance: np.ndarray,
+    mask: np.ndarray | None = None,
+    *,
+    sample: int = LOBE_SAMPLE,
+    shadow_fraction: float = 0.05,
+    saturation: float | None = None,
+) -> float:
+    """The share of the object's pixels that ``robust="lobe"`` fits with a specular lobe.
+
+    The lobe mode fits `sample` of the mask's pixels, spread evenly over it (all of them
+    when fewer). A broad highlight that covers many lights (metal, metallic paint, a broad
+    glaze) is what the lobe explains; on a matte object with shadows and inter-reflection
+    few pixels take one. Measured on renders of DiLiGenT's shapes and on the shared data
+    (benches/README.md): 0–1.3 % on Lambertian surfaces, 13 % on DiLiGenT ball, 40 % on
+    reading, 24–31 % on a sharp plastic, 50–90 % on broad plastics and 74–87 % on rough
+    aluminium and copper. Where most pixels take one, the lobe mode fits the object better
+    than the Tukey fit.
+
+    Parameters
+    ----------
+    images, light_directions, light_irradiance, mask
+        As for `photometric_stereo`.
+    sample : int
+        Most pixels fitted.
+    shadow_fraction, saturation
+        As for `photometric_stereo`.
+
+    Returns
+    -------
+    float
+        In [0, 1]; 0 for an empty mask.
+
+    Raises
+    ------
+    ArgumentError
+        As `photometric_stereo`, or a `sample` below 1.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> lights = np.array([[0, 0, 1], [0.6, 0, 0.8], [0, 0.6, 0.8], [-0.6, 0, 0.8], [0, -0.6, 0.8]])
+    >>> images = (0.5 * np.clip(lights @ [0.0, 0.6, 0.8], 0, None))[:, None, None, None] * np.ones((5, 1, 1, 3))
+    >>> lobe_share(images, lights, np.full((5, 3), np.pi))  # a matte pixel takes no lobe
+    0.0
+    """
+    images = check_array("images", images, (None, None, None, 3), dtype=None)
+    mask = check_mask(mask, images.shape[1:3], match="images")
+    if not (isinstance(sample, (int, np.integer)) and sample >= 1):
+        raise ArgumentError("sample", f"{sample!r} is not a positive integer")
+    pixels = np.flatnonzero(mask)
+    if pixels.size == 0:
+        return 0.0
+    chosen = pixels[np.unique(np.linspace(0, pixels.size - 1, min(int(sample), pixels.size)).round().astype(np.intp))]
+    rows, cols = np.unravel_index(chosen, mask.shape)
+    observed = images[:, rows, cols][:, None]  # (K, 1, N, 3): one row of the chosen pixels
+    fit = photometric_stereo(observed, light_directions, light_irradiance, robust="lobe", shadow_fraction=shadow_fraction, saturation=saturation)
+    return float((fit.flags == LOBE_FITTED).mean())

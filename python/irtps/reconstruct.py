@@ -24,7 +24,7 @@ from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
 from irtps.pipeline import reconstruction_pass, resolve_options, timed
 from irtps.placement import Placement
-from irtps.ps import FLAGS, check_lights
+from irtps.ps import FLAGS, check_lights, lobe_share
 from irtps.radiometry import AlbedoScale
 
 #: Indirect images written at once, one per core up to 4 (on 2 cores, 2 writers take 0.7 of
@@ -72,6 +72,10 @@ class Reconstruction:
         The factor from the fitted albedo (``albedo``, in the units of the data set's
         irradiance) to the reflectance rendered (`irtps.radiometry`): IRT-PS's, and classic
         PS's where the irradiance is relative and the floor was rendered to place the object.
+    lobe_share : float or None
+        When the fit was not the lobe mode's: the share of the object's pixels that the
+        lobe mode fits with a specular lobe (`irtps.ps.lobe_share`); from half of them on,
+        the object looks glossy or metallic and ``robust="lobe"`` is advised (a warning).
     """
 
     normals: np.ndarray
@@ -87,6 +91,7 @@ class Reconstruction:
     placement: Placement | None = None
     chosen: int | None = None
     albedo_scale: AlbedoScale | None = None
+    lobe_share: float | None = None
 
     @property
     def indirect(self) -> np.ndarray | None:
@@ -151,7 +156,9 @@ def reconstruct(
     Warns
     -----
     IrtpsWarning
-        When observations are saturated, with their count.
+        When observations are saturated, with their count; when most of the object's pixels
+        reflect a broad specular lobe and the robust mode is not ``"lobe"``, advising it
+        (`Reconstruction.lobe_share`).
 
     Examples
     --------
@@ -159,7 +166,7 @@ def reconstruct(
     >>> data, _ = synthesize("cap", size=24, lights=6, bounces=0, environment="none")
     >>> result = reconstruct(data)
     >>> result.normals.shape, sorted(result.timings)
-    ((24, 24, 3), ['integration', 'photometric_stereo', 'placement'])
+    ((24, 24, 3), ['integration', 'lobe_share', 'photometric_stereo', 'placement'])
     >>> reconstruct(data, samples=0)
     Traceback (most recent call last):
     ...
@@ -170,8 +177,12 @@ def reconstruct(
     options = resolve_options(dataset, ReconstructOptions.build(options, **settings))
     _check_input(dataset, options.saturation, options.robust)
     parameters = options.to_dict()
+    timings: dict[str, float] = {}
+    share = None
+    if options.robust != "lobe":
+        with timed(timings, "lobe_share"):
+            share = _advise_lobe(dataset, options)
     if options.method == "irtps":
-        timings: dict[str, float] = {}
         with timed(timings, "irtps"):
             loop = remove_interreflections(dataset, options, progress=progress)
         return Reconstruction(
@@ -188,6 +199,7 @@ def reconstruct(
             placement=loop.placement,
             chosen=loop.chosen,
             albedo_scale=loop.albedo_scale,
+            lobe_share=share,
         )
     # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
     first = reconstruction_pass(dataset, dataset.images, options)
@@ -198,10 +210,11 @@ def reconstruct(
         mask=dataset.mask,
         flags=first.fit.flags,
         pixel_size=dataset.scene.camera.pixel_size,
-        timings=first.timings,
+        timings={**timings, **first.timings},
         parameters=parameters,
         placement=first.placement,
         albedo_scale=first.albedo_scale,
+        lobe_share=share,
     )
 
 
@@ -241,7 +254,7 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, **options)
     ...     save_dataset(data, folder + "/cap")
     ...     dataset, result = load_and_reconstruct(folder + "/cap")
     >>> list(result.timings)
-    ['load', 'photometric_stereo', 'integration', 'placement']
+    ['load', 'lobe_share', 'photometric_stereo', 'integration', 'placement']
     """
     if method is not None:
         options["method"] = method
@@ -253,6 +266,25 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, **options)
     result = reconstruct(dataset, **options)
     result.timings = {"load": loaded, **result.timings}
     return dataset, result
+
+
+#: From this share of the object's pixels fitted with a lobe (`irtps.ps.lobe_share`), the
+#: lobe mode is advised: most of the object reflects a broad highlight.
+LOBE_ADVISED = 0.5
+
+
+def _advise_lobe(dataset: Dataset, options: ReconstructOptions) -> float:
+    """The data set's `irtps.ps.lobe_share`; warns when it advises the lobe mode."""
+    scene = dataset.scene
+    share = lobe_share(dataset.images, scene.light_directions, scene.light_irradiance, dataset.mask, shadow_fraction=options.shadow_fraction, saturation=options.saturation)
+    if share >= LOBE_ADVISED:
+        warnings.warn(
+            f"{dataset.source or 'the data set'}: {100 * share:.0f} % of the object's pixels reflect a broad specular lobe, as glossy and metallic "
+            f"surfaces do; robust mode 'lobe' (--robust lobe) fits such objects better than '{options.robust}'",
+            IrtpsWarning,
+            stacklevel=4,
+        )
+    return share
 
 
 def _check_input(dataset: Dataset, saturation: float | None, robust: str) -> None:
@@ -332,6 +364,7 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             "history": [asdict(step) for step in result.history],
             "chosen_pass": result.chosen,
             "albedo_scale": None if result.albedo_scale is None else result.albedo_scale.to_dict(),
+            "lobe_share": result.lobe_share,
         }
         if result.object_indirect is not None:
             (folder / "indirect").mkdir()
