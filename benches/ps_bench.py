@@ -106,7 +106,8 @@ def main() -> None:
         print(f"  object only:  numpy pinv(L) @ images {numpy_object:.3f} s")
         for mode in ROBUST_MODES:
             elapsed = figures[f"irtps_{mode}_object_s"]
-            print(f"                irtps {mode:<9}  {elapsed:.3f} s   {figures[f'irtps_{mode}_object_x']:.1f}x numpy plain")
+            ratio = figures[f"irtps_{mode}_object_x"]
+            print(f"                irtps {mode:<9}  {elapsed:.3f} s   {ratio:.1f}x numpy plain" if ratio >= 1 else f"                irtps {mode:<9}  {elapsed:.3f} s   {1 / ratio:.0f}x slower than numpy plain")
         results.append(figures)
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))
