@@ -20,7 +20,8 @@
 //! start). Each channel's albedo is its own diffuse scale under the kept fit's weights: the
 //! highlight goes to the lobe, not to the albedo. Saturated observations carry no weight.
 //!
-//! A pixel whose Tukey fit has too few observations (or none lit) keeps that fit.
+//! A pixel whose Tukey fit has too few observations, or lights fewer than [`LOBE_MIN_LIT`]
+//! unsaturated ones, keeps that fit.
 
 use glam::Vec3;
 
@@ -34,6 +35,10 @@ pub const LOBE_EXPONENTS: u32 = 8;
 pub const LOBE_ROUNDS: usize = 15;
 /// Tukey's biweight constant of the lobe fit, in robust scales (as [`crate::tukey::TUKEY_SCALES`]).
 pub const LOBE_SCALES: f32 = 2.5;
+/// Fewest unsaturated observations that the Tukey normal lights for a lobe to be tried: one
+/// more than the lobe fit's five unknowns (the normal's two, `a`, `c` and the exponent), so
+/// that a lobe cannot explain a pixel merely by having as many unknowns as observations.
+pub const LOBE_MIN_LIT: usize = 6;
 /// Parameters that a lobe adds to the Lambertian fit: its height and exponent.
 const LOBE_PARAMETERS: f32 = 2.0;
 /// Median absolute deviation to the standard deviation of a normal distribution.
@@ -178,6 +183,10 @@ fn refit(grey: &[f32], rgb: &[[f32; 3]], lights: &Lights, half: &HalfVectors, st
     let brightest = (0..lights.count).filter(|&k| work.usable[k] > 0.0).max_by(|&i, &j| work.b[i].total_cmp(&work.b[j]))?;
     let (normal, albedo) = start;
     shading(lights, half, normal, 0, work);
+    let lit = work.diffuse.iter().zip(&work.usable).filter(|&(&f, &u)| f > 0.0 && u > 0.0).count();
+    if lit < LOBE_MIN_LIT {
+        return None;
+    }
     let reach = 1.0 / (LOBE_SCALES * robust_scale(albedo, 0.0, work)?);
     // Bayesian information criterion: the lobe fit must lower χ² (the loss near zero is 3u²
     // = 3/LOBE_SCALES² of a squared residual in robust scales) by more than ln N per
@@ -447,6 +456,24 @@ mod tests {
             assert!(angle_deg(*m, n) < 0.05, "normal off by {}°", angle_deg(*m, n));
             assert!(albedo.iter().all(|&a| (a - 0.5).abs() < 2e-3), "albedo {albedo:?}");
         }
+    }
+
+    #[test]
+    fn pixels_with_few_lit_observations_keep_the_tukey_fit() {
+        // Five lights: a lobe's five unknowns would fit any such pixel's observations.
+        let directions: Vec<Vec3> = ring_lights().into_iter().step_by(10).collect();
+        let lights: Vec<Light> = directions.iter().map(|&d| Light { direction: Vec3A::from(d), irradiance: [1.0; 3] }).collect();
+        let normals = tilted(20);
+        let mut images = Vec::new();
+        for &l in &directions {
+            let h = (l + Vec3::Z).normalize();
+            for &n in &normals {
+                images.extend([n.dot(l).max(0.0) * (0.3 + 2.0 * n.dot(h).max(0.0).powi(16)); 3]);
+            }
+        }
+        let mask = vec![true; normals.len()];
+        let fit = |robust| photometric_stereo(&images, &mask, &lights, &PsSettings { robust, ..PsSettings::default() }).unwrap();
+        assert_eq!(fit(Robust::Lobe), fit(Robust::Tukey));
     }
 
     #[test]

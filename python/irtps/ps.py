@@ -101,8 +101,8 @@ def photometric_stereo(
           the best ``p`` of 1, 2, 4, …, 128), re-weighted by Tukey's biweight; the albedo
           is each channel's diffuse term, without the highlight. A pixel keeps its Tukey
           fit unless the lobe lowers Tukey's loss by more than the Bayesian information
-          criterion asks for its two extra parameters; pixels fitted with a lobe are
-          flagged (``FLAGS[4]``). A hundred or more times slower than
+          criterion asks for its two extra parameters, or when it lights fewer than 6
+          unsaturated observations; pixels fitted with a lobe are flagged (``FLAGS[4]``). A hundred or more times slower than
           ``"tukey"`` (seconds on a DiLiGenT object), and worse than it on matte objects
           with deep folds, where it can take inter-reflected light for a lobe.
         - ``"threshold"``: drop observations in shadow (channel sum below `shadow_fraction`
