@@ -193,6 +193,8 @@ def test_reconstruct_robust_lobe_on_a_metallic_object(tmp_path, capsys):
     # The default run saw the lobe and said so; the lobe run had nothing to advise.
     assert tukey_run["lobe_share"] > 0.5 and advice == {"tukey": True, "lobe": False}
     assert lobe_run["lobe_share"] is None
+    assert main(["report", str(tmp_path / "tukey"), "--quiet"]) == 0
+    assert "robust mode &#x27;lobe&#x27; (--robust lobe) is advised" in (tmp_path / "tukey" / "report" / "index.html").read_text()
 
 
 @pytest.mark.parametrize("name, most", [("diligent_ball_small", 0.05), ("diligent_reading_small", 0.3)])

@@ -160,6 +160,23 @@ def photometric_stereo(
 LOBE_FITTED = 4
 #: Object pixels `lobe_share` fits by default.
 LOBE_SAMPLE = 1000
+#: From this `lobe_share`, ``robust="lobe"`` is advised: most of the object reflects a broad
+#: highlight.
+LOBE_ADVISED = 0.5
+
+
+def format_lobe_share(share: float) -> str:
+    """One sentence on a `lobe_share`, with the advice it gives.
+
+    Examples
+    --------
+    >>> format_lobe_share(0.87)
+    "87 % of the object's pixels take a specular lobe: robust mode 'lobe' (--robust lobe) is advised"
+    >>> format_lobe_share(0.12)
+    "12 % of the object's pixels take a specular lobe"
+    """
+    sentence = f"{100 * share:.0f} % of the object's pixels take a specular lobe"
+    return sentence + (": robust mode 'lobe' (--robust lobe) is advised" if share >= LOBE_ADVISED else "")
 
 
 def lobe_share(

@@ -24,7 +24,7 @@ from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
 from irtps.pipeline import reconstruction_pass, resolve_options, timed
 from irtps.placement import Placement
-from irtps.ps import FLAGS, check_lights, lobe_share
+from irtps.ps import FLAGS, LOBE_ADVISED, check_lights, format_lobe_share, lobe_share
 from irtps.radiometry import AlbedoScale
 
 #: Indirect images written at once, one per core up to 4 (on 2 cores, 2 writers take 0.7 of
@@ -268,19 +268,14 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, **options)
     return dataset, result
 
 
-#: From this share of the object's pixels fitted with a lobe (`irtps.ps.lobe_share`), the
-#: lobe mode is advised: most of the object reflects a broad highlight.
-LOBE_ADVISED = 0.5
-
-
 def _advise_lobe(dataset: Dataset, options: ReconstructOptions) -> float:
     """The data set's `irtps.ps.lobe_share`; warns when it advises the lobe mode."""
     scene = dataset.scene
     share = lobe_share(dataset.images, scene.light_directions, scene.light_irradiance, dataset.mask, shadow_fraction=options.shadow_fraction, saturation=options.saturation)
     if share >= LOBE_ADVISED:
         warnings.warn(
-            f"{dataset.source or 'the data set'}: {100 * share:.0f} % of the object's pixels reflect a broad specular lobe, as glossy and metallic "
-            f"surfaces do; robust mode 'lobe' (--robust lobe) fits such objects better than '{options.robust}'",
+            f"{dataset.source or 'the data set'}: {format_lobe_share(share)} (a broad highlight, as glossy and metallic surfaces reflect, "
+            f"which robust mode '{options.robust}' sets aside)",
             IrtpsWarning,
             stacklevel=4,
         )

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from irtps.evaluate import format_metrics
 from irtps.placement import format_placement
+from irtps.ps import format_lobe_share
 from irtps.radiometry import format_albedo_scale
 
 if TYPE_CHECKING:
@@ -120,6 +121,8 @@ def _summary(report: Report) -> str:
     placement = "" if record.get("placement") is None else f" Placement: {format_placement(record['placement'])}."
     if record.get("albedo_scale") is not None:
         placement += f" {format_albedo_scale(record['albedo_scale']).capitalize()}."
+    if record.get("lobe_share") is not None:
+        placement += f" {format_lobe_share(record['lobe_share'])}."
     return f"{method} of {source}: {cols}×{rows} pixels, {report.object_pixels} on the object{scale}.{placement} Folder: {report.run_dir}."
 
 
