@@ -12,8 +12,7 @@
 //! re-weighted, from the second round on, by Tukey's biweight of its residual in units of
 //! [`LOBE_SCALES`] robust scales (1.4826 × the median absolute residual of the lit
 //! observations): shadows and inter-reflections that neither term explains lose their
-//! weight. Every exponent gets [`PROBE_ROUNDS`] rounds from each start, and the
-//! [`PROBED_KEPT`] with the least loss go on to [`LOBE_ROUNDS`].
+//! weight.
 //!
 //! A lobe fit replaces the Tukey fit only where it lowers Tukey's loss, summed over every
 //! unsaturated observation at the Tukey fit's robust scale, by more than the Bayesian
@@ -32,12 +31,8 @@ use crate::robust_ps::{gather, Lights, Scratch, LANES, SATURATED};
 /// The lobe exponents tried, as powers of two: `p = 2^s` for `s` in `0..LOBE_EXPONENTS`
 /// (1 to 128: lobes from about 60° to about 6° wide at half height).
 pub const LOBE_EXPONENTS: u32 = 8;
-/// Rounds of (a, c) fit and normal step per exponent and start...
+/// Rounds of (a, c) fit and normal step per exponent and start.
 pub const LOBE_ROUNDS: usize = 15;
-/// ...after every exponent has had this many, for the [`PROBED_KEPT`] with the least loss.
-const PROBE_ROUNDS: usize = 3;
-/// Exponents fitted to the end from each start.
-const PROBED_KEPT: usize = 2;
 /// Tukey's biweight constant of the lobe fit, in robust scales (as [`crate::tukey::TUKEY_SCALES`]).
 pub const LOBE_SCALES: f32 = 2.5;
 /// Fewest unsaturated observations that the Tukey normal lights for a lobe to be tried: one
@@ -207,14 +202,8 @@ fn refit(grey: &[f32], rgb: &[[f32; 3]], lights: &Lights, half: &HalfVectors, st
         if best.as_ref().map_or(start_cost, |b| b.cost) <= margin {
             continue;
         }
-        // Every exponent for a few rounds; the most promising ones to the end.
-        let mut probed: [(f32, u32); LOBE_EXPONENTS as usize] = std::array::from_fn(|shift| (0.0, shift as u32));
-        for (cost, shift) in &mut probed {
-            *cost = fit_exponent(lights, half, from, *shift, reach, PROBE_ROUNDS, work).cost;
-        }
-        probed.sort_by(|x, y| x.0.total_cmp(&y.0));
-        for &(_, shift) in &probed[..PROBED_KEPT] {
-            let fit = fit_exponent(lights, half, from, shift, reach, LOBE_ROUNDS, work);
+        for shift in 0..LOBE_EXPONENTS {
+            let fit = fit_exponent(lights, half, from, shift, reach, work);
             if fit.cost + margin < best.as_ref().map_or(start_cost, |b| b.cost) {
                 work.best_weight.copy_from_slice(&work.weight);
                 best = Some(fit);
@@ -243,11 +232,11 @@ fn shading(lights: &Lights, half: &HalfVectors, n: Vec3, shift: u32, work: &mut 
 
 /// Fits exponent `2^shift` from normal `from`, its [`loss`] at `reach`; leaves the fit's
 /// weights in `work.weight`.
-fn fit_exponent(lights: &Lights, half: &HalfVectors, from: Vec3, shift: u32, reach: f32, rounds: usize, work: &mut Work) -> LobeFit {
+fn fit_exponent(lights: &Lights, half: &HalfVectors, from: Vec3, shift: u32, reach: f32, work: &mut Work) -> LobeFit {
     let p = (1u32 << shift) as f32;
     let mut n = from;
     work.weight.copy_from_slice(&work.usable);
-    for round in 0..rounds {
+    for round in 0..LOBE_ROUNDS {
         shading(lights, half, n, shift, work);
         let (a, c) = lobe_scales(work);
         let (t1, t2) = tangents(n);
