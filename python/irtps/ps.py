@@ -195,7 +195,7 @@ def lobe_share(
     when fewer). A broad highlight that covers many lights (metal, metallic paint, a broad
     glaze) is what the lobe explains; on a matte object with shadows and inter-reflection
     few pixels take one. Measured on renders of DiLiGenT's shapes and on the shared data
-    (benches/README.md): 0–1.3 % on Lambertian surfaces, 13 % on DiLiGenT ball, 40 % on
+    (benches/README.md): 0–1.3 % on Lambertian surfaces, 13 % on DiLiGenT ball, 38–40 % on
     reading, 24–31 % on a sharp plastic, 50–90 % on broad plastics and 74–87 % on rough
     aluminium and copper. Where most pixels take one, the lobe mode fits the object better
     than the Tukey fit.
