@@ -243,7 +243,7 @@ class ReconstructOptions(_Options):
     robust: str = _option(
         "tukey",
         "observations each pixel's fit uses: tukey re-weights them by their residuals (shadows and highlights set aside), lobe adds a "
-        "specular lobe per pixel where the observations call for one (glossy and metallic objects; several times slower), threshold drops "
+        "specular lobe per pixel where the observations call for one (glossy and metallic objects; seconds, not milliseconds, on a DiLiGenT object), threshold drops "
         "those below the shadow fraction (the better choice on very rough matte surfaces such as plaster), trim keeps those between the darkest two fifths and the brightest fifth, none uses all; every mode but "
         "none drops saturated ones",
         str,

@@ -102,9 +102,10 @@ def photometric_stereo(
           is each channel's diffuse term, without the highlight. A pixel keeps its Tukey
           fit unless the lobe lowers Tukey's loss by more than the Bayesian information
           criterion asks for its two extra parameters, or when it lights fewer than 6
-          unsaturated observations; pixels fitted with a lobe are flagged (``FLAGS[4]``). A hundred or more times slower than
-          ``"tukey"`` (seconds on a DiLiGenT object), and worse than it on matte objects
-          with deep folds, where it can take inter-reflected light for a lobe.
+          unsaturated observations; pixels fitted with a lobe are flagged (``FLAGS[4]``).
+          About 300 times slower than ``"tukey"`` (seconds on a DiLiGenT object), and worse
+          than it on matte objects with deep folds, where it can take inter-reflected light
+          for a lobe. `lobe_share` tells which objects want it.
         - ``"threshold"``: drop observations in shadow (channel sum below `shadow_fraction`
           of the pixel's brightest) and re-solve from the rest. The better choice on very
           rough matte surfaces (plaster, unglazed clay), whose fall-off departs from
@@ -229,7 +230,7 @@ def lobe_share(
     """
     images = check_array("images", images, (None, None, None, 3), dtype=None)
     mask = check_mask(mask, images.shape[1:3], match="images")
-    if not (isinstance(sample, (int, np.integer)) and sample >= 1):
+    if isinstance(sample, bool) or not (isinstance(sample, (int, np.integer)) and sample >= 1):
         raise ArgumentError("sample", f"{sample!r} is not a positive integer")
     pixels = np.flatnonzero(mask)
     if pixels.size == 0:

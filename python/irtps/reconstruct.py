@@ -277,7 +277,7 @@ def _advise_lobe(dataset: Dataset, options: ReconstructOptions) -> float:
             f"{dataset.source or 'the data set'}: {format_lobe_share(share)} (a broad highlight, as glossy and metallic surfaces reflect, "
             f"which robust mode '{options.robust}' sets aside)",
             IrtpsWarning,
-            stacklevel=4,
+            stacklevel=3,
         )
     return share
 
