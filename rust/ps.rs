@@ -10,7 +10,9 @@
 //! pixel, the observations in shadow (whose summed `b` is below `shadow_fraction` of that
 //! pixel's brightest) and re-solves from the rest when at least 3 non-coplanar lights
 //! remain; otherwise it keeps the full fit and flags the pixel. The Tukey (default) and trim
-//! modes fit each pixel from its own observations ([`crate::tukey`], [`crate::robust_ps`]).
+//! modes fit each pixel from its own observations ([`crate::tukey`], [`crate::robust_ps`]);
+//! the lobe mode refits the Tukey fit with a specular lobe where one explains the
+//! observations better ([`crate::lobe`]).
 //!
 //! The plain and threshold fits run over tiles of pixels, streaming through each image's rows
 //! of the tile (twice in threshold mode: once for each pixel's brightest, once to
