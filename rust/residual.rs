@@ -57,7 +57,7 @@ impl ResidualSums {
 /// A rendering compared with the observations.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Comparison {
-    /// The inter-reflected light, (K, N, 3): Σ_h counts[h] · half h / Σ counts.
+    /// The inter-reflected light, (K, N, 3): Σ_h counts\[h\] · half h / Σ counts.
     pub indirect: Vec<f32>,
     /// Per pixel, the Monte-Carlo noise energy of `indirect` summed over lights and channels:
     /// (n₁ n₂ / n²) Σ |half 1 − half 2|² (all 0 with one half).
