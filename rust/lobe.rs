@@ -114,8 +114,8 @@ struct Work {
     specular: Vec<f32>,
     /// `n·h` of the current normal (at least [`NH_MIN`]).
     nh: Vec<f32>,
-    /// Absolute residuals of the lit observations, for their median.
-    spread: Vec<f32>,
+    /// Bits of the absolute residuals of the lit observations, for their median.
+    spread: Vec<u32>,
     /// The best fit's weights so far.
     best_weight: Vec<f32>,
 }
@@ -345,14 +345,15 @@ fn robust_scale(a: f32, c: f32, work: &mut Work) -> Option<f32> {
     work.spread.clear();
     for k in 0..work.diffuse.len() {
         if work.diffuse[k] > 0.0 && work.usable[k] > 0.0 {
-            work.spread.push((work.b[k] - a * work.diffuse[k] - c * work.specular[k]).abs());
+            work.spread.push((work.b[k] - a * work.diffuse[k] - c * work.specular[k]).abs().to_bits());
         }
     }
     if work.spread.is_empty() {
         return None;
     }
+    // Absolute values: their bits order as the values do.
     let middle = work.spread.len() / 2;
-    let median = *work.spread.select_nth_unstable_by(middle, f32::total_cmp).1;
+    let median = f32::from_bits(*work.spread.select_nth_unstable(middle).1);
     Some((MAD_TO_SIGMA * median).max(SCALE_FLOOR * (a + c)) + 1e-9)
 }
 
