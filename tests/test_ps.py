@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import irtps
-from irtps.errors import IrtpsError
 from irtps.cli import main
+from irtps.errors import IrtpsError
 from irtps.evaluate import angular_error_deg
 from irtps.ps import photometric_stereo
 
