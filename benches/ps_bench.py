@@ -107,7 +107,8 @@ def main() -> None:
         for mode in ROBUST_MODES:
             elapsed = figures[f"irtps_{mode}_object_s"]
             ratio = figures[f"irtps_{mode}_object_x"]
-            print(f"                irtps {mode:<9}  {elapsed:.3f} s   {ratio:.1f}x numpy plain" if ratio >= 1 else f"                irtps {mode:<9}  {elapsed:.3f} s   {1 / ratio:.0f}x slower than numpy plain")
+            speed = f"{ratio:.1f}x numpy plain" if ratio >= 1 else f"{1 / ratio:.0f}x slower than numpy plain"
+            print(f"                irtps {mode:<9}  {elapsed:.3f} s   {speed}")
         results.append(figures)
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))

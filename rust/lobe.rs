@@ -86,8 +86,7 @@ impl HalfVectors {
         let padded = lights.padded();
         let mut half = [vec![0.0; padded], vec![0.0; padded], vec![0.0; padded]];
         for k in 0..lights.count {
-            let l = Vec3::new(lights.direction[0][k], lights.direction[1][k], lights.direction[2][k]);
-            let h = (l + Vec3::Z).normalize_or_zero();
+            let h = (lights.direction(k) + Vec3::Z).normalize_or_zero();
             for (axis, value) in half.iter_mut().zip(h.to_array()) {
                 axis[k] = value;
             }
@@ -118,6 +117,14 @@ struct Work {
     spread: Vec<u32>,
     /// The best fit's weights so far.
     best_weight: Vec<f32>,
+}
+
+impl Work {
+    /// Observation `k`'s residual under the model `a`, `c` of the current shading.
+    #[inline(always)]
+    fn residual(&self, k: usize, a: f32, c: f32) -> f32 {
+        self.b[k] - a * self.diffuse[k] - c * self.specular[k]
+    }
 }
 
 /// A fit of one exponent from one start.
@@ -258,7 +265,7 @@ fn fit_exponent(lights: &Lights, half: &HalfVectors, from: Vec3, shift: u32, rea
             let derivative = [0, 1, 2].map(|axis| along_l * l[axis][k] + along_h * h[axis][k]);
             let j1 = derivative[0] * t1.x + derivative[1] * t1.y + derivative[2] * t1.z;
             let j2 = derivative[0] * t2.x + derivative[1] * t2.y + derivative[2] * t2.z;
-            let r = work.b[k] - a * nl - c * lit_lobe;
+            let r = work.residual(k, a, c);
             let (wj1, wj2, wf, ws) = (w * j1, w * j2, w * nl, w * lit_lobe);
             [wj1 * j1, wj1 * j2, wj2 * j2, wf * j1, wf * j2, ws * j1, ws * j2, wf * nl, wf * lit_lobe, ws * lit_lobe, wj1 * r, wj2 * r]
         });
@@ -333,7 +340,7 @@ fn reweight(a: f32, c: f32, work: &mut Work) {
     };
     let reach = 1.0 / (LOBE_SCALES * scale);
     for k in 0..work.diffuse.len() {
-        let u = (work.b[k] - a * work.diffuse[k] - c * work.specular[k]) * reach;
+        let u = work.residual(k, a, c) * reach;
         let t = 1.0 - u * u;
         work.weight[k] = if t > 0.0 { t * t * work.usable[k] } else { 0.0 };
     }
@@ -345,7 +352,7 @@ fn robust_scale(a: f32, c: f32, work: &mut Work) -> Option<f32> {
     work.spread.clear();
     for k in 0..work.diffuse.len() {
         if work.diffuse[k] > 0.0 && work.usable[k] > 0.0 {
-            work.spread.push((work.b[k] - a * work.diffuse[k] - c * work.specular[k]).abs().to_bits());
+            work.spread.push(work.residual(k, a, c).abs().to_bits());
         }
     }
     if work.spread.is_empty() {
@@ -361,7 +368,7 @@ fn robust_scale(a: f32, c: f32, work: &mut Work) -> Option<f32> {
 /// of the residual `u` under the model `a`, `c`, times `reach`.
 fn loss(a: f32, c: f32, reach: f32, work: &Work) -> f32 {
     let [sum] = summed(work.diffuse.len(), |k| {
-        let u = (work.b[k] - a * work.diffuse[k] - c * work.specular[k]) * reach;
+        let u = work.residual(k, a, c) * reach;
         let t = (1.0 - u * u).max(0.0);
         [work.usable[k] * (1.0 - t * t * t)]
     });

@@ -64,7 +64,7 @@ impl Lights {
         self.direction[0].len()
     }
 
-    fn direction(&self, k: usize) -> Vec3 {
+    pub(crate) fn direction(&self, k: usize) -> Vec3 {
         Vec3::new(self.direction[0][k], self.direction[1][k], self.direction[2][k])
     }
 }
