@@ -29,7 +29,7 @@ from pathlib import Path
 import irtps
 from irtps.errors import IrtpsWarning
 from irtps.options import ReconstructOptions
-from irtps.pipeline import fit_photometric_stereo, resolve_options
+from irtps.pipeline import choose_dataset_robust, fit_photometric_stereo, resolve_options
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -43,7 +43,7 @@ def floor_error(dataset) -> float | None:
     would reach."""
     if dataset.gt is None or dataset.gt.direct is None:
         return None
-    options = resolve_options(dataset, ReconstructOptions())
+    options, _ = choose_dataset_robust(dataset, resolve_options(dataset, ReconstructOptions()))
     return angular_error(dataset, fit_photometric_stereo(dataset, dataset.gt.direct, options).normals)
 
 

@@ -1,8 +1,9 @@
 """Accuracy of each robust mode of photometric stereo, on every shared data set and on
 synthetic glossy pixels.
 
-For each mode of ``irtps.photometric_stereo`` (``none``, ``threshold``, ``trim``, ``tukey``)
-this prints the mean angular error on the shared data sets (DiLiGenT objects; Mitsuba
+For each robust mode of ``irtps.photometric_stereo`` (``tukey``, ``lobe``, ``threshold``,
+``trim``, ``none``) and for ``auto``, the default of ``irtps reconstruct`` (``lobe`` where the
+``irtps.lobe_share`` is at least one half, else ``tukey``), this prints the mean angular error on the shared data sets (DiLiGenT objects; Mitsuba
 renders, with and without inter-reflection) and on synthetic pixels whose normals cover
 the visible hemisphere, under 96 lights spread like DiLiGenT's: a Lambertian term plus a
 Blinn-Phong highlight of several exponents, with soft cast shadows (the observation scaled
@@ -26,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 import irtps
-from irtps.ps import ROBUST_MODES, photometric_stereo
+from irtps.ps import ROBUST_MODES, choose_robust, lobe_share, photometric_stereo
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 #: (Blinn-Phong exponent, highlight strength, share of observations in soft cast shadow)
@@ -124,11 +125,26 @@ def rough_matte_pixels(directions: np.ndarray, sigma: float, albedo: float = 0.6
     return as_images(np.pi * np.where(cosine > 0, brdf * cosine, 0.0), rng), normals[:, None, :]
 
 
+#: The table's columns: each robust mode of the fit, then the reconstruction's default.
+COLUMNS = (*ROBUST_MODES, "auto")
+
+
+def mode_errors(images: np.ndarray, directions: np.ndarray, irradiance: np.ndarray, mask: np.ndarray, truth: np.ndarray, saturation: float | None = None) -> tuple[dict[str, float], float]:
+    """The mean angular error of each of `COLUMNS` (``"auto"``: the mode `choose_robust`
+    picks from the `lobe_share`, as ``irtps reconstruct`` does), and the lobe share."""
+    errors = {}
+    for mode in ROBUST_MODES:
+        fit = photometric_stereo(images, directions, irradiance, mask, robust=mode, saturation=saturation)
+        errors[mode] = mean_error_deg(fit.normals, truth, mask)
+    share = lobe_share(images, directions, irradiance, mask, saturation=saturation)
+    errors["auto"] = errors[choose_robust(share)]
+    return errors, share
+
+
 def synthetic_row(name: str, images: np.ndarray, truth: np.ndarray, directions: np.ndarray, irradiance: np.ndarray) -> str:
-    """The table row of every mode's mean angular error on synthetic pixels."""
-    mask = np.ones(truth.shape[:2], bool)
-    errors = [mean_error_deg(photometric_stereo(images, directions, irradiance, mask, robust=mode).normals, truth, mask) for mode in ROBUST_MODES]
-    return _row(name, errors)
+    """The table row of every column's mean angular error on synthetic pixels."""
+    errors, _ = mode_errors(images, directions, irradiance, np.ones(truth.shape[:2], bool), truth)
+    return _row(name, [errors[column] for column in COLUMNS])
 
 
 def mean_error_deg(normals: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
@@ -142,11 +158,8 @@ def shared_rows(shared: Path) -> list[tuple[str, list[float]]]:
         data = irtps.load_dataset(folder)
         sets = [("", data.images)] + ([(" gt/direct", data.gt.direct)] if data.gt.direct is not None else [])
         for suffix, images in sets:
-            errors = []
-            for mode in ROBUST_MODES:
-                fit = photometric_stereo(images, data.scene.light_directions, data.scene.light_irradiance, data.mask, robust=mode, saturation=data.saturation)
-                errors.append(mean_error_deg(fit.normals, data.gt.normal, data.mask))
-            rows.append((folder.name + suffix, errors))
+            errors, _ = mode_errors(images, data.scene.light_directions, data.scene.light_irradiance, data.mask, data.gt.normal, data.saturation)
+            rows.append((folder.name + suffix, [errors[column] for column in COLUMNS]))
             print(_row(*rows[-1]), flush=True)
     return rows
 
@@ -162,8 +175,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--shared", type=Path, default=SHARED, help="the shared data folder (default: ../shared/data)")
     parser.add_argument("--synthetic-only", action="store_true", help="skip the shared data sets")
     args = parser.parse_args(argv)
-    print("| data | " + " | ".join(f"`{m}`" for m in ROBUST_MODES) + " |")
-    print("|---|" + "---|" * len(ROBUST_MODES))
+    print("| data | " + " | ".join(f"`{m}`" for m in COLUMNS) + " |")
+    print("|---|" + "---|" * len(COLUMNS))
     if not args.synthetic_only and args.shared.is_dir():
         shared_rows(args.shared)
     directions = lights()

@@ -4,7 +4,9 @@ Both run in this process on the same DiLiGenT-size input (96 lights, 612x512 RGB
 interleaved (each repeat runs numpy, then irtps), so that a machine whose speed wanders
 slows both alike: the figures are the median times and the median of the per-repeat ratios,
 over every pixel (plain least squares) and over the object's pixels, which is what ``irtps
-reconstruct`` fits (numpy's plain least squares against each robust mode of irtps). Uses
+reconstruct`` fits (numpy's plain least squares against each robust mode of irtps; against
+``lobe_share``, the check by which ``irtps reconstruct --robust auto``, the default, chooses
+between ``tukey`` and ``lobe``; and against the two together, ``auto``). Uses
 DiLiGenT ball (and reading, when present) from ``../shared``, else synthetic images of the
 same size with a disc for the object.
 
@@ -21,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 from irtps import _core
-from irtps.ps import ROBUST_MODES
+from irtps.ps import ROBUST_MODES, choose_robust, lobe_share
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "diligent"
 
@@ -79,6 +81,8 @@ def measure(images: np.ndarray, mask: np.ndarray, d32: np.ndarray, e32: np.ndarr
     }
     for mode in ROBUST_MODES:
         runs[f"irtps_{mode}_object"] = lambda mode=mode: _core.photometric_stereo(images, mask, d32, e32, mode)
+    runs["irtps_lobe_share_object"] = lambda: lobe_share(images, d32, e32, mask)
+    runs["irtps_auto_object"] = lambda: _core.photometric_stereo(images, mask, d32, e32, choose_robust(lobe_share(images, d32, e32, mask)))
     times: dict[str, list[float]] = {name: [] for name in runs}
     for _ in range(repeats):
         for name, run in runs.items():
@@ -104,11 +108,11 @@ def main() -> None:
         numpy_all, numpy_object = figures["numpy_plain_all_s"], figures["numpy_plain_object_s"]
         print(f"  every pixel:  numpy pinv(L) @ images {numpy_all:.3f} s   irtps none {figures['irtps_plain_all_s']:.3f} s   {figures['irtps_plain_all_x']:.1f}x numpy")
         print(f"  object only:  numpy pinv(L) @ images {numpy_object:.3f} s")
-        for mode in ROBUST_MODES:
+        for mode in (*ROBUST_MODES, "lobe_share", "auto"):
             elapsed = figures[f"irtps_{mode}_object_s"]
             ratio = figures[f"irtps_{mode}_object_x"]
             speed = f"{ratio:.1f}x numpy plain" if ratio >= 1 else f"{1 / ratio:.0f}x slower than numpy plain"
-            print(f"                irtps {mode:<9}  {elapsed:.3f} s   {speed}")
+            print(f"                irtps {mode:<10} {elapsed:.3f} s   {speed}")
         results.append(figures)
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))

@@ -9,9 +9,9 @@ light directions (irradiance π) with physically based BSDFs: Lambertian, rough 
 (GGX, a white specular coat over a diffuse base) and rough conductors (GGX, measured
 aluminium and copper). Paths of up to 4 bounces (``max_depth`` 6), ``--samples`` per pixel.
 For each, the mean angular error of every ``--robust`` mode against the height field's
-normals (scene contract §2), how far Tukey (the default) is below plain least squares, and
+normals (scene contract §2), how far ``auto`` (the default) is below plain least squares, and
 the share of the object's pixels that the lobe mode fits with a lobe (``irtps.lobe_share``,
-from which ``irtps reconstruct`` advises ``--robust lobe``).
+from which ``auto`` picks ``lobe``, from one half on, or ``tukey``).
 
     python benches/ps_materials.py [--objects ballPNG readingPNG] [--downsample 2]
         [--samples 32] [--json PATH]
@@ -30,11 +30,10 @@ from pathlib import Path
 
 import numpy as np
 from mitsuba_compare import MitsubaScene, import_mitsuba
-from ps_accuracy import mean_error_deg
+from ps_accuracy import COLUMNS, mode_errors
 
 import irtps
-from irtps import height_to_normals, integrate_normals, photometric_stereo
-from irtps.ps import ROBUST_MODES, lobe_share
+from irtps import height_to_normals, integrate_normals
 from irtps.render import make_renderer
 from irtps.scene import Camera, Light, Scene
 
@@ -103,8 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     if not usable:
         sys.exit("no usable Mitsuba variant")
     print(f"Mitsuba {mi.__version__} ({usable[0]}), {args.samples} samples per pixel, 4 bounces, 96 DiLiGenT lights")
-    print("| shape | material | " + " | ".join(f"`{mode}`" for mode in ROBUST_MODES) + " | `tukey` against `none` | lobe share |")
-    print("|---|---|" + "---|" * (len(ROBUST_MODES) + 2))
+    print("| shape | material | " + " | ".join(f"`{column}`" for column in COLUMNS) + " | `auto` against `none` | lobe share |")
+    print("|---|---|" + "---|" * (len(COLUMNS) + 2))
     rows = []
     for name in args.objects:
         height, mask, directions = diligent_shape(DILIGENT / name, args.downsample)
@@ -114,12 +113,11 @@ def main(argv: list[str] | None = None) -> int:
         for material, bsdf in MATERIALS:
             start = time.perf_counter()
             images = render_material(mi, usable[0], scene, renderer, bsdf, args.samples)
-            errors = {mode: mean_error_deg(photometric_stereo(images, directions, irradiance, mask, robust=mode).normals, truth, mask) for mode in ROBUST_MODES}
-            change = errors["tukey"] / errors["none"] - 1
-            share = lobe_share(images, directions, irradiance, mask)
+            errors, share = mode_errors(images, directions, irradiance, mask, truth)
+            change = errors["auto"] / errors["none"] - 1
             label = f"{name} ({mask.shape[1]}×{mask.shape[0]}, {int(mask.sum())} px)"
-            rows.append({"shape": name, "material": material, "errors_deg": errors, "tukey_vs_none": change, "lobe_share": share, "seconds": time.perf_counter() - start})
-            print(f"| {label} | {material} | " + " | ".join(f"{errors[mode]:.2f}°" for mode in ROBUST_MODES) + f" | {100 * change:+.0f} % | {100 * share:.0f} % |", flush=True)
+            rows.append({"shape": name, "material": material, "errors_deg": errors, "auto_vs_none": change, "lobe_share": share, "seconds": time.perf_counter() - start})
+            print(f"| {label} | {material} | " + " | ".join(f"{errors[column]:.2f}°" for column in COLUMNS) + f" | {100 * change:+.0f} % | {100 * share:.0f} % |", flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))
     return 0

@@ -79,7 +79,7 @@ def test_reconstruct_and_evaluate_a_diligent_capture(tmp_path, capsys):
     for name in ["normal.exr", "albedo.exr", "height.exr", "mask.png", "mesh.ply", "mesh.obj", "run.json"]:
         assert (out / name).is_file(), name
     run = json.loads((out / "run.json").read_text())
-    assert run["parameters"]["method"] == "ps" and run["parameters"]["robust"] == "tukey"
+    assert run["parameters"]["method"] == "ps" and run["parameters"]["robust"] == "auto" and run["robust_used"] == "tukey"
     assert set(run["timings_s"]) >= {"load", "photometric_stereo", "integration"}
     assert main(["evaluate", str(out), "--gt", str(BALL), "--json"]) == 0
     metrics = json.loads(capsys.readouterr().out)

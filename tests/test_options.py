@@ -102,12 +102,13 @@ def test_reconstruct_records_the_options_it_used_with_defaults_resolved():
     result = irtps.reconstruct(data, options=ReconstructOptions(shadow_fraction=0.1))
     assert result.parameters == {
         "method": "ps",
-        "robust": "tukey",
+        "robust": "auto",  # what was asked; the mode it chose is recorded beside
         "shadow_fraction": 0.1,
         "saturation": 1.0,  # PNG images saturate at their maximum
         "integration": "ls",
         "base_height": "auto",
     }
+    assert result.robust_used == "tukey"  # a matte ball
 
 
 @pytest.mark.parametrize("cls", [ReconstructOptions, RenderOptions, SynthOptions, TableOptions, ClusterOptions])

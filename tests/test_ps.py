@@ -11,7 +11,8 @@ import irtps
 from irtps.cli import main
 from irtps.errors import IrtpsError
 from irtps.evaluate import angular_error_deg
-from irtps.ps import photometric_stereo
+from irtps.interreflection import remove_interreflections
+from irtps.ps import LOBE_FITTED, photometric_stereo
 
 DATA = Path(__file__).parent / "data"
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -171,35 +172,56 @@ def test_lobe_mode_keeps_the_tukey_fit_of_lambertian_pixels():
     assert _mean_error(data, data.images, "lobe") == pytest.approx(_mean_error(data, data.images, "tukey"), abs=0.02)
 
 
-def test_reconstruct_robust_lobe_on_a_metallic_object(tmp_path, capsys):
-    # A synthesized cap, direct light only, re-shaded as a metal-like GGX surface (α 0.3,
-    # Fresnel 0.9, dim diffuse base) from its true normals and written as a data set.
+def _metal_cap() -> irtps.Dataset:
+    """A synthesized cap, direct light only, re-shaded as a metal-like GGX surface (α 0.3,
+    Fresnel 0.9, dim diffuse base) from its true normals."""
     data, _ = irtps.synthesize("cap", size=40, lights=24, bounces=0, environment="none", seed=2)
     shading = _microfacet_plastic(data.gt.normal[data.mask].astype(np.float64), data.scene.light_directions.astype(np.float64), alpha=0.3, diffuse=0.05, fresnel_0=0.9)
     images = data.images.copy()
     images[:, data.mask] = shading[:, :, 0] * (data.scene.light_irradiance[:, None, :] / np.pi)
-    irtps.save_dataset(dataclasses.replace(data, images=images), tmp_path / "metal")
-    errors, advice = {}, {}
-    for mode in ("tukey", "lobe"):
+    return dataclasses.replace(data, images=images)
+
+
+def test_reconstruct_picks_the_lobe_mode_for_a_metallic_object(tmp_path, capsys):
+    irtps.save_dataset(_metal_cap(), tmp_path / "metal")
+    errors, advice, runs = {}, {}, {}
+    for mode in ("tukey", "lobe", "auto"):
         out = tmp_path / mode
-        assert main(["reconstruct", str(tmp_path / "metal"), "--out", str(out), "--robust", mode, "--quiet"]) == 0
+        chosen = [] if mode == "auto" else ["--robust", mode]  # auto: the default
+        assert main(["reconstruct", str(tmp_path / "metal"), "--out", str(out), *chosen, "--quiet"]) == 0
         advice[mode] = "--robust lobe" in capsys.readouterr().err
         assert main(["evaluate", str(out), "--gt", str(tmp_path / "metal"), "--json"]) == 0
         errors[mode] = json.loads(capsys.readouterr().out)["normal_mean_angular_deg"]
-    tukey_run, lobe_run = (json.loads((tmp_path / mode / "run.json").read_text()) for mode in ("tukey", "lobe"))
+        runs[mode] = json.loads((out / "run.json").read_text())
     # Measured: Tukey 17.96°, lobe 5.29°; 579 of 688 pixels fitted with a lobe.
     assert errors["lobe"] < 0.5 * errors["tukey"]
-    assert lobe_run["flags"]["fitted with a specular lobe"] > lobe_run["flags"]["fitted"]
-    # The default run saw the lobe and said so; the lobe run had nothing to advise.
-    assert tukey_run["lobe_share"] > 0.5 and advice == {"tukey": True, "lobe": False}
-    assert lobe_run["lobe_share"] is None
-    assert main(["report", str(tmp_path / "tukey"), "--quiet"]) == 0
-    assert "robust mode &#x27;lobe&#x27; (--robust lobe) is advised" in (tmp_path / "tukey" / "report" / "index.html").read_text()
+    assert runs["lobe"]["flags"]["fitted with a specular lobe"] > runs["lobe"]["flags"]["fitted"]
+    # The default saw the lobe and fitted it; a Tukey run said so; the lobe run had nothing
+    # to check.
+    assert runs["auto"]["robust_used"] == "lobe" and errors["auto"] == errors["lobe"]
+    assert runs["tukey"]["lobe_share"] > 0.5 and runs["auto"]["lobe_share"] == runs["tukey"]["lobe_share"]
+    assert advice == {"tukey": True, "lobe": False, "auto": False}
+    assert runs["lobe"]["lobe_share"] is None
+    for mode, said in (("tukey", "robust mode &#x27;lobe&#x27; (--robust lobe) is advised"), ("auto", "fitted with robust mode &#x27;lobe&#x27;")):
+        assert main(["report", str(tmp_path / mode), "--quiet"]) == 0
+        assert said in (tmp_path / mode / "report" / "index.html").read_text()
+
+
+def test_irtps_fits_every_pass_with_the_mode_auto_picked():
+    metal = _metal_cap()
+    result = irtps.reconstruct(metal, "irtps", iterations=1, samples=4)
+    # Every pass is fitted in lobe mode: the returned fit has lobe pixels whichever it is.
+    assert result.robust_used == "lobe" and result.lobe_share > 0.5
+    assert (result.flags[metal.mask] == LOBE_FITTED).mean() > 0.5
+    # The loop called alone picks the same way.
+    loop = remove_interreflections(metal, iterations=0)
+    assert (loop.fit.flags[metal.mask] == LOBE_FITTED).mean() > 0.5
 
 
 @pytest.mark.parametrize("name, most", [("diligent_ball_small", 0.05), ("diligent_reading_small", 0.3)])
-def test_no_lobe_advice_on_the_small_diligent_copies(tmp_path, capsys, name, most):
+def test_no_lobe_on_the_small_diligent_copies(tmp_path, capsys, name, most):
     # Measured: 1.0 % of ball's pixels take a lobe, 17.1 % of reading's (8 and 24 lights).
     assert main(["reconstruct", str(DATA / name), "--out", str(tmp_path / name), "--quiet"]) == 0
     assert "--robust lobe" not in capsys.readouterr().err
-    assert json.loads((tmp_path / name / "run.json").read_text())["lobe_share"] < most
+    run = json.loads((tmp_path / name / "run.json").read_text())
+    assert run["lobe_share"] < most and run["robust_used"] == "tukey"

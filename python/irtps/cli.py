@@ -23,6 +23,7 @@ from irtps.options import ClusterOptions, OptionError, ReconstructOptions, Rende
 from irtps.output_rule import check_output, escaped, written_by_irtps
 from irtps.paths import check_folder, resolve_path
 from irtps.placement import format_placement
+from irtps.ps import LOBE_ADVISED, format_lobe_share
 from irtps.radiometry import format_albedo_scale
 from irtps.reconstruct import load_and_reconstruct, load_reconstruction, save_reconstruction
 from irtps.render import Rendering, render
@@ -74,6 +75,15 @@ def _cmd_synth(args: argparse.Namespace) -> None:
         )
 
 
+def _robust_line(asked: str, used: str | None, share: float | None) -> str:
+    """What ``irtps reconstruct`` says of the robust mode of its fit."""
+    if share is None:
+        return f"robust mode {used}"
+    if asked == "auto":
+        return f"robust mode {used}, chosen by auto: {100 * share:.0f} % of the object's pixels take a specular lobe (lobe from {100 * LOBE_ADVISED:.0f} %)"
+    return f"robust mode {used}; {format_lobe_share(share, used)}"
+
+
 def _cmd_reconstruct(args: argparse.Namespace) -> None:
     options = from_arguments(ReconstructOptions, args)
     check_output(args.out, [args.data], force=args.force)
@@ -82,6 +92,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
         print(f"reconstructed {args.data} ({options.method}; {stages}) -> {args.out}")
+        print(f"  {_robust_line(options.robust, result.robust_used, result.lobe_share)}")
         if result.placement is not None:
             print(f"  placement: {format_placement(result.placement)}")
         if result.albedo_scale is not None:
@@ -284,7 +295,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Reconstruct the object of DATA (contract layout, or DiLiGenT layout, detected) and write OUT: "
         "normal.exr (R, G, B = nx, ny, nz), albedo.exr, height.exr, mask.png, mesh.ply (the height field with "
         "per-vertex albedo colour and normals), mesh.obj (the same mesh for any viewer) and run.json (parameters, "
-        "timings, versions, the data set's path, the placement); with --method irtps also "
+        "timings, versions, the data set's path, the placement, the robust mode used and the lobe share that auto "
+        "chose it by); with --method irtps also "
         "indirect/NNN.exr (the estimated inter-reflected light, with the floor's light in the edge pixels, that was "
         "subtracted) and each pass's residual in run.json: the reconstruction rendered again and compared with the "
         "images, the number to judge a run by without ground truth. The result is the pass with the lowest residual "

@@ -35,7 +35,7 @@ from irtps.errors import IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
 from irtps.paper_estimator import paper_indirect
-from irtps.pipeline import Pass, fitted_observations, reconstruction_pass, rendered_as, resolve_options, timed
+from irtps.pipeline import Pass, choose_dataset_robust, fitted_observations, reconstruction_pass, rendered_as, resolve_options, timed
 from irtps.placement import Placement
 from irtps.ps import PsResult
 from irtps.radiometry import AlbedoScale
@@ -145,6 +145,8 @@ def remove_interreflections(
           non-negative;
         - ``integration``: default ``"footprint"``, which keeps creases, and so the
           rendered concavities as deep as the real ones;
+        - ``robust``: ``"auto"`` picks the mode once, from the input images
+          (`irtps.ps.choose_robust`), and every pass fits with it;
         - ``stride``: 1 estimates the indirect light at every pixel; s > 1 at one pixel in
           s×s, interpolated to the rest (faster, slightly less accurate; see
           `irtps.render.render_indirect`);
@@ -172,6 +174,8 @@ def remove_interreflections(
         Naming the option, for a value out of range.
     """
     options = resolve_options(dataset, ReconstructOptions.build(options, method="irtps", **settings))
+    if options.robust == "auto":
+        options, _ = choose_dataset_robust(dataset, options)
     scene, mask = dataset.scene, dataset.mask
     original = dataset.images
     # After pass 0, the loop holds the mask's pixels only: photometric stereo fits nothing else.

@@ -28,8 +28,11 @@ from irtps.imageio import MAX_IMAGE_PIXELS
 from irtps.integrate import METHODS as INTEGRATION_METHODS
 from irtps.ps import ROBUST_MODES
 
-__all__ = ["ESTIMATORS", "METHODS", "ROBUST_MODES", "UPDATES", "ClusterOptions", "OptionError", "ReconstructOptions", "RenderOptions", "SynthOptions", "TableOptions", "add_arguments", "from_arguments"]
+__all__ = ["ESTIMATORS", "METHODS", "ROBUST_CHOICES", "ROBUST_MODES", "UPDATES", "ClusterOptions", "OptionError", "ReconstructOptions", "RenderOptions", "SynthOptions", "TableOptions", "add_arguments", "from_arguments"]
 
+#: Robust modes of a reconstruction: the fit's own (`irtps.ps.ROBUST_MODES`), or the one
+#: `irtps.ps.choose_robust` picks for the data set (``"auto"``, the default).
+ROBUST_CHOICES = ("auto", *ROBUST_MODES)
 #: Reconstruction methods: classic photometric stereo, and IRT-PS.
 METHODS = ("ps", "irtps")
 #: IRT-PS's indirect-light estimators: the physically based renderer, or the paper's own
@@ -241,13 +244,14 @@ class ReconstructOptions(_Options):
 
     method: str = _option("ps", "reconstruction method: classic photometric stereo or IRT-PS", str, choices=METHODS)
     robust: str = _option(
-        "tukey",
-        "observations each pixel's fit uses: tukey re-weights them by their residuals (shadows and highlights set aside), lobe adds a "
+        "auto",
+        "observations each pixel's fit uses: auto is lobe for objects most of whose pixels take a specular lobe (lobe_share, "
+        "reported in run.json), else tukey; tukey re-weights them by their residuals (shadows and highlights set aside), lobe adds a "
         "specular lobe per pixel where the observations call for one (glossy and metallic objects; seconds, not milliseconds, on a DiLiGenT object), threshold drops "
         "those below the shadow fraction (the better choice on very rough matte surfaces such as plaster), trim keeps those between the darkest two fifths and the brightest fifth, none uses all; every mode but "
         "none drops saturated ones",
         str,
-        choices=ROBUST_MODES,
+        choices=ROBUST_CHOICES,
     )
     shadow_fraction: float = _option(
         0.05, "shadow threshold relative to a pixel's brightest observation (threshold mode, and the start of tukey)", float, low=0.0, high=1.0, high_open=True

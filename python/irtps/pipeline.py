@@ -19,7 +19,7 @@ from irtps.data import Dataset
 from irtps.integrate import integrate_normals, place_height
 from irtps.options import OptionError, ReconstructOptions
 from irtps.placement import PRECISION_PIXELS, Placement, estimate_placement, fallback_placement
-from irtps.ps import OUTSIDE_MASK, PsResult, photometric_stereo
+from irtps.ps import OUTSIDE_MASK, PsResult, choose_robust, lobe_share, photometric_stereo
 from irtps.radiometry import AlbedoScale, absolute_scale, estimate_albedo_scale, scaled_albedo, scaled_scene
 from irtps.residual import compared_observations
 from irtps.scene import Scene
@@ -161,6 +161,15 @@ def resolve_options(dataset: Dataset, options: ReconstructOptions) -> Reconstruc
         saturation=dataset.saturation if options.saturation is None else options.saturation,
         integration=options.integration_method,
     )
+
+
+def choose_dataset_robust(dataset: Dataset, options: ReconstructOptions) -> tuple[ReconstructOptions, float]:
+    """The data set's `irtps.ps.lobe_share`, and `options` with robust ``"auto"`` replaced by
+    the mode `irtps.ps.choose_robust` picks for it (other modes kept). `options` are resolved
+    (`resolve_options`): the share leaves the data set's saturated observations out."""
+    scene = dataset.scene
+    share = lobe_share(dataset.images, scene.light_directions, scene.light_irradiance, dataset.mask, shadow_fraction=options.shadow_fraction, saturation=options.saturation)
+    return (dataclasses.replace(options, robust=choose_robust(share)) if options.robust == "auto" else options), share
 
 
 def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: ReconstructOptions) -> PsResult:

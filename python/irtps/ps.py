@@ -161,22 +161,51 @@ def photometric_stereo(
 LOBE_FITTED = 4
 #: Object pixels `lobe_share` fits by default.
 LOBE_SAMPLE = 1000
-#: From this `lobe_share`, ``robust="lobe"`` is advised: most of the object reflects a broad
-#: highlight.
+#: From this `lobe_share` on, most of the object reflects a broad highlight: `choose_robust`
+#: fits it with ``robust="lobe"``, and a run with another mode advises that one.
 LOBE_ADVISED = 0.5
 
 
-def format_lobe_share(share: float) -> str:
-    """One sentence on a `lobe_share`, with the advice it gives.
+def choose_robust(share: float) -> str:
+    """The robust mode for an object whose `lobe_share` is `share` (the choice of
+    ``irtps reconstruct --robust auto``, the default).
+
+    ``"lobe"`` from `LOBE_ADVISED` on (most of the object reflects a broad highlight, as
+    metal, metallic paint and broad glazes do), else ``"tukey"``: the lobe mode is the better
+    fit of such objects and the slower and worse one of matte objects with deep folds
+    (benches/README.md).
+
+    Examples
+    --------
+    >>> choose_robust(0.87), choose_robust(0.12)
+    ('lobe', 'tukey')
+    """
+    return "lobe" if share >= LOBE_ADVISED else "tukey"
+
+
+def format_lobe_share(share: float, robust_used: str | None = None) -> str:
+    """One sentence on a `lobe_share` and on what it made of the fit.
+
+    Parameters
+    ----------
+    share : float
+        The object's `lobe_share`.
+    robust_used : str, optional
+        The robust mode the fit used: a ``"lobe"`` fit is said to be one; another mode gets
+        the advice from `LOBE_ADVISED` on.
 
     Examples
     --------
     >>> format_lobe_share(0.87)
     "87 % of the object's pixels take a specular lobe: robust mode 'lobe' (--robust lobe) is advised"
-    >>> format_lobe_share(0.12)
+    >>> format_lobe_share(0.87, "lobe")
+    "87 % of the object's pixels take a specular lobe: fitted with robust mode 'lobe'"
+    >>> format_lobe_share(0.12, "tukey")
     "12 % of the object's pixels take a specular lobe"
     """
     sentence = f"{100 * share:.0f} % of the object's pixels take a specular lobe"
+    if robust_used == "lobe":
+        return sentence + ": fitted with robust mode 'lobe'"
     return sentence + (": robust mode 'lobe' (--robust lobe) is advised" if share >= LOBE_ADVISED else "")
 
 

@@ -22,9 +22,9 @@ from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
 from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
-from irtps.pipeline import reconstruction_pass, resolve_options, timed
+from irtps.pipeline import choose_dataset_robust, reconstruction_pass, resolve_options, timed
 from irtps.placement import Placement
-from irtps.ps import FLAGS, LOBE_ADVISED, check_lights, format_lobe_share, lobe_share
+from irtps.ps import FLAGS, LOBE_ADVISED, check_lights, format_lobe_share
 from irtps.radiometry import AlbedoScale
 
 #: Indirect images written at once, one per core up to 4 (on 2 cores, 2 writers take 0.7 of
@@ -73,9 +73,13 @@ class Reconstruction:
         irradiance) to the reflectance rendered (`irtps.radiometry`): IRT-PS's, and classic
         PS's where the irradiance is relative and the floor was rendered to place the object.
     lobe_share : float or None
-        When the fit was not the lobe mode's: the share of the object's pixels that the
+        Unless ``robust="lobe"`` was asked for: the share of the object's pixels that the
         lobe mode fits with a specular lobe (`irtps.ps.lobe_share`); from half of them on,
-        the object looks glossy or metallic and ``robust="lobe"`` is advised (a warning).
+        the object looks glossy or metallic: ``robust="auto"`` fits it with the lobe mode,
+        and another mode warns, advising it.
+    robust_used : str or None
+        The robust mode of the fit (`irtps.ps.ROBUST_MODES`): the one asked for, or the one
+        ``"auto"`` chose (`irtps.ps.choose_robust`); None where not recorded.
     """
 
     normals: np.ndarray
@@ -92,6 +96,7 @@ class Reconstruction:
     chosen: int | None = None
     albedo_scale: AlbedoScale | None = None
     lobe_share: float | None = None
+    robust_used: str | None = None
 
     @property
     def indirect(self) -> np.ndarray | None:
@@ -157,8 +162,8 @@ def reconstruct(
     -----
     IrtpsWarning
         When observations are saturated, with their count; when most of the object's pixels
-        reflect a broad specular lobe and the robust mode is not ``"lobe"``, advising it
-        (`Reconstruction.lobe_share`).
+        reflect a broad specular lobe and the robust mode asked for is neither ``"auto"`` nor
+        ``"lobe"``, advising the lobe mode (`Reconstruction.lobe_share`).
 
     Examples
     --------
@@ -181,7 +186,8 @@ def reconstruct(
     share = None
     if options.robust != "lobe":
         with timed(timings, "lobe_share"):
-            share = _advise_lobe(dataset, options)
+            options, share = choose_dataset_robust(dataset, options)
+        _advise_lobe(dataset, options.robust, share)
     if options.method == "irtps":
         with timed(timings, "irtps"):
             loop = remove_interreflections(dataset, options, progress=progress)
@@ -200,6 +206,7 @@ def reconstruct(
             chosen=loop.chosen,
             albedo_scale=loop.albedo_scale,
             lobe_share=share,
+            robust_used=options.robust,
         )
     # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
     first = reconstruction_pass(dataset, dataset.images, options)
@@ -215,6 +222,7 @@ def reconstruct(
         placement=first.placement,
         albedo_scale=first.albedo_scale,
         lobe_share=share,
+        robust_used=options.robust,
     )
 
 
@@ -268,18 +276,16 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, **options)
     return dataset, result
 
 
-def _advise_lobe(dataset: Dataset, options: ReconstructOptions) -> float:
-    """The data set's `irtps.ps.lobe_share`; warns when it advises the lobe mode."""
-    scene = dataset.scene
-    share = lobe_share(dataset.images, scene.light_directions, scene.light_irradiance, dataset.mask, shadow_fraction=options.shadow_fraction, saturation=options.saturation)
-    if share >= LOBE_ADVISED:
+def _advise_lobe(dataset: Dataset, robust_used: str, share: float) -> None:
+    """Warn when the data set's `irtps.ps.lobe_share` advises the lobe mode and the fit is
+    another mode's."""
+    if share >= LOBE_ADVISED and robust_used != "lobe":
         warnings.warn(
             f"{dataset.source or 'the data set'}: {format_lobe_share(share)} (a broad highlight, as glossy and metallic surfaces reflect, "
-            f"which robust mode '{options.robust}' sets aside)",
+            f"which robust mode '{robust_used}' sets aside)",
             IrtpsWarning,
             stacklevel=3,
         )
-    return share
 
 
 def _check_input(dataset: Dataset, saturation: float | None, robust: str) -> None:
@@ -360,6 +366,7 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             "chosen_pass": result.chosen,
             "albedo_scale": None if result.albedo_scale is None else result.albedo_scale.to_dict(),
             "lobe_share": result.lobe_share,
+            "robust_used": result.robust_used,
         }
         if result.object_indirect is not None:
             (folder / "indirect").mkdir()
@@ -403,7 +410,14 @@ _RUN_FIELDS = {
     "history": (list,),
 }
 #: Fields that folders written by older versions of irtps lack.
-_OPTIONAL_RUN_FIELDS = {"pixel_size": (int, float), "placement": (dict, type(None)), "chosen_pass": (int, type(None)), "albedo_scale": (dict, type(None))}
+_OPTIONAL_RUN_FIELDS = {
+    "pixel_size": (int, float),
+    "placement": (dict, type(None)),
+    "chosen_pass": (int, type(None)),
+    "albedo_scale": (dict, type(None)),
+    "lobe_share": (int, float, type(None)),
+    "robust_used": (str, type(None)),
+}
 _HISTORY_FIELDS = {"index": (int,), "height_change": (int, float, type(None)), "timings": (dict,), "metrics": (dict, type(None))}
 _JSON_TYPE_NAMES = {dict: "an object", list: "a list", str: "a string", int: "a number", float: "a number", type(None): "null"}
 

@@ -107,13 +107,14 @@ def report_html(report: Report) -> str:
 def _summary(report: Report) -> str:
     record = report.record
     parameters = record["parameters"]
+    robust = "" if record.get("robust_used") is None else f"robust mode {record['robust_used']}"
     if parameters.get("method") == "irtps":
         corrections = max(len(record["history"]) - 1, 0)
         chosen = record.get("chosen_pass")
         result = "" if chosen is None else f"; the result is pass {chosen}" + (" (classic photometric stereo)" if chosen == 0 else "")
-        method = f"IRT-PS ({parameters.get('bounces')} bounces estimated, {corrections} corrections{result})"
+        method = f"IRT-PS ({parameters.get('bounces')} bounces estimated, {corrections} corrections{result}{'; ' + robust if robust else ''})"
     else:
-        method = "Classic photometric stereo"
+        method = "Classic photometric stereo" + (f" ({robust})" if robust else "")
     source = record["source"] or "an unrecorded data set"
     rows, cols = report.size
     pixel_size = record.get("pixel_size")
@@ -122,7 +123,7 @@ def _summary(report: Report) -> str:
     if record.get("albedo_scale") is not None:
         placement += f" {format_albedo_scale(record['albedo_scale']).capitalize()}."
     if record.get("lobe_share") is not None:
-        placement += f" {format_lobe_share(record['lobe_share'])}."
+        placement += f" {format_lobe_share(record['lobe_share'], record.get('robust_used'))}."
     return f"{method} of {source}: {cols}×{rows} pixels, {report.object_pixels} on the object{scale}.{placement} Folder: {report.run_dir}."
 
 
