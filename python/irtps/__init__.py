@@ -7,7 +7,7 @@ from irtps.dataset import load_dataset, load_ground_truth, load_scene_object, sa
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
 from irtps.evaluate import Metrics, angular_error_deg, evaluate
 from irtps.integrate import integrate_normals, place_height
-from irtps.ps import PsResult, lobe_share, photometric_stereo
+from irtps.ps import PsResult, choose_robust, lobe_share, photometric_stereo
 from irtps.reconstruct import Reconstruction, reconstruct, save_reconstruction
 from irtps.render import Rendering, render, render_indirect
 from irtps.scene import Camera, CornellBox, Floor, Light, Scene, load_scene
@@ -37,6 +37,7 @@ __all__ = [
     "Scene",
     "__version__",
     "angular_error_deg",
+    "choose_robust",
     "evaluate",
     "height_to_normals",
     "integrate_normals",

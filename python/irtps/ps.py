@@ -105,7 +105,8 @@ def photometric_stereo(
           unsaturated observations; pixels fitted with a lobe are flagged (``FLAGS[4]``).
           About 300 times slower than ``"tukey"`` (seconds on a DiLiGenT object), and worse
           than it on matte objects with deep folds, where it can take inter-reflected light
-          for a lobe. `lobe_share` tells which objects want it.
+          for a lobe. `lobe_share` tells which objects want it, and `choose_robust` picks
+          it from there (as ``irtps.reconstruct``'s default, ``robust="auto"``, does).
         - ``"threshold"``: drop observations in shadow (channel sum below `shadow_fraction`
           of the pixel's brightest) and re-solve from the rest. The better choice on very
           rough matte surfaces (plaster, unglazed clay), whose fall-off departs from
@@ -174,6 +175,16 @@ def choose_robust(share: float) -> str:
     metal, metallic paint and broad glazes do), else ``"tukey"``: the lobe mode is the better
     fit of such objects and the slower and worse one of matte objects with deep folds
     (benches/README.md).
+
+    Parameters
+    ----------
+    share : float
+        The object's `lobe_share`, in [0, 1].
+
+    Returns
+    -------
+    str
+        A robust mode of `photometric_stereo`.
 
     Examples
     --------
