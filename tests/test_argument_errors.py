@@ -89,6 +89,7 @@ CASES = {
     "irtps.surface.surface_albedo": (lambda f: f(ALBEDO[:, :2], HEIGHT, MASK), "albedo_ps: "),
     "irtps.ps.photometric_stereo": (lambda f: f(np.zeros((3, 4, 4, 3)), LIGHTS, np.ones((3, 3)), robust="huber"), "robust: "),
     "irtps.ps.lobe_share": (lambda f: f(np.zeros((3, 4, 4, 3)), LIGHTS, np.ones((3, 3)), sample=0), "sample: "),
+    "irtps.ps.choose_robust": (lambda f: f(1.5), "share: "),
     "irtps.render.render": (lambda f: f(_scene(), np.zeros((8, 8)), np.full((8, 8, 3), 0.5), WRONG, bounces=1, samples=4), "mask: "),
     "irtps.render.render_indirect": (lambda f: f(_scene(), np.zeros((8, 9)), np.full((8, 8, 3), 0.5), np.ones((8, 8), bool), stride=0), "stride: "),
     "irtps.reconstruct.reconstruct": (lambda f: f(_dataset(), method="magic"), "method: "),

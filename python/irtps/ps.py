@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from irtps import _core
-from irtps._checks import check_array, check_choice, check_mask, check_positive, document_choices
+from irtps._checks import check_array, check_choice, check_mask, check_number, check_positive, document_choices
 from irtps.errors import ArgumentError
 
 #: Robust modes of `photometric_stereo`, the default first.
@@ -186,12 +186,20 @@ def choose_robust(share: float) -> str:
     str
         A robust mode of `photometric_stereo`.
 
+    Raises
+    ------
+    ArgumentError
+        If `share` is not a number in [0, 1].
+
     Examples
     --------
     >>> choose_robust(0.87), choose_robust(0.12)
     ('lobe', 'tukey')
     """
-    return "lobe" if share >= LOBE_ADVISED else "tukey"
+    fraction = check_number("share", share, what="a number in [0, 1]")
+    if not 0 <= fraction <= 1:
+        raise ArgumentError("share", f"expected a number in [0, 1], got {share!r}")
+    return "lobe" if fraction >= LOBE_ADVISED else "tukey"
 
 
 def format_lobe_share(share: float, robust_used: str | None = None) -> str:
