@@ -3,8 +3,9 @@ synthetic glossy pixels.
 
 For each robust mode of ``irtps.photometric_stereo`` (``tukey``, ``lobe``, ``threshold``,
 ``trim``, ``none``) and for ``auto``, the default of ``irtps reconstruct`` (``lobe`` where the
-``irtps.lobe_share`` is at least one half, else ``tukey``), this prints the mean angular error on the shared data sets (DiLiGenT objects; Mitsuba
-renders, with and without inter-reflection) and on synthetic pixels whose normals cover
+``irtps.lobe_share`` is at least one half, else ``tukey``), this prints the mean angular
+error on the shared data sets (DiLiGenT objects; Mitsuba renders, with and without
+inter-reflection) and on synthetic pixels whose normals cover
 the visible hemisphere, under 96 lights spread like DiLiGenT's: a Lambertian term plus a
 Blinn-Phong highlight of several exponents, with soft cast shadows (the observation scaled
 by 0 to 0.3) on a random share of the observations; then reflectance that Lambert's law with a few
