@@ -166,6 +166,7 @@ def test_a_folder_that_is_not_a_reconstruction_is_named(tmp_path):
         (lambda text: text.replace('"history": [', '"history": [1, '), r"run.json: history\[0\] must be an object"),
         (lambda text: text.replace('"source": "', '"source": 3, "x": "'), "run.json: source must be a string or null"),
         (lambda text: text.replace('"index": 1', '"index": "one"'), r"run.json: history\[1\].index must be a number"),
+        (lambda text: text.replace('"robust_used": "', '"robust_used": 4, "x": "'), "run.json: robust_used must be a string or null"),
     ],
 )
 def test_a_malformed_run_json_names_the_field(run_copy, change, message):

@@ -193,8 +193,8 @@ def choose_robust(share: float) -> str:
 
     Examples
     --------
-    >>> choose_robust(0.87), choose_robust(0.12)
-    ('lobe', 'tukey')
+    >>> choose_robust(0.87), choose_robust(0.5), choose_robust(0.12)
+    ('lobe', 'lobe', 'tukey')
     """
     fraction = check_number("share", share, what="a number in [0, 1]")
     if not 0 <= fraction <= 1:
