@@ -207,6 +207,16 @@ def test_reconstruct_picks_the_lobe_mode_for_a_metallic_object(tmp_path, capsys)
         assert said in (tmp_path / mode / "report" / "index.html").read_text()
 
 
+@pytest.mark.parametrize("mode", ["tukey", "lobe", "threshold", "trim", "none"])
+def test_a_fit_with_a_progress_bar_is_the_same_fit(mode):
+    metal = _metal_cap()
+    args = (metal.images, metal.scene.light_directions, metal.scene.light_irradiance, metal.mask)
+    whole = photometric_stereo(*args, robust=mode)
+    banded = photometric_stereo(*args, robust=mode, progress=True)  # 40 rows: bands of one row
+    for name in ("normals", "albedo", "flags", "used"):
+        np.testing.assert_array_equal(getattr(banded, name), getattr(whole, name))
+
+
 def test_irtps_fits_every_pass_with_the_mode_auto_picked():
     metal = _metal_cap()
     result = irtps.reconstruct(metal, "irtps", iterations=1, samples=4)

@@ -73,6 +73,7 @@ def reconstruction_pass(
     usable: np.ndarray | None = None,
     rendered: bool = False,
     coverage: np.ndarray | None = None,
+    progress: bool = False,
 ) -> Pass:
     """Photometric stereo on `images`, integration, placement and the placed height.
 
@@ -97,6 +98,8 @@ def reconstruction_pass(
         (H, W): the fraction of each pixel's footprint whose light `images` hold (IRT-PS's
         edge pixels, their surroundings' light subtracted: `irtps.surroundings`); the
         albedo is the fitted one over it. Default 1.
+    progress : bool
+        Show a progress bar for a lobe-mode fit (`fit_photometric_stereo`).
 
     Returns
     -------
@@ -107,7 +110,7 @@ def reconstruction_pass(
     mask = dataset.mask
     timings: dict[str, float] = {}
     with timed(timings, "photometric_stereo"):
-        fit = fit_photometric_stereo(dataset, images, options)
+        fit = fit_photometric_stereo(dataset, images, options, progress=progress)
     with timed(timings, "integration"):
         relief = surface_relief(dataset, fit.normals, options)
     with timed(timings, "placement"):
@@ -172,10 +175,12 @@ def choose_dataset_robust(dataset: Dataset, options: ReconstructOptions) -> tupl
     return (dataclasses.replace(options, robust=choose_robust(share)) if options.robust == "auto" else options), share
 
 
-def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: ReconstructOptions) -> PsResult:
+def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: ReconstructOptions, *, progress: bool = False) -> PsResult:
     """Photometric stereo on `images` (the data set's, or corrected ones) with the data set's
     lights and mask and the options' robust settings. `images` are (K, H, W, 3), or
-    (K, N, 3) at the mask's N pixels in row-major order (the corrected images of IRT-PS)."""
+    (K, N, 3) at the mask's N pixels in row-major order (the corrected images of IRT-PS).
+    `progress`: a progress bar for the lobe mode's fit of (K, H, W, 3) images, the one slow
+    enough to want one (`irtps.ps.photometric_stereo`)."""
     scene, mask = dataset.scene, dataset.mask
     # (K, N, 3) observations are fitted as one row of N pixels, every one in the mask.
     fitted, fitted_mask = (images, mask) if images.ndim == 4 else (images[:, None], np.ones((1, images.shape[1]), dtype=bool))
@@ -187,6 +192,7 @@ def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: Recons
         robust=options.robust,
         shadow_fraction=options.shadow_fraction,
         saturation=options.saturation,
+        progress=progress and options.robust == "lobe" and images.ndim == 4,
     )
     if images.ndim == 4:
         return fit

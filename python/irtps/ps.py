@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from tqdm import tqdm
 
 from irtps import _core
 from irtps._checks import check_array, check_choice, check_mask, check_number, check_positive, document_choices
@@ -69,6 +70,7 @@ def photometric_stereo(
     robust: str = "tukey",
     shadow_fraction: float = 0.05,
     saturation: float | None = None,
+    progress: bool = False,
 ) -> PsResult:
     """Fit a normal and an RGB albedo per pixel to images under known distant lights.
 
@@ -123,6 +125,10 @@ def photometric_stereo(
         Shadow threshold of the threshold mode (and the Tukey mode's start).
     saturation : float, optional
         Raw value at or above which an observation is saturated.
+    progress : bool
+        Show a progress bar on standard error (from half a second on): the fit runs in
+        bands of rows, each pixel's fit the same as in one call. For the lobe mode, which
+        takes minutes on a large capture.
 
     Returns
     -------
@@ -154,8 +160,28 @@ def photometric_stereo(
         raise ArgumentError("shadow_fraction", f"{shadow_fraction} is not in [0, 1)")
     if saturation is not None:
         saturation = check_positive("saturation", saturation)
-    normals, albedo, flags, used = _core.photometric_stereo(images, mask, directions, irradiance, robust, shadow_fraction, saturation)
-    return PsResult(normals=normals, albedo=albedo, flags=flags, used=used)
+    settings = (directions, irradiance, robust, shadow_fraction, saturation)
+    if not progress:
+        return PsResult(*_core.photometric_stereo(images, mask, *settings))
+    return _fit_in_bands(images, mask, settings)
+
+
+#: Bands of rows a fit with a progress bar runs in.
+PROGRESS_BANDS = 50
+
+
+def _fit_in_bands(images: np.ndarray, mask: np.ndarray, settings: tuple) -> PsResult:
+    """`_core.photometric_stereo` of `images` and `mask` with `settings`, band of rows by band
+    of rows under a progress bar (counting the mask's pixels), joined."""
+    rows = images.shape[1]
+    band = -(-rows // PROGRESS_BANDS)
+    parts = []
+    with tqdm(total=int(mask.sum()), unit="px", desc="photometric stereo", leave=False, delay=0.5) as bar:
+        for start in range(0, rows, band):
+            rows_here = slice(start, min(start + band, rows))
+            parts.append(_core.photometric_stereo(np.ascontiguousarray(images[:, rows_here]), np.ascontiguousarray(mask[rows_here]), *settings))
+            bar.update(int(mask[rows_here].sum()))
+    return PsResult(*(np.concatenate(arrays) for arrays in zip(*parts)))
 
 
 #: The flag of the pixels that the lobe mode fitted with a specular lobe.

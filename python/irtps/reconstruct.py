@@ -137,7 +137,7 @@ def reconstruct(
         Every setting (`irtps.options.ReconstructOptions`: photometric stereo, integration,
         placement, IRT-PS); default all defaults.
     progress : bool
-        Show a progress bar (IRT-PS).
+        Show a progress bar: IRT-PS's passes, or the lobe mode's fit.
     **settings
         Fields of `ReconstructOptions` that replace those of `options`, e.g.
         ``bounces=2``. ``saturation`` defaults to ``dataset.saturation`` (1.0 for PNG
@@ -209,7 +209,7 @@ def reconstruct(
             robust_used=options.robust,
         )
     # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
-    first = reconstruction_pass(dataset, dataset.images, options)
+    first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
     return Reconstruction(
         normals=first.fit.normals,
         albedo=first.fit.albedo,
