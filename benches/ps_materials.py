@@ -4,7 +4,8 @@
 The synthetic pixels of ``benches/ps_accuracy.py`` have no shape: no cast shadow, no
 inter-reflection. Here the shapes are DiLiGenT's own (ball, reading: the ground-truth
 normals of ``../shared/data/diligent``, averaged over ``--downsample``² blocks and integrated
-into a height field), alone in the dark, and Mitsuba 3 renders them under DiLiGenT's 96
+into a height field) or those of ``irtps synth`` (cap, cavity, grooves, relief, pedestal),
+alone in the dark, and Mitsuba 3 renders them under DiLiGenT's 96
 light directions (irradiance π) with physically based BSDFs: Lambertian, rough plastics
 (GGX, a white specular coat over a diffuse base) and rough conductors (GGX, measured
 aluminium and copper). Paths of up to 4 bounces (``max_depth`` 6), ``--samples`` per pixel.
@@ -15,6 +16,7 @@ from which ``auto`` picks ``lobe``, from one half on, or ``tukey``).
 
     python benches/ps_materials.py [--objects ballPNG readingPNG] [--downsample 2]
         [--samples 32] [--json PATH]
+    python benches/ps_materials.py --objects cap cavity grooves relief pedestal [--size 160]
 
 Needs Mitsuba 3 (``pip install mitsuba``; its LLVM variant needs libLLVM, see
 ``benches/mitsuba_compare.py``) and ``../shared/data/diligent``.
@@ -36,6 +38,7 @@ import irtps
 from irtps import height_to_normals, integrate_normals
 from irtps.render import make_renderer
 from irtps.scene import Camera, Light, Scene
+from irtps.synth import SHAPES
 
 DILIGENT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "diligent"
 #: Diffuse reflectance of the Lambertian and plastic materials' base.
@@ -66,6 +69,15 @@ def diligent_shape(folder: Path, downsample: int) -> tuple[np.ndarray, np.ndarra
     return height, mask, dataset.scene.light_directions
 
 
+def synthetic_shape(name: str, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(height, mask, light directions) of an ``irtps synth`` shape, `size` pixels square,
+    under DiLiGenT ball's 96 light directions: shapes DiLiGenT does not have (a cavity,
+    grooves, a pedestal with a trench), to see the robust modes off DiLiGenT's own."""
+    height, mask = SHAPES[name](size, np.random.default_rng(0))
+    directions = irtps.load_dataset(DILIGENT / "ballPNG").scene.light_directions
+    return np.where(mask, height, 0.0).astype(np.float32), mask, directions
+
+
 def shape_scene(height: np.ndarray, mask: np.ndarray, directions: np.ndarray):
     """(scene, renderer) of the shape alone in the dark under each direction (irradiance π),
     albedo `BASE`: the triangles that every material's Mitsuba scene takes."""
@@ -90,14 +102,17 @@ def positive_int(text: str) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--objects", nargs="+", default=["ballPNG", "readingPNG"], help="DiLiGenT objects whose shapes to render (default: ballPNG readingPNG)")
+    parser.add_argument(
+        "--objects", nargs="+", default=["ballPNG", "readingPNG"], help=f"DiLiGenT objects, or shapes of irtps synth ({', '.join(SHAPES)}), to render (default: ballPNG readingPNG)"
+    )
+    parser.add_argument("--size", type=positive_int, default=160, help="side of a synthetic shape's image, pixels (default: 160)")
     parser.add_argument("--downsample", type=positive_int, default=2, help="block size of the shape's pixels (default: 2)")
     parser.add_argument("--samples", type=positive_int, default=32, help="Mitsuba samples per pixel (default: 32)")
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
-    missing = [name for name in args.objects if not (DILIGENT / name).is_dir()]
+    missing = [name for name in [*args.objects, "ballPNG"] if name not in SHAPES and not (DILIGENT / name).is_dir()]
     if missing:
-        sys.exit(f"ps_materials.py needs the DiLiGenT objects in {DILIGENT}: {', '.join(missing)} not found")
+        sys.exit(f"ps_materials.py needs the DiLiGenT objects in {DILIGENT}: {', '.join(sorted(set(missing)))} not found")
     mi, _, usable = import_mitsuba(["llvm_ad_rgb", "scalar_rgb"], threads=2)
     if not usable:
         sys.exit("no usable Mitsuba variant")
@@ -106,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---|" + "---|" * (len(COLUMNS) + 2))
     rows = []
     for name in args.objects:
-        height, mask, directions = diligent_shape(DILIGENT / name, args.downsample)
+        height, mask, directions = synthetic_shape(name, args.size) if name in SHAPES else diligent_shape(DILIGENT / name, args.downsample)
         truth = height_to_normals(height, mask)
         irradiance = np.full((len(directions), 3), np.pi, dtype=np.float32)
         scene, renderer = shape_scene(height, mask, directions)
