@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Each robust photometric-stereo mode on real shapes rendered by Mitsuba 3 in other materials.
+"""Each robust photometric-stereo mode on DiLiGenT's shapes (and irtps synth's) rendered by Mitsuba 3 in other materials.
 
 The synthetic pixels of ``benches/ps_accuracy.py`` have no shape: no cast shadow, no
 inter-reflection. Here the shapes are DiLiGenT's own (ball, reading: the ground-truth
