@@ -59,6 +59,7 @@ def test_outputs_match_a_direct_reconstruction_and_a_failure_stops_nothing(clust
         expected = evaluate(mask=direct.mask, normals=direct.normals, albedo=direct.albedo, height=direct.height, gt=dataset.gt)
         assert result.mean_angular_error == pytest.approx(expected.normal_mean_angular_deg)
         assert result.source == str(folder) and result.seconds > 0
+        assert result.robust_used == direct.robust_used == "tukey"  # auto's choice, recorded
 
 
 def test_a_task_that_dies_is_reported_and_the_others_finish(cluster, three_sets, tmp_path, monkeypatch):
@@ -126,7 +127,7 @@ def test_command_succeeds_when_every_data_set_does(cluster, three_sets, tmp_path
     out = tmp_path / "out"
     assert main(["batch", str(cap), str(ball), "--out", str(out), "--scheduler", cluster.scheduler.address]) == 0
     printed = capsys.readouterr().out
-    assert "| cap | ok |" in printed and "| ball | ok |" in printed
+    assert "| cap | ok |" in printed and "| ball | ok |" in printed and "| tukey |" in printed
     assert "2 data sets reconstructed" in printed
 
 
@@ -148,6 +149,7 @@ def test_resume_keeps_complete_outputs_untouched_and_redoes_the_others(cluster, 
     assert [(s["name"], s["status"]) for s in summary["datasets"]] == [("cap", "reused"), ("ball", "ok")]
     assert (summary["succeeded"], summary["reused"], summary["failed"]) == (2, 1, 0)
     assert summary["datasets"][0]["metrics"] == first["datasets"][0]["metrics"]  # evaluated again from the kept files
+    assert summary["datasets"][0]["robust_used"] == first["datasets"][0]["robust_used"] == "tukey"  # read back from run.json
     assert {path: (path.stat().st_ino, path.stat().st_mtime_ns, path.is_file() and path.read_bytes()) for path in kept} == before
     assert (out / "ball" / "mesh.obj").stat().st_size > 0
     assert "| cap | reused |" in printed and "1 data sets reconstructed into" in printed and "(1 complete from an earlier run, kept)" in printed

@@ -88,6 +88,10 @@ class BatchResult:
     lost_workers : int
         How many times a worker died (killed, out of memory) while it held this data
         set's task, which then ran again.
+    robust_used : str or None
+        The robust mode of its photometric stereo (`irtps.Reconstruction.robust_used`:
+        what ``"auto"`` chose); None on failure, or for a reused output written by a
+        version of irtps that did not record it.
     """
 
     name: str
@@ -98,6 +102,7 @@ class BatchResult:
     metrics: dict | None = None
     warnings: tuple[str, ...] = ()
     lost_workers: int = 0
+    robust_used: str | None = None
 
     @property
     def failed(self) -> bool:
@@ -189,15 +194,16 @@ def reconstruct_to_folder(source: str, destination: str, options: ReconstructOpt
                 with _TASKS.writing():
                     save_reconstruction(result, destination, source=str(resolve_path(source)))
                 gt, normals, albedo, height, mask = dataset.gt, result.normals, result.albedo, result.height, result.mask
+                robust_used = result.robust_used
             else:
                 status = "reused"
-                normals, albedo, height, mask = kept
+                (normals, albedo, height, mask), robust_used = kept
                 gt = load_ground_truth(source, mask.shape)
             metrics = None if gt is None else evaluate(mask=mask, normals=normals, albedo=albedo, height=height, gt=gt).to_dict()
         except Exception as error:  # a batch reports every failure of a data set and goes on
             outcome = BatchResult(name, source, "failed", time.perf_counter() - start, error=_describe(error))
         else:
-            outcome = BatchResult(name, source, status, time.perf_counter() - start, metrics=metrics)
+            outcome = BatchResult(name, source, status, time.perf_counter() - start, metrics=metrics, robust_used=robust_used)
     return _with_warnings(outcome, recorded)
 
 
@@ -461,8 +467,8 @@ def connect(address: str) -> Iterator:
 
 def summary_table(results: Sequence[BatchResult]) -> str:
     """The outcome of a batch as a markdown table: data set, status (with the workers
-    lost while they held the data set, if any), seconds, mean angular error (when there
-    is ground truth) and the error of a failed data set.
+    lost while they held the data set, if any), seconds, the robust mode of its fit, mean
+    angular error (when there is ground truth) and the error of a failed data set.
 
     Parameters
     ----------
@@ -474,16 +480,16 @@ def summary_table(results: Sequence[BatchResult]) -> str:
 
     Examples
     --------
-    >>> print(summary_table([BatchResult("ball", "/d/ball", "ok", 1.25, metrics={"normal_mean_angular_deg": 2.5}),
+    >>> print(summary_table([BatchResult("ball", "/d/ball", "ok", 1.25, metrics={"normal_mean_angular_deg": 2.5}, robust_used="tukey"),
     ...                      BatchResult("cap", "/d/cap", "failed", 0.5, error="/d/cap/scene.json: missing"),
-    ...                      BatchResult("cavity", "/d/cavity", "ok", 3.0, lost_workers=1)]), end="")
-    | Data set | Status | Seconds | Angular error (°) | Error |
-    |---|---|---|---|---|
-    | ball | ok | 1.2 | 2.5 |  |
-    | cap | failed | 0.5 | n/a | /d/cap/scene.json: missing |
-    | cavity | ok (1 worker lost) | 3.0 | n/a |  |
+    ...                      BatchResult("cavity", "/d/cavity", "ok", 3.0, lost_workers=1, robust_used="lobe")]), end="")
+    | Data set | Status | Seconds | Robust mode | Angular error (°) | Error |
+    |---|---|---|---|---|---|
+    | ball | ok | 1.2 | tukey | 2.5 |  |
+    | cap | failed | 0.5 | n/a | n/a | /d/cap/scene.json: missing |
+    | cavity | ok (1 worker lost) | 3.0 | lobe | n/a |  |
     """
-    lines = ["| Data set | Status | Seconds | Angular error (°) | Error |", "|---|---|---|---|---|"]
+    lines = ["| Data set | Status | Seconds | Robust mode | Angular error (°) | Error |", "|---|---|---|---|---|---|"]
     for result in results:
         seconds = "n/a" if result.seconds is None else f"{result.seconds:.1f}"
         angular = "n/a" if result.mean_angular_error is None else f"{result.mean_angular_error:.4g}"
@@ -491,7 +497,7 @@ def summary_table(results: Sequence[BatchResult]) -> str:
         status = result.status
         if result.lost_workers:
             status += f" ({result.lost_workers} worker{'s' if result.lost_workers > 1 else ''} lost)"
-        lines.append(f"| {result.name} | {status} | {seconds} | {angular} | {error} |")
+        lines.append(f"| {result.name} | {status} | {seconds} | {result.robust_used or 'n/a'} | {angular} | {error} |")
     return "\n".join(lines) + "\n"
 
 
@@ -768,7 +774,7 @@ def _lost_workers(client) -> Iterator[Counter]:
 
 def _complete_output(destination: str, source: str, options: ReconstructOptions) -> tuple | None:
     """The normals, albedo, height and mask of a complete output folder of `source` made
-    with `options` (see `reconstruct_to_folder`), or None."""
+    with `options` (see `reconstruct_to_folder`), and its recorded robust mode, or None."""
     folder = Path(destination)
     try:
         record = load_run_record(folder)
@@ -778,7 +784,7 @@ def _complete_output(destination: str, source: str, options: ReconstructOptions)
     except (IrtpsError, OSError):
         return None
     same_run = record["source"] == str(resolve_path(source)) and _same_options(record["parameters"], options)
-    return maps if same_run and meshes and indirect else None
+    return (maps, record.get("robust_used")) if same_run and meshes and indirect else None
 
 
 def _numbered_images(folder: Path) -> bool:
