@@ -25,6 +25,7 @@ Needs Mitsuba 3 (``pip install mitsuba``; its LLVM variant needs libLLVM, see
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 import time
@@ -74,8 +75,13 @@ def synthetic_shape(name: str, size: int) -> tuple[np.ndarray, np.ndarray, np.nd
     under DiLiGenT ball's 96 light directions: shapes DiLiGenT does not have (a cavity,
     grooves, a pedestal with a trench), to see the robust modes off DiLiGenT's own."""
     height, mask = SHAPES[name](size, np.random.default_rng(0))
-    directions = irtps.load_dataset(DILIGENT / "ballPNG").scene.light_directions
-    return np.where(mask, height, 0.0).astype(np.float32), mask, directions
+    return np.where(mask, height, 0.0).astype(np.float32), mask, diligent_directions()
+
+
+@functools.cache
+def diligent_directions() -> np.ndarray:
+    """DiLiGenT ball's 96 light directions, its images read once for every synthetic shape."""
+    return irtps.load_dataset(DILIGENT / "ballPNG").scene.light_directions
 
 
 def shape_scene(height: np.ndarray, mask: np.ndarray, directions: np.ndarray):
