@@ -11,10 +11,10 @@
 //! target without FMA instructions [`Portable`] does it in software, correctly but slowly).
 //! Comparisons return masks, all bits set where true.
 
-use std::ops::{Add, AddAssign, BitAnd, BitXor, Mul, Sub, SubAssign};
+use std::ops::{Add, AddAssign, BitAnd, BitXor, Div, Mul, Sub, SubAssign};
 
 /// `W` `f32` in registers.
-pub trait Floats<const W: usize>: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Mul<f32, Output = Self> + BitAnd<Output = Self> + BitXor<Output = Self> + AddAssign {
+pub trait Floats<const W: usize>: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Mul<f32, Output = Self> + Div<Output = Self> + BitAnd<Output = Self> + BitXor<Output = Self> + AddAssign {
     /// The integers of the same instruction set.
     type Ints: Ints<W, Floats = Self>;
     /// Mask of `self < other` (false where either is a NaN).
@@ -23,6 +23,9 @@ pub trait Floats<const W: usize>: Copy + Add<Output = Self> + Sub<Output = Self>
     fn simd_gt(self, other: Self) -> Self;
     /// `self × a + b`, rounded once.
     fn mul_add(self, a: Self, b: Self) -> Self;
+    /// `self` where `self > other`, else `other` (so `other` where either is a NaN, as
+    /// `f32::max` does for a NaN `self`).
+    fn max(self, other: Self) -> Self;
     /// The bits of each value.
     fn to_bits(self) -> Self::Ints;
     fn to_array(self) -> [f32; W];
@@ -101,6 +104,11 @@ impl Floats<8> for wide::f32x8 {
     }
 
     #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        wide::f32x8::fast_max(self, other)
+    }
+
+    #[inline(always)]
     fn simd_lt(self, other: Self) -> Self {
         wide::f32x8::simd_lt(self, other)
     }
@@ -170,7 +178,7 @@ mod x86 {
     //! makes their intrinsics safe to call.
 
     use std::arch::x86_64::*;
-    use std::ops::{Add, AddAssign, BitAnd, BitXor, Mul, Sub, SubAssign};
+    use std::ops::{Add, AddAssign, BitAnd, BitXor, Div, Mul, Sub, SubAssign};
 
     use super::{Floats, Ints, Isa};
 
@@ -270,6 +278,7 @@ mod x86 {
     binary!(F8, Add, add, _mm256_add_ps);
     binary!(F8, Sub, sub, _mm256_sub_ps);
     binary!(F8, Mul, mul, _mm256_mul_ps);
+    binary!(F8, Div, div, _mm256_div_ps);
     binary!(F8, BitAnd, bitand, _mm256_and_ps);
     binary!(F8, BitXor, bitxor, _mm256_xor_ps);
     binary!(I8, Add, add, _mm256_add_epi32);
@@ -292,6 +301,11 @@ mod x86 {
         #[inline(always)]
         fn mul_add(self, a: F8, b: F8) -> F8 {
             F8(simd!(_mm256_fmadd_ps(self.0, a.0, b.0)))
+        }
+
+        #[inline(always)]
+        fn max(self, other: F8) -> F8 {
+            F8(simd!(_mm256_max_ps(self.0, other.0)))
         }
 
         #[inline(always)]
@@ -392,6 +406,7 @@ mod x86 {
     binary!(F16, Add, add, _mm512_add_ps);
     binary!(F16, Sub, sub, _mm512_sub_ps);
     binary!(F16, Mul, mul, _mm512_mul_ps);
+    binary!(F16, Div, div, _mm512_div_ps);
     binary!(I16, Add, add, _mm512_add_epi32);
     binary!(I16, Sub, sub, _mm512_sub_epi32);
     binary!(I16, BitAnd, bitand, _mm512_and_si512);
@@ -429,6 +444,11 @@ mod x86 {
         #[inline(always)]
         fn mul_add(self, a: F16, b: F16) -> F16 {
             F16(simd!(_mm512_fmadd_ps(self.0, a.0, b.0)))
+        }
+
+        #[inline(always)]
+        fn max(self, other: F16) -> F16 {
+            F16(simd!(_mm512_max_ps(self.0, other.0)))
         }
 
         #[inline(always)]
@@ -513,6 +533,8 @@ mod tests {
         assert_eq!((a - b).to_array()[3], -6.0);
         assert_eq!((a * b).to_array()[5], 12.0);
         assert_eq!((a * 0.5).to_array()[W - 1], 4.0);
+        assert_eq!((a / b).to_array(), lanes([0.5, -1.0, 1.5, -2.0, 0.25, 3.0, -0.0, 4.0]));
+        assert_eq!(a.max(isa.splat(0.0)).to_array(), lanes([1.0, 0.0, 3.0, 0.0, 0.5, 6.0, 0.0, 8.0]));
         let mut sum = a;
         sum += b;
         assert_eq!(sum.to_array()[0], 3.0);
@@ -523,6 +545,8 @@ mod tests {
         for mask in [nan.simd_lt(a), nan.simd_gt(a), a.simd_lt(nan), (nan * 0.0).simd_lt(a)] {
             assert_eq!(mask.to_bits().to_array(), [0; W], "no comparison with a NaN holds");
         }
+        assert_eq!(nan.max(b).to_array(), [2.0; W], "the maximum of a NaN and a number is the number");
+        assert!(b.max(nan).to_array().iter().all(|v| v.is_nan()), "a NaN second is kept");
         assert_eq!(a.simd_lt(b).to_bits().to_array(), lanes([-1, -1, 0, -1, -1, 0, -1, 0]));
         assert_eq!((a & a.simd_gt(b)).to_array(), lanes([0.0, 0.0, 3.0, 0.0, 0.0, 6.0, 0.0, 8.0]));
         assert_eq!((a ^ isa.splat(-0.0)).to_array(), lanes([-1.0, 2.0, -3.0, 4.0, -0.5, -6.0, 0.0, -8.0]));
