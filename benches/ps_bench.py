@@ -111,7 +111,7 @@ def main() -> None:
         for mode in (*ROBUST_MODES, "lobe_share", "auto"):
             elapsed = figures[f"irtps_{mode}_object_s"]
             ratio = figures[f"irtps_{mode}_object_x"]
-            speed = f"{ratio:.1f}x numpy plain" if ratio >= 1 else f"{1 / ratio:.0f}x slower than numpy plain"
+            speed = f"{ratio:.1f}x numpy plain" if ratio >= 1 else f"{ratio:.2f}x numpy plain ({1 / ratio:.1f} times slower)"
             print(f"                irtps {mode:<10} {elapsed:.3f} s   {speed}")
         results.append(figures)
     if args.json:
