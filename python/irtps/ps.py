@@ -105,7 +105,7 @@ def photometric_stereo(
           fit unless the lobe lowers Tukey's loss by more than the Bayesian information
           criterion asks for its two extra parameters, or when it lights fewer than 6
           unsaturated observations; pixels fitted with a lobe are flagged (``FLAGS[4]``).
-          About 300 times slower than ``"tukey"`` (seconds on a DiLiGenT object), and worse
+          About 90 times slower than ``"tukey"`` (0.5–1 s on a DiLiGenT object), and worse
           than it on matte objects with deep folds, where it can take inter-reflected light
           for a lobe. `lobe_share` tells which objects want it, and `choose_robust` picks
           it from there (as ``irtps.reconstruct``'s default, ``robust="auto"``, does).
