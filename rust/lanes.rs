@@ -105,7 +105,8 @@ impl Floats<8> for wide::f32x8 {
 
     #[inline(always)]
     fn max(self, other: Self) -> Self {
-        wide::f32x8::fast_max(self, other)
+        // By the comparison, not `wide`'s `fast_max`: NEON's maximum returns a NaN.
+        other ^ (self.simd_gt(other) & (self ^ other))
     }
 
     #[inline(always)]
