@@ -161,8 +161,8 @@ struct Work {
     specular: Vec<Group>,
     /// `n·h` of the current normal (at least [`NH_MIN`]).
     nh: Vec<Group>,
-    /// Bits of the absolute residuals of the lit observations, for their median (the first
-    /// of them; one slot per padded light).
+    /// Bits of the absolute residuals, the lit observations' packed at the front (a slot per
+    /// padded light), for their median.
     spread: Vec<u32>,
     /// The best fit's weights so far.
     best_weight: Vec<Group>,
@@ -377,7 +377,9 @@ fn projected(diffuse: bool, lobe: bool, [ff, fs, ss]: [f32; 3], u1: [f32; 2], u2
 }
 
 /// The sums over `groups` groups of [`LANES`] lights of each of the `N` values that `term`
-/// gives for a group: lane by lane, then across the lanes.
+/// gives for a group: lane by lane, then across the lanes. `term` is a closure marked
+/// `#[inline(always)]`: a closure does not take the target features of the function it is
+/// written in, and its intrinsics would otherwise be calls.
 #[inline(always)]
 fn summed<V: Isa<LANES>, const N: usize>(isa: V, groups: usize, term: impl Fn(usize) -> [V::F; N]) -> [f32; N] {
     let mut lanes = [isa.splat(0.0); N];
