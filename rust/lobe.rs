@@ -319,7 +319,7 @@ fn fit_exponent<V: Isa<LANES>>(isa: V, lights: &Lights, half: &HalfVectors, from
         let groups = work.diffuse.len();
         let l = lights.direction.each_ref().map(|row| &grouped(row)[..groups]);
         let h = half.0.each_ref().map(|row| &row[..groups]);
-        let (diffuse, specular, nh, weight, b) = (&work.diffuse[..groups], &work.specular[..groups], &work.nh[..groups], &work.weight[..groups], &work.b[..groups]);
+        let (diffuse, specular, nh, weight) = (&work.diffuse[..groups], &work.specular[..groups], &work.nh[..groups], &work.weight[..groups]);
         let (zero, nh_min, a_v, cp) = (isa.splat(0.0), isa.splat(NH_MIN), isa.splat(a), isa.splat(c * p));
         let [m11, m12, m22, f1, f2, s1, s2, ff, fs, ss, q1, q2] = summed(isa, groups, #[inline(always)] |g| {
             let (nl, lit_lobe) = (isa.floats(diffuse[g]), isa.floats(specular[g]));
@@ -332,7 +332,7 @@ fn fit_exponent<V: Isa<LANES>>(isa: V, lights: &Lights, half: &HalfVectors, from
             let dz = along_l * isa.floats(l[2][g]) + along_h * isa.floats(h[2][g]);
             let j1 = dx * t1.x + dy * t1.y + dz * t1.z;
             let j2 = dx * t2.x + dy * t2.y + dz * t2.z;
-            let r = isa.floats(b[g]) - nl * a - lit_lobe * c;
+            let r = residual(isa, work, g, a, c);
             let (wj1, wj2, wf, ws) = (w * j1, w * j2, w * nl, w * lit_lobe);
             [wj1 * j1, wj1 * j2, wj2 * j2, wf * j1, wf * j2, ws * j1, ws * j2, wf * nl, wf * lit_lobe, ws * lit_lobe, wj1 * r, wj2 * r]
         });
@@ -388,6 +388,7 @@ fn summed<V: Isa<LANES>, const N: usize>(isa: V, groups: usize, term: impl Fn(us
             *lane += value;
         }
     }
+    // A loop, not `map`: a closure's `to_array` would be a call (see above).
     let mut sums = [0.0; N];
     for (sum, lane) in sums.iter_mut().zip(lanes) {
         *sum = lane.to_array().iter().sum();
