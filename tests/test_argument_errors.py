@@ -96,6 +96,7 @@ CASES = {
     "irtps.reconstruct.save_reconstruction": (lambda f: f(_dataset(), "unused"), "result: "),
     "irtps.synth.synthesize": (lambda f: f("cube"), "shape: "),
     "irtps.dataset.load_dataset": (lambda f: f("no/such/folder"), "no/such/folder: "),
+    "irtps.image_selection.exclude_images": (lambda f: f(_dataset(), "5-1"), "exclude_images: "),
     "irtps.dataset.load_ground_truth": (lambda f: f("no/such/folder", (4, 4)), "no/such/folder: "),
     "irtps.dataset.load_scene_object": (lambda f: f("no/such/folder"), "no/such/folder"),
     "irtps.dataset.save_dataset": (lambda f: f(_dataset(), "unused", extra={"../x.exr": HEIGHT}), "extra: "),

@@ -483,7 +483,7 @@ def test_a_real_process_exits_2_without_traceback(name, tmp_path, reconstruction
 
 
 def test_running_out_of_memory_is_a_clear_error(tmp_path, monkeypatch, capsys):
-    def allocate(path):
+    def allocate(path, **options):
         raise MemoryError("Unable to allocate 90.9 TiB for an array with shape (10000000, 10000000)")
 
     monkeypatch.setattr(sys.modules["irtps.reconstruct"], "load_dataset", allocate)

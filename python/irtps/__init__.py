@@ -6,6 +6,7 @@ from irtps.data import Dataset, GroundTruth
 from irtps.dataset import load_dataset, load_ground_truth, load_scene_object, save_dataset
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
 from irtps.evaluate import Metrics, angular_error_deg, evaluate
+from irtps.image_selection import exclude_images
 from irtps.integrate import integrate_normals, place_height
 from irtps.ps import PsResult, choose_robust, lobe_share, photometric_stereo
 from irtps.reconstruct import Reconstruction, reconstruct, save_reconstruction
@@ -39,6 +40,7 @@ __all__ = [
     "angular_error_deg",
     "choose_robust",
     "evaluate",
+    "exclude_images",
     "height_to_normals",
     "integrate_normals",
     "load_dataset",

@@ -19,6 +19,7 @@ from irtps.batch import SUMMARY_JSON, SUMMARY_MARKDOWN, connect, local_cluster, 
 from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object, load_ground_truth, save_dataset
 from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate, format_metrics
+from irtps.image_selection import format_images_fitted
 from irtps.options import ClusterOptions, OptionError, ReconstructOptions, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
 from irtps.output_rule import check_output, escaped, written_by_irtps
 from irtps.paths import check_folder, resolve_path
@@ -87,11 +88,13 @@ def _robust_line(asked: str, used: str | None, share: float | None) -> str:
 def _cmd_reconstruct(args: argparse.Namespace) -> None:
     options = from_arguments(ReconstructOptions, args)
     check_output(args.out, [args.data], force=args.force)
-    dataset, result = load_and_reconstruct(args.data, options=options, progress=not args.quiet)
+    dataset, result = load_and_reconstruct(args.data, options=options, progress=not args.quiet, exclude_images=args.exclude_images)
     save_reconstruction(result, args.out, source=str(resolve_path(args.data)))
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
         print(f"reconstructed {args.data} ({options.method}; {stages}) -> {args.out}")
+        if result.excluded_images:
+            print(f"  {format_images_fitted(len(result.image_names), result.excluded_images)}")
         print(f"  {_robust_line(options.robust, result.robust_used, result.lobe_share)}")
         if result.placement is not None:
             print(f"  placement: {format_placement(result.placement)}")
@@ -296,9 +299,9 @@ def build_parser() -> argparse.ArgumentParser:
         "normal.exr (R, G, B = nx, ny, nz), albedo.exr, height.exr, mask.png, mesh.ply (the height field with "
         "per-vertex albedo colour and normals), mesh.obj (the same mesh for any viewer) and run.json (parameters, "
         "timings, versions, the data set's path, the placement, the robust mode used and the lobe share that auto "
-        "chose it by); with --method irtps also "
-        "indirect/NNN.exr (the estimated inter-reflected light, with the floor's light in the edge pixels, that was "
-        "subtracted) and each pass's residual in run.json: the reconstruction rendered again and compared with the "
+        "chose it by, the images fitted and those left out); with --method irtps also "
+        "indirect/NNN.exr (the estimated inter-reflected light in run.json's images[NNN], with the floor's light in the "
+        "edge pixels, that was subtracted) and each pass's residual in run.json: the reconstruction rendered again and compared with the "
         "images, the number to judge a run by without ground truth. The result is the pass with the lowest residual "
         "(pass 0 is classic PS). "
         "When DATA has ground truth, the errors are printed too. OUT is replaced atomically.",
@@ -309,10 +312,18 @@ def build_parser() -> argparse.ArgumentParser:
         "  irtps reconstruct capture --out capture_ps --saturation 0.99 --base-height boundary\n"
         "  irtps reconstruct shared/data/diligent/readingPNG --out reading --robust trim\n"
         "  irtps reconstruct metal_capture --out metal --robust lobe\n"
-        "  irtps reconstruct rig_capture --out rig --method irtps --albedo-scale 0.8",
+        "  irtps reconstruct rig_capture --out rig --method irtps --albedo-scale 0.8\n"
+        "  irtps reconstruct bearPNG --out bear --exclude-images 1-20",
     )
     p.add_argument("data", type=Path, help="data set folder")
     p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument(
+        "--exclude-images",
+        metavar="LIST",
+        help="images to leave out (not read): numbers and ranges of numbers that match the images' numbered file names "
+        "(1-20,37: DiLiGenT's 001.png ... 020.png and 037.png; the irtps layout's images count from 000.exr), or file "
+        "names; for images a light misfired in, that the object moved in, or that cannot be read",
+    )
     add_arguments(p, ReconstructOptions, groups=RECONSTRUCT_GROUPS)
     _add_force(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")

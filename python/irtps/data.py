@@ -59,6 +59,12 @@ class Dataset:
         The value at which the camera clips, where it is known: 1.0 for images read from
         PNG files (their largest code value), None for float images. `irtps.reconstruct`
         leaves out observations at or above it.
+    image_names : tuple of str or None
+        Each image's file name (``filenames.txt``'s for DiLiGenT, ``000.exr`` ... for the
+        irtps layout); None: those `irtps.save_dataset` would write (`names`).
+    excluded_images : tuple of str
+        The names of the folder's images left out when it was read, or since
+        (`irtps.exclude_images`).
 
     Raises
     ------
@@ -72,11 +78,24 @@ class Dataset:
     gt: GroundTruth | None = None
     source: str | None = None
     saturation: float | None = None
+    image_names: tuple[str, ...] | None = None
+    excluded_images: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         self.images = np.asarray(self.images, dtype=np.float32)
         self.mask = np.asarray(self.mask, dtype=bool)
+        if self.image_names is not None:
+            self.image_names = tuple(map(str, self.image_names))
+        self.excluded_images = tuple(map(str, self.excluded_images))
         self.check_shapes()
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Each image's file name: `image_names`, or ``000.exr``, ``001.exr`` ... as
+        `irtps.save_dataset` writes them."""
+        if self.image_names is not None:
+            return self.image_names
+        return tuple(image_file_name(k) for k in range(len(self.scene.lights)))
 
     def check_shapes(self) -> None:
         """Raise `DatasetError` if an array's shape disagrees with the scene's lights and camera."""
@@ -84,11 +103,18 @@ class Dataset:
         size = (self.scene.camera.height, self.scene.camera.width)
         _expect_shape("Dataset.images", self.images, (count, *size, 3))
         _expect_shape("Dataset.mask", self.mask, size)
+        if self.image_names is not None and len(self.image_names) != count:
+            raise DatasetError(f"Dataset.image_names has {len(self.image_names)} names, expected {count} from the scene")
         if self.gt is not None:
             for name, shape in _gt_shapes(count, size).items():
                 value = getattr(self.gt, name)
                 if value is not None:
                     _expect_shape(f"Dataset.gt.{name}", value, shape)
+
+
+def image_file_name(k: int, suffix: str = ".exr") -> str:
+    """The file name of image `k` (from 0) in the irtps layout: ``000.exr`` ..."""
+    return f"{k:03d}{suffix}"
 
 
 def _gt_shapes(count: int, size: tuple[int, int]) -> dict[str, tuple[int, ...]]:

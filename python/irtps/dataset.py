@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from collections.abc import Mapping
@@ -15,9 +16,10 @@ import numpy as np
 
 from irtps._checks import check_finite
 from irtps.atomic import atomic_output_dir
-from irtps.data import Dataset, GroundTruth
+from irtps.data import Dataset, GroundTruth, image_file_name
 from irtps.diligent import load_diligent, load_diligent_ground_truth
 from irtps.errors import ArgumentError, DatasetError
+from irtps.image_selection import parse_image_list, select_images
 from irtps.imageio import check_stack_memory, clip_negative, format_size, png_saturation, read_exr, read_image, read_images, read_mask, write_exr, write_png
 from irtps.paths import check_file, check_folder, exists, optional_file, optional_folder
 from irtps.scene import Scene, load_scene, write_scene
@@ -32,7 +34,7 @@ _NUMBERED_IMAGE = re.compile(r"\d{3,}\.(exr|png)", re.IGNORECASE)
 _HEIGHT_CHANNEL_TOLERANCE = 1e-6
 
 
-def load_dataset(path: str | Path, *, ground_truth: bool = True) -> Dataset:
+def load_dataset(path: str | Path, *, ground_truth: bool = True, exclude_images: str | None = None) -> Dataset:
     """Read a data set folder, in the irtps layout or the DiLiGenT layout.
 
     Parameters
@@ -42,12 +44,16 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True) -> Dataset:
         (DiLiGenT layout).
     ground_truth : bool
         Also read the ground truth (``gt/``, or DiLiGenT's ``Normal_gt.mat``) when present.
+    exclude_images : str, optional
+        Images to leave out, not read (`irtps.image_selection`): numbers and ranges of
+        numbers that match the images' numbered file names (``"1-20,37"``), or file names.
 
     Returns
     -------
     Dataset
         Negative pixel values of the images are clipped to 0. When every image is a
-        PNG file, ``saturation`` is 1.0.
+        PNG file, ``saturation`` is 1.0. ``image_names`` holds the file names read,
+        ``excluded_images`` those left out.
 
     Raises
     ------
@@ -57,7 +63,10 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True) -> Dataset:
         optional file such as ``mask.png`` is absent only when nothing is at its path),
         an image count that is not the number of lights, sizes that disagree,
         non-finite pixels, too few lights, a light that is not a unit vector with
-        z > 0, an unknown format.
+        z > 0, an unknown format; an item of `exclude_images` that names no image, or
+        fewer than 3 images left.
+    ArgumentError
+        If `exclude_images` is malformed (checked before anything is read).
     IrtpsError
         If decoding the images would need more memory than is available (checked from
         the first image's header before decoding any), naming the images' folder.
@@ -67,11 +76,13 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True) -> Dataset:
     IrtpsWarning
         Naming the first image with negative values, if any.
     """
+    if exclude_images is not None:
+        parse_image_list(exclude_images)
     folder = check_folder(path)
     if exists(folder / SCENE_FILE):
-        return _load_irtps(folder, ground_truth)
+        return _load_irtps(folder, ground_truth, exclude_images)
     if exists(folder / DILIGENT_MARKER):
-        return load_diligent(folder, ground_truth=ground_truth)
+        return load_diligent(folder, ground_truth=ground_truth, exclude_images=exclude_images)
     raise DatasetError(
         f"{folder}: not a data set: it holds neither {SCENE_FILE} (irtps layout) "
         f"nor {DILIGENT_MARKER} (DiLiGenT layout)"
@@ -125,7 +136,7 @@ def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.n
         write_scene(dataset.scene, out / SCENE_FILE)
         (out / IMAGES_FOLDER).mkdir()
         for k, image in enumerate(dataset.images):
-            write_exr(out / IMAGES_FOLDER / _image_name(k), image)
+            write_exr(out / IMAGES_FOLDER / image_file_name(k), image)
         write_png(out / MASK_FILE, dataset.mask.astype(np.float32), bit_depth=8)
         for files in _gt_files(dataset.gt).values():
             for relative, array in files:
@@ -177,11 +188,14 @@ def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | 
     raise DatasetError(f"{folder}: not a data set: it holds neither {SCENE_FILE} nor {DILIGENT_MARKER}")
 
 
-def _load_irtps(folder: Path, ground_truth: bool) -> Dataset:
+def _load_irtps(folder: Path, ground_truth: bool, exclude_images: str | None) -> Dataset:
     scene = load_scene(folder / SCENE_FILE)
     count = len(scene.lights)
     size = (scene.camera.height, scene.camera.width)
     paths = _numbered_images(folder / IMAGES_FOLDER, count)
+    selection = select_images([path.name for path in paths], exclude_images, where=str(folder))
+    paths = [paths[k] for k in selection.kept]
+    scene = dataclasses.replace(scene, lights=tuple(scene.lights[k] for k in selection.kept))
     check_stack_memory(paths, size)
     images = read_images(paths)
     if images.shape[1:3] != size:
@@ -192,9 +206,9 @@ def _load_irtps(folder: Path, ground_truth: bool) -> Dataset:
     clip_negative(paths, images)
     mask_path = folder / MASK_FILE
     mask = read_mask(mask_path, size) if optional_file(mask_path) else np.ones(size, dtype=bool)
-    gt = _load_ground_truth(folder / GT_FOLDER, count, size) if ground_truth else None
+    gt = _load_ground_truth(folder / GT_FOLDER, count, size, kept=selection.kept) if ground_truth else None
     saturation = png_saturation(paths)
-    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=saturation)
+    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=saturation, image_names=selection.names, excluded_images=selection.excluded)
 
 
 def _numbered_images(folder: Path, count: int) -> list[Path]:
@@ -203,7 +217,7 @@ def _numbered_images(folder: Path, count: int) -> list[Path]:
     check_folder(folder, missing="missing folder", context=context)
     paths = []
     for k in range(count):
-        candidates = [folder / _image_name(k, suffix) for suffix in (".exr", ".png")]
+        candidates = [folder / image_file_name(k, suffix) for suffix in (".exr", ".png")]
         present = [candidate for candidate in candidates if exists(candidate)]
         if not present:
             raise DatasetError(f"{candidates[0]}: missing ({context})")
@@ -219,7 +233,9 @@ def _numbered_images(folder: Path, count: int) -> list[Path]:
     return paths
 
 
-def _load_ground_truth(folder: Path, count: int, size: tuple[int, int], direct: bool = True) -> GroundTruth | None:
+def _load_ground_truth(folder: Path, count: int, size: tuple[int, int], direct: bool = True, kept: list[int] | None = None) -> GroundTruth | None:
+    """The ground truth in `folder`, if any: the direct-light images of the lights `kept`
+    (default all `count`)."""
     if not optional_folder(folder):
         return None
     parts = {
@@ -230,6 +246,7 @@ def _load_ground_truth(folder: Path, count: int, size: tuple[int, int], direct: 
     direct_folder = folder / "direct"
     if direct and optional_folder(direct_folder):
         paths = _numbered_images(direct_folder, count)
+        paths = paths if kept is None else [paths[k] for k in kept]
         check_stack_memory(paths, size)
         parts["direct"] = _checked_size(paths[0], read_images(paths), size)
     if all(part is None for part in parts.values()):
@@ -313,7 +330,7 @@ def _gt_files(gt: GroundTruth | None) -> dict[str, list[tuple[str, np.ndarray]]]
         if value is not None:
             files[name] = [(f"{GT_FOLDER}/{name}.exr", value)]
     if gt.direct is not None:
-        files["direct"] = [(f"{GT_FOLDER}/direct/{_image_name(k)}", image) for k, image in enumerate(gt.direct)]
+        files["direct"] = [(f"{GT_FOLDER}/direct/{image_file_name(k)}", image) for k, image in enumerate(gt.direct)]
     return files
 
 
@@ -335,10 +352,6 @@ def _write_new_exr(out: Path, relative: str, array: np.ndarray) -> None:
         raise ArgumentError("extra", f"{relative!r} would overwrite a file of the data set")
     target.parent.mkdir(parents=True, exist_ok=True)
     write_exr(target, array)
-
-
-def _image_name(k: int, suffix: str = ".exr") -> str:
-    return f"{k:03d}{suffix}"
 
 
 def load_scene_object(path: str | Path) -> tuple[Scene, np.ndarray, np.ndarray, np.ndarray]:

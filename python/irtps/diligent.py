@@ -16,6 +16,7 @@ import scipy.io
 from irtps.data import Dataset, GroundTruth
 from irtps._checks import check_finite
 from irtps.errors import DatasetError
+from irtps.image_selection import select_images
 from irtps.imageio import check_stack_memory, format_size, png_saturation, read_images, read_mask
 from irtps.paths import check_file, check_folder, optional_file
 from irtps.scene import MIN_LIGHTS, Camera, Light, Scene
@@ -31,7 +32,7 @@ UNIT_TOLERANCE = 1e-2
 """How far the norm of a listed light direction may be from 1; within it, it is renormalised."""
 
 
-def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
+def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images: str | None = None) -> Dataset:
     """Read a data set folder in the DiLiGenT layout.
 
     Parameters
@@ -39,6 +40,9 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
     path : str or pathlib.Path
     ground_truth : bool
         Also read the normals of ``Normal_gt.mat`` when the file is present.
+    exclude_images : str, optional
+        Images to leave out, not read (`irtps.image_selection`): ``"1-20"`` for
+        ``001.png`` … ``020.png``, or file names as ``filenames.txt`` lists them.
 
     Returns
     -------
@@ -58,7 +62,10 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
         not a readable regular file (a directory, a FIFO, a symlink loop), line counts
         that disagree, a direction that is not a unit vector (beyond 1e-2) or
         has z <= 0, a negative intensity, fewer than 3 lights, images of
-        different sizes or with non-finite values.
+        different sizes or with non-finite values; an item of `exclude_images` that
+        names no image, or fewer than 3 images left.
+    ArgumentError
+        If `exclude_images` is malformed.
     IrtpsError
         If decoding the images would need more memory than is available (checked from
         the first image's header and the image count, before decoding any).
@@ -82,8 +89,9 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
         )
     directions = _unit_directions(folder / DIRECTIONS_FILE, directions, direction_lines)
     _check_non_negative(folder / INTENSITIES_FILE, intensities, intensity_lines)
-    image_paths = [folder / name for name in names]
-    for image_path, line in zip(image_paths, name_lines, strict=True):
+    selection = select_images(names, exclude_images, where=str(folder))
+    image_paths = [folder / names[k] for k in selection.kept]
+    for image_path, line in zip(image_paths, [name_lines[k] for k in selection.kept], strict=True):
         check_file(image_path, f"listed on line {line} of {FILENAMES_FILE}")
     check_stack_memory(image_paths, where=folder / FILENAMES_FILE)
     images = read_images(image_paths)
@@ -94,10 +102,11 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True) -> Dataset:
     gt = GroundTruth(normal=_read_normals(normals_path, size)) if ground_truth and optional_file(normals_path) else None
     scene = Scene(
         camera=Camera(width=size[1], height=size[0], pixel_size=1.0),
-        lights=tuple(Light(direction=d, irradiance=e) for d, e in zip(directions, intensities, strict=True)),
+        lights=tuple(Light(direction=directions[k], irradiance=intensities[k]) for k in selection.kept),
         relative_irradiance=True,  # light_intensities.txt: relative RGB intensities
     )
-    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=png_saturation(image_paths))
+    saturation = png_saturation(image_paths)
+    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=saturation, image_names=selection.names, excluded_images=selection.excluded)
 
 
 def load_diligent_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | None:

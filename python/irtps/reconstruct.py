@@ -80,6 +80,11 @@ class Reconstruction:
     robust_used : str or None
         The robust mode of the fit (`irtps.ps.ROBUST_MODES`): the one asked for, or the one
         ``"auto"`` chose (`irtps.ps.choose_robust`); None where not recorded.
+    image_names : tuple of str
+        The images fitted (`Dataset.names`), in order: IRT-PS's ``object_indirect[k]`` is
+        image ``image_names[k]``'s.
+    excluded_images : tuple of str
+        The data set's images left out (`Dataset.excluded_images`).
     """
 
     normals: np.ndarray
@@ -97,6 +102,8 @@ class Reconstruction:
     albedo_scale: AlbedoScale | None = None
     lobe_share: float | None = None
     robust_used: str | None = None
+    image_names: tuple[str, ...] = ()
+    excluded_images: tuple[str, ...] = ()
 
     @property
     def indirect(self) -> np.ndarray | None:
@@ -207,6 +214,8 @@ def reconstruct(
             albedo_scale=loop.albedo_scale,
             lobe_share=share,
             robust_used=options.robust,
+            image_names=dataset.names,
+            excluded_images=dataset.excluded_images,
         )
     # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
     first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
@@ -223,10 +232,12 @@ def reconstruct(
         albedo_scale=first.albedo_scale,
         lobe_share=share,
         robust_used=options.robust,
+        image_names=dataset.names,
+        excluded_images=dataset.excluded_images,
     )
 
 
-def load_and_reconstruct(path: str | Path, method: str | None = None, **options) -> tuple[Dataset, Reconstruction]:
+def load_and_reconstruct(path: str | Path, method: str | None = None, *, exclude_images: str | None = None, **options) -> tuple[Dataset, Reconstruction]:
     """Read a data set folder and reconstruct it, timing the reading too.
 
     Parameters
@@ -235,6 +246,8 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, **options)
         A data set folder, as for `irtps.load_dataset`.
     method : str, optional
         As for `reconstruct`.
+    exclude_images : str, optional
+        Images not to read (`irtps.load_dataset`), e.g. ``"1-20"``.
     **options
         The other keyword arguments of `reconstruct` (``options``, ``progress``, fields
         of `ReconstructOptions`).
@@ -251,6 +264,8 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, **options)
         If the folder is not a readable data set (see `irtps.load_dataset`).
     OptionError
         For an option out of range, before the data set is read.
+    ArgumentError
+        For a malformed `exclude_images`, before the data set is read.
 
     Examples
     --------
@@ -269,7 +284,7 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, **options)
     settings = {key: value for key, value in options.items() if key not in ("options", "progress")}
     ReconstructOptions.build(options.get("options"), **settings)  # a bad option fails before the data set is read
     start = time.perf_counter()
-    dataset = load_dataset(path)
+    dataset = load_dataset(path, exclude_images=exclude_images)
     loaded = time.perf_counter() - start
     result = reconstruct(dataset, **options)
     result.timings = {"load": loaded, **result.timings}
@@ -320,10 +335,11 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
     ``mask.png``, ``mesh.ply`` (binary; the height field with per-vertex albedo colour and
     normals), ``mesh.obj`` (the same vertices, triangles and normals as Wavefront OBJ text,
     see `irtps.mesh`), ``run.json`` (parameters, pixel size, timings, versions, source,
-    placement, IRT-PS history with each pass's residual, and the pass chosen) and, for
-    IRT-PS, ``indirect/NNN.exr`` (the estimate of each image's inter-reflected light that
-    the chosen pass removed, with the surroundings' light in the edge pixels,
-    `irtps.surroundings`; none when that is pass 0).
+    placement, IRT-PS history with each pass's residual, the pass chosen, the images fitted
+    and those left out) and, for IRT-PS, ``indirect/NNN.exr`` (the estimate of the
+    inter-reflected light in image ``images[NNN]`` of run.json that the chosen pass removed,
+    with the surroundings' light in the edge pixels, `irtps.surroundings`; none when that is
+    pass 0).
 
     Parameters
     ----------
@@ -367,6 +383,8 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             "albedo_scale": None if result.albedo_scale is None else result.albedo_scale.to_dict(),
             "lobe_share": result.lobe_share,
             "robust_used": result.robust_used,
+            "images": list(result.image_names),
+            "excluded_images": list(result.excluded_images),
         }
         if result.object_indirect is not None:
             (folder / "indirect").mkdir()
@@ -417,6 +435,8 @@ _OPTIONAL_RUN_FIELDS = {
     "albedo_scale": (dict, type(None)),
     "lobe_share": (int, float, type(None)),
     "robust_used": (str, type(None)),
+    "images": (list,),
+    "excluded_images": (list,),
 }
 _HISTORY_FIELDS = {"index": (int,), "height_change": (int, float, type(None)), "timings": (dict,), "metrics": (dict, type(None))}
 _JSON_TYPE_NAMES = {dict: "an object", list: "a list", str: "a string", int: "a number", float: "a number", type(None): "null"}

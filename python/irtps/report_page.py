@@ -12,6 +12,7 @@ from html import escape
 from typing import TYPE_CHECKING
 
 from irtps.evaluate import format_metrics
+from irtps.image_selection import format_images_fitted
 from irtps.placement import format_placement
 from irtps.ps import format_lobe_share
 from irtps.radiometry import format_albedo_scale
@@ -124,6 +125,8 @@ def _summary(report: Report) -> str:
         placement += f" {format_albedo_scale(record['albedo_scale']).capitalize()}."
     if record.get("lobe_share") is not None:
         placement += f" {format_lobe_share(record['lobe_share'], record.get('robust_used'))}."
+    if record.get("excluded_images"):
+        placement += f" {format_images_fitted(len(record.get('images', [])), record['excluded_images']).capitalize()}."
     return f"{method} of {source}: {cols}×{rows} pixels, {report.object_pixels} on the object{scale}.{placement} Folder: {report.run_dir}."
 
 

@@ -1,0 +1,162 @@
+"""Leaving images out of a data set (`irtps.image_selection`, ``load_dataset(exclude_images=)``,
+``irtps reconstruct --exclude-images``): which images a list names, that they are neither
+read nor fitted, and what a run records."""
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from cli_helpers import refused
+from irtps import ArgumentError, Dataset, DatasetError, exclude_images, load_dataset, reconstruct, save_dataset
+from irtps.cli import main
+from irtps.evaluate import angular_error_deg
+from irtps.image_selection import excluded_indices, parse_image_list
+from irtps.synth import synthesize
+
+FIXTURE = Path(__file__).resolve().parent / "data" / "diligent_ball_small"
+#: The fixture's images, as filenames.txt lists them.
+NAMES = ["008.png", "009.png", "021.png", "041.png", "048.png", "052.png", "089.png", "096.png"]
+
+
+@pytest.fixture
+def ball(tmp_path):
+    folder = tmp_path / "ball"
+    shutil.copytree(FIXTURE, folder)
+    return folder
+
+
+@pytest.mark.parametrize(
+    ("images", "dropped"),
+    [
+        ("8", [0]),
+        ("008", [0]),
+        ("1-9", [0, 1]),
+        ("9 - 41", [1, 2, 3]),
+        ("089.png", [6]),
+        ("052", [5]),
+        ("96,8,96", [0, 7]),
+        (" 21 ,048.png", [2, 4]),
+    ],
+)
+def test_numbers_ranges_and_names_select_the_images_they_name(images, dropped):
+    assert excluded_indices(NAMES, images, where="ball") == dropped
+
+
+def test_names_that_are_not_numbers_are_matched_whole():
+    names = ["sphere_07.png", "sphere_7.png", "7.png", "left.exr", "right.exr", "top.exr"]
+    assert excluded_indices(names, "sphere_07.png,left", where="rig") == [0, 3]
+    assert excluded_indices(names, "7", where="rig") == [2]  # a number matches numbered names only
+
+
+@pytest.mark.parametrize(
+    ("images", "problem"),
+    [
+        ("", "empty item"),
+        ("1-3,", "empty item"),
+        ("20-1", "runs backwards; write 1-20"),
+    ],
+)
+def test_a_malformed_list_is_refused_before_any_data_set(images, problem):
+    with pytest.raises(ArgumentError, match=problem) as caught:
+        parse_image_list(images)
+    assert str(caught.value).startswith("exclude_images: ")
+
+
+def test_only_a_data_set_has_images_to_leave_out():
+    with pytest.raises(ArgumentError, match="^dataset: expected a Dataset, got str$"):
+        exclude_images("ballPNG", "1-20")
+
+
+def test_a_list_must_name_images_of_the_data_set_and_leave_three():
+    with pytest.raises(DatasetError, match=r"^ball: no image is numbered 1 to 5 \(the images: 008.png, 009.png, 021.png, ... 096.png\)$"):
+        excluded_indices(NAMES, "1-5", where="ball")
+    with pytest.raises(DatasetError, match="no image is named 'missing.png'"):
+        excluded_indices(NAMES, "8,missing.png", where="ball")
+    with pytest.raises(DatasetError, match="leaving out 6 of its 8 images leaves 2; photometric stereo needs at least 3"):
+        excluded_indices(NAMES, "8-52", where="ball")
+
+
+def test_excluded_images_are_not_read(ball):
+    (ball / "009.png").write_bytes((ball / "009.png").read_bytes()[:500])  # a file cut short
+    with pytest.raises(DatasetError, match="009.png"):
+        load_dataset(ball)
+    data = load_dataset(ball, exclude_images="9")
+    full = load_dataset(FIXTURE)
+    assert data.names == tuple(NAMES[:1] + NAMES[2:]) and data.excluded_images == ("009.png",)
+    np.testing.assert_array_equal(data.images, np.delete(full.images, 1, axis=0))
+    np.testing.assert_array_equal(data.scene.light_directions, np.delete(full.scene.light_directions, 1, axis=0))
+    np.testing.assert_array_equal(data.scene.light_irradiance, np.delete(full.scene.light_irradiance, 1, axis=0))
+
+
+def test_leaving_out_in_memory_or_when_read_gives_the_same_data_set():
+    full = load_dataset(FIXTURE)
+    read = load_dataset(FIXTURE, exclude_images="21-48")
+    left = exclude_images(full, "21-48")
+    assert left.names == read.names == ("008.png", "009.png", "052.png", "089.png", "096.png")
+    assert left.excluded_images == read.excluded_images == ("021.png", "041.png", "048.png")
+    np.testing.assert_array_equal(left.images, read.images)
+    assert left.scene == read.scene
+    assert full.names == tuple(NAMES)  # the data set it came from is untouched
+
+
+def test_the_irtps_layout_leaves_out_lights_and_their_direct_images(tmp_path):
+    data, _ = synthesize("cap", size=16, lights=7, bounces=0, environment="none")
+    save_dataset(data, tmp_path / "cap")
+    read = load_dataset(tmp_path / "cap", exclude_images="000.exr,3-4")
+    assert read.names == ("001.exr", "002.exr", "005.exr", "006.exr") and read.excluded_images == ("000.exr", "003.exr", "004.exr")
+    kept = [1, 2, 5, 6]
+    np.testing.assert_allclose(read.images, data.images[kept], rtol=1e-6)
+    np.testing.assert_allclose(read.gt.direct, data.gt.direct[kept], rtol=1e-6)
+    assert read.scene.lights == tuple(data.scene.lights[k] for k in kept)
+    assert exclude_images(read, "1").excluded_images == ("000.exr", "003.exr", "004.exr", "001.exr")
+
+
+def test_a_data_set_in_memory_is_named_as_it_would_be_saved():
+    data, _ = synthesize("cap", size=16, lights=4, bounces=0, environment="none")
+    assert data.names == ("000.exr", "001.exr", "002.exr", "003.exr")
+    with pytest.raises(DatasetError, match="image_names has 3 names, expected 4"):
+        Dataset(scene=data.scene, images=data.images, mask=data.mask, image_names=("a", "b", "c"))
+
+
+def test_a_faulty_image_left_out_no_longer_bends_the_normals():
+    """An image lit 3x brighter than its light's recorded irradiance (a misfired flash) pulls
+    the normals toward its light; without it, the fit of the other images is that of a
+    data set that never had it."""
+    data = load_dataset(FIXTURE)
+    faulty = Dataset(scene=data.scene, images=data.images.copy(), mask=data.mask, gt=data.gt, source="faulty", saturation=None, image_names=data.names)
+    faulty.images[3] *= 3
+    clean = reconstruct(exclude_images(data, "41"), robust="tukey", saturation=None)
+    bent = reconstruct(faulty, robust="tukey", saturation=None)
+    fixed = reconstruct(exclude_images(faulty, "041.png"), robust="tukey", saturation=None)
+    error = {name: np.nanmean(angular_error_deg(result.normals, data.gt.normal, data.mask)) for name, result in (("bent", bent), ("fixed", fixed), ("clean", clean))}
+    assert error["bent"] > error["fixed"] + 1.0, error
+    np.testing.assert_array_equal(fixed.normals, clean.normals)
+    assert fixed.excluded_images == ("041.png",) and len(fixed.image_names) == 7
+
+
+def test_the_command_records_and_prints_the_images_left_out(ball, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["reconstruct", str(ball), "--out", str(out), "--exclude-images", "8-9,096.png"]) == 0
+    printed = capsys.readouterr().out
+    assert "  5 of 8 images fitted; left out 008.png, 009.png, 096.png\n" in printed
+    run = json.loads((out / "run.json").read_text())
+    assert run["images"] == NAMES[2:7] and run["excluded_images"] == ["008.png", "009.png", "096.png"]
+    assert main(["reconstruct", str(ball), "--out", str(tmp_path / "all")]) == 0
+    run = json.loads((tmp_path / "all" / "run.json").read_text())
+    assert run["images"] == NAMES and run["excluded_images"] == []
+
+
+@pytest.mark.parametrize(
+    ("images", "message"),
+    [
+        ("3-1", "exclude_images: the range '3-1' runs backwards; write 1-3"),
+        ("1-7", "no image is numbered 1 to 7"),
+        ("8-100", "leaving out 8 of its 8 images leaves 0"),
+    ],
+)
+def test_the_command_refuses_a_bad_list_and_writes_nothing(ball, tmp_path, capsys, images, message):
+    out = tmp_path / "out"
+    assert message in refused(["reconstruct", str(ball), "--out", str(out), "--exclude-images", images], capsys)
+    assert not out.exists()
