@@ -102,7 +102,7 @@ def excluded_indices(names: Sequence[str], images: str, *, where: str) -> list[i
     >>> excluded_indices(names, "97", where="bearPNG")
     Traceback (most recent call last):
     ...
-    irtps.errors.DatasetError: bearPNG: no image is named '97' (the images: 001.png, 002.png, ... 096.png)
+    irtps.errors.DatasetError: bearPNG: no image is named '97' (the images: 001.png, 002.png, 003.png, ... 096.png)
     """
     items = parse_image_list(images)
     stems = [PurePosixPath(name).stem for name in names]
