@@ -1,6 +1,6 @@
 """Leaving images out of a data set (`irtps.image_selection`, ``load_dataset(exclude_images=)``,
 ``irtps reconstruct --exclude-images``): which images a list names, that they are neither
-read nor fitted, and what a run records."""
+read nor fitted, and what a run records (IRT-PS's estimates named after their images)."""
 
 import json
 import shutil
@@ -9,10 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cli_helpers import refused
-from irtps import ArgumentError, Dataset, DatasetError, exclude_images, load_dataset, reconstruct, save_dataset
+from irtps import ArgumentError, Dataset, DatasetError, Reconstruction, exclude_images, load_dataset, reconstruct, save_dataset, save_reconstruction
+from irtps.batch import _complete_indirect
 from irtps.cli import main
 from irtps.evaluate import angular_error_deg
 from irtps.image_selection import excluded_indices, parse_image_list
+from irtps.imageio import read_exr
 from irtps.synth import synthesize
 
 FIXTURE = Path(__file__).resolve().parent / "data" / "diligent_ball_small"
@@ -160,3 +162,32 @@ def test_the_command_refuses_a_bad_list_and_writes_nothing(ball, tmp_path, capsy
     out = tmp_path / "out"
     assert message in refused(["reconstruct", str(ball), "--out", str(out), "--exclude-images", images], capsys)
     assert not out.exists()
+
+
+def _with_indirect(data, names):
+    """A reconstruction of `data` whose IRT-PS estimate is image k's index k + 1 everywhere."""
+    pixels = int(data.mask.sum())
+    indirect = np.stack([np.full((pixels, 3), k + 1, np.float32) for k in range(len(names))])
+    zeros = np.zeros(data.mask.shape, np.float32)
+    return Reconstruction(
+        normals=np.dstack([zeros, zeros, zeros + 1]), albedo=np.dstack([zeros + 0.5] * 3), height=zeros, mask=data.mask,
+        flags=np.zeros(data.mask.shape, np.uint8), pixel_size=1.0, object_indirect=indirect, image_names=tuple(names),
+    )
+
+
+def test_each_indirect_estimate_is_named_after_its_image(tmp_path):
+    data = exclude_images(load_dataset(FIXTURE), "9,41")
+    save_reconstruction(_with_indirect(data, data.names), tmp_path / "out")
+    files = sorted(path.name for path in (tmp_path / "out" / "indirect").iterdir())
+    assert files == ["008.exr", "021.exr", "048.exr", "052.exr", "089.exr", "096.exr"]
+    assert read_exr(tmp_path / "out" / "indirect" / "021.exr")[data.mask].max() == 2  # the second image fitted
+    run = json.loads((tmp_path / "out" / "run.json").read_text())
+    assert _complete_indirect(tmp_path / "out" / "indirect", run["images"])
+    assert not _complete_indirect(tmp_path / "out" / "indirect", NAMES)  # not the images of this run
+
+
+def test_indirect_estimates_are_numbered_where_names_would_not_do(tmp_path):
+    data = load_dataset(FIXTURE)
+    names = [f"{side}/{k}.png" for k in range(4) for side in ("left", "right")]  # stems repeat
+    save_reconstruction(_with_indirect(data, names), tmp_path / "out")
+    assert sorted(path.name for path in (tmp_path / "out" / "indirect").iterdir()) == [f"{k:03d}.exr" for k in range(8)]

@@ -49,7 +49,7 @@ from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
 from irtps.paths import resolve_path
-from irtps.reconstruct import load_and_reconstruct, load_reconstruction, load_run_record, save_reconstruction
+from irtps.reconstruct import indirect_file_names, load_and_reconstruct, load_reconstruction, load_run_record, save_reconstruction
 
 __all__ = ["BatchResult", "connect", "local_cluster", "output_names", "reconstruct_many", "reconstruct_to_folder", "summary_table", "write_summary"]
 
@@ -158,7 +158,8 @@ def reconstruct_to_folder(source: str, destination: str, options: ReconstructOpt
     same options (an option left unset, resolved for each data set, matches any value);
     its normal, albedo and height maps and its mask read back, all of one size; its two
     meshes are files that are not empty; and when the chosen IRT-PS pass is not pass 0,
-    ``indirect/`` holds ``000.exr``, ``001.exr`` and so on, none empty. Any other output
+    ``indirect/`` holds a file for each image fitted (`irtps.reconstruct.indirect_file_names`),
+    none empty. Any other output
     folder is reconstructed again and replaced.
 
     Parameters
@@ -780,17 +781,20 @@ def _complete_output(destination: str, source: str, options: ReconstructOptions)
         record = load_run_record(folder)
         maps = load_reconstruction(folder)
         meshes = all(_nonempty_file(folder / name) for name in ("mesh.ply", "mesh.obj"))
-        indirect = not record.get("chosen_pass") or _numbered_images(folder / "indirect")
+        indirect = not record.get("chosen_pass") or _complete_indirect(folder / "indirect", record.get("images", []))
     except (IrtpsError, OSError):
         return None
     same_run = record["source"] == str(resolve_path(source)) and _same_options(record["parameters"], options)
     return (maps, record.get("robust_used")) if same_run and meshes and indirect else None
 
 
-def _numbered_images(folder: Path) -> bool:
-    """Whether a folder holds ``000.exr``, ``001.exr`` … and nothing else, none empty."""
+def _complete_indirect(folder: Path, images: list[str]) -> bool:
+    """Whether a folder holds one file for each image fitted (`indirect_file_names`; images
+    numbered from ``000.exr`` where ``run.json`` does not list them) and nothing else, none
+    empty."""
     files = {file.name: file for file in folder.iterdir()}
-    return bool(files) and files.keys() == {f"{k:03d}.exr" for k in range(len(files))} and all(map(_nonempty_file, files.values()))
+    expected = indirect_file_names(images, len(images) if images else len(files))
+    return bool(files) and files.keys() == set(expected) and all(map(_nonempty_file, files.values()))
 
 
 def _nonempty_file(path: Path) -> bool:

@@ -300,8 +300,8 @@ def build_parser() -> argparse.ArgumentParser:
         "per-vertex albedo colour and normals), mesh.obj (the same mesh for any viewer) and run.json (parameters, "
         "timings, versions, the data set's path, the placement, the robust mode used and the lobe share that auto "
         "chose it by, the images fitted and those left out); with --method irtps also "
-        "indirect/NNN.exr (the estimated inter-reflected light in run.json's images[NNN], with the floor's light in the "
-        "edge pixels, that was subtracted) and each pass's residual in run.json: the reconstruction rendered again and compared with the "
+        "indirect/NAME.exr (for each image NAME.png or NAME.exr fitted, the estimated inter-reflected light, with the "
+        "floor's light in the edge pixels, that was subtracted) and each pass's residual in run.json: the reconstruction rendered again and compared with the "
         "images, the number to judge a run by without ground truth. The result is the pass with the lowest residual "
         "(pass 0 is classic PS). "
         "When DATA has ground truth, the errors are printed too. OUT is replaced atomically.",

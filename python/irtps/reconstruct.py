@@ -5,11 +5,13 @@ from __future__ import annotations
 import json
 import os
 import platform
+import re
 import time
 import warnings
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
@@ -32,6 +34,8 @@ from irtps.radiometry import AlbedoScale
 _EXR_WRITERS = max(1, min(4, os.cpu_count() or 1))
 #: What a reconstruction folder holds (`save_reconstruction`); ``indirect`` for IRT-PS only.
 RECONSTRUCTION_FILES = ("normal.exr", "albedo.exr", "height.exr", "mask.png", "mesh.ply", "mesh.obj", "run.json", "indirect")
+#: An image name's stem that can name its file in ``indirect/``: plain, not hidden.
+_PLAIN_STEM = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
 
 
 @dataclass
@@ -336,10 +340,10 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
     normals), ``mesh.obj`` (the same vertices, triangles and normals as Wavefront OBJ text,
     see `irtps.mesh`), ``run.json`` (parameters, pixel size, timings, versions, source,
     placement, IRT-PS history with each pass's residual, the pass chosen, the images fitted
-    and those left out) and, for IRT-PS, ``indirect/NNN.exr`` (the estimate of the
-    inter-reflected light in image ``images[NNN]`` of run.json that the chosen pass removed,
-    with the surroundings' light in the edge pixels, `irtps.surroundings`; none when that is
-    pass 0).
+    and those left out) and, for IRT-PS, ``indirect/`` (for each image fitted, the estimate of
+    its inter-reflected light that the chosen pass removed, with the surroundings' light in the
+    edge pixels, `irtps.surroundings`, named as `indirect_file_names` says; none when that
+    is pass 0).
 
     Parameters
     ----------
@@ -390,9 +394,31 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             (folder / "indirect").mkdir()
             # A few at a time (the core compresses with the GIL released), each image made as
             # it is written: never more than the writers' images in memory.
+            names = indirect_file_names(result.image_names, len(result.object_indirect))
             with ThreadPoolExecutor(max_workers=_EXR_WRITERS) as writers:
-                list(writers.map(lambda k: write_exr(folder / "indirect" / f"{k:03d}.exr", result.indirect_image(k)), range(len(result.object_indirect))))
+                list(writers.map(lambda k: write_exr(folder / "indirect" / names[k], result.indirect_image(k)), range(len(names))))
         (folder / "run.json").write_text(json.dumps(run, indent=2))
+
+
+def indirect_file_names(image_names: Sequence[str], count: int) -> list[str]:
+    """The files of a reconstruction's ``indirect/``, one for each of the `count` images fitted.
+
+    Each image's own name with ``.exr`` for its extension (``001.exr`` for DiLiGenT's
+    ``001.png``, ``000.exr`` for the contract layout's ``000.exr``), so that a file names
+    the image whatever was left out; ``000.exr``, ``001.exr`` … by position where the names
+    are not `count` distinct plain file names (letters, digits, ``_``, ``-``, ``.``).
+
+    Examples
+    --------
+    >>> indirect_file_names(["021.png", "041.png"], 2)
+    ['021.exr', '041.exr']
+    >>> indirect_file_names(["a/x.png", "b/x.png"], 2)
+    ['000.exr', '001.exr']
+    """
+    stems = [PurePosixPath(name).stem for name in image_names]
+    if len(stems) == count and len({stem.lower() for stem in stems}) == count and all(map(_PLAIN_STEM.fullmatch, stems)):
+        return [f"{stem}.exr" for stem in stems]
+    return [f"{k:03d}.exr" for k in range(count)]
 
 
 def load_reconstruction(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
