@@ -17,6 +17,8 @@ ROBUST_MODES = ("tukey", "lobe", "threshold", "trim", "none")
 FLAGS = {0: "fitted", 1: "full fit kept (too few non-coplanar lit observations)", 2: "no light", 3: "outside the mask", 4: "fitted with a specular lobe"}
 #: The flag of the pixels outside the mask.
 OUTSIDE_MASK = 3
+#: The flag of the pixels fitted as asked (with every mode but the lobe's).
+FITTED = 0
 
 
 @dataclass

@@ -19,6 +19,7 @@ from irtps.atomic import atomic_output_dir
 from irtps.data import pixel_observations
 from irtps.dataset import Dataset, load_dataset, read_albedo_map, read_height_map, read_normal_map
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
+from irtps.image_brightness import image_brightness
 from irtps.imageio import read_mask, write_exr, write_png
 from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
@@ -26,7 +27,7 @@ from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
 from irtps.pipeline import choose_dataset_robust, reconstruction_pass, resolve_options, timed
 from irtps.placement import Placement
-from irtps.ps import FLAGS, LOBE_ADVISED, check_lights, format_lobe_share
+from irtps.ps import FITTED, FLAGS, LOBE_ADVISED, LOBE_FITTED, PsResult, check_lights, format_lobe_share
 from irtps.radiometry import AlbedoScale
 
 #: Indirect images written at once, one per core up to 4 (on 2 cores, 2 writers take 0.7 of
@@ -89,6 +90,10 @@ class Reconstruction:
         image ``image_names[k]``'s.
     excluded_images : tuple of str
         The data set's images left out (`Dataset.excluded_images`).
+    image_brightness : numpy.ndarray or None
+        float64 (K,): each image fitted's brightness against the fit (of the pass returned),
+        relative to the median image's (`irtps.image_brightness`): an image far from 1 has a
+        light or exposure other than recorded, or moved.
     """
 
     normals: np.ndarray
@@ -108,6 +113,7 @@ class Reconstruction:
     robust_used: str | None = None
     image_names: tuple[str, ...] = ()
     excluded_images: tuple[str, ...] = ()
+    image_brightness: np.ndarray | None = None
 
     @property
     def indirect(self) -> np.ndarray | None:
@@ -220,6 +226,7 @@ def reconstruct(
             robust_used=options.robust,
             image_names=dataset.names,
             excluded_images=dataset.excluded_images,
+            image_brightness=_image_brightness(dataset, loop.fit, options.saturation),
         )
     # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
     first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
@@ -238,6 +245,7 @@ def reconstruct(
         robust_used=options.robust,
         image_names=dataset.names,
         excluded_images=dataset.excluded_images,
+        image_brightness=_image_brightness(dataset, first.fit, options.saturation),
     )
 
 
@@ -295,6 +303,16 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, *, exclude
     return dataset, result
 
 
+def _image_brightness(dataset: Dataset, fit: PsResult, saturation: float | None) -> np.ndarray:
+    """Each image's brightness against `fit` (`irtps.image_brightness`), over the pixels it
+    fitted as asked or with a lobe."""
+    fitted = dataset.mask & ((fit.flags == FITTED) | (fit.flags == LOBE_FITTED))
+    if not fitted.any():
+        return np.full(len(dataset.scene.lights), np.nan)
+    scene = dataset.scene
+    return image_brightness(dataset.images, scene.light_directions, scene.light_irradiance, fit.normals, fit.albedo, fitted, saturation=saturation)
+
+
 def _advise_lobe(dataset: Dataset, robust_used: str, share: float) -> None:
     """Warn when the data set's `irtps.ps.lobe_share` advises the lobe mode and the fit is
     another mode's."""
@@ -339,8 +357,8 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
     ``mask.png``, ``mesh.ply`` (binary; the height field with per-vertex albedo colour and
     normals), ``mesh.obj`` (the same vertices, triangles and normals as Wavefront OBJ text,
     see `irtps.mesh`), ``run.json`` (parameters, pixel size, timings, versions, source,
-    placement, IRT-PS history with each pass's residual, the pass chosen, the images fitted
-    and those left out) and, for IRT-PS, ``indirect/`` (for each image fitted, the estimate of
+    placement, IRT-PS history with each pass's residual, the pass chosen, the images fitted,
+    each one's brightness against the fit, and those left out) and, for IRT-PS, ``indirect/`` (for each image fitted, the estimate of
     its inter-reflected light that the chosen pass removed, with the surroundings' light in the
     edge pixels, `irtps.surroundings`, named as `indirect_file_names` says; none when that
     is pass 0).
@@ -389,6 +407,7 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             "robust_used": result.robust_used,
             "images": list(result.image_names),
             "excluded_images": list(result.excluded_images),
+            "image_brightness": _brightness_record(result),
         }
         if result.object_indirect is not None:
             (folder / "indirect").mkdir()
@@ -398,6 +417,13 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             with ThreadPoolExecutor(max_workers=_EXR_WRITERS) as writers:
                 list(writers.map(lambda k: write_exr(folder / "indirect" / names[k], result.indirect_image(k)), range(len(names))))
         (folder / "run.json").write_text(json.dumps(run, indent=2))
+
+
+def _brightness_record(result: Reconstruction) -> list[float | None] | None:
+    """`Reconstruction.image_brightness` for ``run.json``: null where not known."""
+    if result.image_brightness is None:
+        return None
+    return [None if np.isnan(value) else round(float(value), 4) for value in result.image_brightness]
 
 
 def indirect_file_names(image_names: Sequence[str], count: int) -> list[str]:
@@ -463,6 +489,7 @@ _OPTIONAL_RUN_FIELDS = {
     "robust_used": (str, type(None)),
     "images": (list,),
     "excluded_images": (list,),
+    "image_brightness": (list, type(None)),
 }
 _HISTORY_FIELDS = {"index": (int,), "height_change": (int, float, type(None)), "timings": (dict,), "metrics": (dict, type(None))}
 _JSON_TYPE_NAMES = {dict: "an object", list: "a list", str: "a string", int: "a number", float: "a number", type(None): "null"}

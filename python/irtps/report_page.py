@@ -12,6 +12,7 @@ from html import escape
 from typing import TYPE_CHECKING
 
 from irtps.evaluate import format_metrics
+from irtps.image_brightness import format_image_brightness
 from irtps.image_selection import format_images_fitted
 from irtps.placement import format_placement
 from irtps.ps import format_lobe_share
@@ -126,8 +127,16 @@ def _summary(report: Report) -> str:
     if record.get("lobe_share") is not None:
         placement += f" {format_lobe_share(record['lobe_share'], record.get('robust_used'))}."
     if record.get("excluded_images"):
-        placement += f" {format_images_fitted(len(record.get('images', [])), record['excluded_images']).capitalize()}."
+        placement += f" {_sentence(format_images_fitted(len(record.get('images', [])), record['excluded_images']))}."
+    if record.get("image_brightness") is not None and len(record["image_brightness"]) == len(record.get("images", [])):
+        brightness = [float("nan") if value is None else value for value in record["image_brightness"]]
+        placement += f" {_sentence(format_image_brightness(record['images'], brightness))}."
     return f"{method} of {source}: {cols}×{rows} pixels, {report.object_pixels} on the object{scale}.{placement} Folder: {report.run_dir}."
+
+
+def _sentence(text: str) -> str:
+    """`text` with a capital first letter, the rest as it is (file names keep their case)."""
+    return text[:1].upper() + text[1:]
 
 
 def _figure(figure: ReportFigure) -> str:
