@@ -112,6 +112,21 @@ class Dataset:
                     _expect_shape(f"Dataset.gt.{name}", value, shape)
 
 
+def spread_pixels(mask: np.ndarray, count: int) -> np.ndarray:
+    """Flat indices of `count` of the pixels of `mask`, spread evenly over them in row-major
+    order (all of them when it has no more).
+
+    Examples
+    --------
+    >>> spread_pixels(np.ones((2, 5), bool), 4).tolist()
+    [0, 3, 6, 9]
+    """
+    pixels = np.flatnonzero(mask)
+    if pixels.size <= count:
+        return pixels
+    return pixels[np.unique(np.linspace(0, pixels.size - 1, count).round().astype(np.intp))]
+
+
 def image_file_name(k: int, suffix: str = ".exr") -> str:
     """The file name of image `k` (from 0) in the irtps layout: ``000.exr`` ..."""
     return f"{k:03d}{suffix}"

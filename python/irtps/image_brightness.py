@@ -16,10 +16,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from irtps._checks import check_array, check_mask, check_positive
-from irtps.data import pixel_observations
+from irtps.data import pixel_observations, spread_pixels
 from irtps.errors import ArgumentError
 
-__all__ = ["MIN_PIXELS", "WELL_LIT", "format_image_brightness", "image_brightness"]
+__all__ = ["MIN_PIXELS", "SAMPLE", "WELL_LIT", "format_image_brightness", "image_brightness"]
 
 #: Least cosine between a pixel's fitted normal and a light for the pixel to count in that
 #: light's image (60° from the light): away from grazing light, where the fall-off of real
@@ -27,6 +27,9 @@ __all__ = ["MIN_PIXELS", "WELL_LIT", "format_image_brightness", "image_brightnes
 WELL_LIT = 0.5
 #: Fewest pixels an image needs for its brightness to be given.
 MIN_PIXELS = 20
+#: Object pixels measured by default, spread evenly over the mask: the median of a few
+#: thousand ratios is within a few thousandths of all of them, at a fraction of the time.
+SAMPLE = 4096
 
 
 def image_brightness(
@@ -38,10 +41,12 @@ def image_brightness(
     mask: np.ndarray,
     *,
     saturation: float | None = None,
+    sample: int = SAMPLE,
 ) -> np.ndarray:
     """Each image's brightness against a Lambertian fit, relative to the other images'.
 
-    For image k: the median, over the pixels of `mask` whose fitted normal the light lights
+    For image k: the median, over the pixels of `mask` (`sample` of them, spread evenly over
+    it, when it has more) whose fitted normal the light lights
     well (``n·l`` at least `WELL_LIT`) and whose observation is neither saturated nor
     black, of the observed brightness (channels summed) over the fitted one,
     ``ρ ⊙ E_k · (n·l) / π``; then divided by the median over the images. An image whose
@@ -60,6 +65,8 @@ def image_brightness(
         (H, W) bool: the pixels to use (the fitted ones).
     saturation : float, optional
         Observations with a channel at or above it are left out.
+    sample : int
+        Most pixels measured.
 
     Returns
     -------
@@ -71,7 +78,7 @@ def image_brightness(
     ------
     ArgumentError
         Naming the argument: shapes that disagree, a mask with no pixel, a `saturation`
-        that is not positive.
+        that is not positive, a `sample` below 1.
 
     Examples
     --------
@@ -93,13 +100,21 @@ def image_brightness(
     mask = check_mask(mask, size, match="images", nonempty=True)
     if saturation is not None:
         saturation = check_positive("saturation", saturation)
+    if isinstance(sample, bool) or not (isinstance(sample, (int, np.integer)) and sample >= 1):
+        raise ArgumentError("sample", f"{sample!r} is not a positive integer")
+    chosen = spread_pixels(mask, int(sample))
+    mask = np.zeros_like(mask)
+    mask.flat[chosen] = True
     observed = pixel_observations(images, mask)  # (K, N, 3)
+    # Channel by channel: numpy reduces a last axis of 3 several times slower.
+    red, green, blue = observed[..., 0], observed[..., 1], observed[..., 2]
+    summed = red + green + blue
     cosine = directions @ normals[mask].T  # (K, N)
     fitted = (irradiance @ albedo[mask].T) * cosine / np.pi
-    usable = (cosine >= WELL_LIT) & (fitted > 0) & (observed.sum(axis=2) > 0)
+    usable = (cosine >= WELL_LIT) & (fitted > 0) & (summed > 0)
     if saturation is not None:
-        usable &= (observed < saturation).all(axis=2)
-    ratio = np.divide(observed.sum(axis=2), fitted, out=np.zeros_like(fitted), where=usable)
+        usable &= (red < saturation) & (green < saturation) & (blue < saturation)
+    ratio = np.divide(summed, fitted, out=np.zeros_like(fitted), where=usable)
     brightness = np.array([np.median(ratio[k, usable[k]]) if usable[k].sum() >= MIN_PIXELS else np.nan for k in range(count)])
     if np.isnan(brightness).all():
         return brightness

@@ -9,6 +9,7 @@ from tqdm import tqdm
 
 from irtps import _core
 from irtps._checks import check_array, check_choice, check_mask, check_number, check_positive, document_choices
+from irtps.data import spread_pixels
 from irtps.errors import ArgumentError
 
 #: Robust modes of `photometric_stereo`, the default first.
@@ -308,10 +309,9 @@ def lobe_share(
     mask = check_mask(mask, images.shape[1:3], match="images")
     if isinstance(sample, bool) or not (isinstance(sample, (int, np.integer)) and sample >= 1):
         raise ArgumentError("sample", f"{sample!r} is not a positive integer")
-    pixels = np.flatnonzero(mask)
-    if pixels.size == 0:
+    chosen = spread_pixels(mask, int(sample))
+    if chosen.size == 0:
         return 0.0
-    chosen = pixels[np.unique(np.linspace(0, pixels.size - 1, min(int(sample), pixels.size)).round().astype(np.intp))]
     rows, cols = np.unravel_index(chosen, mask.shape)
     observed = images[:, rows, cols][:, None]  # (K, 1, N, 3): one row of the chosen pixels
     fit = photometric_stereo(observed, light_directions, light_irradiance, robust="lobe", shadow_fraction=shadow_fraction, saturation=saturation)

@@ -188,7 +188,7 @@ def reconstruct(
     >>> data, _ = synthesize("cap", size=24, lights=6, bounces=0, environment="none")
     >>> result = reconstruct(data)
     >>> result.normals.shape, sorted(result.timings)
-    ((24, 24, 3), ['integration', 'lobe_share', 'photometric_stereo', 'placement'])
+    ((24, 24, 3), ['image_brightness', 'integration', 'lobe_share', 'photometric_stereo', 'placement'])
     >>> reconstruct(data, samples=0)
     Traceback (most recent call last):
     ...
@@ -208,6 +208,8 @@ def reconstruct(
     if options.method == "irtps":
         with timed(timings, "irtps"):
             loop = remove_interreflections(dataset, options, progress=progress)
+        with timed(timings, "image_brightness"):
+            brightness = _image_brightness(dataset, loop.fit, options.saturation)
         return Reconstruction(
             normals=loop.fit.normals,
             albedo=loop.albedo,
@@ -226,10 +228,13 @@ def reconstruct(
             robust_used=options.robust,
             image_names=dataset.names,
             excluded_images=dataset.excluded_images,
-            image_brightness=_image_brightness(dataset, loop.fit, options.saturation),
+            image_brightness=brightness,
         )
     # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
     first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
+    timings.update(first.timings)
+    with timed(timings, "image_brightness"):
+        brightness = _image_brightness(dataset, first.fit, options.saturation)
     return Reconstruction(
         normals=first.fit.normals,
         albedo=first.fit.albedo,
@@ -237,7 +242,7 @@ def reconstruct(
         mask=dataset.mask,
         flags=first.fit.flags,
         pixel_size=dataset.scene.camera.pixel_size,
-        timings={**timings, **first.timings},
+        timings=timings,
         parameters=parameters,
         placement=first.placement,
         albedo_scale=first.albedo_scale,
@@ -245,7 +250,7 @@ def reconstruct(
         robust_used=options.robust,
         image_names=dataset.names,
         excluded_images=dataset.excluded_images,
-        image_brightness=_image_brightness(dataset, first.fit, options.saturation),
+        image_brightness=brightness,
     )
 
 
@@ -289,7 +294,7 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, *, exclude
     ...     save_dataset(data, folder + "/cap")
     ...     dataset, result = load_and_reconstruct(folder + "/cap")
     >>> list(result.timings)
-    ['load', 'lobe_share', 'photometric_stereo', 'integration', 'placement']
+    ['load', 'lobe_share', 'photometric_stereo', 'integration', 'placement', 'image_brightness']
     """
     if method is not None:
         options["method"] = method
