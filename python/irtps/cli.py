@@ -25,7 +25,7 @@ from irtps.options import ClusterOptions, OptionError, ReconstructOptions, Rende
 from irtps.output_rule import check_output, escaped, written_by_irtps
 from irtps.paths import check_folder, resolve_path
 from irtps.placement import format_placement
-from irtps.ps import LOBE_ADVISED, format_lobe_share
+from irtps.ps import format_lobe_share
 from irtps.radiometry import format_albedo_scale
 from irtps.reconstruct import load_and_reconstruct, load_reconstruction, save_reconstruction
 from irtps.render import Rendering, render
@@ -82,7 +82,7 @@ def _robust_line(asked: str, used: str | None, share: float | None) -> str:
     if share is None:
         return f"robust mode {used}"
     if asked == "auto":
-        return f"robust mode {used}, chosen by auto: {100 * share:.0f} % of the object's pixels take a specular lobe (lobe from {100 * LOBE_ADVISED:.0f} %)"
+        return f"robust mode {used}, chosen by auto: {format_lobe_share(share, auto=True)}"
     return f"robust mode {used}; {format_lobe_share(share, used)}"
 
 

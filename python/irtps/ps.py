@@ -231,7 +231,7 @@ def choose_robust(share: float) -> str:
     return "lobe" if fraction >= LOBE_ADVISED else "tukey"
 
 
-def format_lobe_share(share: float, robust_used: str | None = None) -> str:
+def format_lobe_share(share: float, robust_used: str | None = None, *, auto: bool = False) -> str:
     """One sentence on a `lobe_share` and on what it made of the fit.
 
     Parameters
@@ -241,6 +241,8 @@ def format_lobe_share(share: float, robust_used: str | None = None) -> str:
     robust_used : str, optional
         The robust mode the fit used: a ``"lobe"`` fit is said to be one; another mode gets
         the advice from `LOBE_ADVISED` on.
+    auto : bool
+        The share chose the mode (`choose_robust`): the sentence gives the line instead.
 
     Examples
     --------
@@ -250,8 +252,12 @@ def format_lobe_share(share: float, robust_used: str | None = None) -> str:
     "87 % of the object's pixels take a specular lobe: fitted with robust mode 'lobe'"
     >>> format_lobe_share(0.12, "tukey")
     "12 % of the object's pixels take a specular lobe"
+    >>> format_lobe_share(0.12, auto=True)
+    "12 % of the object's pixels take a specular lobe (lobe from 50 %)"
     """
     sentence = f"{100 * share:.0f} % of the object's pixels take a specular lobe"
+    if auto:
+        return f"{sentence} (lobe from {100 * LOBE_ADVISED:.0f} %)"
     if robust_used == "lobe":
         return sentence + ": fitted with robust mode 'lobe'"
     return sentence + (": robust mode 'lobe' (--robust lobe) is advised" if share >= LOBE_ADVISED else "")
