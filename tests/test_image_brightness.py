@@ -82,3 +82,15 @@ def test_the_command_prints_and_records_each_image_brightness(tmp_path, capsys):
     run = json.loads((tmp_path / "out" / "run.json").read_text())
     assert len(run["image_brightness"]) == len(run["images"]) == 8
     assert all(0.95 < value < 1.05 for value in run["image_brightness"])
+
+
+def test_irtps_measures_the_images_against_classic_photometric_stereo():
+    """Inter-reflections add light to every image, by how much depends on the light: the
+    brightness is measured against pass 0's fit, of the images as they are, whatever pass
+    IRT-PS returns."""
+    data, _ = synthesize("cavity", size=32, lights=6, bounces=2, environment="cornell", samples=16, seed=2)
+    classic = reconstruct(data)
+    corrected = reconstruct(data, "irtps", iterations=1, samples=8)
+    assert corrected.chosen == 1  # not classic photometric stereo's fit
+    np.testing.assert_array_equal(corrected.image_brightness, classic.image_brightness)
+    assert np.all(np.abs(classic.image_brightness - 1) < 0.05), classic.image_brightness

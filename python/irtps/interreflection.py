@@ -93,7 +93,8 @@ class InterreflectionResult:
     of its fit), placed height, the estimate subtracted from the object's pixels to get its
     images ((K, N, 3) at the mask's N pixels, row-major: the inter-reflections and, in edge
     pixels, the surroundings' light, `irtps.surroundings`; None for pass 0), the placement,
-    the albedo scale it rendered with, and every pass's record."""
+    the albedo scale it rendered with, and every pass's record; and pass 0's fit (classic
+    photometric stereo's, of the images as they are)."""
 
     fit: PsResult
     albedo: np.ndarray
@@ -103,6 +104,7 @@ class InterreflectionResult:
     placement: Placement
     chosen: int = 0
     albedo_scale: AlbedoScale | None = None
+    first_fit: PsResult | None = None
 
 
 def remove_interreflections(
@@ -193,9 +195,12 @@ def remove_interreflections(
     best: tuple[Residual, int, Pass, np.ndarray | None] | None = None
     stalled = 0
     history: list[Iteration] = []
+    first_fit: PsResult | None = None
     with tqdm(total=options.iterations + 1, desc="IRT-PS", unit="pass", disable=not progress, leave=False) as bar:
         for index in range(options.iterations + 1):
             current = reconstruction_pass(dataset, images, options, previous=previous, usable=usable, rendered=True, coverage=coverage)
+            if index == 0:
+                first_fit = current.fit
             timings = current.timings
             render_scene, render_albedo = rendered_as(scene, current.albedo, current.albedo_scale)
             seed = options.seed + index
@@ -279,6 +284,7 @@ def remove_interreflections(
         placement=chosen_pass.placement,
         chosen=chosen,
         albedo_scale=chosen_pass.albedo_scale,
+        first_fit=first_fit,
     )
 
 

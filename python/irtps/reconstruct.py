@@ -91,9 +91,10 @@ class Reconstruction:
     excluded_images : tuple of str
         The data set's images left out (`Dataset.excluded_images`).
     image_brightness : numpy.ndarray or None
-        float64 (K,): each image fitted's brightness against the fit (of the pass returned),
-        relative to the median image's (`irtps.image_brightness`): an image far from 1 has a
-        light or exposure other than recorded, or moved.
+        float64 (K,): each image fitted's brightness against classic photometric stereo's
+        fit of the images as they are (IRT-PS's pass 0), relative to the median image's
+        (`irtps.image_brightness`): an image far from 1 has a light or exposure other than
+        recorded, or moved.
     """
 
     normals: np.ndarray
@@ -209,7 +210,7 @@ def reconstruct(
         with timed(timings, "irtps"):
             loop = remove_interreflections(dataset, options, progress=progress)
         with timed(timings, "image_brightness"):
-            brightness = _image_brightness(dataset, loop.fit, options.saturation)
+            brightness = _image_brightness(dataset, loop.first_fit or loop.fit, options.saturation)
         return Reconstruction(
             normals=loop.fit.normals,
             albedo=loop.albedo,
