@@ -1,12 +1,12 @@
-"""Faulty images: how far each image's brightness against the fit shows them, and what
-leaving them out gives back, on every shared data set.
+"""Faulty images: how far each image's agreement with the fit shows them, and what leaving
+them out gives back, on every shared data set.
 
 For each data set under ``../shared/data``: the default reconstruction of the images as they
-are, then (on the real objects, whose lights are the ones a user's rig gets wrong) with
-images 1-20 made 1.2x and 1.5x too bright, and 5 images spread over the set 2x. Prints the
-range of `Reconstruction.image_brightness` over the sound images and over the faulty ones,
-and the mean angular error as it is and with the faulty images left out
-(`irtps.exclude_images`).
+are, then (on the real objects, whose rigs are the ones that go wrong) with images 1-20 made
+1.2x and 1.5x too bright, 5 images spread over the set 2x, and images 1-20 shifted by 3
+pixels (taken as the object moved). Prints the range of `Reconstruction.image_agreement`'s
+brightness and spread over the sound images and over the faulty ones, and the mean angular
+error as it is and with the faulty images left out (`irtps.exclude_images`).
 
 Usage::
 
@@ -28,8 +28,14 @@ import irtps
 from irtps.errors import IrtpsWarning
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-#: The faults tried on real objects: a name, the images (from 0) and the factor.
-FAULTS = (("1-20 x1.2", range(20), 1.2), ("1-20 x1.5", range(20), 1.5), ("5 images x2", (3, 30, 50, 70, 90), 2.0))
+FIRST_20 = range(20)
+#: The faults tried on real objects: a name, the images (from 0) and what is done to them.
+FAULTS = (
+    ("1-20 x1.2", FIRST_20, lambda images: images * 1.2),
+    ("1-20 x1.5", FIRST_20, lambda images: images * 1.5),
+    ("5 images x2", (3, 30, 50, 70, 90), lambda images: images * 2.0),
+    ("1-20 shifted", FIRST_20, lambda images: np.roll(images, 3, axis=2)),
+)
 
 
 def error(dataset, result) -> float:
@@ -53,20 +59,21 @@ def main() -> None:
     for folder in folders:
         dataset = irtps.load_dataset(folder)
         result = irtps.reconstruct(dataset)
-        print(f"{folder.name:18s} as given     brightness {spread(result.image_brightness)}  error {error(dataset, result):.3f}", flush=True)
+        agreement = result.image_agreement
+        print(f"{folder.name:18s} as given      brightness {spread(agreement.brightness)}  spread {spread(agreement.spread)}  error {error(dataset, result):.3f}", flush=True)
         if not dataset.scene.relative_irradiance:
             continue  # rendered: the lights are exactly as recorded
-        for label, images, factor in FAULTS:
+        for label, images, fault in FAULTS:
             faulty = dataclasses.replace(dataset, images=dataset.images.copy())
-            faulty.images[list(images)] *= factor
-            result = irtps.reconstruct(faulty)
+            faulty.images[list(images)] = fault(faulty.images[list(images)])
+            agreement = irtps.reconstruct(faulty).image_agreement
             bad = np.zeros(len(dataset.names), bool)
             bad[list(images)] = True
-            listed = ",".join(dataset.names[k] for k in np.flatnonzero(bad))
-            left_out = irtps.reconstruct(irtps.exclude_images(faulty, listed))
+            left_out = irtps.reconstruct(irtps.exclude_images(faulty, ",".join(dataset.names[k] for k in np.flatnonzero(bad))))
             print(
-                f"{folder.name:18s} {label:12s} brightness sound {spread(result.image_brightness[~bad])}, faulty "
-                f"{spread(result.image_brightness[bad])}  error {error(dataset, result):.3f}, faulty left out {error(dataset, left_out):.3f}",
+                f"{folder.name:18s} {label:13s} brightness sound {spread(agreement.brightness[~bad])}, faulty {spread(agreement.brightness[bad])}  "
+                f"spread sound {spread(agreement.spread[~bad])}, faulty {spread(agreement.spread[bad])}  "
+                f"error {error(dataset, irtps.reconstruct(faulty)):.3f}, faulty left out {error(dataset, left_out):.3f}",
                 flush=True,
             )
 

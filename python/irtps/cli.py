@@ -19,7 +19,7 @@ from irtps.batch import SUMMARY_JSON, SUMMARY_MARKDOWN, connect, local_cluster, 
 from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object, load_ground_truth, save_dataset
 from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate, format_metrics
-from irtps.image_brightness import format_image_brightness
+from irtps.image_agreement import format_image_agreement
 from irtps.image_selection import format_images_fitted
 from irtps.options import ClusterOptions, OptionError, ReconstructOptions, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
 from irtps.output_rule import check_output, escaped, written_by_irtps
@@ -97,8 +97,9 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
         if result.excluded_images:
             print(f"  {format_images_fitted(len(result.image_names), result.excluded_images)}")
         print(f"  {_robust_line(options.robust, result.robust_used, result.lobe_share)}")
-        if result.image_brightness is not None:
-            print(f"  {format_image_brightness(result.image_names, result.image_brightness)}")
+        if result.image_agreement is not None:
+            for line in format_image_agreement(result.image_names, result.image_agreement):
+                print(f"  {line}")
         if result.placement is not None:
             print(f"  placement: {format_placement(result.placement)}")
         if result.albedo_scale is not None:
@@ -302,8 +303,9 @@ def build_parser() -> argparse.ArgumentParser:
         "normal.exr (R, G, B = nx, ny, nz), albedo.exr, height.exr, mask.png, mesh.ply (the height field with "
         "per-vertex albedo colour and normals), mesh.obj (the same mesh for any viewer) and run.json (parameters, "
         "timings, versions, the data set's path, the placement, the robust mode used and the lobe share that auto "
-        "chose it by, the images fitted and those left out, and each image's brightness against the fit: one far from "
-        "the others, printed among the farthest, had another light or exposure than recorded, or moved); with --method irtps also "
+        "chose it by, the images fitted and those left out, and how each image agrees with the fit: one whose brightness "
+        "is far from the others' had another light or exposure than recorded, one whose spread is wider was taken as "
+        "the object or the camera moved); with --method irtps also "
         "indirect/NAME.exr (for each image NAME.png or NAME.exr fitted, the estimated inter-reflected light, with the "
         "floor's light in the edge pixels, that was subtracted) and each pass's residual in run.json: the reconstruction rendered again and compared with the "
         "images, the number to judge a run by without ground truth. The result is the pass with the lowest residual "

@@ -19,7 +19,7 @@ from irtps.atomic import atomic_output_dir
 from irtps.data import pixel_observations
 from irtps.dataset import Dataset, load_dataset, read_albedo_map, read_height_map, read_normal_map
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
-from irtps.image_brightness import image_brightness
+from irtps.image_agreement import ImageAgreement, image_agreement
 from irtps.imageio import read_mask, write_exr, write_png
 from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
@@ -90,11 +90,11 @@ class Reconstruction:
         image ``image_names[k]``'s.
     excluded_images : tuple of str
         The data set's images left out (`Dataset.excluded_images`).
-    image_brightness : numpy.ndarray or None
-        float64 (K,): each image fitted's brightness against classic photometric stereo's
-        fit of the images as they are (IRT-PS's pass 0), relative to the median image's
-        (`irtps.image_brightness`): an image far from 1 has a light or exposure other than
-        recorded, or moved.
+    image_agreement : ImageAgreement or None
+        How each image fitted agrees with classic photometric stereo's fit of the images as
+        they are (IRT-PS's pass 0; `irtps.image_agreement`): an image whose brightness is far
+        from the others' had another light or exposure than recorded; one whose spread is
+        wider was taken as the object or the camera moved.
     """
 
     normals: np.ndarray
@@ -114,7 +114,7 @@ class Reconstruction:
     robust_used: str | None = None
     image_names: tuple[str, ...] = ()
     excluded_images: tuple[str, ...] = ()
-    image_brightness: np.ndarray | None = None
+    image_agreement: ImageAgreement | None = None
 
     @property
     def indirect(self) -> np.ndarray | None:
@@ -189,7 +189,7 @@ def reconstruct(
     >>> data, _ = synthesize("cap", size=24, lights=6, bounces=0, environment="none")
     >>> result = reconstruct(data)
     >>> result.normals.shape, sorted(result.timings)
-    ((24, 24, 3), ['image_brightness', 'integration', 'lobe_share', 'photometric_stereo', 'placement'])
+    ((24, 24, 3), ['image_agreement', 'integration', 'lobe_share', 'photometric_stereo', 'placement'])
     >>> reconstruct(data, samples=0)
     Traceback (most recent call last):
     ...
@@ -209,8 +209,8 @@ def reconstruct(
     if options.method == "irtps":
         with timed(timings, "irtps"):
             loop = remove_interreflections(dataset, options, progress=progress)
-        with timed(timings, "image_brightness"):
-            brightness = _image_brightness(dataset, loop.first_fit or loop.fit, options.saturation)
+        with timed(timings, "image_agreement"):
+            agreement = _image_agreement(dataset, loop.first_fit or loop.fit, options.saturation)
         return Reconstruction(
             normals=loop.fit.normals,
             albedo=loop.albedo,
@@ -229,13 +229,13 @@ def reconstruct(
             robust_used=options.robust,
             image_names=dataset.names,
             excluded_images=dataset.excluded_images,
-            image_brightness=brightness,
+            image_agreement=agreement,
         )
     # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
     first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
     timings.update(first.timings)
-    with timed(timings, "image_brightness"):
-        brightness = _image_brightness(dataset, first.fit, options.saturation)
+    with timed(timings, "image_agreement"):
+        agreement = _image_agreement(dataset, first.fit, options.saturation)
     return Reconstruction(
         normals=first.fit.normals,
         albedo=first.fit.albedo,
@@ -251,7 +251,7 @@ def reconstruct(
         robust_used=options.robust,
         image_names=dataset.names,
         excluded_images=dataset.excluded_images,
-        image_brightness=brightness,
+        image_agreement=agreement,
     )
 
 
@@ -295,7 +295,7 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, *, exclude
     ...     save_dataset(data, folder + "/cap")
     ...     dataset, result = load_and_reconstruct(folder + "/cap")
     >>> list(result.timings)
-    ['load', 'lobe_share', 'photometric_stereo', 'integration', 'placement', 'image_brightness']
+    ['load', 'lobe_share', 'photometric_stereo', 'integration', 'placement', 'image_agreement']
     """
     if method is not None:
         options["method"] = method
@@ -309,14 +309,15 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, *, exclude
     return dataset, result
 
 
-def _image_brightness(dataset: Dataset, fit: PsResult, saturation: float | None) -> np.ndarray:
-    """Each image's brightness against `fit` (`irtps.image_brightness`), over the pixels it
-    fitted as asked or with a lobe."""
+def _image_agreement(dataset: Dataset, fit: PsResult, saturation: float | None) -> ImageAgreement:
+    """How each image agrees with `fit` (`irtps.image_agreement`), over the pixels it fitted
+    as asked or with a lobe."""
     fitted = dataset.mask & ((fit.flags == FITTED) | (fit.flags == LOBE_FITTED))
     if not fitted.any():
-        return np.full(len(dataset.scene.lights), np.nan)
+        unknown = np.full(len(dataset.scene.lights), np.nan)
+        return ImageAgreement(unknown, unknown.copy())
     scene = dataset.scene
-    return image_brightness(dataset.images, scene.light_directions, scene.light_irradiance, fit.normals, fit.albedo, fitted, saturation=saturation)
+    return image_agreement(dataset.images, scene.light_directions, scene.light_irradiance, fit.normals, fit.albedo, fitted, saturation=saturation)
 
 
 def _advise_lobe(dataset: Dataset, robust_used: str, share: float) -> None:
@@ -364,7 +365,7 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
     normals), ``mesh.obj`` (the same vertices, triangles and normals as Wavefront OBJ text,
     see `irtps.mesh`), ``run.json`` (parameters, pixel size, timings, versions, source,
     placement, IRT-PS history with each pass's residual, the pass chosen, the images fitted,
-    each one's brightness against the fit, and those left out) and, for IRT-PS, ``indirect/`` (for each image fitted, the estimate of
+    how each agrees with the fit, and those left out) and, for IRT-PS, ``indirect/`` (for each image fitted, the estimate of
     its inter-reflected light that the chosen pass removed, with the surroundings' light in the
     edge pixels, `irtps.surroundings`, named as `indirect_file_names` says; none when that
     is pass 0).
@@ -413,7 +414,7 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             "robust_used": result.robust_used,
             "images": list(result.image_names),
             "excluded_images": list(result.excluded_images),
-            "image_brightness": _brightness_record(result),
+            "image_agreement": None if result.image_agreement is None else result.image_agreement.to_dict(),
         }
         if result.object_indirect is not None:
             (folder / "indirect").mkdir()
@@ -423,13 +424,6 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             with ThreadPoolExecutor(max_workers=_EXR_WRITERS) as writers:
                 list(writers.map(lambda k: write_exr(folder / "indirect" / names[k], result.indirect_image(k)), range(len(names))))
         (folder / "run.json").write_text(json.dumps(run, indent=2))
-
-
-def _brightness_record(result: Reconstruction) -> list[float | None] | None:
-    """`Reconstruction.image_brightness` for ``run.json``: null where not known."""
-    if result.image_brightness is None:
-        return None
-    return [None if np.isnan(value) else round(float(value), 4) for value in result.image_brightness]
 
 
 def indirect_file_names(image_names: Sequence[str], count: int) -> list[str]:
@@ -495,7 +489,7 @@ _OPTIONAL_RUN_FIELDS = {
     "robust_used": (str, type(None)),
     "images": (list,),
     "excluded_images": (list,),
-    "image_brightness": (list, type(None)),
+    "image_agreement": (dict, type(None)),
 }
 _HISTORY_FIELDS = {"index": (int,), "height_change": (int, float, type(None)), "timings": (dict,), "metrics": (dict, type(None))}
 _JSON_TYPE_NAMES = {dict: "an object", list: "a list", str: "a string", int: "a number", float: "a number", type(None): "null"}

@@ -11,8 +11,9 @@ import json
 from html import escape
 from typing import TYPE_CHECKING
 
+from irtps.errors import ArgumentError
 from irtps.evaluate import format_metrics
-from irtps.image_brightness import format_image_brightness
+from irtps.image_agreement import ImageAgreement, format_image_agreement
 from irtps.image_selection import format_images_fitted
 from irtps.placement import format_placement
 from irtps.ps import format_lobe_share
@@ -128,10 +129,21 @@ def _summary(report: Report) -> str:
         placement += f" {format_lobe_share(record['lobe_share'], record.get('robust_used'))}."
     if record.get("excluded_images"):
         placement += f" {_sentence(format_images_fitted(len(record.get('images', [])), record['excluded_images']))}."
-    if record.get("image_brightness") is not None and len(record["image_brightness"]) == len(record.get("images", [])):
-        brightness = [float("nan") if value is None else value for value in record["image_brightness"]]
-        placement += f" {_sentence(format_image_brightness(record['images'], brightness))}."
+    agreement = _image_agreement(record)
+    if agreement is not None:
+        placement += "".join(f" {_sentence(line)}." for line in format_image_agreement(record["images"], agreement))
     return f"{method} of {source}: {cols}×{rows} pixels, {report.object_pixels} on the object{scale}.{placement} Folder: {report.run_dir}."
+
+
+def _image_agreement(record: dict) -> ImageAgreement | None:
+    """The run's `ImageAgreement`, if it recorded one that fits its list of images."""
+    if record.get("image_agreement") is None or not isinstance(record.get("images"), list):
+        return None
+    try:
+        agreement = ImageAgreement.from_dict(record["image_agreement"])
+    except ArgumentError:
+        return None
+    return agreement if len(agreement.brightness) == len(record["images"]) else None
 
 
 def _sentence(text: str) -> str:
