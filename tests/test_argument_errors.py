@@ -68,6 +68,7 @@ CASES = {
     "irtps.figures.image_png": (lambda f: f(HEIGHT, "t"), "rgb: "),
     "irtps.figures.error_map_png": (lambda f: f(np.full((2, 2), np.nan), "t", "u"), "errors: "),
     "irtps.figures.convergence_png": (lambda f: f([0, 1], [1.0], [0.1, 0.2]), "passes: "),
+    "irtps.figures.agreement_png": (lambda f: f(["a.png"], [np.nan], [np.nan]), "brightness: "),
     "irtps.integrate.integrate_normals": (lambda f: f(NORMALS, method="poisson"), "method: "),
     "irtps.integrate.normals_to_gradients": (lambda f: f(NORMALS, max_slope=-1), "max_slope: "),
     "irtps.integrate.place_height": (lambda f: f(HEIGHT, WRONG), "mask: "),

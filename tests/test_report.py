@@ -68,7 +68,7 @@ def _decode_png(data: bytes) -> np.ndarray:
 def test_irtps_run_gets_every_figure_and_a_self_contained_page(run_copy):
     page = write_report(run_copy)
     assert page == run_copy / "report" / "index.html"
-    expected = BASE_FIGURES + ["indirect"] + ERROR_FIGURES + ["convergence"]
+    expected = BASE_FIGURES + ["indirect"] + ERROR_FIGURES + ["convergence", "agreement"]
     assert sorted(p.name for p in page.parent.iterdir()) == sorted([f"{name}.png" for name in expected] + ["index.html"])
     parsed = _parse(page)
     assert len(parsed.images) == len(expected)
@@ -109,7 +109,7 @@ def test_without_ground_truth_there_are_no_error_figures_and_the_page_says_why(r
     (run_copy / "run.json").write_text(json.dumps(record))
     report = build_report(run_copy)
     names = [figure.name for figure in report.figures]
-    assert names == BASE_FIGURES + ["indirect", "convergence"]
+    assert names == BASE_FIGURES + ["indirect", "convergence", "agreement"]
     assert report.metrics is None
     text = report_html(report)
     assert "Ground truth: none, so no error maps: run.json names no source data set" in text
@@ -138,8 +138,19 @@ def test_classic_run_of_a_diligent_capture_has_no_iteration_figures(tmp_path):
     assert main(["reconstruct", str(BALL), "--out", str(out), "--quiet"]) == 0
     report = build_report(out)
     # DiLiGenT has true normals only: the angular error map, no height or albedo error.
-    assert [figure.name for figure in report.figures] == BASE_FIGURES + ["angular_error"]
+    assert [figure.name for figure in report.figures] == BASE_FIGURES + ["angular_error", "agreement"]
     assert "Iterations" not in report_html(report)
+
+
+def test_a_run_without_image_figures_has_no_agreement_figure(run_copy):
+    """Folders of older versions have none; a record that does not fit the images is ignored."""
+    record = json.loads((run_copy / "run.json").read_text())
+    for agreement in (None, {"brightness": [1.0], "spread": [0.01]}):
+        record["image_agreement"] = agreement
+        (run_copy / "run.json").write_text(json.dumps(record))
+        report = build_report(run_copy)
+        assert "agreement" not in [figure.name for figure in report.figures]
+        assert "Images' spread" not in report_html(report)
 
 
 def test_a_run_without_recorded_pixel_size_gets_a_note(run_copy):
@@ -200,7 +211,7 @@ def test_report_cannot_replace_the_reconstruction(run_copy):
 def test_cli_report_writes_the_page_and_quiet_prints_nothing(run_copy, tmp_path, capsys):
     assert main(["report", str(run_copy)]) == 0
     printed = capsys.readouterr().out
-    assert "8 figures" in printed and str(run_copy / "report" / "index.html") in printed
+    assert "9 figures" in printed and str(run_copy / "report" / "index.html") in printed
     elsewhere = tmp_path / "elsewhere"
     assert main(["report", str(run_copy), "--out", str(elsewhere), "--truth", str(SMALL), "--quiet"]) == 0
     assert capsys.readouterr().out == ""

@@ -65,7 +65,7 @@ def test_the_report_page_shows_every_figure_without_console_errors(tmp_path):
     assert main(["report", str(run), "--quiet"]) == 0
     page = (run / "report" / "index.html").read_text(encoding="utf-8")
     images, console = open_in_browser(page, tmp_path)
-    assert len(images) == len(list((run / "report").glob("*.png"))) == 8
+    assert len(images) == len(list((run / "report").glob("*.png"))) == 9
     for image in images:
         assert image["complete"] and image["width"] > 100 and image["height"] > 100, image
     assert console == []

@@ -1,4 +1,5 @@
-"""PNG figures drawn with matplotlib: an image, a map of errors with its colour bar, a convergence curve.
+"""PNG figures drawn with matplotlib: an image, a map of errors with its colour bar, a convergence curve,
+each image's agreement with the fit.
 
 Figures are drawn on `matplotlib.figure.Figure` objects directly (no pyplot, no global
 state, no display needed) and returned as PNG bytes.
@@ -18,7 +19,7 @@ from irtps._checks import check_array
 from irtps.display import BACKGROUND
 from irtps.errors import ArgumentError
 
-__all__ = ["convergence_png", "error_map_png", "image_png"]
+__all__ = ["agreement_png", "convergence_png", "error_map_png", "image_png"]
 
 #: Size of a figure in inches, and its resolution.
 FIGURE_SIZE = (4.8, 4.2)
@@ -150,6 +151,67 @@ def convergence_png(
     if errors:
         _curve(panels[0], errors, "mean angular error (°)", "Normal error against ground truth", chosen)
     _curve(panels[-1], residuals, "relative residual on the object", "Rendered reconstruction against the images", chosen)
+    return _png(figure)
+
+
+def agreement_png(names: Sequence[str], brightness: Sequence[float] | np.ndarray, spread: Sequence[float] | np.ndarray, labelled: int = 3) -> bytes:
+    """How each image agrees with the fit (`irtps.image_agreement`), as PNG bytes.
+
+    Left: each image's brightness against the fit, over the median image's (1 drawn as a
+    line). Right: its spread about the fit, in per cent. In each, the `labelled` images
+    farthest out are ringed and listed with their figures. Images without figures (NaN)
+    are left out.
+
+    Parameters
+    ----------
+    names : sequence of str
+        The images, in order.
+    brightness, spread : sequence of float
+        One per image.
+    labelled : int
+        Images named in each panel.
+
+    Returns
+    -------
+    bytes
+        A PNG file.
+
+    Raises
+    ------
+    ArgumentError
+        If the sequences differ in length or no image has figures.
+
+    Examples
+    --------
+    >>> agreement_png(["001.png", "002.png", "003.png"], [1.0, 1.5, 0.98], [0.02, 0.02, 0.09])[:8]
+    b'\\x89PNG\\r\\n\\x1a\\n'
+    """
+    values = [np.asarray(figures, dtype=np.float64) for figures in (brightness, spread)]
+    if not len(names) == len(values[0]) == len(values[1]):
+        raise ArgumentError("brightness", f"{len(names)} images but {len(values[0])} brightnesses and {len(values[1])} spreads")
+    known = np.flatnonzero(~np.isnan(values[0]) & ~np.isnan(values[1]))
+    if known.size == 0:
+        raise ArgumentError("brightness", "no image has figures")
+    figure = Figure(figsize=(FIGURE_SIZE[0] * 2, FIGURE_SIZE[1] * 0.8), layout="constrained")
+    left, right = figure.subplots(1, 2, sharex=True)
+    panels = (
+        (left, values[0][known], np.abs(np.log(values[0][known])), "over the median image's", "Brightness against the fit", "{:.2f}"),
+        (right, 100 * values[1][known], values[1][known], "% a pixel", "Spread about the fit", "{:.1f} %"),
+    )
+    for axes, shown, outness, label, title, text in panels:
+        axes.plot(known + 1, shown, marker="o", markersize=3, linestyle="none")
+        # The images farthest out ringed and listed in a corner: names beside the points of
+        # neighbouring images would overprint.
+        farthest = np.argsort(-outness, kind="stable")[:labelled]
+        axes.plot(known[farthest] + 1, shown[farthest], marker="o", markersize=9, markerfacecolor="none", color="C3", linestyle="none")
+        listed = "\n".join(f"{names[known[k]]} {text.format(shown[k])}" for k in farthest)
+        axes.text(0.02, 0.97, listed, transform=axes.transAxes, fontsize="x-small", va="top", bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "C3"})
+        axes.set_xlabel("image (1 = the first fitted)")
+        axes.set_ylabel(label)
+        axes.set_title(title, fontsize="medium")
+        axes.xaxis.set_major_locator(MaxNLocator(integer=True))
+        axes.grid(True, alpha=0.3)
+    left.axhline(1.0, color="C3", linewidth=1)
     return _png(figure)
 
 

@@ -9,7 +9,9 @@ them beside the run's parameters and metrics, to ``report/`` in that folder. The
 - ``shading.png``: a shaded relief of the height field (`irtps.display.hillshade`);
 - with ground truth: ``angular_error.png``, ``height_error.png``, ``albedo_error.png``;
 - IRT-PS runs: ``indirect.png``, the estimated inter-reflected light, and
-  ``convergence.png``, the error and height change per pass.
+  ``convergence.png``, the error and height change per pass;
+- ``agreement.png``: each image's brightness and spread against the fit
+  (`irtps.image_agreement`), the images farthest out named.
 
 Ground truth comes from the data set named by ``run.json``'s ``source`` (or the one given
 as ``truth``); without it the page says why there are no error maps.
@@ -27,11 +29,12 @@ from irtps.dataset import GroundTruth, load_ground_truth
 from irtps.display import albedo_to_rgb, hillshade, normal_to_rgb, object_window, radiance_to_rgb
 from irtps.errors import IrtpsError
 from irtps.evaluate import ErrorMaps, Metrics, error_maps, evaluate
-from irtps.figures import convergence_png, error_map_png, image_png
+from irtps.figures import agreement_png, convergence_png, error_map_png, image_png
+from irtps.image_agreement import ImageAgreement
 from irtps.imageio import read_exr
 from irtps.output_rule import check_output
 from irtps.reconstruct import RECONSTRUCTION_FILES, load_reconstruction, load_run_record
-from irtps.report_page import report_html
+from irtps.report_page import recorded_agreement, report_html
 
 __all__ = ["PAGE_FILE", "REPORT_FOLDER", "Report", "ReportFigure", "build_report", "report_inputs", "write_report"]
 
@@ -140,7 +143,7 @@ def build_report(run_dir: str | Path, *, truth: str | Path | None = None) -> Rep
     ...     save_reconstruction(reconstruct(data), folder + "/out")
     ...     report = build_report(folder + "/out")
     >>> [figure.name for figure in report.figures]
-    ['normal', 'albedo', 'shading']
+    ['normal', 'albedo', 'shading', 'agreement']
     >>> report.metrics is None, report.ground_truth
     (True, 'none, so no error maps: run.json names no source data set (give one with --truth DATASET).')
     """
@@ -165,6 +168,9 @@ def build_report(run_dir: str | Path, *, truth: str | Path | None = None) -> Rep
         report.figures += _error_figures(maps, report.metrics, window)
     if len(record["history"]) > 1 and any("residual" in step for step in record["history"]):
         report.figures.append(_convergence_figure(record["history"], record.get("chosen_pass")))
+    agreement = recorded_agreement(record)
+    if agreement is not None and not np.isnan(agreement.brightness).all():
+        report.figures.append(_agreement_figure(record["images"], agreement))
     return report
 
 
@@ -202,7 +208,7 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, *, truth: s
     ...     page = write_report(folder + "/out")
     ...     files = sorted(path.name for path in page.parent.iterdir())
     >>> page.relative_to(folder).as_posix(), files
-    ('out/report/index.html', ['albedo.png', 'index.html', 'normal.png', 'shading.png'])
+    ('out/report/index.html', ['agreement.png', 'albedo.png', 'index.html', 'normal.png', 'shading.png'])
     """
     folder = Path(run_dir)
     target = folder / REPORT_FOLDER if out is None else Path(out)
@@ -328,6 +334,19 @@ def _error_figures(maps: ErrorMaps, metrics: Metrics, window: tuple[slice, slice
         caption = f"|ρ_true − ρ| per pixel, averaged over R, G and B, without rescaling. {scale}"
         figures.append(ReportFigure("albedo_error", title, caption, error_map_png(maps.albedo[window], title, "|Δ albedo|")))
     return figures
+
+
+def _agreement_figure(names: list[str], agreement: ImageAgreement) -> ReportFigure:
+    caption = (
+        "Each image's observed brightness over the brightness the fit predicts (classic photometric stereo's fit of "
+        "the images as they are), at the object pixels it lights within 60° of their fitted normal. Left: the median, "
+        "over the median image's: an image far from 1 had another light or exposure than recorded. Right: the spread "
+        "of the ratio (robust standard deviation of its logarithm): an image well above the others was taken as the "
+        "object or the camera moved. The three images farthest out in each are named; leave one out with "
+        "--exclude-images if it is faulty."
+    )
+    png = agreement_png(names, agreement.brightness, agreement.spread)
+    return ReportFigure("agreement", "How each image agrees with the fit", caption, png, wide=True)
 
 
 def _convergence_figure(history: list[dict], chosen: int | None) -> ReportFigure:

@@ -22,7 +22,7 @@ from irtps.radiometry import format_albedo_scale
 if TYPE_CHECKING:
     from irtps.report import Report, ReportFigure
 
-__all__ = ["report_html"]
+__all__ = ["recorded_agreement", "report_html"]
 
 _STYLE = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 80em; padding: 0 1em; color: #222; }
@@ -129,14 +129,15 @@ def _summary(report: Report) -> str:
         placement += f" {format_lobe_share(record['lobe_share'], record.get('robust_used'))}."
     if record.get("excluded_images"):
         placement += f" {_sentence(format_images_fitted(len(record.get('images', [])), record['excluded_images']))}."
-    agreement = _image_agreement(record)
+    agreement = recorded_agreement(record)
     if agreement is not None:
         placement += "".join(f" {_sentence(line)}." for line in format_image_agreement(record["images"], agreement))
     return f"{method} of {source}: {cols}×{rows} pixels, {report.object_pixels} on the object{scale}.{placement} Folder: {report.run_dir}."
 
 
-def _image_agreement(record: dict) -> ImageAgreement | None:
-    """The run's `ImageAgreement`, if it recorded one that fits its list of images."""
+def recorded_agreement(record: dict) -> ImageAgreement | None:
+    """The `ImageAgreement` of a ``run.json`` record, if it holds one that fits its list of
+    images."""
     if record.get("image_agreement") is None or not isinstance(record.get("images"), list):
         return None
     try:
