@@ -6,7 +6,8 @@ are, then (on the real objects, whose rigs are the ones that go wrong) with imag
 1.2x and 1.5x too bright, 5 images spread over the set 2x, and images 1-20 shifted by 3
 pixels (taken as the object moved). Prints the range of `Reconstruction.image_agreement`'s
 brightness and spread over the sound images and over the faulty ones, and the mean angular
-error as it is and with the faulty images left out (`irtps.exclude_images`).
+error as it is, with the faulty images left out (`irtps.exclude_images`) and with each
+light's irradiance scaled by its image's brightness (``correct_brightness``).
 
 Usage::
 
@@ -60,7 +61,12 @@ def main() -> None:
         dataset = irtps.load_dataset(folder)
         result = irtps.reconstruct(dataset)
         agreement = result.image_agreement
-        print(f"{folder.name:18s} as given      brightness {spread(agreement.brightness)}  spread {spread(agreement.spread)}  error {error(dataset, result):.3f}", flush=True)
+        corrected = irtps.reconstruct(dataset, correct_brightness=True)
+        print(
+            f"{folder.name:18s} as given      brightness {spread(agreement.brightness)}  spread {spread(agreement.spread)}  "
+            f"error {error(dataset, result):.3f}, brightness corrected {error(dataset, corrected):.3f}",
+            flush=True,
+        )
         if not dataset.scene.relative_irradiance:
             continue  # rendered: the lights are exactly as recorded
         for label, images, fault in FAULTS:
@@ -70,10 +76,12 @@ def main() -> None:
             bad = np.zeros(len(dataset.names), bool)
             bad[list(images)] = True
             left_out = irtps.reconstruct(irtps.exclude_images(faulty, ",".join(dataset.names[k] for k in np.flatnonzero(bad))))
+            corrected = irtps.reconstruct(faulty, correct_brightness=True)
             print(
                 f"{folder.name:18s} {label:13s} brightness sound {spread(agreement.brightness[~bad])}, faulty {spread(agreement.brightness[bad])}  "
                 f"spread sound {spread(agreement.spread[~bad])}, faulty {spread(agreement.spread[bad])}  "
-                f"error {error(dataset, irtps.reconstruct(faulty)):.3f}, faulty left out {error(dataset, left_out):.3f}",
+                f"error {error(dataset, irtps.reconstruct(faulty)):.3f}, faulty left out {error(dataset, left_out):.3f}, "
+                f"brightness corrected {error(dataset, corrected):.3f}",
                 flush=True,
             )
 

@@ -1,6 +1,6 @@
 """How each image agrees with the fit (`irtps.image_agreement`): exact on Lambertian renders,
 a faulty image's factor and a shifted image's spread on a real object, what a run prints and
-records."""
+records; ``correct_brightness``, which scales each light by its image's brightness."""
 
 import dataclasses
 import json
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from irtps import ArgumentError, load_dataset, reconstruct, synthesize
+from irtps import ArgumentError, angular_error_deg, load_dataset, reconstruct, synthesize
 from irtps.cli import main
 from irtps.image_agreement import MIN_PIXELS, ImageAgreement, format_image_agreement, image_agreement
 
@@ -147,3 +147,38 @@ def test_the_command_prints_and_records_how_each_image_agrees(tmp_path, capsys):
     assert len(figures["brightness"]) == len(figures["spread"]) == len(run["images"]) == 8
     assert all(0.95 < value < 1.05 for value in figures["brightness"])
     assert all(0 < value < 0.05 for value in figures["spread"])
+
+
+@pytest.mark.filterwarnings("ignore:.*saturated")
+def test_correcting_the_brightness_takes_a_wrong_irradiance_out_of_the_fit():
+    """DiLiGenT ball (8 images), image 4 made 1.5x too bright: --correct-brightness scales its
+    light by about that, so that the image then agrees with the fit and the error falls
+    most of the way back to the sound data's."""
+    data = load_dataset(FIXTURE)
+    faulty = dataclasses.replace(data, images=data.images.copy())
+    faulty.images[3] *= 1.5
+
+    def error(result):
+        return np.nanmean(angular_error_deg(result.normals, data.gt.normal, data.mask))
+
+    sound, kept, corrected = reconstruct(data), reconstruct(faulty), reconstruct(faulty, correct_brightness=True)
+    assert sound.irradiance_factors is None and kept.irradiance_factors is None
+    assert 1.4 < corrected.irradiance_factors[3] < 1.6 and np.all(np.abs(np.delete(corrected.irradiance_factors, 3) - 1) < 0.05)
+    assert np.all(np.abs(corrected.image_agreement.brightness - 1) < 0.01), corrected.image_agreement.brightness
+    assert error(corrected) < error(sound) + 0.25 < error(kept), (error(sound), error(kept), error(corrected))
+    assert "brightness_correction" in corrected.timings and "brightness_correction" not in kept.timings
+
+
+def test_a_sound_render_needs_no_correction(cap):
+    result = reconstruct(cap, correct_brightness=True)
+    np.testing.assert_allclose(result.irradiance_factors, 1.0, atol=2e-3)
+
+
+def test_the_command_prints_and_records_the_correction(tmp_path, capsys):
+    assert main(["reconstruct", str(FIXTURE), "--out", str(tmp_path / "out"), "--correct-brightness"]) == 0
+    printed = capsys.readouterr().out
+    assert "  irradiance scaled by each image's brightness against a first fit: 0.97 to 1.02 (--correct-brightness)\n" in printed
+    run = json.loads((tmp_path / "out" / "run.json").read_text())
+    assert run["parameters"]["correct_brightness"] is True and len(run["irradiance_factors"]) == 8
+    assert main(["reconstruct", str(FIXTURE), "--out", str(tmp_path / "plain"), "--quiet"]) == 0
+    assert json.loads((tmp_path / "plain" / "run.json").read_text())["irradiance_factors"] is None

@@ -105,6 +105,7 @@ def test_reconstruct_records_the_options_it_used_with_defaults_resolved():
         "robust": "auto",  # what was asked; the mode it chose is recorded beside
         "shadow_fraction": 0.1,
         "saturation": 1.0,  # PNG images saturate at their maximum
+        "correct_brightness": False,
         "integration": "ls",
         "base_height": "auto",
     }

@@ -97,6 +97,9 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
         if result.excluded_images:
             print(f"  {format_images_fitted(len(result.image_names), result.excluded_images)}")
         print(f"  {_robust_line(options.robust, result.robust_used, result.lobe_share)}")
+        if result.irradiance_factors is not None:
+            factors = result.irradiance_factors
+            print(f"  irradiance scaled by each image's brightness against a first fit: {factors.min():.2f} to {factors.max():.2f} (--correct-brightness)")
         if result.image_agreement is not None:
             for line in format_image_agreement(result.image_names, result.image_agreement):
                 print(f"  {line}")

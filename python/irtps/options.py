@@ -259,6 +259,13 @@ class ReconstructOptions(_Options):
     saturation: float | None = _option(
         None, "raw value at or above which an observation is saturated (default: 1 for PNG images, none for EXR)", float, low=0.0, low_open=True, optional=True
     )
+    correct_brightness: bool = _option(
+        False,
+        "scale each light's irradiance by its image's brightness against a first fit (the summary's brightness line) and fit "
+        "again: for a rig whose recorded irradiance is off in some images (DiLiGenT reading with images 1-20 1.5x too bright: "
+        "13.44 -> 11.42 deg; data sets whose irradiance is right move by -0.16 to +0.02 deg)",
+        bool,
+    )
     integration: str | None = _option(
         None, "normal integration (default ls for ps, footprint for irtps)", str, choices=INTEGRATION_METHODS, optional=True
     )

@@ -10,7 +10,7 @@ import time
 import warnings
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path, PurePosixPath
 
 import numpy as np
@@ -25,7 +25,7 @@ from irtps.interreflection import Iteration, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
 from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
-from irtps.pipeline import choose_dataset_robust, reconstruction_pass, resolve_options, timed
+from irtps.pipeline import choose_dataset_robust, fit_photometric_stereo, reconstruction_pass, resolve_options, timed
 from irtps.placement import Placement
 from irtps.ps import FITTED, FLAGS, LOBE_ADVISED, LOBE_FITTED, PsResult, check_lights, format_lobe_share
 from irtps.radiometry import AlbedoScale
@@ -95,6 +95,10 @@ class Reconstruction:
         they are (IRT-PS's pass 0; `irtps.image_agreement`): an image whose brightness is far
         from the others' had another light or exposure than recorded; one whose spread is
         wider was taken as the object or the camera moved.
+    irradiance_factors : numpy.ndarray or None
+        With ``correct_brightness``: float64 (K,), the factor each light's irradiance was
+        scaled by before the fit (its image's brightness against a first fit; 1 where not
+        known).
     """
 
     normals: np.ndarray
@@ -115,6 +119,7 @@ class Reconstruction:
     image_names: tuple[str, ...] = ()
     excluded_images: tuple[str, ...] = ()
     image_agreement: ImageAgreement | None = None
+    irradiance_factors: np.ndarray | None = None
 
     @property
     def indirect(self) -> np.ndarray | None:
@@ -206,6 +211,10 @@ def reconstruct(
         with timed(timings, "lobe_share"):
             options, share = choose_dataset_robust(dataset, options)
         _advise_lobe(dataset, options.robust, share)
+    factors = None
+    if options.correct_brightness:
+        with timed(timings, "brightness_correction"):
+            dataset, factors = _brightness_corrected(dataset, options)
     if options.method == "irtps":
         with timed(timings, "irtps"):
             loop = remove_interreflections(dataset, options, progress=progress)
@@ -230,6 +239,7 @@ def reconstruct(
             image_names=dataset.names,
             excluded_images=dataset.excluded_images,
             image_agreement=agreement,
+            irradiance_factors=factors,
         )
     # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
     first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
@@ -252,6 +262,7 @@ def reconstruct(
         image_names=dataset.names,
         excluded_images=dataset.excluded_images,
         image_agreement=agreement,
+        irradiance_factors=factors,
     )
 
 
@@ -307,6 +318,16 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, *, exclude
     result = reconstruct(dataset, **options)
     result.timings = {"load": loaded, **result.timings}
     return dataset, result
+
+
+def _brightness_corrected(dataset: Dataset, options: ReconstructOptions) -> tuple[Dataset, np.ndarray]:
+    """The data set with each light's irradiance scaled by its image's brightness against a
+    first fit of `options`' robust mode, and the factors (1 where not known)."""
+    first = fit_photometric_stereo(dataset, dataset.images, options)
+    brightness = _image_agreement(dataset, first, options.saturation).brightness
+    factors = np.where(np.isnan(brightness), 1.0, brightness)
+    lights = tuple(replace(light, irradiance=light.irradiance * factor) for light, factor in zip(dataset.scene.lights, factors, strict=True))
+    return replace(dataset, scene=replace(dataset.scene, lights=lights)), factors
 
 
 def _image_agreement(dataset: Dataset, fit: PsResult, saturation: float | None) -> ImageAgreement:
@@ -365,7 +386,8 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
     normals), ``mesh.obj`` (the same vertices, triangles and normals as Wavefront OBJ text,
     see `irtps.mesh`), ``run.json`` (parameters, pixel size, timings, versions, source,
     placement, IRT-PS history with each pass's residual, the pass chosen, the images fitted,
-    how each agrees with the fit, and those left out) and, for IRT-PS, ``indirect/`` (for each image fitted, the estimate of
+    how each agrees with the fit, those left out, and the factors of ``correct_brightness``)
+    and, for IRT-PS, ``indirect/`` (for each image fitted, the estimate of
     its inter-reflected light that the chosen pass removed, with the surroundings' light in the
     edge pixels, `irtps.surroundings`, named as `indirect_file_names` says; none when that
     is pass 0).
@@ -415,6 +437,7 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             "images": list(result.image_names),
             "excluded_images": list(result.excluded_images),
             "image_agreement": None if result.image_agreement is None else result.image_agreement.to_dict(),
+            "irradiance_factors": None if result.irradiance_factors is None else [round(float(factor), 4) for factor in result.irradiance_factors],
         }
         if result.object_indirect is not None:
             (folder / "indirect").mkdir()
@@ -490,6 +513,7 @@ _OPTIONAL_RUN_FIELDS = {
     "images": (list,),
     "excluded_images": (list,),
     "image_agreement": (dict, type(None)),
+    "irradiance_factors": (list, type(None)),
 }
 _HISTORY_FIELDS = {"index": (int,), "height_change": (int, float, type(None)), "timings": (dict,), "metrics": (dict, type(None))}
 _JSON_TYPE_NAMES = {dict: "an object", list: "a list", str: "a string", int: "a number", float: "a number", type(None): "null"}
