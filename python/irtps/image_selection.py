@@ -63,9 +63,9 @@ def parse_image_list(images: str) -> tuple[str, ...]:
     for item in items:
         if not item:
             raise ArgumentError("exclude_images", f"{images!r} has an empty item; expected items separated by commas, such as {_EXAMPLE!r}")
-        span = _RANGE.fullmatch(item)
-        if span and int(span[1]) > int(span[2]):
-            raise ArgumentError("exclude_images", f"the range {item!r} runs backwards; write {span[2]}-{span[1]}")
+        span = _numbers(item)
+        if span is not None and span[0] > span[1]:
+            raise ArgumentError("exclude_images", f"the range {item!r} runs backwards; write {span[1]}-{span[0]}")
     return items
 
 

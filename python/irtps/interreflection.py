@@ -102,9 +102,9 @@ class InterreflectionResult:
     indirect: np.ndarray | None
     history: list[Iteration]
     placement: Placement
+    first_fit: PsResult
     chosen: int = 0
     albedo_scale: AlbedoScale | None = None
-    first_fit: PsResult | None = None
 
 
 def remove_interreflections(
@@ -266,7 +266,7 @@ def remove_interreflections(
                 estimate_used = subtracted = step * estimate
                 images = _corrected(observed if index == 0 else images, estimate_used, observed, saturated)
             previous = current
-    assert best is not None, "the loop runs at least one pass"
+    assert best is not None and first_fit is not None, "the loop runs at least one pass"
     residual, chosen, chosen_pass, subtracted = best
     if chosen == 0 and len(history) > 1:
         warnings.warn(

@@ -219,7 +219,7 @@ def reconstruct(
         with timed(timings, "irtps"):
             loop = remove_interreflections(dataset, options, progress=progress)
         with timed(timings, "image_agreement"):
-            agreement = _image_agreement(dataset, loop.first_fit or loop.fit, options.saturation)
+            agreement = _image_agreement(dataset, loop.first_fit, options.saturation)
         return Reconstruction(
             normals=loop.fit.normals,
             albedo=loop.albedo,
