@@ -12,7 +12,7 @@ from irtps.cli import main
 from irtps.errors import IrtpsError
 from irtps.evaluate import angular_error_deg
 from irtps.interreflection import remove_interreflections
-from irtps.ps import LOBE_FITTED, photometric_stereo
+from irtps.ps import LOBE_FIRST, LOBE_FITTED, choose_robust, lobe_share, photometric_stereo
 
 DATA = Path(__file__).parent / "data"
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -230,8 +230,55 @@ def test_irtps_fits_every_pass_with_the_mode_auto_picked():
 
 @pytest.mark.parametrize("name, most", [("diligent_ball_small", 0.05), ("diligent_reading_small", 0.3)])
 def test_no_lobe_on_the_small_diligent_copies(tmp_path, capsys, name, most):
-    # Measured: 1.0 % of ball's pixels take a lobe, 17.1 % of reading's (8 and 24 lights).
+    # Measured: 3.1 % of ball's first 64 pixels take a lobe (1.0 % of all its 1 000), 18.8 % of
+    # reading's first 256 (17.1 %); 8 and 24 lights.
     assert main(["reconstruct", str(DATA / name), "--out", str(tmp_path / name), "--quiet"]) == 0
     assert "--robust lobe" not in capsys.readouterr().err
     run = json.loads((tmp_path / name / "run.json").read_text())
     assert run["lobe_share"] < most and run["robust_used"] == "tukey"
+
+
+def _half_metal_cap() -> irtps.Dataset:
+    """`_metal_cap` on the left 404 of the object's 688 pixels, its matte original on the
+    right: about half of the pixels take a lobe (84 % of the metal's do)."""
+    matte, _ = irtps.synthesize("cap", size=40, lights=24, bounces=0, environment="none", seed=2)
+    metal = _metal_cap()
+    images = metal.images.copy()
+    images[:, :, 22:] = matte.images[:, :, 22:]
+    return dataclasses.replace(metal, images=images)
+
+
+def _pixels_fitted(monkeypatch) -> list[int]:
+    """The number of pixels of each `photometric_stereo` call from here on."""
+    calls: list[int] = []
+
+    def counted(images, *args, **kwargs):
+        calls.append(images.shape[1] * images.shape[2])
+        return photometric_stereo(images, *args, **kwargs)
+
+    monkeypatch.setattr(irtps.ps, "photometric_stereo", counted)
+    return calls
+
+
+@pytest.mark.parametrize("make, lobe_pixels", [(lambda: irtps.synthesize("cap", size=40, lights=24, bounces=0, environment="none", seed=2)[0], False), (_metal_cap, True)])
+def test_lobe_share_tells_matte_from_metal_on_its_first_pixels(monkeypatch, make, lobe_pixels):
+    data = make()
+    args = (data.images, data.scene.light_directions, data.scene.light_irradiance, data.mask)
+    calls = _pixels_fitted(monkeypatch)
+    share = lobe_share(*args)
+    assert calls == [LOBE_FIRST]
+    # Measured on all 688 pixels: 0 % and 84 %.
+    assert (share > 0.7) if lobe_pixels else (share == 0)
+    assert choose_robust(share) == choose_robust(lobe_share(*args, stop_early=False))
+
+
+def test_lobe_share_near_the_line_is_measured_on_every_pixel_as_one_fit(monkeypatch):
+    data = _half_metal_cap()
+    args = (data.images, data.scene.light_directions, data.scene.light_irradiance, data.mask)
+    calls = _pixels_fitted(monkeypatch)
+    share = lobe_share(*args)
+    # Doubled from the first pixels until all were fitted, the share never clear of the line.
+    assert calls == [LOBE_FIRST, LOBE_FIRST, 2 * LOBE_FIRST, 4 * LOBE_FIRST, int(data.mask.sum()) - 8 * LOBE_FIRST]
+    whole = photometric_stereo(*args, robust="lobe")
+    assert share == pytest.approx((whole.flags[data.mask] == LOBE_FITTED).mean(), abs=1e-12)
+    assert 0.3 < share < 0.7

@@ -127,6 +127,26 @@ def spread_pixels(mask: np.ndarray, count: int) -> np.ndarray:
     return pixels[np.unique(np.linspace(0, pixels.size - 1, count).round().astype(np.intp))]
 
 
+def coarse_to_fine(count: int) -> np.ndarray:
+    """An order of ``range(count)`` whose first ``2**j`` or so entries are spread evenly over
+    it, for every ``j`` (the bit-reversal permutation of the next power of two, entries past
+    `count` left out): a sample that grows along it stays spread.
+
+    Examples
+    --------
+    >>> coarse_to_fine(8).tolist()
+    [0, 4, 2, 6, 1, 5, 3, 7]
+    >>> coarse_to_fine(6).tolist()
+    [0, 4, 2, 1, 5, 3]
+    """
+    bits = max(int(count - 1).bit_length(), 0)
+    index = np.arange(1 << bits)
+    reversed_index = np.zeros_like(index)
+    for bit in range(bits):
+        reversed_index |= ((index >> bit) & 1) << (bits - 1 - bit)
+    return reversed_index[reversed_index < count]
+
+
 def image_file_name(k: int, suffix: str = ".exr") -> str:
     """The file name of image `k` (from 0) in the irtps layout: ``000.exr`` ..."""
     return f"{k:03d}{suffix}"
