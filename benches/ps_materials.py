@@ -12,10 +12,13 @@ aluminium and copper). Paths of up to 4 bounces (``max_depth`` 6), ``--samples``
 For each, the mean angular error of every ``--robust`` mode against the height field's
 normals (scene contract §2), how far ``auto`` (the default) is below plain least squares, and
 the share of the object's pixels that the lobe mode fits with a lobe (``irtps.lobe_share``,
-from which ``auto`` picks ``lobe``, from one half on, or ``tukey``).
+from which ``auto`` picks ``lobe``, from one half on, or ``tukey``). With ``--irtps``, also
+the error of ``irtps.reconstruct``'s IRT-PS (defaults; the object's own inter-reflections, in
+a scene of the shape alone with the render's lights) beside its classic photometric stereo:
+whether IRT-PS, whose rendering is Lambertian, holds on glossy and metallic objects.
 
     python benches/ps_materials.py [--objects ballPNG readingPNG] [--downsample 2]
-        [--samples 32] [--json PATH]
+        [--samples 32] [--irtps] [--json PATH]
     python benches/ps_materials.py --objects cap cavity grooves relief pedestal [--size 160]
 
 Needs Mitsuba 3 (``pip install mitsuba``; its LLVM variant needs libLLVM, see
@@ -29,6 +32,7 @@ import functools
 import json
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +41,8 @@ from ps_accuracy import COLUMNS, mode_errors
 
 import irtps
 from irtps import height_to_normals, integrate_normals
+from irtps.errors import IrtpsWarning
+from irtps.evaluate import angular_error_deg
 from irtps.render import make_renderer
 from irtps.scene import Camera, Light, Scene
 from irtps.synth import SHAPES
@@ -99,6 +105,18 @@ def render_material(mi, variant: str, scene, renderer, bsdf: dict, samples: int)
     return np.stack([mitsuba.render(k, samples, seed=k)[0] for k in range(len(scene.lights))])
 
 
+def reconstruction_errors(dataset: irtps.Dataset) -> dict[str, float]:
+    """Mean angular error (degrees) of `irtps.reconstruct`'s classic photometric stereo
+    (``"ps"``) and IRT-PS (``"irtps"``) of `dataset`, with their defaults."""
+    errors = {}
+    for method in ("ps", "irtps"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", IrtpsWarning)  # IRT-PS returning classic PS's pass says so
+            result = irtps.reconstruct(dataset, method)
+        errors[method] = float(np.nanmean(angular_error_deg(result.normals, dataset.gt.normal, dataset.mask)))
+    return errors
+
+
 def positive_int(text: str) -> int:
     value = int(text)
     if value < 1:
@@ -114,6 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--size", type=positive_int, default=160, help="side of a synthetic shape's image, pixels (default: 160)")
     parser.add_argument("--downsample", type=positive_int, default=2, help="block size of the shape's pixels (default: 2)")
     parser.add_argument("--samples", type=positive_int, default=32, help="Mitsuba samples per pixel (default: 32)")
+    parser.add_argument("--irtps", action="store_true", help="also reconstruct each render with IRT-PS and with classic photometric stereo (irtps.reconstruct)")
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
     missing = [name for name in [*args.objects, "ballPNG"] if name not in SHAPES and not (DILIGENT / name).is_dir()]
@@ -123,8 +142,9 @@ def main(argv: list[str] | None = None) -> int:
     if not usable:
         sys.exit("no usable Mitsuba variant")
     print(f"Mitsuba {mi.__version__} ({usable[0]}), {args.samples} samples per pixel, 4 bounces, 96 DiLiGenT lights")
-    print("| shape | material | " + " | ".join(f"`{column}`" for column in COLUMNS) + " | `auto` against `none` | lobe share |")
-    print("|---|---|" + "---|" * (len(COLUMNS) + 2))
+    reconstructions = ("classic", "IRT-PS") if args.irtps else ()
+    print("| shape | material | " + " | ".join(f"`{column}`" for column in COLUMNS) + " | `auto` against `none` | lobe share |" + "".join(f" {name} |" for name in reconstructions))
+    print("|---|---|" + "---|" * (len(COLUMNS) + 2 + len(reconstructions)))
     rows = []
     for name in args.objects:
         height, mask, directions = synthetic_shape(name, args.size) if name in SHAPES else diligent_shape(DILIGENT / name, args.downsample)
@@ -137,8 +157,15 @@ def main(argv: list[str] | None = None) -> int:
             errors, share = mode_errors(images, directions, irradiance, mask, truth)
             change = errors["auto"] / errors["none"] - 1
             label = f"{name} ({mask.shape[1]}×{mask.shape[0]}, {int(mask.sum())} px)"
-            rows.append({"shape": name, "material": material, "errors_deg": errors, "auto_vs_none": change, "lobe_share": share, "seconds": time.perf_counter() - start})
-            print(f"| {label} | {material} | " + " | ".join(f"{errors[column]:.2f}°" for column in COLUMNS) + f" | {100 * change:+.0f} % | {100 * share:.0f} % |", flush=True)
+            row = {"shape": name, "material": material, "errors_deg": errors, "auto_vs_none": change, "lobe_share": share}
+            if args.irtps:
+                row["reconstruct_deg"] = reconstruction_errors(irtps.Dataset(scene=scene, images=images, mask=mask, gt=irtps.GroundTruth(height=height, normal=truth)))
+            rows.append({**row, "seconds": time.perf_counter() - start})
+            print(
+                f"| {label} | {material} | " + " | ".join(f"{errors[column]:.2f}°" for column in COLUMNS) + f" | {100 * change:+.0f} % | {100 * share:.0f} % |"
+                + "".join(f" {row['reconstruct_deg'][method]:.2f}° |" for method in ("ps", "irtps") if args.irtps),
+                flush=True,
+            )
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))
     return 0

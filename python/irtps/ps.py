@@ -288,13 +288,15 @@ def lobe_share(
     at each step, until the share of those fitted is clearly on one side of `LOBE_ADVISED`
     (`share_is_decided`), which is all that `choose_robust` asks of it. So a matte object is
     told from a metal on 64 pixels, and an object near the line is measured on all `sample`,
-    with the same share as in one fit of them all. A broad highlight that covers many lights (metal, metallic paint, a broad
-    glaze) is what the lobe explains; on a matte object with shadows and inter-reflection
-    few pixels take one. Measured on renders of DiLiGenT's shapes and on the shared data
-    (benches/README.md): 0–1.3 % on Lambertian surfaces, 13 % on DiLiGenT ball, 38–40 % on
-    reading, 24–31 % on a sharp plastic, 50–90 % on broad plastics and 74–87 % on rough
-    aluminium and copper. Where most pixels take one, the lobe mode fits the object better
-    than the Tukey fit.
+    with the same share as in one fit of them all.
+
+    A broad highlight that covers many lights (metal, metallic paint, a broad glaze) is what
+    the lobe explains; on a matte object with shadows and inter-reflection few pixels take
+    one. Measured on 1 000 pixels of renders of DiLiGenT's shapes and of the shared data
+    (benches/README.md): 0–1.3 % on Lambertian surfaces, 13 % on DiLiGenT ball (20 % of the
+    64 pixels that decide it), 38–40 % on reading, 24–31 % on a sharp plastic, 50–90 % on
+    broad plastics and 74–87 % on rough aluminium and copper. Where most pixels take one,
+    the lobe mode fits the object better than the Tukey fit.
 
     Parameters
     ----------
