@@ -139,7 +139,7 @@ def coarse_to_fine(count: int) -> np.ndarray:
     >>> coarse_to_fine(6).tolist()
     [0, 4, 2, 1, 5, 3]
     """
-    bits = max(int(count - 1).bit_length(), 0)
+    bits = max(count - 1, 0).bit_length()
     index = np.arange(1 << bits)
     reversed_index = np.zeros_like(index)
     for bit in range(bits):

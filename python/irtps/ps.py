@@ -195,7 +195,7 @@ LOBE_SAMPLE = 1000
 #: side of `LOBE_ADVISED` (`share_is_decided`) or `LOBE_SAMPLE` are fitted.
 LOBE_FIRST = 64
 #: Standard deviations of the Wilson score interval by which `share_is_decided` judges a share
-#: clearly on one side of `LOBE_ADVISED`: about one chance in 700 per look that a binomial
+#: clearly on one side of `LOBE_ADVISED`: about one chance in 740 per look that a binomial
 #: sample so far off the line comes from a share on its other side.
 LOBE_DECIDED_Z = 3.0
 #: From this `lobe_share` on, most of the object reflects a broad highlight: `choose_robust`
@@ -337,14 +337,15 @@ def lobe_share(
         return 0.0
     rows, cols = np.unravel_index(chosen[coarse_to_fine(chosen.size)], mask.shape)
     fitted = lobes = 0
-    while True:
-        more = slice(fitted, min(2 * fitted, chosen.size) if fitted else min(LOBE_FIRST, chosen.size))
-        observed = images[:, rows[more], cols[more]][:, None]  # (K, 1, N, 3): one row of pixels
+    while fitted < chosen.size:
+        upto = min(max(LOBE_FIRST, 2 * fitted), chosen.size)
+        observed = images[:, rows[fitted:upto], cols[fitted:upto]][:, None]  # (K, 1, N, 3): one row of pixels
         fit = photometric_stereo(observed, light_directions, light_irradiance, robust="lobe", shadow_fraction=shadow_fraction, saturation=saturation)
         lobes += int((fit.flags == LOBE_FITTED).sum())
-        fitted = more.stop
-        if fitted == chosen.size or (stop_early and share_is_decided(lobes, fitted)):
-            return lobes / fitted
+        fitted = upto
+        if stop_early and share_is_decided(lobes, fitted):
+            break
+    return lobes / fitted
 
 
 def share_is_decided(lobes: int, fitted: int) -> bool:
