@@ -282,3 +282,15 @@ def test_lobe_share_near_the_line_is_measured_on_every_pixel_as_one_fit(monkeypa
     whole = photometric_stereo(*args, robust="lobe")
     assert share == pytest.approx((whole.flags[data.mask] == LOBE_FITTED).mean(), abs=1e-12)
     assert 0.3 < share < 0.7
+
+
+def test_a_share_is_decided_only_clear_of_the_line():
+    from irtps.ps import share_is_decided
+
+    # One half is never clear of the line, however many pixels say so.
+    assert not any(share_is_decided(fitted // 2, fitted) for fitted in range(2, 1001, 2))
+    # 64 pixels decide 0 and 64 lobes, and 13 (20 %), but not 20 (31 %) nor 44 (69 %).
+    assert [share_is_decided(lobes, 64) for lobes in (0, 13, 20, 44, 51, 64)] == [True, True, False, False, True, True]
+    # 1 000 pixels tell 45 % from one half (Wilson half-width 4.7 points at 3 sigma), not 46 %.
+    assert share_is_decided(450, 1000) and share_is_decided(550, 1000)
+    assert not share_is_decided(460, 1000) and not share_is_decided(540, 1000)
