@@ -274,10 +274,9 @@ fn check_data_len(image: &Image) -> Result<()> {
 mod tests {
     use super::*;
 
-    fn temp_path(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("irtps-io-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir.join(name)
+    /// A fresh folder, removed with everything in it when dropped.
+    fn temp_dir() -> tempfile::TempDir {
+        tempfile::tempdir().unwrap()
     }
 
     fn ramp(width: usize, height: usize, channels: usize) -> Image {
@@ -287,8 +286,9 @@ mod tests {
 
     #[test]
     fn exr_round_trip_rgb_and_y() {
+        let dir = temp_dir();
         for channels in [1, 3] {
-            let path = temp_path(&format!("ramp{channels}.exr"));
+            let path = dir.path().join(format!("ramp{channels}.exr"));
             let image = ramp(7, 5, channels);
             write_exr(&path, &image).unwrap();
             assert_eq!(read_exr(&path).unwrap(), image);
@@ -297,7 +297,8 @@ mod tests {
 
     #[test]
     fn png_round_trip_keeps_16_bits() {
-        let path = temp_path("ramp16.png");
+        let dir = temp_dir();
+        let path = dir.path().join("ramp16.png");
         let image = Image { width: 3, height: 1, channels: 1, data: vec![0.0, 1.0 / 65535.0, 1.0] };
         write_png(&path, &image, 16).unwrap();
         let (back, bits) = read_png(&path).unwrap();
@@ -307,17 +308,19 @@ mod tests {
 
     #[test]
     fn errors_name_the_file() {
-        let path = temp_path("garbage.exr");
+        let dir = temp_dir();
+        let path = dir.path().join("garbage.exr");
         std::fs::write(&path, b"not an exr").unwrap();
         let message = read_exr(&path).unwrap_err().to_string();
         assert!(message.starts_with(&path.display().to_string()), "{message}");
-        let missing = temp_path("missing.png");
+        let missing = dir.path().join("missing.png");
         assert!(read_png(&missing).unwrap_err().to_string().contains("missing.png"));
     }
 
     #[test]
     fn absurd_sizes_are_rejected_before_allocating() {
-        let exr = temp_path("tiny.exr");
+        let dir = temp_dir();
+        let exr = dir.path().join("tiny.exr");
         write_exr(&exr, &ramp(4, 3, 3)).unwrap();
         let mut bytes = std::fs::read(&exr).unwrap();
         let window = bytes.windows(11).position(|w| w == b"dataWindow\0").unwrap() + b"dataWindow\0box2i\0".len() + 4;
@@ -326,7 +329,7 @@ mod tests {
         let message = read_exr(&exr).unwrap_err().to_string();
         assert!(message.contains("tiny.exr") && message.contains("65537x65537 exceeds"), "{message}");
 
-        let png = temp_path("huge.png");
+        let png = dir.path().join("huge.png");
         let mut file = vec![0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
         let header = [&1_000u32.to_be_bytes()[..], &1_000u32.to_be_bytes(), &[16, 2, 0, 0, 0]].concat();
         file.extend(png_chunk(b"IHDR", &header));
@@ -356,8 +359,9 @@ mod tests {
 
     #[test]
     fn stack_rejects_size_mismatch() {
-        let a = temp_path("a.exr");
-        let b = temp_path("b.exr");
+        let dir = temp_dir();
+        let a = dir.path().join("a.exr");
+        let b = dir.path().join("b.exr");
         write_exr(&a, &ramp(4, 4, 3)).unwrap();
         write_exr(&b, &ramp(4, 3, 3)).unwrap();
         let message = read_image_stack(&[a, b.clone()]).unwrap_err().to_string();
