@@ -289,3 +289,32 @@ def test_a_stopping_worker_finishes_the_write_under_way_then_exits_and_starts_no
     assert events == ["written", "exit"] and exits == [0]
     with pytest.raises(irtps.IrtpsError, match="stopping"), tasks.writing():
         pass
+
+
+def test_images_left_out_per_data_set_and_a_resume_that_asks_for_others(cluster, three_sets, tmp_path, capsys):
+    cap, ball, _ = three_sets
+    out = tmp_path / "out"
+    argv = ["batch", str(cap), str(ball), "--out", str(out), "--scheduler", cluster.scheduler.address, "--quiet"]
+    assert main([*argv, "--exclude-images", "ball=8-9", "--exclude-images", "096.png"]) == 2  # cap has no 096.png: it fails alone
+    summary = json.loads((out / "batch.json").read_text())
+    assert [(s["name"], s["status"]) for s in summary["datasets"]] == [("cap", "failed"), ("ball", "ok")]
+    assert summary["datasets"][0]["error"].startswith(f"{cap}: no image is named '096.png'")
+    assert json.loads((out / "ball" / "run.json").read_text())["excluded_images"] == ["008.png", "009.png", "096.png"]
+    direct = reconstruct(load_dataset(ball, exclude_images="8-9,96"))
+    np.testing.assert_array_equal(load_reconstruction(out / "ball")[0], direct.normals)
+    capsys.readouterr()
+    # Resumed with the same lists, ball's folder is kept; asked for other images, it is redone.
+    assert main([*argv, "--resume", "--exclude-images", "ball=8-9,96"]) == 0
+    assert [s["status"] for s in json.loads((out / "batch.json").read_text())["datasets"]] == ["ok", "reused"]
+    assert main([*argv, "--resume"]) == 0
+    assert [s["status"] for s in json.loads((out / "batch.json").read_text())["datasets"]] == ["reused", "ok"]
+    assert json.loads((out / "ball" / "run.json").read_text())["excluded_images"] == []
+
+
+def test_a_list_for_no_data_set_is_refused_before_anything_runs(three_sets, tmp_path, capsys):
+    argv = ["batch", str(three_sets[0]), "--out", str(tmp_path / "out"), "--exclude-images", "ball=1"]
+    assert main(argv) == 2
+    assert "exclude_images: 'ball=1' names no data set (the data sets: cap)" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(irtps.ArgumentError, match="'bear' is none of the data sets"):
+        reconstruct_many([three_sets[0]], tmp_path / "out", exclude_images={"bear": "1-20"})

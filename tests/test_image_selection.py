@@ -13,7 +13,7 @@ from irtps import ArgumentError, Dataset, DatasetError, Reconstruction, exclude_
 from irtps.batch import _complete_indirect
 from irtps.cli import main
 from irtps.evaluate import angular_error_deg
-from irtps.image_selection import excluded_indices, parse_image_list
+from irtps.image_selection import excluded_indices, exclusions_by_name, parse_image_list
 from irtps.imageio import read_exr
 from irtps.synth import synthesize
 
@@ -191,3 +191,44 @@ def test_indirect_estimates_are_numbered_where_names_would_not_do(tmp_path):
     names = [f"{side}/{k}.png" for k in range(4) for side in ("left", "right")]  # stems repeat
     save_reconstruction(_with_indirect(data, names), tmp_path / "out")
     assert sorted(path.name for path in (tmp_path / "out" / "indirect").iterdir()) == [f"{k:03d}.exr" for k in range(8)]
+
+
+def test_lists_for_many_data_sets_go_to_every_one_or_to_the_one_named():
+    names = ["ballPNG", "bearPNG", "rig", "rig=old"]
+    assert exclusions_by_name([], names) == dict.fromkeys(names)
+    assert exclusions_by_name(["96", "bearPNG=1-20", "bearPNG=37"], names) == {"ballPNG": "96", "bearPNG": "96,1-20,37", "rig": "96", "rig=old": "96"}
+    # A name with "=" in it: the longest name the entry starts with.
+    assert exclusions_by_name(["rig=old=3", "rig=4"], names) == {"ballPNG": None, "bearPNG": None, "rig": "4", "rig=old": "3"}
+
+
+@pytest.mark.parametrize(
+    ("entry", "message"),
+    [
+        ("bear=1-20", "exclude_images: 'bear=1-20' names no data set (the data sets: ballPNG, bearPNG)"),
+        ("bearPNG=5-1", "exclude_images: the range '5-1' runs backwards; write 1-5"),
+        ("bearPNG=", "exclude_images: '' has an empty item"),
+    ],
+)
+def test_a_list_for_a_data_set_that_is_not_there_or_malformed_is_refused(entry, message):
+    with pytest.raises(ArgumentError) as caught:
+        exclusions_by_name([entry], ["ballPNG", "bearPNG"])
+    assert str(caught.value).startswith(message)
+
+
+def test_table_leaves_out_the_images_named_for_each_data_set(ball, tmp_path, capsys):
+    other = shutil.copytree(ball, tmp_path / "other")
+    out = tmp_path / "table"
+    argv = ["table", str(ball), str(other), "--out", str(out), "--bounces", "1", "--iterations", "1", "--samples", "4", "--no-paper", "--quiet"]
+    assert main([*argv, "--exclude-images", "96", "--exclude-images", "other=8-9"]) == 0
+    printed = capsys.readouterr().out
+    table = json.loads((out / "table.json").read_text())
+    assert table["excluded_images"] == {"ball": ["096.png"], "other": ["008.png", "009.png", "096.png"]}
+    assert "ball: 7 of 8 images fitted; left out 096.png\nother: 5 of 8 images fitted; left out 008.png, 009.png, 096.png\n" in printed
+    assert (out / "table.md").read_text() in printed
+    # Each column is the reconstruction of the data set without those images.
+    expected = reconstruct(load_dataset(other, exclude_images="8-9,96"), method="ps")
+    truth = load_dataset(other).gt
+    error = float(np.nanmean(angular_error_deg(expected.normals, truth.normal, expected.mask)))
+    assert table["datasets"]["other"]["PS"]["normal_mean_angular_deg"] == pytest.approx(error)
+    assert table["datasets"]["ball"]["PS"]["normal_mean_angular_deg"] != pytest.approx(error)
+    assert "names no data set" in refused([*argv[:5], "--exclude-images", "bal=1"], capsys)

@@ -37,16 +37,17 @@ import threading
 import time
 import warnings
 from collections import Counter
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, replace
 from multiprocessing import resource_tracker
 from pathlib import Path
 
 from irtps.atomic import atomic_write_text
-from irtps.dataset import load_ground_truth
-from irtps.errors import IrtpsError, IrtpsWarning
+from irtps.dataset import dataset_image_names, load_ground_truth
+from irtps.errors import ArgumentError, IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate
+from irtps.image_selection import parse_image_list, select_images
 from irtps.options import ReconstructOptions
 from irtps.paths import resolve_path
 from irtps.reconstruct import indirect_file_names, load_and_reconstruct, load_reconstruction, load_run_record, save_reconstruction
@@ -145,7 +146,7 @@ def output_names(paths: Sequence[str | Path]) -> list[str]:
     return names
 
 
-def reconstruct_to_folder(source: str, destination: str, options: ReconstructOptions, *, resume: bool = False) -> BatchResult:
+def reconstruct_to_folder(source: str, destination: str, options: ReconstructOptions, *, resume: bool = False, exclude_images: str | None = None) -> BatchResult:
     """Reconstruct one data set folder into an output folder: the task of a batch.
 
     Errors are caught and reported, never raised, so that one bad data set does not
@@ -155,11 +156,11 @@ def reconstruct_to_folder(source: str, destination: str, options: ReconstructOpt
     With ``resume``, an output folder that is already complete is kept as it is (and
     evaluated against the ground truth, if any): its ``run.json``, written last by
     `irtps.save_reconstruction`, is valid and records the same data set folder and the
-    same options (an option left unset, resolved for each data set, matches any value);
-    its normal, albedo and height maps and its mask read back, all of one size; its two
-    meshes are files that are not empty; and when the chosen IRT-PS pass is not pass 0,
-    ``indirect/`` holds a file for each image fitted (`irtps.reconstruct.indirect_file_names`),
-    none empty. Any other output
+    same options (an option left unset, resolved for each data set, matches any value)
+    and left out the images that `exclude_images` names, no other; its normal, albedo and
+    height maps and its mask read back, all of one size; its two meshes are files that are
+    not empty; and when the chosen IRT-PS pass is not pass 0, ``indirect/`` holds a file for
+    each image fitted (`irtps.reconstruct.indirect_file_names`), none empty. Any other output
     folder is reconstructed again and replaced.
 
     Parameters
@@ -172,6 +173,8 @@ def reconstruct_to_folder(source: str, destination: str, options: ReconstructOpt
         How to reconstruct (`irtps.options.ReconstructOptions`).
     resume : bool
         Keep a complete output folder (status ``"reused"``) instead of replacing it.
+    exclude_images : str, optional
+        Images of the data set to leave out, not read (`irtps.load_dataset`).
 
     Returns
     -------
@@ -188,10 +191,10 @@ def reconstruct_to_folder(source: str, destination: str, options: ReconstructOpt
     start = time.perf_counter()
     with _TASKS.running(), _recorded_warnings() as recorded:
         try:
-            kept = _complete_output(destination, source, options) if resume else None
+            kept = _complete_output(destination, source, options, exclude_images) if resume else None
             if kept is None:
                 status = "ok"
-                dataset, result = load_and_reconstruct(source, options=options)
+                dataset, result = load_and_reconstruct(source, options=options, exclude_images=exclude_images)
                 with _TASKS.writing():
                     save_reconstruction(result, destination, source=str(resolve_path(source)))
                 gt, normals, albedo, height, mask = dataset.gt, result.normals, result.albedo, result.height, result.mask
@@ -216,6 +219,7 @@ def reconstruct_many(
     client=None,
     progress: bool = False,
     resume: bool = False,
+    exclude_images: str | Mapping[str, str | None] | None = None,
     **settings,
 ) -> list[BatchResult]:
     """Reconstruct many data set folders on a Dask cluster, each into ``out/NAME/``.
@@ -263,6 +267,11 @@ def reconstruct_many(
         of reconstructing it again (see `reconstruct_to_folder` for what is complete);
         without it, an existing output folder is replaced once its new reconstruction is
         written.
+    exclude_images : str or mapping, optional
+        Images to leave out, not read (`irtps.load_dataset`): one list for every data set,
+        or a list (or None) per data set's ``NAME`` (`output_names`; a name left out leaves
+        out nothing), e.g. ``{"bearPNG": "1-20"}``. A list that names none of a data set's
+        images fails that data set alone.
     **settings
         Fields of `ReconstructOptions` that replace those of `options`, e.g.
         ``method="irtps"``.
@@ -276,7 +285,8 @@ def reconstruct_many(
     ------
     IrtpsError
         Before anything runs: no data set, an option unknown or out of range
-        (`irtps.options.OptionError`), or dask not installed.
+        (`irtps.options.OptionError`), a malformed list of images to leave out or one for
+        a ``NAME`` that is none of the data sets', or dask not installed.
 
     Examples
     --------
@@ -301,9 +311,10 @@ def reconstruct_many(
     sources = [str(resolve_path(path)) for path in datasets]
     folder = resolve_path(out)
     names = output_names(sources)
+    exclusions = _exclusions(exclude_images, names)
     with _using(client) as active, _lost_workers(active) as lost:
         pending = {
-            active.submit(reconstruct_to_folder, source, str(folder / name), options, resume=resume, pure=False, priority=-index): (name, source)
+            active.submit(reconstruct_to_folder, source, str(folder / name), options, resume=resume, exclude_images=exclusions[name], pure=False, priority=-index): (name, source)
             for index, (name, source) in enumerate(zip(names, sources, strict=True))
         }
         outcomes = {}
@@ -773,18 +784,20 @@ def _lost_workers(client) -> Iterator[Counter]:
         client.unsubscribe_topic("all")
 
 
-def _complete_output(destination: str, source: str, options: ReconstructOptions) -> tuple | None:
+def _complete_output(destination: str, source: str, options: ReconstructOptions, exclude_images: str | None) -> tuple | None:
     """The normals, albedo, height and mask of a complete output folder of `source` made
-    with `options` (see `reconstruct_to_folder`), and its recorded robust mode, or None."""
+    with `options`, leaving out the images of `exclude_images` (see `reconstruct_to_folder`),
+    and its recorded robust mode, or None."""
     folder = Path(destination)
     try:
         record = load_run_record(folder)
         maps = load_reconstruction(folder)
         meshes = all(_nonempty_file(folder / name) for name in ("mesh.ply", "mesh.obj"))
         indirect = not record.get("chosen_pass") or _complete_indirect(folder / "indirect", record.get("images", []))
+        excluded = select_images(dataset_image_names(source), exclude_images, where=source).excluded
     except (IrtpsError, OSError):
         return None
-    same_run = record["source"] == str(resolve_path(source)) and _same_options(record["parameters"], options)
+    same_run = record["source"] == str(resolve_path(source)) and _same_options(record["parameters"], options) and tuple(record.get("excluded_images", ())) == excluded
     return (maps, record.get("robust_used")) if same_run and meshes and indirect else None
 
 
@@ -806,6 +819,24 @@ def _same_options(recorded: dict, options: ReconstructOptions) -> bool:
     which the reconstruction resolves for each data set, matches any recorded value."""
     wanted = json.loads(json.dumps(options.to_dict()))
     return recorded.keys() == wanted.keys() and all(value is None or recorded[key] == value for key, value in wanted.items())
+
+
+def _exclusions(exclude_images: str | Mapping[str, str | None] | None, names: list[str]) -> dict[str, str | None]:
+    """Each data set's list of images to leave out (`reconstruct_many`'s ``exclude_images``),
+    each list checked for form."""
+    if exclude_images is None or isinstance(exclude_images, str):
+        if exclude_images is not None:
+            parse_image_list(exclude_images)
+        return dict.fromkeys(names, exclude_images)
+    if not isinstance(exclude_images, Mapping):
+        raise ArgumentError("exclude_images", f"expected a list of images or a mapping of data set names to lists, got {type(exclude_images).__name__}")
+    unknown = sorted(set(exclude_images) - set(names), key=str)
+    if unknown:
+        raise ArgumentError("exclude_images", f"{unknown[0]!r} is none of the data sets ({', '.join(names)})")
+    for images in exclude_images.values():
+        if images is not None:
+            parse_image_list(images)
+    return {name: exclude_images.get(name) for name in names}
 
 
 def _describe(error: BaseException) -> str:

@@ -20,7 +20,7 @@ from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object,
 from irtps.errors import IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate, format_metrics
 from irtps.image_agreement import format_image_agreement
-from irtps.image_selection import format_images_fitted
+from irtps.image_selection import exclusions_by_name, format_images_fitted
 from irtps.options import ClusterOptions, OptionError, ReconstructOptions, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
 from irtps.output_rule import check_output, escaped, written_by_irtps
 from irtps.paths import check_folder, resolve_path
@@ -122,6 +122,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
 
 def _cmd_batch(args: argparse.Namespace) -> None:
     options, cluster_options = from_arguments(ReconstructOptions, args), from_arguments(ClusterOptions, args)
+    exclusions = exclusions_by_name(args.exclude_images, output_names(args.data))
     check_output(args.out, args.data, force=args.force or _holds_batch_outputs(args.out))
     if args.force and os.path.lexists(args.out) and not args.out.is_dir():
         args.out.unlink()  # OUT is a folder that the data sets' folders go into, not replaced as a whole
@@ -131,7 +132,7 @@ def _cmd_batch(args: argparse.Namespace) -> None:
     else:
         cluster = connect(cluster_options.scheduler)
     with cluster as client:
-        results = reconstruct_many(args.data, args.out, options, client=client, progress=not args.quiet, resume=args.resume)
+        results = reconstruct_many(args.data, args.out, options, client=client, progress=not args.quiet, resume=args.resume, exclude_images=exclusions)
     write_summary(results, args.out, settings=options.to_dict())
     print(summary_table(results), end="")
     failed = sum(result.failed for result in results)
@@ -177,7 +178,8 @@ def _cmd_report(args: argparse.Namespace) -> None:
 
 def _run_table(datasets, options: TableOptions, quiet: bool, out: Path | None, sources: dict[str, str] | None = None) -> str:
     """Compute the comparison table and write it under `out`; with `sources` (data set name ->
-    the path recorded as its source), the reconstructions too."""
+    the path recorded as its source), the reconstructions too. The images a data set left
+    out are listed under the table and in ``table.json``."""
     from tqdm import tqdm
 
     total = len(datasets) * len(method_names(options.bounces, options.paper))
@@ -189,7 +191,11 @@ def _run_table(datasets, options: TableOptions, quiet: bool, out: Path | None, s
             bar.update(1)
 
         table = comparison_table(datasets, options, on_result=finished)
+    table["excluded_images"] = {name: list(dataset.excluded_images) for name, dataset in datasets}
     text = format_table(table)
+    left_out = [f"{name}: {format_images_fitted(len(dataset.names), dataset.excluded_images)}" for name, dataset in datasets if dataset.excluded_images]
+    if left_out:
+        text += "\n" + "\n".join(left_out) + "\n"
     if out is not None:
         (out / "table.md").write_text(text)
         (out / "table.json").write_text(json.dumps(table, indent=2))
@@ -198,9 +204,11 @@ def _run_table(datasets, options: TableOptions, quiet: bool, out: Path | None, s
 
 def _cmd_table(args: argparse.Namespace) -> None:
     options = from_arguments(TableOptions, args)
+    names = output_names(args.data)
+    exclusions = exclusions_by_name(args.exclude_images, names)
     if args.out is not None:
         check_output(args.out, args.data, force=args.force)
-    datasets = [(name, load_dataset(folder)) for name, folder in zip(output_names(args.data), args.data, strict=True)]
+    datasets = [(name, load_dataset(folder, exclude_images=exclusions[name])) for name, folder in zip(names, args.data, strict=True)]
     if args.out is None:
         print(_run_table(datasets, options, args.quiet, None), end="")
         return
@@ -235,6 +243,18 @@ def _cmd_demo(args: argparse.Namespace) -> None:
         f"truth), cap_cornell/PS/, cap_cornell/IRTPSr*/ and cap_cornell/Paper-r*/ (normals, albedo, height, mesh.ply, mesh.obj, "
         f"run.json), "
         f"table.md, table.json. See one as pictures with: irtps report {args.out / 'cap_cornell' / method_names(options.bounces, False)[-1]}"
+    )
+
+
+def _add_exclude_images(parser: argparse.ArgumentParser) -> None:
+    """``--exclude-images`` of the commands that take many data sets."""
+    parser.add_argument(
+        "--exclude-images",
+        metavar="[NAME=]LIST",
+        action="append",
+        default=[],
+        help="images to leave out (not read), as for 'irtps reconstruct': LIST for every DATA, NAME=LIST for the DATA named NAME "
+        "(its folder's name, as in the summary: bearPNG=1-20); repeat it for more, a data set's lists are joined",
     )
 
 
@@ -358,19 +378,21 @@ def build_parser() -> argparse.ArgumentParser:
         "then 'irtps batch ... --scheduler tcp://HOST:8786'.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  irtps batch shared/data/diligent/*PNG --out diligent_ps\n"
+        "  irtps batch shared/data/diligent/*PNG --out diligent_ps --exclude-images bearPNG=1-20\n"
         "  irtps batch scenes/* --out runs --method irtps --bounces 2 --workers 2 --threads-per-worker 4\n"
         "  irtps batch /shared/scenes/* --out /shared/runs --method irtps --scheduler tcp://head-node:8786\n"
         "  irtps batch scenes/* --out runs --method irtps --bounces 2 --resume   # after an interrupted run",
     )
     p.add_argument("data", type=Path, nargs="+", help="data set folders")
     p.add_argument("--out", type=Path, required=True, help="folder for one reconstruction folder per data set and the summary")
+    _add_exclude_images(p)
     add_arguments(p, ReconstructOptions, groups=RECONSTRUCT_GROUPS)
     add_arguments(p.add_argument_group("cluster"), ClusterOptions)
     _add_force(p)
     p.add_argument(
         "--resume",
         action="store_true",
-        help="keep each output folder that is complete (run.json, written last, records the same data set and options, and "
+        help="keep each output folder that is complete (run.json, written last, records the same data set, options and images left out, and "
         "every file it goes with is there) instead of reconstructing it again; others are redone",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -418,10 +440,12 @@ def build_parser() -> argparse.ArgumentParser:
         "best value in bold. --out writes table.md and table.json.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  irtps table shared/data/mitsuba/cap_cornell shared/data/mitsuba/grooves_dark --out table\n"
-        "  irtps table cavity --bounces 3 --iterations 4 --samples 128",
+        "  irtps table cavity --bounces 3 --iterations 4 --samples 128\n"
+        "  irtps table rig_a rig_b --exclude-images rig_b=7,12",
     )
     p.add_argument("data", type=Path, nargs="+", help="data set folders with ground truth")
     p.add_argument("--out", type=Path, help="folder for table.md and table.json")
+    _add_exclude_images(p)
     add_arguments(p, TableOptions)
     _add_force(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -17,7 +17,7 @@ import numpy as np
 from irtps._checks import check_finite
 from irtps.atomic import atomic_output_dir
 from irtps.data import Dataset, GroundTruth, image_file_name
-from irtps.diligent import load_diligent, load_diligent_ground_truth
+from irtps.diligent import diligent_image_names, load_diligent, load_diligent_ground_truth
 from irtps.errors import ArgumentError, DatasetError
 from irtps.image_selection import parse_image_list, select_images
 from irtps.imageio import check_stack_memory, clip_negative, format_size, png_saturation, read_exr, read_image, read_images, read_mask, write_exr, write_png
@@ -83,7 +83,39 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True, exclude_images:
         return _load_irtps(folder, ground_truth, exclude_images)
     if exists(folder / DILIGENT_MARKER):
         return load_diligent(folder, ground_truth=ground_truth, exclude_images=exclude_images)
-    raise DatasetError(
+    raise _not_a_dataset(folder)
+
+
+def dataset_image_names(path: str | Path) -> tuple[str, ...]:
+    """The file names of every image of a data set folder, in its order, without reading
+    them: what a list of images to leave out (`irtps.image_selection`) is matched against.
+
+    Raises
+    ------
+    DatasetError
+        As `load_dataset`, for a folder that is not a data set or whose images are missing.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from irtps.synth import synthesize
+    >>> data, _ = synthesize("cap", size=16, lights=4, bounces=0, environment="none")
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     save_dataset(data, folder + "/cap")
+    ...     dataset_image_names(folder + "/cap")
+    ('000.exr', '001.exr', '002.exr', '003.exr')
+    """
+    folder = check_folder(path)
+    if exists(folder / SCENE_FILE):
+        scene = load_scene(folder / SCENE_FILE)
+        return tuple(image.name for image in _numbered_images(folder / IMAGES_FOLDER, len(scene.lights)))
+    if exists(folder / DILIGENT_MARKER):
+        return diligent_image_names(folder)
+    raise _not_a_dataset(folder)
+
+
+def _not_a_dataset(folder: Path) -> DatasetError:
+    return DatasetError(
         f"{folder}: not a data set: it holds neither {SCENE_FILE} (irtps layout) "
         f"nor {DILIGENT_MARKER} (DiLiGenT layout)"
     )

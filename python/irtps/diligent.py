@@ -127,6 +127,12 @@ def load_diligent_ground_truth(path: str | Path, size: tuple[int, int]) -> Groun
     return GroundTruth(normal=_read_normals(normals_path, size)) if optional_file(normals_path) else None
 
 
+def diligent_image_names(folder: str | Path) -> tuple[str, ...]:
+    """The image file names that a DiLiGenT folder's ``filenames.txt`` lists, in its order
+    (the images are not read)."""
+    return tuple(_read_filenames(Path(folder) / FILENAMES_FILE)[0])
+
+
 def _read_lines(path: Path) -> list[tuple[int, str]]:
     """Non-blank lines of a text file, stripped, with their 1-based line numbers."""
     check_file(path, f"a DiLiGenT folder needs {FILENAMES_FILE}, {DIRECTIONS_FILE} and {INTENSITIES_FILE}")

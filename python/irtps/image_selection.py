@@ -22,7 +22,7 @@ from irtps.data import Dataset
 from irtps.errors import ArgumentError, DatasetError
 from irtps.scene import MIN_LIGHTS
 
-__all__ = ["ImageSelection", "exclude_images", "excluded_indices", "format_image_names", "format_images_fitted", "parse_image_list", "select_images"]
+__all__ = ["ImageSelection", "exclude_images", "excluded_indices", "exclusions_by_name", "format_image_names", "format_images_fitted", "parse_image_list", "select_images"]
 
 _NUMBER = re.compile(r"\d+")
 _RANGE = re.compile(r"(\d+)\s*-\s*(\d+)")
@@ -119,6 +119,55 @@ def excluded_indices(names: Sequence[str], images: str, *, where: str) -> list[i
     if kept < MIN_LIGHTS:
         raise DatasetError(f"{where}: leaving out {len(chosen)} of its {len(names)} images leaves {kept}; photometric stereo needs at least {MIN_LIGHTS}")
     return sorted(chosen)
+
+
+def exclusions_by_name(entries: Sequence[str], names: Sequence[str]) -> dict[str, str | None]:
+    """Each data set's list of images to leave out, from lists given for many data sets at once
+    (``irtps batch`` and ``irtps table``): ``LIST`` for every data set, ``NAME=LIST`` for the
+    data set named ``NAME``; a data set's lists are joined.
+
+    Parameters
+    ----------
+    entries : sequence of str
+        The lists, each ``LIST`` or ``NAME=LIST`` (``NAME`` the longest of `names` that the
+        entry starts with, followed by ``=``).
+    names : sequence of str
+        The data sets' names (`irtps.batch.output_names`).
+
+    Returns
+    -------
+    dict
+        Name -> the joined list (`parse_image_list`'s form), or None when nothing is left out.
+
+    Raises
+    ------
+    ArgumentError
+        For a malformed list, or an entry with ``=`` that starts with none of `names` (checked
+        before anything is read).
+
+    Examples
+    --------
+    >>> exclusions_by_name(["96", "bearPNG=1-20"], ["ballPNG", "bearPNG"])
+    {'ballPNG': '96', 'bearPNG': '96,1-20'}
+    >>> exclusions_by_name(["bear=1-20"], ["ballPNG", "bearPNG"])
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: exclude_images: 'bear=1-20' names no data set (the data sets: ballPNG, bearPNG)
+    """
+    lists: dict[str, list[str]] = {name: [] for name in names}
+    for entry in entries:
+        named = [name for name in names if entry.startswith(name + "=")]
+        if named:
+            name = max(named, key=len)
+            targets, images = [name], entry[len(name) + 1 :]
+        elif "=" in entry:
+            raise ArgumentError("exclude_images", f"{entry!r} names no data set (the data sets: {', '.join(names)})")
+        else:
+            targets, images = list(names), entry
+        parse_image_list(images)
+        for target in targets:
+            lists[target].append(images)
+    return {name: ",".join(images) if images else None for name, images in lists.items()}
 
 
 def _numbers(item: str) -> tuple[int, int] | None:
