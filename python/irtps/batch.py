@@ -26,6 +26,7 @@ Dask (``dask.distributed``) is an optional dependency: ``pip install 'irtps[batc
 from __future__ import annotations
 
 import builtins
+import gc
 import json
 import logging
 import multiprocessing
@@ -467,7 +468,14 @@ def connect(address: str) -> Iterator:
     try:
         client = distributed.Client(address)
     except (OSError, ValueError) as error:
-        raise IrtpsError(f"{address}: cannot reach a Dask scheduler there ({error})") from None
+        failure = f"{address}: cannot reach a Dask scheduler there ({error})"
+    else:
+        failure = None
+    if failure is not None:
+        # The half-made client, garbage once the error is, is closed now: collected later,
+        # inside another client's start, its closing would wait on the lock that start holds.
+        gc.collect()
+        raise IrtpsError(failure)
     try:
         yield client
     except BaseException:
