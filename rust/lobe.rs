@@ -30,7 +30,7 @@ use glam::Vec3;
 
 use crate::lanes::{Floats, Ints, Isa, Portable};
 use crate::ps::{fit_masked, flag, PixelFit, PsOutput};
-use crate::robust_ps::{gather, Lights, Scratch, LANES, SATURATED};
+use crate::robust_ps::{gather, Lights, Scratch, LANES, MAD_TO_SIGMA, SATURATED};
 
 /// The lobe exponents tried, as powers of two: `p = 2^s` for `s` in `0..LOBE_EXPONENTS`
 /// (1 to 128: lobes from about 60° to about 6° wide at half height).
@@ -45,8 +45,6 @@ pub const LOBE_SCALES: f32 = 2.5;
 pub const LOBE_MIN_LIT: usize = 6;
 /// Parameters that a lobe adds to the Lambertian fit: its height and exponent.
 const LOBE_PARAMETERS: f32 = 2.0;
-/// Median absolute deviation to the standard deviation of a normal distribution.
-const MAD_TO_SIGMA: f32 = 1.4826;
 /// Least robust scale, as a fraction of `a + c` (noise-free data).
 const SCALE_FLOOR: f32 = 1e-4;
 /// Longest step of the normal per round (about 11°).

@@ -72,6 +72,9 @@ impl Lights {
 /// Channel-summed `b` of a saturated observation: so large that its residual gives it no
 /// weight, finite so that a zero weight times it adds nothing.
 pub(crate) const SATURATED: f32 = f32::MAX;
+/// Median absolute deviation to the standard deviation of a normal distribution: the robust
+/// scale of the Tukey and lobe fits.
+pub(crate) const MAD_TO_SIGMA: f32 = 1.4826;
 
 /// One pixel's observations, pixel-major.
 struct Pixel<'a> {

@@ -32,7 +32,7 @@ use glam::{Mat3, Vec3};
 
 use crate::lanes::{Floats, Ints, Isa, Portable};
 use crate::ps::{fit_masked, flag, PixelFit, PsOutput};
-use crate::robust_ps::{full_fit, solved, Lights, LANES, SATURATED};
+use crate::robust_ps::{full_fit, solved, Lights, LANES, MAD_TO_SIGMA, SATURATED};
 
 /// Tukey's biweight constant, in robust scales: an observation whose residual is beyond
 /// 2.5 scales carries no weight. Below the 4.685 of 95 % Gaussian efficiency, because the
@@ -46,8 +46,6 @@ pub const TUKEY_ITERATIONS: u8 = 20;
 pub const TUKEY_SETTLED: f32 = 3e-3;
 /// Fewest observations with weight that a re-weighted fit needs.
 const TUKEY_MIN: usize = 4;
-/// Median absolute deviation to the standard deviation of a normal distribution.
-const MAD_TO_SIGMA: f32 = 1.4826;
 /// Least robust scale, as a fraction of the fit's length (noise-free data).
 const SCALE_FLOOR: f32 = 1e-4;
 /// Pixels per parallel task.

@@ -20,8 +20,9 @@ import numpy as np
 from irtps._checks import check_array, check_mask, check_positive
 from irtps.data import pixel_observations, spread_pixels
 from irtps.errors import ArgumentError
+from irtps.robust_stats import median_and_sigma
 
-__all__ = ["MAD_TO_SIGMA", "MIN_PIXELS", "SAMPLE", "WELL_LIT", "ImageAgreement", "format_image_agreement", "image_agreement"]
+__all__ = ["MIN_PIXELS", "SAMPLE", "WELL_LIT", "ImageAgreement", "format_image_agreement", "image_agreement"]
 
 #: Least cosine between a pixel's fitted normal and a light for the pixel to count in that
 #: light's image (60° from the light): away from grazing light, where the fall-off of real
@@ -32,8 +33,6 @@ MIN_PIXELS = 20
 #: Object pixels measured by default, spread evenly over the mask: the median of a few
 #: thousand ratios is within a few thousandths of all of them, at a fraction of the time.
 SAMPLE = 4096
-#: Median absolute deviation to the standard deviation of a normal distribution.
-MAD_TO_SIGMA = 1.4826
 
 
 @dataclass(frozen=True)
@@ -169,8 +168,8 @@ def image_agreement(
     for k in range(count):
         values = log_ratio[k, usable[k]]
         if values.size >= MIN_PIXELS:
-            center = np.median(values)
-            brightness[k], spread[k] = np.exp(center), MAD_TO_SIGMA * np.median(np.abs(values - center))
+            center, spread[k] = median_and_sigma(values)
+            brightness[k] = np.exp(center)
     if not np.isnan(brightness).all():
         brightness /= np.nanmedian(brightness)
     return ImageAgreement(brightness, spread)

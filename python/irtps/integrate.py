@@ -31,6 +31,7 @@ import scipy.sparse
 
 from irtps._checks import check_choice, check_finite, check_mask, check_number, check_positive, document_choices
 from irtps.errors import ArgumentError
+from irtps.robust_stats import median_and_sigma
 
 __all__ = ["integrate_normals", "mask_boundary", "normals_to_gradients", "place_height"]
 
@@ -738,8 +739,7 @@ def _robust_weights(residuals, kind):
     # The scale from a regular subsample of at most ~2^19 residuals: as good an estimate,
     # for a fraction of the two partial sorts on millions of residuals.
     sample = residuals[:: max(1, residuals.size >> 19)]
-    deviation = np.abs(sample - np.median(sample))
-    scale = 1.4826 * np.median(deviation)
+    scale = median_and_sigma(sample)[1]
     magnitude = np.abs(residuals)
     # Exact data have a zero MAD: keep the scale away from 0 (relative to the residuals).
     scale = max(scale, 1e-9 * float(magnitude.max()), 1e-300)
