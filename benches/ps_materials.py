@@ -18,7 +18,7 @@ a scene of the shape alone with the render's lights) beside its classic photomet
 whether IRT-PS, whose rendering is Lambertian, holds on glossy and metallic objects.
 
     python benches/ps_materials.py [--objects ballPNG readingPNG] [--downsample 2]
-        [--samples 32] [--irtps] [--json PATH]
+        [--samples 32] [--irtps] [--json PATH] [--cache DIR]
     python benches/ps_materials.py --objects cap cavity grooves relief pedestal [--size 160]
 
 Needs Mitsuba 3 (``pip install mitsuba``; its LLVM variant needs libLLVM, see
@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import hashlib
 import json
 import sys
 import time
@@ -99,10 +100,26 @@ def shape_scene(height: np.ndarray, mask: np.ndarray, directions: np.ndarray):
     return scene, make_renderer(scene, height, albedo, mask)
 
 
-def render_material(mi, variant: str, scene, renderer, bsdf: dict, samples: int) -> np.ndarray:
-    """(K, H, W, 3) images of the shape in `bsdf` under each light, 4 bounces."""
+def render_material(mi, variant: str, scene, renderer, bsdf: dict, samples: int, cache: Path | None = None) -> np.ndarray:
+    """(K, H, W, 3) images of the shape in `bsdf` under each light, 4 bounces; with `cache`,
+    read from there when an earlier run rendered the same (the renders are seeded), else
+    written there."""
+    path = None
+    if cache is not None:
+        key = hashlib.sha256(json.dumps([mi.__version__, variant, bsdf, samples], sort_keys=True).encode())
+        for array in (*renderer.mesh_arrays()[:2], *(light.direction for light in scene.lights)):
+            key.update(np.ascontiguousarray(array).tobytes())
+        path = cache / f"{key.hexdigest()[:24]}.npy"
+    if path is not None and path.is_file():
+        return np.load(path)
     mitsuba = MitsubaScene(mi, variant, renderer, scene, 4, "independent", bsdf=bsdf)
-    return np.stack([mitsuba.render(k, samples, seed=k)[0] for k in range(len(scene.lights))])
+    images = np.stack([mitsuba.render(k, samples, seed=k)[0] for k in range(len(scene.lights))])
+    if path is not None:
+        cache.mkdir(parents=True, exist_ok=True)
+        partial = path.with_suffix(".partial.npy")
+        np.save(partial, images)
+        partial.replace(path)
+    return images
 
 
 def reconstruction_errors(dataset: irtps.Dataset) -> dict[str, float]:
@@ -134,6 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--samples", type=positive_int, default=32, help="Mitsuba samples per pixel (default: 32)")
     parser.add_argument("--irtps", action="store_true", help="also reconstruct each render with IRT-PS (irtps.reconstruct), beside its pass 0, classic photometric stereo")
     parser.add_argument("--json", type=Path, help="write the rows here")
+    parser.add_argument("--cache", type=Path, help="keep the renders in this folder and take them from there when run again (after a change to irtps's fits, not to the renders)")
     args = parser.parse_args(argv)
     missing = [name for name in [*args.objects, "ballPNG"] if name not in SHAPES and not (DILIGENT / name).is_dir()]
     if missing:
@@ -153,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
         scene, renderer = shape_scene(height, mask, directions)
         for material, bsdf in MATERIALS:
             start = time.perf_counter()
-            images = render_material(mi, usable[0], scene, renderer, bsdf, args.samples)
+            images = render_material(mi, usable[0], scene, renderer, bsdf, args.samples, args.cache)
             errors, share = mode_errors(images, directions, irradiance, mask, truth)
             change = errors["auto"] / errors["none"] - 1
             label = f"{name} ({mask.shape[1]}×{mask.shape[0]}, {int(mask.sum())} px)"
