@@ -178,8 +178,7 @@ def _cmd_report(args: argparse.Namespace) -> None:
 
 def _run_table(datasets, options: TableOptions, quiet: bool, out: Path | None, sources: dict[str, str] | None = None) -> str:
     """Compute the comparison table and write it under `out`; with `sources` (data set name ->
-    the path recorded as its source), the reconstructions too. The images a data set left
-    out are listed under the table and in ``table.json``."""
+    the path recorded as its source), the reconstructions too."""
     from tqdm import tqdm
 
     total = len(datasets) * len(method_names(options.bounces, options.paper))
@@ -191,11 +190,7 @@ def _run_table(datasets, options: TableOptions, quiet: bool, out: Path | None, s
             bar.update(1)
 
         table = comparison_table(datasets, options, on_result=finished)
-    table["excluded_images"] = {name: list(dataset.excluded_images) for name, dataset in datasets}
     text = format_table(table)
-    left_out = [f"{name}: {format_images_fitted(len(dataset.names), dataset.excluded_images)}" for name, dataset in datasets if dataset.excluded_images]
-    if left_out:
-        text += "\n" + "\n".join(left_out) + "\n"
     if out is not None:
         (out / "table.md").write_text(text)
         (out / "table.json").write_text(json.dumps(table, indent=2))

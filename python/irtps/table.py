@@ -10,6 +10,7 @@ import numpy as np
 from irtps.data import Dataset
 from irtps.errors import ArgumentError
 from irtps.evaluate import evaluate
+from irtps.image_selection import format_images_fitted
 from irtps.options import PAPER_BOUNCES, ReconstructOptions, TableOptions
 from irtps.reconstruct import Reconstruction, reconstruct
 
@@ -67,8 +68,10 @@ def comparison_table(
     -------
     dict
         ``{"methods": [...], "rows": [...], "datasets": {name: {method: metrics}},
-        "overall": {method: metrics}}``, metrics being `irtps.evaluate.Metrics.to_dict`;
-        the overall value of a metric is its mean over the data sets that have it.
+        "overall": {method: metrics}, "images_fitted": {name: count}, "excluded_images":
+        {name: [file names]}}``, metrics being `irtps.evaluate.Metrics.to_dict`; the
+        overall value of a metric is its mean over the data sets that have it; the images
+        each data set fitted and those it left out (`irtps.exclude_images`).
 
     Raises
     ------
@@ -101,12 +104,19 @@ def comparison_table(
         for _, key in ROWS:
             values = [per_dataset[name][method][key] for name in per_dataset if per_dataset[name][method][key] is not None]
             overall[method][key] = float(np.mean(values)) if values else None
-    return {"methods": methods, "rows": [key for _, key in ROWS], "datasets": per_dataset, "overall": overall}
+    return {
+        "methods": methods,
+        "rows": [key for _, key in ROWS],
+        "datasets": per_dataset,
+        "overall": overall,
+        "images_fitted": {name: len(data.names) for name, data in datasets},
+        "excluded_images": {name: list(data.excluded_images) for name, data in datasets},
+    }
 
 
 def format_table(table: dict) -> str:
     """The table as markdown, in the layout of the paper's Table 1; the best value of each
-    row is in bold."""
+    row is in bold. Under it, each data set that left images out, and which."""
     methods = table["methods"]
     blocks = [(name, table["datasets"][name]) for name in table["datasets"]]
     if len(blocks) > 1:
@@ -122,4 +132,7 @@ def format_table(table: dict) -> str:
             cells = ["n/a" if v is None else (f"**{v:.4g}**" if v == best else f"{v:.4g}") for v in values]
             lines.append(f"| {label} | " + " | ".join(cells) + " |")
         lines.append("")
-    return "\n".join(lines).rstrip() + "\n"
+    text = "\n".join(lines).rstrip() + "\n"
+    fitted = table.get("images_fitted", {})
+    left_out = [f"{name}: {format_images_fitted(fitted[name], excluded)}" for name, excluded in table.get("excluded_images", {}).items() if excluded]
+    return text + "\n" + "\n".join(left_out) + "\n" if left_out else text
