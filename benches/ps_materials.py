@@ -11,8 +11,9 @@ light directions (irradiance π) with physically based BSDFs: Lambertian, rough 
 aluminium and copper). Paths of up to 4 bounces (``max_depth`` 6), ``--samples`` per pixel.
 For each, the mean angular error of every ``--robust`` mode against the height field's
 normals (scene contract §2), how far ``auto`` (the default) is below plain least squares, and
-the share of the object's pixels that the lobe mode fits with a lobe (``irtps.lobe_share``,
-from which ``auto`` picks ``lobe``, from one half on, or ``tukey``). With ``--irtps``, also
+the share of the object's pixels that take a lobe in ``auto``'s check (``irtps.lobe_share``,
+the lobe fit cut to ``irtps.ps.LOBE_CHECK_ROUNDS`` rounds, from which ``auto`` picks
+``lobe``, from one half on, or ``tukey``). With ``--irtps``, also
 the error of ``irtps.reconstruct``'s IRT-PS (defaults; the object's own inter-reflections, in
 a scene of the shape alone with the render's lights) beside its classic photometric stereo:
 whether IRT-PS, whose rendering is Lambertian, holds on glossy and metallic objects.

@@ -63,11 +63,15 @@ pub struct PsSettings {
     pub shadow_fraction: f32,
     /// In every robust mode, raw values at or above this level (in any channel) are saturated.
     pub saturation: Option<f32>,
+    /// In the lobe mode, the rounds of each exponent's fit from each start (at least 1):
+    /// [`crate::lobe::LOBE_ROUNDS`] by default, fewer for a quicker look at which pixels
+    /// take a lobe.
+    pub lobe_rounds: usize,
 }
 
 impl Default for PsSettings {
     fn default() -> Self {
-        PsSettings { robust: Robust::Tukey, shadow_fraction: 0.05, saturation: None }
+        PsSettings { robust: Robust::Tukey, shadow_fraction: 0.05, saturation: None, lobe_rounds: crate::lobe::LOBE_ROUNDS }
     }
 }
 
@@ -144,6 +148,9 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
     if images.len() != k_count * n * 3 {
         return Err(Error::input("images", format!("{} values for {k_count} lights x {n} pixels x 3", images.len())));
     }
+    if settings.lobe_rounds == 0 {
+        return Err(Error::input("lobe_rounds", "must be at least 1"));
+    }
     let fit = Fit::new(lights, gram, settings);
     let mut out = PsOutput { normals: vec![[0.0; 3]; n], albedo: vec![[0.0; 3]; n], flags: vec![flag::MASKED_OUT; n], used: vec![0; n] };
     let per_pixel = Lights::new(&fit.directions, &fit.scale, &fit.saturated_b, gram);
@@ -151,7 +158,7 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
         Robust::Tukey => crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out),
         Robust::Lobe => {
             crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out);
-            crate::lobe::fit_pixels(images, mask, &per_pixel, &mut out);
+            crate::lobe::fit_pixels(images, mask, &per_pixel, settings.lobe_rounds, &mut out);
         }
         Robust::Trim => crate::robust_ps::fit_pixels(images, mask, &per_pixel, &mut out),
         Robust::None | Robust::Threshold => return Ok(fit.streamed(images, mask, out)),

@@ -354,9 +354,10 @@ type PsArrays<'py> = (Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<f32>>, 
 
 /// Calibrated Lambertian photometric stereo on C-contiguous float32 images (K, H, W, 3):
 /// (normals (H, W, 3), albedo (H, W, 3), flags (H, W) uint8, observations used (H, W) uint16).
-/// `robust` is "none", "threshold", "trim", "tukey" or "lobe".
+/// `robust` is "none", "threshold", "trim", "tukey" or "lobe"; `lobe_rounds` the lobe mode's
+/// most rounds per exponent and start (at least 1; its 15 by default).
 #[pyfunction]
-#[pyo3(signature = (images, mask, light_directions, light_irradiance, robust="tukey", shadow_fraction=0.05, saturation=None))]
+#[pyo3(signature = (images, mask, light_directions, light_irradiance, robust="tukey", shadow_fraction=0.05, saturation=None, lobe_rounds=None))]
 #[allow(clippy::too_many_arguments)]
 fn photometric_stereo<'py>(
     py: Python<'py>,
@@ -367,6 +368,7 @@ fn photometric_stereo<'py>(
     robust: &str,
     shadow_fraction: f32,
     saturation: Option<f32>,
+    lobe_rounds: Option<usize>,
 ) -> PyResult<PsArrays<'py>> {
     let robust = match robust {
         "none" => Robust::None,
@@ -386,7 +388,7 @@ fn photometric_stereo<'py>(
     }
     let data = images.as_array().to_slice().ok_or_else(|| argument_error("images", "must be C-contiguous"))?;
     let mask_data = mask.as_array().to_slice().ok_or_else(|| argument_error("mask", "must be C-contiguous"))?;
-    let settings = PsSettings { robust, shadow_fraction, saturation };
+    let settings = PsSettings { robust, shadow_fraction, saturation, lobe_rounds: lobe_rounds.unwrap_or(crate::lobe::LOBE_ROUNDS) };
     let out = py.detach(|| core_ps(data, mask_data, &lights, &settings)).map_err(to_py)?;
     let (h, w) = (shape[1], shape[2]);
     let planar = |v: Vec<[f32; 3]>| Array::from_shape_vec(IxDyn(&[h, w, 3]), v.into_flattened());

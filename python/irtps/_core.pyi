@@ -48,9 +48,11 @@ def photometric_stereo(
     robust: str = "tukey",
     shadow_fraction: float = 0.05,
     saturation: float | None = None,
+    lobe_rounds: int | None = None,
 ) -> tuple[_F32, _F32, npt.NDArray[np.uint8], npt.NDArray[np.uint16]]:
     """(normals (H, W, 3), albedo (H, W, 3), flags (H, W), observations used (H, W)) of
-    C-contiguous float32 images (K, H, W, 3)."""
+    C-contiguous float32 images (K, H, W, 3); `lobe_rounds`, the lobe mode's most rounds per
+    exponent and start, at least 1 (15 by default)."""
 
 def compare_rendering(
     direct: _F32,

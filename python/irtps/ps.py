@@ -156,6 +156,14 @@ def photometric_stereo(
     """
     images = np.ascontiguousarray(check_array("images", images, (None, None, None, 3), dtype=np.float32, copy=False))
     mask = np.ascontiguousarray(check_mask(mask, images.shape[1:3], match="images"))
+    settings = _core_settings(light_directions, light_irradiance, robust, shadow_fraction, saturation)
+    if not progress:
+        return PsResult(*_core.photometric_stereo(images, mask, *settings))
+    return _fit_in_bands(images, mask, settings)
+
+
+def _core_settings(light_directions: np.ndarray, light_irradiance: np.ndarray, robust: str, shadow_fraction: float, saturation: float | None) -> tuple[np.ndarray, np.ndarray, str, float, float | None]:
+    """The arguments of `_core.photometric_stereo` after the images and the mask, checked."""
     directions = np.ascontiguousarray(light_directions, dtype=np.float32)
     irradiance = np.ascontiguousarray(light_irradiance, dtype=np.float32)
     check_choice("robust", robust, ROBUST_MODES)
@@ -163,10 +171,7 @@ def photometric_stereo(
         raise ArgumentError("shadow_fraction", f"{shadow_fraction} is not in [0, 1)")
     if saturation is not None:
         saturation = check_positive("saturation", saturation)
-    settings = (directions, irradiance, robust, shadow_fraction, saturation)
-    if not progress:
-        return PsResult(*_core.photometric_stereo(images, mask, *settings))
-    return _fit_in_bands(images, mask, settings)
+    return (directions, irradiance, robust, shadow_fraction, saturation)
 
 
 #: Bands of rows a fit with a progress bar runs in.
@@ -194,6 +199,12 @@ LOBE_SAMPLE = 1000
 #: Object pixels `lobe_share` fits first; it doubles them until the share is clearly on one
 #: side of `LOBE_ADVISED` (`share_is_decided`) or `LOBE_SAMPLE` are fitted.
 LOBE_FIRST = 64
+#: Rounds of each exponent's fit, from each start, in `lobe_share`'s fits (the lobe mode's
+#: own fit has 15): half the cost per pixel. Measured on the 47 objects of benches/README.md
+#: (real and rendered, 96 lights, 1 000 pixels each), the shares are 0–9 points lower than
+#: after 15 rounds (10 on a metal under 24 lights, tests/test_ps.py), some pixels taking a
+#: lobe only in later rounds, and every object falls on the same side of `LOBE_ADVISED`.
+LOBE_CHECK_ROUNDS = 5
 #: Standard deviations of the Wilson score interval by which `share_is_decided` judges a share
 #: clearly on one side of `LOBE_ADVISED`: about one chance in 740 per look that a binomial
 #: sample so far off the line comes from a share on its other side.
@@ -281,10 +292,12 @@ def lobe_share(
     shadow_fraction: float = 0.05,
     saturation: float | None = None,
 ) -> float:
-    """The share of the object's pixels that ``robust="lobe"`` fits with a specular lobe.
+    """The share of the object's pixels that the lobe mode's fit, cut short, gives a
+    specular lobe.
 
-    The lobe mode fits up to `sample` of the mask's pixels, spread evenly over it (all of
-    them when fewer): first `LOBE_FIRST` of them, spread over the mask too, then twice as many
+    Up to `sample` of the mask's pixels, spread evenly over it (all of them when fewer), are
+    fitted as ``robust="lobe"`` fits them, but with `LOBE_CHECK_ROUNDS` rounds per exponent
+    instead of 15: first `LOBE_FIRST` of them, spread over the mask too, then twice as many
     at each step, until the share of those fitted is clearly on one side of `LOBE_ADVISED`
     (`share_is_decided`), which is all that `choose_robust` asks of it. So a matte object is
     told from a metal on 64 pixels, and an object near the line is measured on all `sample`,
@@ -292,10 +305,12 @@ def lobe_share(
 
     A broad highlight that covers many lights (metal, metallic paint, a broad glaze) is what
     the lobe explains; on a matte object with shadows and inter-reflection few pixels take
-    one. Measured on 1 000 pixels of renders of DiLiGenT's shapes and of the shared data
-    (benches/README.md): 0–1.3 % on Lambertian surfaces, 13 % on DiLiGenT ball (20 % of the
-    64 pixels that decide it), 38–40 % on reading, 24–31 % on a sharp plastic, 50–90 % on
-    broad plastics and 74–87 % on rough aluminium and copper. Where most pixels take one,
+    one. Measured on 1 000 pixels of renders of DiLiGenT's shapes in six materials and of the
+    real objects (benches/README.md): 0.1–1.1 % on Lambertian surfaces, 9 % on DiLiGenT ball
+    (as many of the 64 pixels that decide it), 32 % on reading (27 % of its first 64, which
+    decide it; both with saturated observations left out), 19–26 % on a sharp plastic, 47–89 % on broad plastics and 65–87 % on rough
+    aluminium and copper; 0–9 points below the full lobe fit's shares, and on the same side
+    of `LOBE_ADVISED` for each of 47 real and rendered objects. Where most pixels take one,
     the lobe mode fits the object better than the Tukey fit.
 
     Parameters
@@ -332,6 +347,7 @@ def lobe_share(
     mask = check_mask(mask, images.shape[1:3], match="images")
     if isinstance(sample, bool) or not (isinstance(sample, (int, np.integer)) and sample >= 1):
         raise ArgumentError("sample", f"{sample!r} is not a positive integer")
+    settings = _core_settings(light_directions, light_irradiance, "lobe", shadow_fraction, saturation)
     chosen = spread_pixels(mask, int(sample))
     if chosen.size == 0:
         return 0.0
@@ -339,9 +355,9 @@ def lobe_share(
     fitted = lobes = 0
     while fitted < chosen.size:
         upto = min(max(LOBE_FIRST, 2 * fitted), chosen.size)
-        observed = images[:, rows[fitted:upto], cols[fitted:upto]][:, None]  # (K, 1, N, 3): one row of pixels
-        fit = photometric_stereo(observed, light_directions, light_irradiance, robust="lobe", shadow_fraction=shadow_fraction, saturation=saturation)
-        lobes += int((fit.flags == LOBE_FITTED).sum())
+        observed = np.ascontiguousarray(images[:, rows[fitted:upto], cols[fitted:upto]][:, None], dtype=np.float32)  # (K, 1, N, 3): one row of pixels
+        flags = _core.photometric_stereo(observed, np.ones(observed.shape[1:3], bool), *settings, LOBE_CHECK_ROUNDS)[2]
+        lobes += int((flags == LOBE_FITTED).sum())
         fitted = upto
         if stop_early and share_is_decided(lobes, fitted):
             break
