@@ -230,8 +230,8 @@ def test_irtps_fits_every_pass_with_the_mode_auto_picked():
 
 @pytest.mark.parametrize("name, most", [("diligent_ball_small", 0.05), ("diligent_reading_small", 0.3)])
 def test_no_lobe_on_the_small_diligent_copies(tmp_path, capsys, name, most):
-    # Measured: 1.6 % of ball's first 64 pixels take a lobe (0.9 % of all its 1 000), 14.1 % of
-    # reading's first 64 (13.5 %); 8 and 24 lights.
+    # Measured: 1.6 % of ball's first 64 pixels take a lobe (0.9 % of all its 930), 14.1 % of
+    # reading's first 64 (13.5 % of 1 000); 8 and 24 lights.
     assert main(["reconstruct", str(DATA / name), "--out", str(tmp_path / name), "--quiet"]) == 0
     assert "--robust lobe" not in capsys.readouterr().err
     run = json.loads((tmp_path / name / "run.json").read_text())

@@ -308,10 +308,11 @@ def lobe_share(
     one. Measured on 1 000 pixels of renders of DiLiGenT's shapes in six materials and of the
     real objects (benches/README.md): 0.1–1.1 % on Lambertian surfaces, 9 % on DiLiGenT ball
     (as many of the 64 pixels that decide it), 32 % on reading (27 % of its first 64, which
-    decide it; both with saturated observations left out), 19–26 % on a sharp plastic, 47–89 % on broad plastics and 65–87 % on rough
-    aluminium and copper; 0–9 points below the full lobe fit's shares, and on the same side
-    of `LOBE_ADVISED` for each of 47 real and rendered objects. Where most pixels take one,
-    the lobe mode fits the object better than the Tukey fit.
+    decide it; both with saturated observations left out), 19–26 % on a sharp plastic,
+    47–89 % on broad plastics and 65–87 % on rough aluminium and copper; 0–9 points below the
+    full lobe fit's shares, and on the same side of `LOBE_ADVISED` for each of 47 real and
+    rendered objects (96 lights). Where most pixels take one, the lobe mode fits the object
+    better than the Tukey fit.
 
     Parameters
     ----------
