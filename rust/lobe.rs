@@ -269,7 +269,7 @@ fn refit<V: Isa<LANES>>(isa: V, job: &Job, grey: &[f32], rgb: &[[f32; 3]], start
             continue;
         }
         for shift in 0..LOBE_EXPONENTS {
-            let fit = fit_exponent(isa, lights, half, from, (shift, job.rounds), reach, work);
+            let fit = fit_exponent(isa, job, from, shift, reach, work);
             if fit.cost + margin < best.as_ref().map_or(start_cost, |b| b.cost) {
                 work.best_weight.copy_from_slice(&work.weight);
                 best = Some(fit);
@@ -300,14 +300,15 @@ fn shading<V: Isa<LANES>>(isa: V, lights: &Lights, half: &HalfVectors, n: Vec3, 
     }
 }
 
-/// Fits exponent `2^shift` from normal `from` for at most `rounds` rounds, its [`loss`] at
+/// Fits exponent `2^shift` from normal `from` for at most `job`'s rounds, its [`loss`] at
 /// `reach`; leaves the fit's weights in `work.weight`.
 #[inline(always)]
-fn fit_exponent<V: Isa<LANES>>(isa: V, lights: &Lights, half: &HalfVectors, from: Vec3, (shift, rounds): (u32, usize), reach: f32, work: &mut Work) -> LobeFit {
+fn fit_exponent<V: Isa<LANES>>(isa: V, job: &Job, from: Vec3, shift: u32, reach: f32, work: &mut Work) -> LobeFit {
+    let (lights, half) = (job.lights, &job.half);
     let p = (1u32 << shift) as f32;
     let mut n = from;
     work.weight.copy_from_slice(&work.usable);
-    for round in 0..rounds {
+    for round in 0..job.rounds {
         shading(isa, lights, half, n, shift, work);
         let (a, c) = lobe_scales(isa, work);
         let (t1, t2) = tangents(n);

@@ -465,12 +465,11 @@ def connect(address: str) -> Iterator:
         If the scheduler cannot be reached, or dask is not installed.
     """
     distributed = _import_distributed()
+    failure = None
     try:
         client = distributed.Client(address)
     except (OSError, ValueError) as error:
         failure = f"{address}: cannot reach a Dask scheduler there ({error})"
-    else:
-        failure = None
     if failure is not None:
         # The half-made client, garbage once the error is, is closed now: collected later,
         # inside another client's start, its closing would wait on the lock that start holds.
