@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 from irtps import _core
-from irtps.ps import ROBUST_MODES, choose_robust, lobe_share
+from irtps.ps import ROBUST_MODES, lobe_share, photometric_stereo
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "diligent"
 
@@ -82,7 +82,7 @@ def measure(images: np.ndarray, mask: np.ndarray, d32: np.ndarray, e32: np.ndarr
     for mode in ROBUST_MODES:
         runs[f"irtps_{mode}_object"] = lambda mode=mode: _core.photometric_stereo(images, mask, d32, e32, mode)
     runs["irtps_lobe_share_object"] = lambda: lobe_share(images, d32, e32, mask)
-    runs["irtps_auto_object"] = lambda: _core.photometric_stereo(images, mask, d32, e32, choose_robust(lobe_share(images, d32, e32, mask)))
+    runs["irtps_auto_object"] = lambda: photometric_stereo(images, d32, e32, mask, robust="auto")
     times: dict[str, list[float]] = {name: [] for name in runs}
     for _ in range(repeats):
         for name, run in runs.items():

@@ -604,6 +604,33 @@ mod tests {
     }
 
     #[test]
+    fn the_auto_modes_check_beside_the_tukey_fit_is_each_fit_alone() {
+        // Half the pixels glossy, half matte: the check's pixels pick from both.
+        let directions = ring_lights();
+        let lights: Vec<Light> = directions.iter().map(|&d| Light { direction: Vec3A::from(d), irradiance: [std::f32::consts::PI; 3] }).collect();
+        let normals = tilted(60);
+        let mut images = Vec::new();
+        for &l in &directions {
+            let h = (l + Vec3::Z).normalize();
+            for (p, &n) in normals.iter().enumerate() {
+                let height = if p % 2 == 0 { 4.0 } else { 0.0 };
+                images.extend([0.2f32, 0.3, 0.4].map(|r| n.dot(l).max(0.0) * (r + height * n.dot(h).max(0.0).powi(32))));
+            }
+        }
+        let mask: Vec<bool> = (0..normals.len()).map(|p| p != 7).collect();
+        let check = [3, 10, 11, 40, 59, 2];
+        let settings = PsSettings::default();
+        let (fit, flags) = crate::ps::tukey_with_lobe_check(&images, &mask, &check, &lights, &settings, 5).unwrap();
+        assert_eq!(fit, photometric_stereo(&images, &mask, &lights, &PsSettings { robust: Robust::Tukey, ..settings }).unwrap());
+        let observed: Vec<f32> = images.chunks_exact(3 * normals.len()).flat_map(|image| check.iter().flat_map(move |&p| image[3 * p..3 * p + 3].to_vec())).collect();
+        let alone = photometric_stereo(&observed, &[true; 6], &lights, &PsSettings { robust: Robust::Lobe, lobe_rounds: 5, ..settings }).unwrap();
+        assert_eq!(flags, alone.flags);
+        assert_eq!(flags.iter().map(|&f| f == flag::LOBE).collect::<Vec<_>>(), check.map(|p| p % 2 == 0), "the glossy pixels take a lobe, the matte ones none");
+        let outside = crate::ps::tukey_with_lobe_check(&images, &mask, &[60], &lights, &settings, 5).unwrap_err().to_string();
+        assert!(outside.starts_with("check: pixel 60 is outside"), "{outside}");
+    }
+
+    #[test]
     fn lobe_mode_keeps_lambertian_pixels() {
         let normals = tilted(40);
         let out = fit_glossy(&normals, [0.5, 0.5, 0.5], 0.0, 1, Robust::Lobe);

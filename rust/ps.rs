@@ -166,6 +166,28 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
     Ok(out)
 }
 
+/// The auto mode's two fits at once: `images` where `mask` is true in the Tukey mode (the
+/// fit `settings` ask for, whatever their robust mode), and beside it, on the same threads,
+/// the pixels `check` (indices into `mask`, in any order) in the lobe mode with
+/// `check_rounds` rounds, the look at which pixels take a specular lobe that decides whether
+/// the object wants the lobe mode. Returns the Tukey fit and the flag of each pixel of
+/// `check`. The check's few pixels take the threads that the Tukey fit leaves idle, instead
+/// of a call of their own before it.
+pub fn tukey_with_lobe_check(images: &[f32], mask: &[bool], check: &[usize], lights: &[Light], settings: &PsSettings, check_rounds: usize) -> Result<(PsOutput, Vec<u8>)> {
+    let n = mask.len();
+    if let Some(&pixel) = check.iter().find(|&&pixel| pixel >= n) {
+        return Err(Error::input("check", format!("pixel {pixel} is outside the {n} pixels of the mask")));
+    }
+    let tukey = PsSettings { robust: Robust::Tukey, ..*settings };
+    let lobe = PsSettings { robust: Robust::Lobe, lobe_rounds: check_rounds, ..*settings };
+    let look = || {
+        let observed: Vec<f32> = images.chunks_exact(3 * n).flat_map(|image| check.iter().flat_map(move |&pixel| image[3 * pixel..3 * pixel + 3].iter().copied())).collect();
+        photometric_stereo(&observed, &vec![true; check.len()], lights, &lobe)
+    };
+    let (fit, looked) = rayon::join(|| photometric_stereo(images, mask, lights, &tukey), look);
+    Ok((fit?, looked?.flags))
+}
+
 /// Fits the pixels where `mask` is true, `chunk` of them at a time in parallel, into `out`:
 /// `fit` appends (pixel, fit) for each pixel of a chunk (pixel indices in increasing order),
 /// with the working state that `init` makes for each thread, and each chunk's fits go

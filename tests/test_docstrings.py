@@ -11,7 +11,7 @@ import pytest
 
 import irtps
 from irtps.integrate import METHODS, ROBUST_WEIGHTS, integrate_normals
-from irtps.ps import ROBUST_MODES, photometric_stereo
+from irtps.ps import ROBUST_CHOICES, photometric_stereo
 
 PACKAGE = Path(irtps.__file__).parent
 MODULES = sorted(module.name for module in pkgutil.walk_packages(irtps.__path__, "irtps."))
@@ -41,7 +41,7 @@ def test_docstring_examples(name):
 
 @pytest.mark.parametrize(
     ("function", "argument", "choices"),
-    [(integrate_normals, "method", METHODS), (integrate_normals, "robust_weight", ROBUST_WEIGHTS), (photometric_stereo, "robust", ROBUST_MODES)],
+    [(integrate_normals, "method", METHODS), (integrate_normals, "robust_weight", ROBUST_WEIGHTS), (photometric_stereo, "robust", ROBUST_CHOICES)],
 )
 def test_documented_choices_are_the_code_s(function, argument, choices):
     documented = {"{" + ", ".join(f'"{choice}"' for choice in choices) + "}"}

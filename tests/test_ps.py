@@ -12,7 +12,7 @@ from irtps.cli import main
 from irtps.errors import IrtpsError
 from irtps.evaluate import angular_error_deg
 from irtps.interreflection import remove_interreflections
-from irtps.ps import LOBE_CHECK_ROUNDS, LOBE_FIRST, LOBE_FITTED, PsResult, choose_robust, lobe_share, photometric_stereo
+from irtps.ps import LOBE_CHECK_ROUNDS, LOBE_FIRST, LOBE_FITTED, OUTSIDE_MASK, PsResult, choose_robust, lobe_share, photometric_stereo
 
 DATA = Path(__file__).parent / "data"
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -207,7 +207,40 @@ def test_reconstruct_picks_the_lobe_mode_for_a_metallic_object(tmp_path, capsys)
         assert said in (tmp_path / mode / "report" / "index.html").read_text()
 
 
-@pytest.mark.parametrize("mode", ["tukey", "lobe", "threshold", "trim", "none"])
+@pytest.mark.parametrize("make, chosen", [(lambda: irtps.synthesize("cap", size=40, lights=24, bounces=0, environment="none", seed=2)[0], "tukey"), (_metal_cap, "lobe")])
+def test_the_auto_mode_is_the_fit_of_the_mode_the_share_picks(make, chosen):
+    data = make()
+    args = (data.images, data.scene.light_directions, data.scene.light_irradiance, data.mask)
+    auto = photometric_stereo(*args, robust="auto")
+    alone = photometric_stereo(*args, robust=chosen)
+    # The check beside the Tukey fit counts what `lobe_share` counts, and picks by it.
+    assert auto.robust_used == chosen == choose_robust(auto.lobe_share)
+    assert auto.lobe_share == lobe_share(*args)
+    for name in ("normals", "albedo", "flags", "used"):
+        np.testing.assert_array_equal(getattr(auto, name), getattr(alone, name))
+    assert alone.robust_used is None and alone.lobe_share is None
+
+
+def test_the_auto_mode_of_a_share_near_the_line_looks_further_as_lobe_share_does(monkeypatch):
+    data = _half_metal_cap()
+    args = (data.images, data.scene.light_directions, data.scene.light_irradiance, data.mask)
+    calls = _pixels_fitted(monkeypatch)
+    auto = photometric_stereo(*args, robust="auto")
+    # The first pixels beside the Tukey fit; the next ones, as the share is not yet decided,
+    # in calls of their own; then the lobe fit of the whole object if the lobe is chosen.
+    made = list(calls)
+    assert made[:4] == [LOBE_FIRST, 2 * LOBE_FIRST, 4 * LOBE_FIRST, int(data.mask.sum()) - 8 * LOBE_FIRST]
+    assert made[4:] == ([data.mask.size] if auto.robust_used == "lobe" else [])
+    assert auto.lobe_share == lobe_share(*args)
+
+
+def test_the_auto_mode_of_an_empty_mask_fits_nothing():
+    data = _metal_cap()
+    fit = photometric_stereo(data.images, data.scene.light_directions, data.scene.light_irradiance, np.zeros(data.mask.shape, bool), robust="auto")
+    assert fit.robust_used == "tukey" and fit.lobe_share == 0.0 and (fit.flags == OUTSIDE_MASK).all()
+
+
+@pytest.mark.parametrize("mode", ["tukey", "lobe", "threshold", "trim", "none", "auto"])
 def test_a_fit_with_a_progress_bar_is_the_same_fit(mode):
     metal = _metal_cap()
     args = (metal.images, metal.scene.light_directions, metal.scene.light_irradiance, metal.mask)

@@ -14,7 +14,7 @@ import numpy.typing as npt
 
 from irtps.scene import CornellBox, Floor
 
-__all__ = ["read_exr", "write_exr", "read_png", "write_png", "read_images", "photometric_stereo", "check_lights", "compare_rendering", "denoise_indirect", "Renderer", "SparseCholesky", "MAX_IMAGE_PIXELS"]
+__all__ = ["read_exr", "write_exr", "read_png", "write_png", "read_images", "photometric_stereo", "tukey_with_lobe_check", "check_lights", "compare_rendering", "denoise_indirect", "Renderer", "SparseCholesky", "MAX_IMAGE_PIXELS"]
 
 _F32 = npt.NDArray[np.float32]
 _Path = str | PathLike[str]
@@ -53,6 +53,20 @@ def photometric_stereo(
     """(normals (H, W, 3), albedo (H, W, 3), flags (H, W), observations used (H, W)) of
     C-contiguous float32 images (K, H, W, 3); `lobe_rounds`, the lobe mode's most rounds per
     exponent and start, at least 1 (15 by default)."""
+
+def tukey_with_lobe_check(
+    images: _F32,
+    mask: npt.NDArray[np.bool_],
+    check: list[int],
+    light_directions: _F32,
+    light_irradiance: _F32,
+    shadow_fraction: float,
+    saturation: float | None,
+    check_rounds: int,
+) -> tuple[tuple[_F32, _F32, npt.NDArray[np.uint8], npt.NDArray[np.uint16]], npt.NDArray[np.uint8]]:
+    """The Tukey fit of `images` (as `photometric_stereo`'s) and, on the same threads, the
+    lobe fit with `check_rounds` rounds of the pixels `check` (flat indices into `mask`):
+    (the Tukey fit's arrays, the flag of each pixel of `check`)."""
 
 def compare_rendering(
     direct: _F32,

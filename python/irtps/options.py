@@ -26,13 +26,10 @@ import numpy as np
 from irtps.errors import ArgumentError
 from irtps.imageio import MAX_IMAGE_PIXELS
 from irtps.integrate import METHODS as INTEGRATION_METHODS
-from irtps.ps import ROBUST_MODES
+from irtps.ps import ROBUST_CHOICES, ROBUST_MODES
 
 __all__ = ["ESTIMATORS", "METHODS", "ROBUST_CHOICES", "ROBUST_MODES", "UPDATES", "ClusterOptions", "OptionError", "ReconstructOptions", "RenderOptions", "SynthOptions", "TableOptions", "add_arguments", "from_arguments"]
 
-#: Robust modes of a reconstruction: the fit's own (`irtps.ps.ROBUST_MODES`), or the one
-#: `irtps.ps.choose_robust` picks for the data set (``"auto"``, the default).
-ROBUST_CHOICES = ("auto", *ROBUST_MODES)
 #: Reconstruction methods: classic photometric stereo, and IRT-PS.
 METHODS = ("ps", "irtps")
 #: IRT-PS's indirect-light estimators: the physically based renderer, or the paper's own

@@ -179,8 +179,8 @@ def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: Recons
     """Photometric stereo on `images` (the data set's, or corrected ones) with the data set's
     lights and mask and the options' robust settings. `images` are (K, H, W, 3), or
     (K, N, 3) at the mask's N pixels in row-major order (the corrected images of IRT-PS).
-    `progress`: a progress bar for the lobe mode's fit of (K, H, W, 3) images, the one slow
-    enough to want one (`irtps.ps.photometric_stereo`)."""
+    `progress`: a progress bar for the lobe mode's fit of (K, H, W, 3) images (asked for, or chosen by
+    ``"auto"``), the one slow enough to want one (`irtps.ps.photometric_stereo`)."""
     scene, mask = dataset.scene, dataset.mask
     # (K, N, 3) observations are fitted as one row of N pixels, every one in the mask.
     fitted, fitted_mask = (images, mask) if images.ndim == 4 else (images[:, None], np.ones((1, images.shape[1]), dtype=bool))
@@ -192,7 +192,7 @@ def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: Recons
         robust=options.robust,
         shadow_fraction=options.shadow_fraction,
         saturation=options.saturation,
-        progress=progress and options.robust == "lobe" and images.ndim == 4,
+        progress=progress and options.robust in ("lobe", "auto") and images.ndim == 4,
     )
     if images.ndim == 4:
         return fit

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -12,8 +13,11 @@ from irtps._checks import check_array, check_choice, check_mask, check_number, c
 from irtps.data import coarse_to_fine, spread_pixels
 from irtps.errors import ArgumentError
 
-#: Robust modes of `photometric_stereo`, the default first.
+#: Robust modes of a fit, the default first.
 ROBUST_MODES = ("tukey", "lobe", "threshold", "trim", "none")
+#: What `photometric_stereo` takes for `robust`: a mode of `ROBUST_MODES`, or ``"auto"``, the
+#: mode `choose_robust` picks for the object.
+ROBUST_CHOICES = ("auto", *ROBUST_MODES)
 #: Meaning of the values of `PsResult.flags`.
 FLAGS = {0: "fitted", 1: "full fit kept (too few non-coplanar lit observations)", 2: "no light", 3: "outside the mask", 4: "fitted with a specular lobe"}
 #: The flag of the pixels outside the mask.
@@ -36,12 +40,18 @@ class PsResult:
         uint8 (H, W), see `FLAGS`.
     used : numpy.ndarray
         uint16 (H, W), observations used per pixel.
+    robust_used : str or None
+        With ``robust="auto"``: the mode it chose (`choose_robust`); else None.
+    lobe_share : float or None
+        With ``robust="auto"``: the object's `lobe_share`, by which it chose; else None.
     """
 
     normals: np.ndarray
     albedo: np.ndarray
     flags: np.ndarray
     used: np.ndarray
+    robust_used: str | None = None
+    lobe_share: float | None = None
 
 
 def check_lights(light_directions: np.ndarray, light_irradiance: np.ndarray) -> None:
@@ -63,7 +73,7 @@ def check_lights(light_directions: np.ndarray, light_irradiance: np.ndarray) -> 
     _core.check_lights(directions, irradiance)
 
 
-@document_choices(robust=ROBUST_MODES)
+@document_choices(robust=ROBUST_CHOICES)
 def photometric_stereo(
     images: np.ndarray,
     light_directions: np.ndarray,
@@ -111,7 +121,12 @@ def photometric_stereo(
           About 90 times slower than ``"tukey"`` (0.5–1 s on a DiLiGenT object), and worse
           than it on matte objects with deep folds, where it can take inter-reflected light
           for a lobe. `lobe_share` tells which objects want it, and `choose_robust` picks
-          it from there (as ``irtps.reconstruct``'s default, ``robust="auto"``, does).
+          it from there (as ``"auto"`` does).
+        - ``"auto"`` (``irtps.reconstruct``'s default): ``"lobe"`` for an object most of
+          whose pixels take a specular lobe, else ``"tukey"`` (`choose_robust`), by the
+          object's `lobe_share`. The share's first pixels are fitted beside the Tukey fit,
+          on the same threads, so that a matte object costs little more than the Tukey fit
+          alone; the result tells the mode chosen and the share.
         - ``"threshold"``: drop observations in shadow (channel sum below `shadow_fraction`
           of the pixel's brightest) and re-solve from the rest. The better choice on very
           rough matte surfaces (plaster, unglazed clay), whose fall-off departs from
@@ -156,10 +171,31 @@ def photometric_stereo(
     """
     images = np.ascontiguousarray(check_array("images", images, (None, None, None, 3), dtype=np.float32, copy=False))
     mask = np.ascontiguousarray(check_mask(mask, images.shape[1:3], match="images"))
+    check_choice("robust", robust, ROBUST_CHOICES)
+    if robust == "auto":
+        return _fit_auto(images, mask, light_directions, light_irradiance, shadow_fraction, saturation, progress)
     settings = _core_settings(light_directions, light_irradiance, robust, shadow_fraction, saturation)
     if not progress:
         return PsResult(*_core.photometric_stereo(images, mask, *settings))
     return _fit_in_bands(images, mask, settings)
+
+
+def _fit_auto(images: np.ndarray, mask: np.ndarray, light_directions: np.ndarray, light_irradiance: np.ndarray, shadow_fraction: float, saturation: float | None, progress: bool) -> PsResult:
+    """`photometric_stereo` of float32 `images` with ``robust="auto"``: the Tukey fit and,
+    beside it in the same call, `lobe_share`'s first pixels; then the rest of the check, if
+    those leave the share undecided, and the lobe fit, if it is chosen."""
+    directions, irradiance, _, shadow_fraction, saturation = _core_settings(light_directions, light_irradiance, "lobe", shadow_fraction, saturation)
+    check = _LobeCheck(mask, LOBE_SAMPLE)
+    tukey, flags = _core.tukey_with_lobe_check(images, mask, check.next_indices(mask.shape[1]), directions, irradiance, shadow_fraction, saturation, LOBE_CHECK_ROUNDS)
+    check.record(flags)
+    while not check.done(stop_early=True):
+        settings = (directions, irradiance, "lobe", shadow_fraction, saturation)
+        check.record(_core.photometric_stereo(check.next_pixels(images)[:, None], np.ones((1, check.batch), bool), *settings, LOBE_CHECK_ROUNDS)[2][0])
+    chosen = choose_robust(check.share)
+    if chosen == "tukey":
+        return PsResult(*tukey, robust_used=chosen, lobe_share=check.share)
+    fit = photometric_stereo(images, directions, irradiance, mask, robust=chosen, shadow_fraction=shadow_fraction, saturation=saturation, progress=progress)
+    return dataclasses.replace(fit, robust_used=chosen, lobe_share=check.share)
 
 
 def _core_settings(light_directions: np.ndarray, light_irradiance: np.ndarray, robust: str, shadow_fraction: float, saturation: float | None) -> tuple[np.ndarray, np.ndarray, str, float, float | None]:
@@ -189,7 +225,8 @@ def _fit_in_bands(images: np.ndarray, mask: np.ndarray, settings: tuple) -> PsRe
             rows_here = slice(start, min(start + band, rows))
             parts.append(_core.photometric_stereo(np.ascontiguousarray(images[:, rows_here]), np.ascontiguousarray(mask[rows_here]), *settings))
             bar.update(int(mask[rows_here].sum()))
-    return PsResult(*(np.concatenate(arrays) for arrays in zip(*parts)))
+    normals, albedo, flags, used = (np.concatenate(arrays) for arrays in zip(*parts))
+    return PsResult(normals, albedo, flags, used)
 
 
 #: The flag of the pixels that the lobe mode fitted with a specular lobe.
@@ -349,20 +386,53 @@ def lobe_share(
     if isinstance(sample, bool) or not (isinstance(sample, (int, np.integer)) and sample >= 1):
         raise ArgumentError("sample", f"{sample!r} is not a positive integer")
     settings = _core_settings(light_directions, light_irradiance, "lobe", shadow_fraction, saturation)
-    chosen = spread_pixels(mask, int(sample))
-    if chosen.size == 0:
-        return 0.0
-    rows, cols = np.unravel_index(chosen[coarse_to_fine(chosen.size)], mask.shape)
-    fitted = lobes = 0
-    while fitted < chosen.size:
-        upto = min(max(LOBE_FIRST, 2 * fitted), chosen.size)
-        observed = np.ascontiguousarray(images[:, rows[fitted:upto], cols[fitted:upto]][:, None], dtype=np.float32)  # (K, 1, N, 3): one row of pixels
-        flags = _core.photometric_stereo(observed, np.ones(observed.shape[1:3], bool), *settings, LOBE_CHECK_ROUNDS)[2]
-        lobes += int((flags == LOBE_FITTED).sum())
-        fitted = upto
-        if stop_early and share_is_decided(lobes, fitted):
-            break
-    return lobes / fitted
+    check = _LobeCheck(mask, int(sample))
+    while not check.done(stop_early):
+        check.record(_core.photometric_stereo(check.next_pixels(images)[:, None], np.ones((1, check.batch), bool), *settings, LOBE_CHECK_ROUNDS)[2][0])
+    return check.share
+
+
+class _LobeCheck:
+    """`lobe_share`'s look at the pixels of a mask, batch by batch: which pixels it fits, in
+    which order, and what it has counted so far."""
+
+    def __init__(self, mask: np.ndarray, sample: int) -> None:
+        chosen = spread_pixels(mask, sample)
+        self.rows, self.cols = np.unravel_index(chosen[coarse_to_fine(chosen.size)], mask.shape)
+        self.fitted = self.lobes = self.batch = 0
+
+    def done(self, stop_early: bool) -> bool:
+        """Whether every chosen pixel is fitted, or (`stop_early`) the share is decided."""
+        if self.fitted == self.rows.size:
+            return True
+        return stop_early and self.fitted > 0 and share_is_decided(self.lobes, self.fitted)
+
+    def next_pixels(self, images: np.ndarray) -> np.ndarray:
+        """The observations (K, N, 3) of the next batch: `LOBE_FIRST` pixels, then as many
+        as are fitted already (all that are left at most)."""
+        rows, cols = self._next()
+        return np.ascontiguousarray(images[:, rows, cols], dtype=np.float32)
+
+    def next_indices(self, width: int) -> list[int]:
+        """The flat indices of the next batch's pixels (`next_pixels`), in images `width`
+        pixels wide."""
+        rows, cols = self._next()
+        return (rows * width + cols).tolist()
+
+    def _next(self) -> tuple[np.ndarray, np.ndarray]:
+        upto = min(max(LOBE_FIRST, 2 * self.fitted), self.rows.size)
+        self.batch = upto - self.fitted
+        return self.rows[self.fitted : upto], self.cols[self.fitted : upto]
+
+    def record(self, flags: np.ndarray) -> None:
+        """Count the next batch's flags (N,)."""
+        self.lobes += int((flags == LOBE_FITTED).sum())
+        self.fitted += self.batch
+
+    @property
+    def share(self) -> float:
+        """The share of the pixels fitted so far that took a lobe (0 before any)."""
+        return self.lobes / self.fitted if self.fitted else 0.0
 
 
 def share_is_decided(lobes: int, fitted: int) -> bool:

@@ -194,7 +194,7 @@ def reconstruct(
     >>> data, _ = synthesize("cap", size=24, lights=6, bounces=0, environment="none")
     >>> result = reconstruct(data)
     >>> result.normals.shape, sorted(result.timings)
-    ((24, 24, 3), ['image_agreement', 'integration', 'lobe_share', 'photometric_stereo', 'placement'])
+    ((24, 24, 3), ['image_agreement', 'integration', 'photometric_stereo', 'placement'])
     >>> reconstruct(data, samples=0)
     Traceback (most recent call last):
     ...
@@ -207,7 +207,15 @@ def reconstruct(
     parameters = options.to_dict()
     timings: dict[str, float] = {}
     share = None
-    if options.robust != "lobe":
+    first = None
+    if options.robust == "auto" and options.method == "ps" and not options.correct_brightness:
+        # The fit that the result is: its photometric stereo makes auto's choice (`lobe_share`'s
+        # first pixels beside the Tukey fit).
+        first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
+        chosen = first.fit.robust_used
+        assert chosen is not None, "photometric_stereo's auto mode tells the mode it chose"
+        options, share = replace(options, robust=chosen), first.fit.lobe_share
+    elif options.robust != "lobe":
         with timed(timings, "lobe_share"):
             options, share = choose_dataset_robust(dataset, options)
         _advise_lobe(dataset, options.robust, share)
@@ -242,7 +250,8 @@ def reconstruct(
             irradiance_factors=factors,
         )
     # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
-    first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
+    if first is None:
+        first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
     timings.update(first.timings)
     with timed(timings, "image_agreement"):
         agreement = _image_agreement(dataset, first.fit, options.saturation)
@@ -306,7 +315,7 @@ def load_and_reconstruct(path: str | Path, method: str | None = None, *, exclude
     ...     save_dataset(data, folder + "/cap")
     ...     dataset, result = load_and_reconstruct(folder + "/cap")
     >>> list(result.timings)
-    ['load', 'lobe_share', 'photometric_stereo', 'integration', 'placement', 'image_agreement']
+    ['load', 'photometric_stereo', 'integration', 'placement', 'image_agreement']
     """
     if method is not None:
         options["method"] = method
