@@ -189,8 +189,7 @@ def _fit_auto(images: np.ndarray, mask: np.ndarray, light_directions: np.ndarray
     tukey, flags = _core.tukey_with_lobe_check(images, mask, check.next_indices(mask.shape[1]), directions, irradiance, shadow_fraction, saturation, LOBE_CHECK_ROUNDS)
     check.record(flags)
     while not check.done(stop_early=True):
-        settings = (directions, irradiance, "lobe", shadow_fraction, saturation)
-        check.record(_core.photometric_stereo(check.next_pixels(images)[:, None], np.ones((1, check.batch), bool), *settings, LOBE_CHECK_ROUNDS)[2][0])
+        check.fit_next(images, (directions, irradiance, "lobe", shadow_fraction, saturation))
     chosen = choose_robust(check.share)
     if chosen == "tukey":
         return PsResult(*tukey, robust_used=chosen, lobe_share=check.share)
@@ -198,7 +197,12 @@ def _fit_auto(images: np.ndarray, mask: np.ndarray, light_directions: np.ndarray
     return dataclasses.replace(fit, robust_used=chosen, lobe_share=check.share)
 
 
-def _core_settings(light_directions: np.ndarray, light_irradiance: np.ndarray, robust: str, shadow_fraction: float, saturation: float | None) -> tuple[np.ndarray, np.ndarray, str, float, float | None]:
+#: The arguments of `_core.photometric_stereo` after the images and the mask: directions,
+#: irradiance, robust mode, shadow fraction, saturation.
+_CoreSettings = tuple[np.ndarray, np.ndarray, str, float, float | None]
+
+
+def _core_settings(light_directions: np.ndarray, light_irradiance: np.ndarray, robust: str, shadow_fraction: float, saturation: float | None) -> _CoreSettings:
     """The arguments of `_core.photometric_stereo` after the images and the mask, checked."""
     directions = np.ascontiguousarray(light_directions, dtype=np.float32)
     irradiance = np.ascontiguousarray(light_irradiance, dtype=np.float32)
@@ -214,7 +218,7 @@ def _core_settings(light_directions: np.ndarray, light_irradiance: np.ndarray, r
 PROGRESS_BANDS = 50
 
 
-def _fit_in_bands(images: np.ndarray, mask: np.ndarray, settings: tuple) -> PsResult:
+def _fit_in_bands(images: np.ndarray, mask: np.ndarray, settings: _CoreSettings) -> PsResult:
     """`_core.photometric_stereo` of `images` and `mask` with `settings`, band of rows by band
     of rows under a progress bar (counting the mask's pixels), joined."""
     rows = images.shape[1]
@@ -388,7 +392,7 @@ def lobe_share(
     settings = _core_settings(light_directions, light_irradiance, "lobe", shadow_fraction, saturation)
     check = _LobeCheck(mask, int(sample))
     while not check.done(stop_early):
-        check.record(_core.photometric_stereo(check.next_pixels(images)[:, None], np.ones((1, check.batch), bool), *settings, LOBE_CHECK_ROUNDS)[2][0])
+        check.fit_next(images, settings)
     return check.share
 
 
@@ -407,19 +411,22 @@ class _LobeCheck:
             return True
         return stop_early and self.fitted > 0 and share_is_decided(self.lobes, self.fitted)
 
-    def next_pixels(self, images: np.ndarray) -> np.ndarray:
-        """The observations (K, N, 3) of the next batch: `LOBE_FIRST` pixels, then as many
-        as are fitted already (all that are left at most)."""
+    def fit_next(self, images: np.ndarray, settings: _CoreSettings) -> None:
+        """Fit the next batch's pixels of `images` in the lobe mode with `LOBE_CHECK_ROUNDS`
+        rounds, the other `_core.photometric_stereo` arguments `settings`, and count them."""
         rows, cols = self._next()
-        return np.ascontiguousarray(images[:, rows, cols], dtype=np.float32)
+        observed = np.ascontiguousarray(images[:, rows, cols][:, None], dtype=np.float32)  # (K, 1, N, 3): one row of pixels
+        self.record(_core.photometric_stereo(observed, np.ones(observed.shape[1:3], bool), *settings, LOBE_CHECK_ROUNDS)[2][0])
 
     def next_indices(self, width: int) -> list[int]:
-        """The flat indices of the next batch's pixels (`next_pixels`), in images `width`
-        pixels wide."""
+        """The flat indices of the next batch's pixels, in images `width` pixels wide, for a
+        fit elsewhere (`record` its flags)."""
         rows, cols = self._next()
         return (rows * width + cols).tolist()
 
     def _next(self) -> tuple[np.ndarray, np.ndarray]:
+        """The rows and columns of the next batch: `LOBE_FIRST` pixels, then as many as are
+        fitted already (all that are left at most)."""
         upto = min(max(LOBE_FIRST, 2 * self.fitted), self.rows.size)
         self.batch = upto - self.fitted
         return self.rows[self.fitted : upto], self.cols[self.fitted : upto]
