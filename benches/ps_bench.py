@@ -1,9 +1,10 @@
 """Photometric stereo speed: irtps (Rust) against the obvious numpy implementation.
 
 Both run in this process on the same DiLiGenT-size input (96 lights, 612x512 RGB float32),
-interleaved (each irtps run right after a numpy run of its own), so that a machine whose
-speed wanders, and the caches that numpy's run leaves, serve both alike: the figures are the
-median times and the median of the per-run ratios,
+interleaved (each irtps run right after a numpy run of its own, the pairs in a random order
+each repeat), so that a machine whose speed wanders, and what the runs before leave in the
+caches, serve both alike: the figures are the median times and the median of the per-run
+ratios,
 over every pixel (plain least squares) and over the object's pixels, which is what ``irtps
 reconstruct`` fits (numpy's plain least squares against each robust mode of irtps; against
 ``lobe_share``, the check by which ``irtps reconstruct --robust auto``, the default, chooses
@@ -85,13 +86,16 @@ def measure(images: np.ndarray, mask: np.ndarray, d32: np.ndarray, e32: np.ndarr
         runs[f"irtps_{mode}_object"] = lambda mode=mode: _core.photometric_stereo(images, mask, d32, e32, mode)
     runs["irtps_lobe_share_object"] = lambda: lobe_share(images, d32, e32, mask)
     runs["irtps_auto_object"] = lambda: photometric_stereo(images, d32, e32, mask, robust="auto")
-    # Each irtps run right after a numpy run of its own: a run that follows numpy's fit of the
-    # object finds much of the object's observations still in the caches (this machine's last
-    # level holds 260 MB), so every run, irtps's and numpy's, is timed in that state.
+    # Each irtps run right after a numpy run of its own, the pairs in a new random order each
+    # repeat: a run finds in the caches what the runs before it left of the object's
+    # observations (this machine's last level holds 260 MB), so no mode, nor its numpy run,
+    # keeps one place in the sequence.
     times: dict[str, list[float]] = {name: [] for name in [*baselines, *runs]}
     ratios: dict[str, list[float]] = {name: [] for name in runs}
+    order = np.random.default_rng(0)
     for _ in range(repeats):
-        for name, run in runs.items():
+        for name in order.permutation(list(runs)):
+            run = runs[name]
             baseline = "numpy_plain_all" if name.endswith("_all") else "numpy_plain_object"
             numpy_s, irtps_s = seconds(baselines[baseline]), seconds(run)
             times[baseline].append(numpy_s)
