@@ -184,12 +184,13 @@ def _fit_auto(images: np.ndarray, mask: np.ndarray, light_directions: np.ndarray
     """`photometric_stereo` of float32 `images` with ``robust="auto"``: the Tukey fit and,
     beside it in the same call, `lobe_share`'s first pixels; then the rest of the check, if
     those leave the share undecided, and the lobe fit, if it is chosen."""
-    directions, irradiance, _, shadow_fraction, saturation = _core_settings(light_directions, light_irradiance, "lobe", shadow_fraction, saturation)
+    settings = _core_settings(light_directions, light_irradiance, "lobe", shadow_fraction, saturation)
+    directions, irradiance, _, shadow_fraction, saturation = settings
     check = _LobeCheck(mask, LOBE_SAMPLE)
     tukey, flags = _core.tukey_with_lobe_check(images, mask, check.next_indices(mask.shape[1]), directions, irradiance, shadow_fraction, saturation, LOBE_CHECK_ROUNDS)
     check.record(flags)
     while not check.done(stop_early=True):
-        check.fit_next(images, (directions, irradiance, "lobe", shadow_fraction, saturation))
+        check.fit_next(images, settings)
     chosen = choose_robust(check.share)
     if chosen == "tukey":
         return PsResult(*tukey, robust_used=chosen, lobe_share=check.share)
