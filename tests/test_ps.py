@@ -211,7 +211,7 @@ def test_reconstruct_picks_the_lobe_mode_for_a_metallic_object(tmp_path, capsys)
 def test_the_auto_mode_is_the_fit_of_the_mode_the_share_picks(make, chosen):
     data = make()
     args = (data.images, data.scene.light_directions, data.scene.light_irradiance, data.mask)
-    auto = photometric_stereo(*args, robust="auto")
+    auto = photometric_stereo(*args)  # "auto" is the default
     alone = photometric_stereo(*args, robust=chosen)
     # The check beside the Tukey fit counts what `lobe_share` counts, and picks by it.
     assert auto.robust_used == chosen == choose_robust(auto.lobe_share)

@@ -80,7 +80,7 @@ def photometric_stereo(
     light_irradiance: np.ndarray,
     mask: np.ndarray | None = None,
     *,
-    robust: str = "tukey",
+    robust: str = "auto",
     shadow_fraction: float = 0.05,
     saturation: float | None = None,
     progress: bool = False,
@@ -105,7 +105,7 @@ def photometric_stereo(
         Which observations each pixel's fit uses. Every mode but ``"none"`` leaves saturated
         observations out.
 
-        - ``"tukey"`` (default): from the threshold fit, re-weight every observation that
+        - ``"tukey"``: from the threshold fit, re-weight every observation that
           the fit lights by Tukey's biweight of its residual over the pixel's robust scale
           (1.4826 × the median absolute residual; weight 0 beyond 2.5 scales), until the fit
           settles. Soft and cast shadows fall below the fit, highlights above it.
@@ -118,11 +118,11 @@ def photometric_stereo(
           fit unless the lobe lowers Tukey's loss by more than the Bayesian information
           criterion asks for its two extra parameters, or when it lights fewer than 6
           unsaturated observations; pixels fitted with a lobe are flagged (``FLAGS[4]``).
-          About 90 times slower than ``"tukey"`` (0.5–1 s on a DiLiGenT object), and worse
+          About 90 times slower than ``"tukey"`` (0.5–2 s on a DiLiGenT object), and worse
           than it on matte objects with deep folds, where it can take inter-reflected light
           for a lobe. `lobe_share` tells which objects want it, and `choose_robust` picks
           it from there (as ``"auto"`` does).
-        - ``"auto"`` (``irtps.reconstruct``'s default): ``"lobe"`` for an object most of
+        - ``"auto"`` (default, as in ``irtps.reconstruct``): ``"lobe"`` for an object most of
           whose pixels take a specular lobe, else ``"tukey"`` (`choose_robust`), by the
           object's `lobe_share`. The share's first pixels are fitted beside the Tukey fit,
           on the same threads, so that a matte object costs little more than the Tukey fit
