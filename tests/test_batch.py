@@ -163,6 +163,26 @@ def test_resume_keeps_complete_outputs_untouched_and_redoes_the_others(cluster, 
     assert json.loads((out / "cap" / "run.json").read_text())["parameters"]["shadow_fraction"] == 0.1
 
 
+@pytest.mark.parametrize(
+    "damage",
+    [
+        lambda text: '{"format": "irtps.run/1", "x": ' + "[" * 50_000 + "]" * 50_000 + "}",  # deeper than Python's recursion limit
+        lambda text: text.replace('"pixel_size": ', '"pixel_size": ' + "9" * 5000 + ', "was": '),  # past int()'s digit limit
+    ],
+    ids=["nested", "huge integer"],
+)
+def test_resume_redoes_an_output_whose_run_json_is_past_the_parser_bounds(cluster, three_sets, tmp_path, damage):
+    cap, _, _ = three_sets
+    out = tmp_path / "out"
+    argv = ["batch", str(cap), "--out", str(out), "--scheduler", cluster.scheduler.address, "--quiet"]
+    assert main(argv) == 0
+    run = out / "cap" / "run.json"
+    run.write_text(damage(run.read_text()))
+    assert main([*argv, "--resume"]) == 0
+    assert [s["status"] for s in json.loads((out / "batch.json").read_text())["datasets"]] == ["ok"]
+    assert json.loads(run.read_text())["format"] == "irtps.run/1"
+
+
 def test_local_cluster_options_are_refused_with_a_scheduler(three_sets, tmp_path, capsys):
     argv = ["batch", str(three_sets[0]), "--out", str(tmp_path / "out"), "--scheduler", "tcp://head-node:8786", "--workers", "2"]
     assert main(argv) == 2
@@ -302,7 +322,7 @@ def test_images_left_out_per_data_set_and_a_resume_that_asks_for_others(cluster,
     assert main([*argv, "--exclude-images", "ball=8-9", "--exclude-images", "096.png"]) == 2  # cap has no 096.png: it fails alone
     summary = json.loads((out / "batch.json").read_text())
     assert [(s["name"], s["status"]) for s in summary["datasets"]] == [("cap", "failed"), ("ball", "ok")]
-    assert summary["datasets"][0]["error"].startswith(f"{cap}: no image is named '096.png'")
+    assert summary["datasets"][0]["error"].startswith(f"exclude_images: {cap} has no image named '096.png'")
     assert json.loads((out / "ball" / "run.json").read_text())["excluded_images"] == ["008.png", "009.png", "096.png"]
     direct = reconstruct(load_dataset(ball, exclude_images="8-9,96"))
     np.testing.assert_array_equal(load_reconstruction(out / "ball")[0], direct.normals)
@@ -318,7 +338,7 @@ def test_images_left_out_per_data_set_and_a_resume_that_asks_for_others(cluster,
 def test_a_list_for_no_data_set_is_refused_before_anything_runs(three_sets, tmp_path, capsys):
     argv = ["batch", str(three_sets[0]), "--out", str(tmp_path / "out"), "--exclude-images", "ball=1"]
     assert main(argv) == 2
-    assert "exclude_images: 'ball=1' names no data set (the data sets: cap)" in capsys.readouterr().err
+    assert "irtps: error: --exclude-images: 'ball=1' names no data set (the data sets: cap)" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
     with pytest.raises(irtps.ArgumentError, match="'bear' is none of the data sets"):
         reconstruct_many([three_sets[0]], tmp_path / "out", exclude_images={"bear": "1-20"})

@@ -56,6 +56,16 @@ def _directions(*directions):
     return edit
 
 
+def _edit_scene_text(folder, edit):
+    (folder / "scene.json").write_text(edit((folder / "scene.json").read_text()))
+
+
+def _edit_run_text(folder, edit):
+    text = (folder / "run.json").read_text()
+    assert edit(text) != text
+    (folder / "run.json").write_text(edit(text))
+
+
 def _two_lights(folder):
     _edit_scene(folder, lambda scene: scene.update(lights=scene["lights"][:2]))
     (folder / "images" / "002.exr").unlink()
@@ -349,7 +359,64 @@ CASES = {
         "mitsuba",
         lambda f: (f / "scene.json").write_text("[" * 100_000),
         [],
-        ["{data}/scene.json: JSON nested too deeply to be a scene"],
+        ["{data}/scene.json: arrays and objects nested 100000 deep; at most 64 are accepted"],
+    ),
+    # numbers and nesting past what Python's own parsers take (int digits, recursion)
+    "camera width of 5000 digits": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _edit_scene_text(f, lambda text: text.replace('"width": 96', '"width": ' + "9" * 5000)),
+        [],
+        ["{data}/scene.json: line ", ": a number with 5000 digits; at most 40 are accepted"],
+    ),
+    "render: camera width of 5000 digits": (
+        "render",
+        "mitsuba",
+        lambda f: _edit_scene_text(f, lambda text: text.replace('"width": 96', '"width": ' + "9" * 5000)),
+        [],
+        ["{data}/scene.json: line ", ": a number with 5000 digits"],
+    ),
+    "run.json pixel size of 5000 digits": (
+        "report",
+        "reconstruction",
+        lambda f: _edit_run_text(f, lambda text: text.replace('"pixel_size": 1.0', '"pixel_size": ' + "9" * 5000)),
+        [],
+        ["{data}/run.json: line ", ": a number with 5000 digits"],
+    ),
+    "run.json nested deeply": (
+        "report",
+        "reconstruction",
+        lambda f: (f / "run.json").write_text('{"format": "irtps.run/1", "x": ' + "[" * 50_000 + "]" * 50_000 + "}"),
+        [],
+        ["{data}/run.json: arrays and objects nested 50001 deep; at most 64 are accepted"],
+    ),
+    "--exclude-images of 5000 digits": (
+        "reconstruct",
+        "ball",
+        None,
+        ["--exclude-images", "9" * 5000],
+        ["--exclude-images: an integer with 5000 digits; at most 40 are accepted"],
+    ),
+    "--exclude-images out of range": (
+        "reconstruct",
+        "ball",
+        None,
+        ["--exclude-images", "200-300"],
+        ["--exclude-images: {data} has no image numbered 200 to 300"],
+    ),
+    "table: --exclude-images of 5000 digits": (
+        "table",
+        "ball",
+        None,
+        ["--exclude-images", "1-" + "9" * 5000],
+        ["--exclude-images: an integer with 5000 digits"],
+    ),
+    "batch: --exclude-images of 5000 digits": (
+        "batch",
+        "ball",
+        None,
+        ["--exclude-images", "data=" + "9" * 5000, "--workers", "1"],
+        ["--exclude-images: an integer with 5000 digits"],
     ),
     # absurd sizes
     "absurd camera": (
@@ -541,12 +608,15 @@ def test_saturated_png_pixels_are_reported_when_not_robust(tmp_path, capsys):
 # Interrupted runs -------------------------------------------------------------------
 
 
+EARLIER_RUN = '{"format": "irtps.run/1", "earlier": true}'
+
+
 @pytest.fixture
 def previous_output(tmp_path):
     """An output folder from an earlier run, which a failed run must leave as it is."""
     out = tmp_path / "out"
     out.mkdir()
-    (out / "run.json").write_text('{"earlier": true}')
+    (out / "run.json").write_text(EARLIER_RUN)
     return out
 
 
@@ -568,7 +638,7 @@ def test_ctrl_c_while_writing_leaves_the_previous_output(tmp_path, previous_outp
     assert main(["reconstruct", str(BALL), "--out", str(previous_output), "--quiet"]) == 130
     assert len(calls) == 3 and calls[0].startswith(str(tmp_path / ".out.tmp-"))
     assert capsys.readouterr().err == "irtps: interrupted; no partial output was left\n"
-    assert _snapshot(tmp_path) == {"out/run.json": b'{"earlier": true}'}
+    assert _snapshot(tmp_path) == {"out/run.json": EARLIER_RUN.encode()}
 
 
 def test_a_full_disk_while_writing_leaves_the_previous_output(tmp_path, previous_output, monkeypatch, capsys):
@@ -577,7 +647,7 @@ def test_a_full_disk_while_writing_leaves_the_previous_output(tmp_path, previous
     assert main(["reconstruct", str(BALL), "--out", str(previous_output), "--quiet"]) == 2
     assert len(calls) == 3
     assert capsys.readouterr().err == f"irtps: error: {full}\n"
-    assert _snapshot(tmp_path) == {"out/run.json": b'{"earlier": true}'}
+    assert _snapshot(tmp_path) == {"out/run.json": EARLIER_RUN.encode()}
 
 
 @pytest.mark.parametrize("signum, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
@@ -590,4 +660,4 @@ def test_a_killed_process_leaves_the_previous_output(tmp_path, previous_output, 
     assert process.returncode == status
     assert b"irtps: interrupted; no partial output was left\n" in err
     assert b"Traceback" not in err
-    assert _snapshot(tmp_path) == {"out/run.json": b'{"earlier": true}'}
+    assert _snapshot(tmp_path) == {"out/run.json": EARLIER_RUN.encode()}

@@ -72,12 +72,14 @@ def test_only_a_data_set_has_images_to_leave_out():
 
 
 def test_a_list_must_name_images_of_the_data_set_and_leave_three():
-    with pytest.raises(DatasetError, match=r"^ball: no image is numbered 1 to 5 \(the images: 008.png, 009.png, 021.png, ... 096.png\)$"):
+    with pytest.raises(ArgumentError, match=r"^exclude_images: ball has no image numbered 1 to 5 \(the images: 008.png, 009.png, 021.png, ... 096.png\)$"):
         excluded_indices(NAMES, "1-5", where="ball")
-    with pytest.raises(DatasetError, match="no image is named 'missing.png'"):
+    with pytest.raises(ArgumentError, match="^exclude_images: ball has no image named 'missing.png'"):
         excluded_indices(NAMES, "8,missing.png", where="ball")
-    with pytest.raises(DatasetError, match="leaving out 6 of its 8 images leaves 2; photometric stereo needs at least 3"):
+    with pytest.raises(ArgumentError, match="^exclude_images: leaving out 6 of the 8 images of ball leaves 2; photometric stereo needs at least 3"):
         excluded_indices(NAMES, "8-52", where="ball")
+    with pytest.raises(ArgumentError, match="^exclude_images: an integer with 5000 digits; at most 40 are accepted"):
+        excluded_indices(NAMES, "1-" + "9" * 5000, where="ball")
 
 
 def test_excluded_images_are_not_read(ball):
@@ -153,14 +155,15 @@ def test_the_command_records_and_prints_the_images_left_out(ball, tmp_path, caps
 @pytest.mark.parametrize(
     ("images", "message"),
     [
-        ("3-1", "exclude_images: the range '3-1' runs backwards; write 1-3"),
-        ("1-7", "no image is numbered 1 to 7"),
-        ("8-100", "leaving out 8 of its 8 images leaves 0"),
+        ("3-1", "--exclude-images: the range '3-1' runs backwards; write 1-3"),
+        ("1-7", "--exclude-images: {ball} has no image numbered 1 to 7"),
+        ("8-100", "--exclude-images: leaving out 8 of the 8 images of {ball} leaves 0"),
+        ("9" * 5000, "--exclude-images: an integer with 5000 digits; at most 40 are accepted"),
     ],
 )
 def test_the_command_refuses_a_bad_list_and_writes_nothing(ball, tmp_path, capsys, images, message):
     out = tmp_path / "out"
-    assert message in refused(["reconstruct", str(ball), "--out", str(out), "--exclude-images", images], capsys)
+    assert refused(["reconstruct", str(ball), "--out", str(out), "--exclude-images", images], capsys).startswith(f"irtps: error: {message.format(ball=ball)}")
     assert not out.exists()
 
 

@@ -137,8 +137,10 @@ def test_the_command_line_reaches_every_reconstruction_option(tmp_path):
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["reconstruct", str(BALL), "--out", "o", "--samples", "1.5"], "argument --samples: invalid int value: '1.5'"),
-        (["render", str(MITSUBA), "--out", "o", "--seed", "abc"], "argument --seed: invalid int value: 'abc'"),
+        (["reconstruct", str(BALL), "--out", "o", "--samples", "1.5"], "argument --samples: '1.5' is not an integer from 1 to 1048576"),
+        (["render", str(MITSUBA), "--out", "o", "--seed", "abc"], "argument --seed: 'abc' is not an integer from 0 to 2^63 - 1"),
+        (["reconstruct", str(BALL), "--out", "o", "--iterations", "9" * 5000], "argument --iterations: '999999999999999999999999999999999999... is not an integer"),
+        (["demo", "--size", "9" * 5000], "argument --size: '999999999999999999999999999999999999...: an integer with 5000 digits; at most 40 are accepted"),
         (["reconstruct", str(BALL), "--out", "o", "--base-height", "high"], "argument --base-height: 'high' is not a finite number, auto or boundary"),
         (["reconstruct", str(BALL), "--out", "o", "--method", "mitsuba"], "argument --method: invalid choice: 'mitsuba'"),
         (["table", str(BALL), "--bounces"], "argument --bounces: expected at least one argument"),

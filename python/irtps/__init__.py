@@ -1,7 +1,5 @@
 """irtps: Iterative Ray Tracing Photometric Stereo."""
 
-from importlib.metadata import PackageNotFoundError, version
-
 from irtps.data import Dataset, GroundTruth
 from irtps.dataset import load_dataset, load_ground_truth, load_scene_object, save_dataset
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
@@ -10,15 +8,13 @@ from irtps.image_selection import exclude_images
 from irtps.integrate import integrate_normals, place_height
 from irtps.ps import PsResult, choose_robust, lobe_share, photometric_stereo
 from irtps.reconstruct import Reconstruction, reconstruct, save_reconstruction
+from irtps.records import irtps_version
 from irtps.render import Rendering, render, render_indirect
 from irtps.scene import Camera, CornellBox, Floor, Light, Scene, load_scene
 from irtps.surface import height_to_normals
 from irtps.synth import synthesize
 
-try:
-    __version__ = version("irtps")
-except PackageNotFoundError:
-    __version__ = "0+unknown"
+__version__ = irtps_version()
 
 __all__ = [
     "ArgumentError",

@@ -51,6 +51,7 @@ from irtps.evaluate import evaluate
 from irtps.image_selection import parse_image_list, select_images
 from irtps.options import ReconstructOptions
 from irtps.paths import resolve_path
+from irtps.records import BATCH, stamp
 from irtps.reconstruct import indirect_file_names, load_and_reconstruct, load_reconstruction, load_run_record, save_reconstruction
 
 __all__ = ["BatchResult", "connect", "local_cluster", "output_names", "reconstruct_many", "reconstruct_to_folder", "summary_table", "write_summary"]
@@ -538,7 +539,7 @@ def write_summary(results: Sequence[BatchResult], out: str | Path, *, settings: 
     folder = Path(out)
     failed = sum(result.failed for result in results)
     reused = sum(result.status == "reused" for result in results)
-    summary = {"settings": settings, "succeeded": len(results) - failed, "reused": reused, "failed": failed, "datasets": [asdict(result) for result in results]}
+    summary = {**stamp(BATCH), "settings": settings, "succeeded": len(results) - failed, "reused": reused, "failed": failed, "datasets": [asdict(result) for result in results]}
     atomic_write_text(folder / SUMMARY_JSON, json.dumps(summary, indent=2))
     atomic_write_text(folder / SUMMARY_MARKDOWN, summary_table(results))
 

@@ -16,17 +16,18 @@ import numpy as np
 
 from irtps.atomic import atomic_output_dir
 from irtps.batch import SUMMARY_JSON, SUMMARY_MARKDOWN, connect, local_cluster, output_names, reconstruct_many, summary_table, write_summary
-from irtps.dataset import Dataset, GroundTruth, load_dataset, load_scene_object, load_ground_truth, save_dataset
-from irtps.errors import IrtpsError, IrtpsWarning
+from irtps.dataset import Dataset, GroundTruth, dataset_inputs, load_dataset, load_scene_object, load_ground_truth, save_dataset, scene_object_inputs
+from irtps.errors import ArgumentError, IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate, format_metrics
 from irtps.image_agreement import format_image_agreement
 from irtps.image_selection import exclusions_by_name, format_images_fitted
-from irtps.options import ClusterOptions, OptionError, ReconstructOptions, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
-from irtps.output_rule import check_output, escaped, written_by_irtps
+from irtps.options import ClusterOptions, ReconstructOptions, int_argument, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
+from irtps.output_rule import check_output, escaped
 from irtps.paths import check_folder, resolve_path
 from irtps.placement import format_placement
 from irtps.ps import format_lobe_share
 from irtps.radiometry import format_albedo_scale
+from irtps.records import TABLE, stamp, written_by_irtps
 from irtps.reconstruct import load_and_reconstruct, load_reconstruction, save_reconstruction
 from irtps.render import Rendering, render
 from irtps.resources import return_freed_memory
@@ -48,7 +49,7 @@ def _bounce_files(rendering: Rendering) -> dict[str, np.ndarray]:
 
 def _cmd_render(args: argparse.Namespace) -> None:
     options = from_arguments(RenderOptions, args)
-    check_output(args.out, [args.dataset], force=args.force)
+    check_output(args.out, scene_object_inputs(args.dataset), force=args.force)
     scene, height, albedo, mask = load_scene_object(args.dataset)
     start = time.perf_counter()
     rendering = render(scene, height, albedo, mask, bounces=options.bounces, samples=options.samples, seed=options.seed, progress=not args.quiet)
@@ -88,7 +89,7 @@ def _robust_line(asked: str, used: str | None, share: float | None) -> str:
 
 def _cmd_reconstruct(args: argparse.Namespace) -> None:
     options = from_arguments(ReconstructOptions, args)
-    check_output(args.out, [args.data], force=args.force)
+    check_output(args.out, dataset_inputs(args.data, exclude_images=args.exclude_images), force=args.force)
     dataset, result = load_and_reconstruct(args.data, options=options, progress=not args.quiet, exclude_images=args.exclude_images)
     save_reconstruction(result, args.out, source=str(resolve_path(args.data)))
     if not args.quiet:
@@ -123,7 +124,7 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
 def _cmd_batch(args: argparse.Namespace) -> None:
     options, cluster_options = from_arguments(ReconstructOptions, args), from_arguments(ClusterOptions, args)
     exclusions = exclusions_by_name(args.exclude_images, output_names(args.data))
-    check_output(args.out, args.data, force=args.force or _holds_batch_outputs(args.out))
+    check_output(args.out, _batch_inputs(args.data, exclusions), force=args.force or _holds_batch_outputs(args.out))
     if args.force and os.path.lexists(args.out) and not args.out.is_dir():
         args.out.unlink()  # OUT is a folder that the data sets' folders go into, not replaced as a whole
     if cluster_options.scheduler is None:
@@ -142,6 +143,18 @@ def _cmd_batch(args: argparse.Namespace) -> None:
         reused = sum(result.status == "reused" for result in results)
         kept = f" ({reused} complete from an earlier run, kept)" if reused else ""
         print(f"{len(results) - reused} data sets reconstructed into {args.out}/{kept}; summary in {args.out / SUMMARY_MARKDOWN} and {args.out / SUMMARY_JSON}")
+
+
+def _batch_inputs(folders: list[Path], exclusions: dict[str, str | None]) -> list[Path]:
+    """Every file and folder that a batch reads (`irtps.dataset.dataset_inputs`); of a data
+    set that cannot be read, its folder (its task fails as it reads, writing nothing)."""
+    inputs: list[Path] = []
+    for folder, images in zip(folders, exclusions.values(), strict=True):
+        try:
+            inputs += dataset_inputs(folder, exclude_images=images)
+        except IrtpsError:
+            inputs.append(folder)
+    return inputs
 
 
 def _holds_batch_outputs(out: Path) -> bool:
@@ -193,7 +206,7 @@ def _run_table(datasets, options: TableOptions, quiet: bool, out: Path | None, s
     text = format_table(table)
     if out is not None:
         (out / "table.md").write_text(text)
-        (out / "table.json").write_text(json.dumps(table, indent=2))
+        (out / "table.json").write_text(json.dumps({**stamp(TABLE), **table}, indent=2))
     return text
 
 
@@ -202,7 +215,8 @@ def _cmd_table(args: argparse.Namespace) -> None:
     names = output_names(args.data)
     exclusions = exclusions_by_name(args.exclude_images, names)
     if args.out is not None:
-        check_output(args.out, args.data, force=args.force)
+        inputs = [path for folder, name in zip(args.data, names, strict=True) for path in dataset_inputs(folder, exclude_images=exclusions[name])]
+        check_output(args.out, inputs, force=args.force)
     datasets = [(name, load_dataset(folder, exclude_images=exclusions[name])) for name, folder in zip(names, args.data, strict=True)]
     if args.out is None:
         print(_run_table(datasets, options, args.quiet, None), end="")
@@ -456,7 +470,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="examples:\n  irtps demo\n  irtps demo --out demo --size 96 --samples 256",
     )
     p.add_argument("--out", type=Path, default=Path("irtps-demo"), help="output folder (default irtps-demo)")
-    p.add_argument("--size", type=int, default=64, help="image size in pixels (default 64)")
+    p.add_argument("--size", type=int_argument, default=64, help="image size in pixels (default 64)")
     add_arguments(p, TableOptions, defaults={"iterations": 5, "samples": 128})
     _add_force(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -479,13 +493,22 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
         sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
 
 
+def _argument_name(parser: argparse.ArgumentParser, command: str, argument: str) -> str:
+    """An argument's name as `command` takes it on the command line: ``exclude_images`` is
+    ``--exclude-images`` (an argument that is no option of the command keeps its name)."""
+    flag = "--" + argument.replace("_", "-")
+    subcommands = next(action for action in parser._actions if isinstance(action, argparse._SubParsersAction))
+    return flag if flag in subcommands.choices[command]._option_string_actions else argument
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the ``irtps`` command; returns the exit status.
 
     0 on success; 2 on bad input, printed as ``irtps: error: ...`` naming the file or
     field; 130 on Ctrl-C and 143 on SIGTERM, after removing any partial output.
     """
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     return_freed_memory()
     previous = signal.signal(signal.SIGTERM, _raise_terminated)
     try:
@@ -493,9 +516,8 @@ def main(argv: list[str] | None = None) -> int:
             warnings.simplefilter("default", IrtpsWarning)  # each message once
             warnings.showwarning = _show_warning
             args.run(args)
-    except OptionError as err:
-        flag = "--" + err.option.replace("_", "-") if hasattr(args, err.option) else err.option
-        print(f"irtps: error: {flag}: {escaped(err.problem)}", file=sys.stderr)
+    except ArgumentError as err:
+        print(f"irtps: error: {_argument_name(parser, args.command, err.argument)}: {escaped(err.problem)}", file=sys.stderr)
         return 2
     except (IrtpsError, OSError) as err:
         print(f"irtps: error: {escaped(str(err))}", file=sys.stderr)

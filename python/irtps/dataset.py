@@ -11,17 +11,19 @@ import json
 import re
 from collections.abc import Mapping
 from pathlib import Path, PurePosixPath
+from typing import NamedTuple
 
 import numpy as np
 
 from irtps._checks import check_finite
 from irtps.atomic import atomic_output_dir
 from irtps.data import Dataset, GroundTruth, image_file_name
-from irtps.diligent import diligent_image_names, load_diligent, load_diligent_ground_truth
+from irtps.diligent import diligent_ground_truth_inputs, diligent_image_names, diligent_inputs, load_diligent, load_diligent_ground_truth
 from irtps.errors import ArgumentError, DatasetError
-from irtps.image_selection import parse_image_list, select_images
+from irtps.image_selection import ImageSelection, parse_image_list, select_images
 from irtps.imageio import check_stack_memory, clip_negative, format_size, png_saturation, read_exr, read_image, read_images, read_mask, write_exr, write_png
 from irtps.paths import check_file, check_folder, exists, optional_file, optional_folder
+from irtps.records import RENDERING, stamp
 from irtps.scene import Scene, load_scene, write_scene
 
 SCENE_FILE = "scene.json"
@@ -63,10 +65,10 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True, exclude_images:
         optional file such as ``mask.png`` is absent only when nothing is at its path),
         an image count that is not the number of lights, sizes that disagree,
         non-finite pixels, too few lights, a light that is not a unit vector with
-        z > 0, an unknown format; an item of `exclude_images` that names no image, or
-        fewer than 3 images left.
+        z > 0, an unknown format.
     ArgumentError
-        If `exclude_images` is malformed (checked before anything is read).
+        Naming ``exclude_images``: malformed (checked before anything is read), an item
+        that names no image, or fewer than 3 images left.
     IrtpsError
         If decoding the images would need more memory than is available (checked from
         the first image's header before decoding any), naming the images' folder.
@@ -79,11 +81,9 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True, exclude_images:
     if exclude_images is not None:
         parse_image_list(exclude_images)
     folder = check_folder(path)
-    if exists(folder / SCENE_FILE):
-        return _load_irtps(folder, ground_truth, exclude_images)
-    if exists(folder / DILIGENT_MARKER):
+    if _layout(folder) == "diligent":
         return load_diligent(folder, ground_truth=ground_truth, exclude_images=exclude_images)
-    raise _not_a_dataset(folder)
+    return _load_irtps(folder, ground_truth, exclude_images)
 
 
 def dataset_image_names(path: str | Path) -> tuple[str, ...]:
@@ -106,12 +106,10 @@ def dataset_image_names(path: str | Path) -> tuple[str, ...]:
     ('000.exr', '001.exr', '002.exr', '003.exr')
     """
     folder = check_folder(path)
-    if exists(folder / SCENE_FILE):
-        scene = load_scene(folder / SCENE_FILE)
-        return tuple(image.name for image in _numbered_images(folder / IMAGES_FOLDER, len(scene.lights)))
-    if exists(folder / DILIGENT_MARKER):
+    if _layout(folder) == "diligent":
         return diligent_image_names(folder)
-    raise _not_a_dataset(folder)
+    scene = load_scene(folder / SCENE_FILE)
+    return tuple(image.name for image in _numbered_images(folder / IMAGES_FOLDER, len(scene.lights)))
 
 
 def _not_a_dataset(folder: Path) -> DatasetError:
@@ -144,7 +142,7 @@ def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.n
     rendering : mapping, optional
         How the images were rendered (e.g. bounces, samples, seed), written with the irtps
         version as ``gt/rendering.json``: the data set's provenance, by which irtps also
-        knows a folder it may replace (`irtps.output_rule.written_by_irtps`).
+        knows a folder it may replace (`irtps.records.written_by_irtps`).
 
     Raises
     ------
@@ -176,11 +174,9 @@ def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.n
         for relative, array in extra.items():
             _write_new_exr(out, relative, array)
         if rendering is not None:
-            from irtps import __version__
-
             record = out / RENDERING_RECORD
             record.parent.mkdir(exist_ok=True)
-            record.write_text(json.dumps({"irtps": __version__, **rendering}, indent=2) + "\n", encoding="utf-8")
+            record.write_text(json.dumps({**stamp(RENDERING), **rendering}, indent=2) + "\n", encoding="utf-8")
 
 
 def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | None:
@@ -207,27 +203,136 @@ def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | 
         Naming the file: not a data set, a camera of another size, malformed ground truth.
     """
     folder = check_folder(path)
-    if exists(folder / SCENE_FILE):
-        scene = load_scene(folder / SCENE_FILE)
-        camera_size = (scene.camera.height, scene.camera.width)
-        if camera_size != tuple(size):
-            raise DatasetError(
-                f"{folder / SCENE_FILE}: camera size {format_size(camera_size)} differs from the reconstruction's ({format_size(size)})"
-            )
-        return _load_ground_truth(folder / GT_FOLDER, len(scene.lights), camera_size, direct=False)
-    if exists(folder / DILIGENT_MARKER):
+    if _layout(folder) == "diligent":
         return load_diligent_ground_truth(folder, (size[0], size[1]))
-    raise DatasetError(f"{folder}: not a data set: it holds neither {SCENE_FILE} nor {DILIGENT_MARKER}")
+    scene, truth = _ground_truth_files(folder)
+    camera_size = (scene.camera.height, scene.camera.width)
+    if camera_size != tuple(size):
+        raise DatasetError(
+            f"{folder / SCENE_FILE}: camera size {format_size(camera_size)} differs from the reconstruction's ({format_size(size)})"
+        )
+    return None if truth is None else _read_ground_truth(truth, camera_size)
+
+
+def _ground_truth_files(folder: Path) -> tuple[Scene, _TruthFiles | None]:
+    """The scene of a data set folder in the irtps layout, and its ground-truth maps."""
+    scene = load_scene(folder / SCENE_FILE)
+    return scene, _truth_files(folder / GT_FOLDER, len(scene.lights), direct=False)
+
+
+def dataset_inputs(path: str | Path, *, ground_truth: bool = True, exclude_images: str | None = None) -> list[Path]:
+    """Every file and folder that `load_dataset` reads, found by the code that reads them
+    (the small files that list the rest are read; no image is decoded).
+
+    What a command that writes compares its output with (`irtps.output_rule`): an image
+    listed from outside the data set folder, or a folder of it that is a symbolic link to
+    another place, is read all the same.
+
+    Parameters
+    ----------
+    path, ground_truth, exclude_images
+        As for `load_dataset`.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The data set folder, then the files and folders read, as the reader names them
+        (symbolic links not resolved).
+
+    Raises
+    ------
+    DatasetError, ArgumentError
+        As `load_dataset`, for what is found wrong without decoding an image.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from irtps.synth import synthesize
+    >>> data, _ = synthesize("cap", size=16, lights=3, bounces=0, environment="none")
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     save_dataset(data, folder + "/cap")
+    ...     [path.relative_to(folder).as_posix() for path in dataset_inputs(folder + "/cap")][:6]
+    ['cap', 'cap/scene.json', 'cap/images', 'cap/images/000.exr', 'cap/images/001.exr', 'cap/images/002.exr']
+    """
+    if exclude_images is not None:
+        parse_image_list(exclude_images)
+    folder = check_folder(path)
+    if _layout(folder) == "diligent":
+        return diligent_inputs(folder, ground_truth=ground_truth, exclude_images=exclude_images)
+    return _irtps_files(folder, ground_truth, exclude_images).paths()
+
+
+def ground_truth_inputs(path: str | Path) -> list[Path]:
+    """Every file and folder that `load_ground_truth` reads (see `dataset_inputs`).
+
+    Raises
+    ------
+    DatasetError
+        As `load_ground_truth`, for what is found wrong without decoding a map.
+    """
+    folder = check_folder(path)
+    if _layout(folder) == "diligent":
+        return diligent_ground_truth_inputs(folder)
+    _, truth = _ground_truth_files(folder)
+    return [folder, folder / SCENE_FILE, *([] if truth is None else truth.paths())]
+
+
+def _layout(folder: Path) -> str:
+    """``"irtps"`` or ``"diligent"``: the layout of a data set folder, told by its marker file."""
+    if exists(folder / SCENE_FILE):
+        return "irtps"
+    if exists(folder / DILIGENT_MARKER):
+        return "diligent"
+    raise _not_a_dataset(folder)
+
+
+class _TruthFiles(NamedTuple):
+    """The ground-truth files of a data set folder in the irtps layout that are there to read."""
+
+    folder: Path
+    height: Path | None
+    normal: Path | None
+    albedo: Path | None
+    #: The direct-light images of the lights kept (none when they are not read).
+    direct: list[Path]
+
+    def paths(self) -> list[Path]:
+        maps = [path for path in (self.height, self.normal, self.albedo) if path is not None]
+        return [self.folder, *maps, *self.direct]
+
+
+class _IrtpsFiles(NamedTuple):
+    """What reading a data set folder in the irtps layout reads, found (and ``scene.json``
+    parsed) without decoding an image."""
+
+    scene_file: Path
+    #: The scene, with the lights of the images kept.
+    scene: Scene
+    images: list[Path]
+    selection: ImageSelection
+    mask: Path | None
+    truth: _TruthFiles | None
+
+    def paths(self) -> list[Path]:
+        mask = [] if self.mask is None else [self.mask]
+        truth = [] if self.truth is None else self.truth.paths()
+        return [self.scene_file.parent, self.scene_file, self.scene_file.parent / IMAGES_FOLDER, *self.images, *mask, *truth]
+
+
+def _irtps_files(folder: Path, ground_truth: bool, exclude_images: str | None) -> _IrtpsFiles:
+    scene = load_scene(folder / SCENE_FILE)
+    paths = _numbered_images(folder / IMAGES_FOLDER, len(scene.lights))
+    selection = select_images([path.name for path in paths], exclude_images, where=str(folder))
+    kept = dataclasses.replace(scene, lights=tuple(scene.lights[k] for k in selection.kept))
+    mask = _optional_path(folder / MASK_FILE)
+    truth = _truth_files(folder / GT_FOLDER, len(scene.lights), selection.kept) if ground_truth else None
+    return _IrtpsFiles(folder / SCENE_FILE, kept, [paths[k] for k in selection.kept], selection, mask, truth)
 
 
 def _load_irtps(folder: Path, ground_truth: bool, exclude_images: str | None) -> Dataset:
-    scene = load_scene(folder / SCENE_FILE)
-    count = len(scene.lights)
+    files = _irtps_files(folder, ground_truth, exclude_images)
+    scene, paths = files.scene, files.images
     size = (scene.camera.height, scene.camera.width)
-    paths = _numbered_images(folder / IMAGES_FOLDER, count)
-    selection = select_images([path.name for path in paths], exclude_images, where=str(folder))
-    paths = [paths[k] for k in selection.kept]
-    scene = dataclasses.replace(scene, lights=tuple(scene.lights[k] for k in selection.kept))
     check_stack_memory(paths, size)
     images = read_images(paths)
     if images.shape[1:3] != size:
@@ -236,10 +341,10 @@ def _load_irtps(folder: Path, ground_truth: bool, exclude_images: str | None) ->
             f"the camera in {SCENE_FILE} ({format_size(size)})"
         )
     clip_negative(paths, images)
-    mask_path = folder / MASK_FILE
-    mask = read_mask(mask_path, size) if optional_file(mask_path) else np.ones(size, dtype=bool)
-    gt = _load_ground_truth(folder / GT_FOLDER, count, size, kept=selection.kept) if ground_truth else None
+    mask = read_mask(files.mask, size) if files.mask is not None else np.ones(size, dtype=bool)
+    gt = None if files.truth is None else _read_ground_truth(files.truth, size)
     saturation = png_saturation(paths)
+    selection = files.selection
     return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=saturation, image_names=selection.names, excluded_images=selection.excluded)
 
 
@@ -265,25 +370,37 @@ def _numbered_images(folder: Path, count: int) -> list[Path]:
     return paths
 
 
-def _load_ground_truth(folder: Path, count: int, size: tuple[int, int], direct: bool = True, kept: list[int] | None = None) -> GroundTruth | None:
-    """The ground truth in `folder`, if any: the direct-light images of the lights `kept`
-    (default all `count`)."""
+def _truth_files(folder: Path, count: int, kept: list[int] | None = None, direct: bool = True) -> _TruthFiles | None:
+    """The ground-truth files in `folder`, if it is there: the maps present and, with
+    `direct`, the direct-light images of the lights `kept` (default all `count`)."""
     if not optional_folder(folder):
         return None
+    height, normal, albedo = (_optional_path(folder / f"{name}.exr") for name in ("height", "normal", "albedo"))
+    direct_paths: list[Path] = []
+    if direct and optional_folder(folder / "direct"):
+        direct_paths = _numbered_images(folder / "direct", count)
+        direct_paths = direct_paths if kept is None else [direct_paths[k] for k in kept]
+    return _TruthFiles(folder, height, normal, albedo, direct_paths)
+
+
+def _read_ground_truth(files: _TruthFiles, size: tuple[int, int]) -> GroundTruth | None:
+    """The ground truth in `files`, None if there is none."""
     parts = {
-        "height": _if_file(folder / "height.exr", lambda path: read_height_map(path, size)),
-        "normal": _if_file(folder / "normal.exr", lambda path: read_normal_map(path, size)),
-        "albedo": _if_file(folder / "albedo.exr", lambda path: read_albedo_map(path, size)),
+        "height": None if files.height is None else read_height_map(files.height, size),
+        "normal": None if files.normal is None else read_normal_map(files.normal, size),
+        "albedo": None if files.albedo is None else read_albedo_map(files.albedo, size),
     }
-    direct_folder = folder / "direct"
-    if direct and optional_folder(direct_folder):
-        paths = _numbered_images(direct_folder, count)
-        paths = paths if kept is None else [paths[k] for k in kept]
-        check_stack_memory(paths, size)
-        parts["direct"] = _checked_size(paths[0], read_images(paths), size)
+    if files.direct:
+        check_stack_memory(files.direct, size)
+        parts["direct"] = _checked_size(files.direct[0], read_images(files.direct), size)
     if all(part is None for part in parts.values()):
         return None
     return GroundTruth(**parts)
+
+
+def _optional_path(path: Path) -> Path | None:
+    """`path` if an optional file is there to read, None if nothing is at it (`optional_file`)."""
+    return path if optional_file(path) else None
 
 
 def read_height_map(path: Path, size: tuple[int, int]) -> np.ndarray:
@@ -347,11 +464,6 @@ def _image_size(shape: tuple[int, ...]) -> tuple[int, int]:
     return (shape[1], shape[2]) if len(shape) == 4 else (shape[0], shape[1])
 
 
-def _if_file(path: Path, read):
-    """``read(path)`` if an optional file is there, None if nothing is at ``path``."""
-    return read(path) if optional_file(path) else None
-
-
 def _gt_files(gt: GroundTruth | None) -> dict[str, list[tuple[str, np.ndarray]]]:
     """The EXR files of the ground truth, by part: relative path and array."""
     if gt is None:
@@ -406,16 +518,12 @@ def load_scene_object(path: str | Path) -> tuple[Scene, np.ndarray, np.ndarray, 
     DatasetError
         Naming the missing or malformed file, e.g. an albedo outside [0, 1] in the mask.
     """
-    folder = check_folder(path)
-    scene = load_scene(folder / SCENE_FILE)
+    files = _scene_object_files(check_folder(path))
+    scene, albedo_path = files.scene, files.albedo
     size = (scene.camera.height, scene.camera.width)
-    height_path, albedo_path = folder / GT_FOLDER / "height.exr", folder / GT_FOLDER / "albedo.exr"
-    for required in (height_path, albedo_path):
-        check_file(required, "rendering needs the true height and albedo")
-    height = read_height_map(height_path, size)
+    height = read_height_map(files.height, size)
     albedo = read_albedo_map(albedo_path, size)
-    mask_path = folder / MASK_FILE
-    mask = read_mask(mask_path, size) if optional_file(mask_path) else np.ones(size, dtype=bool)
+    mask = read_mask(files.mask, size) if files.mask is not None else np.ones(size, dtype=bool)
     outside = (albedo < 0.0) | (albedo > 1.0)
     outside[~mask] = False
     if outside.any():
@@ -424,3 +532,35 @@ def load_scene_object(path: str | Path) -> tuple[Scene, np.ndarray, np.ndarray, 
             f"{albedo_path}: albedo {albedo[row, column, channel]:g} at row {row}, column {column} of the mask is outside [0, 1]"
         )
     return scene, height, albedo, mask
+
+
+class _SceneObjectFiles(NamedTuple):
+    """What `load_scene_object` reads, found (and ``scene.json`` parsed) without decoding a map."""
+
+    scene: Scene
+    height: Path
+    albedo: Path
+    mask: Path | None
+
+    def paths(self) -> list[Path]:
+        folder = self.height.parent.parent
+        return [folder, folder / SCENE_FILE, self.height.parent, self.height, self.albedo, *([] if self.mask is None else [self.mask])]
+
+
+def _scene_object_files(folder: Path) -> _SceneObjectFiles:
+    scene = load_scene(folder / SCENE_FILE)
+    height, albedo = folder / GT_FOLDER / "height.exr", folder / GT_FOLDER / "albedo.exr"
+    for required in (height, albedo):
+        check_file(required, "rendering needs the true height and albedo")
+    return _SceneObjectFiles(scene, height, albedo, _optional_path(folder / MASK_FILE))
+
+
+def scene_object_inputs(path: str | Path) -> list[Path]:
+    """Every file and folder that `load_scene_object` reads (see `dataset_inputs`).
+
+    Raises
+    ------
+    DatasetError
+        As `load_scene_object`, for what is found wrong without decoding a map.
+    """
+    return _scene_object_files(check_folder(path)).paths()

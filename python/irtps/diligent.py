@@ -9,6 +9,7 @@ evaluation, ``Normal_gt.mat`` (variable ``Normal_gt``, (H, W, 3)).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import scipy.io
@@ -16,7 +17,8 @@ import scipy.io
 from irtps.data import Dataset, GroundTruth
 from irtps._checks import check_finite
 from irtps.errors import DatasetError
-from irtps.image_selection import select_images
+from irtps.guarded import read_text
+from irtps.image_selection import ImageSelection, select_images
 from irtps.imageio import check_stack_memory, format_size, png_saturation, read_images, read_mask
 from irtps.paths import check_file, check_folder, optional_file
 from irtps.scene import MIN_LIGHTS, Camera, Light, Scene
@@ -62,10 +64,10 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
         not a readable regular file (a directory, a FIFO, a symlink loop), line counts
         that disagree, a direction that is not a unit vector (beyond 1e-2) or
         has z <= 0, a negative intensity, fewer than 3 lights, images of
-        different sizes or with non-finite values; an item of `exclude_images` that
-        names no image, or fewer than 3 images left.
+        different sizes or with non-finite values.
     ArgumentError
-        If `exclude_images` is malformed.
+        Naming ``exclude_images``: malformed, an item that names no image, or fewer than 3
+        images left.
     IrtpsError
         If decoding the images would need more memory than is available (checked from
         the first image's header and the image count, before decoding any).
@@ -77,6 +79,41 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
     DiLiGenT's convention ``I = rho * e * (n . l)``.
     """
     folder = check_folder(path)
+    files = _diligent_files(folder, ground_truth, exclude_images)
+    image_paths, selection = files.images, files.selection
+    check_stack_memory(image_paths, where=folder / FILENAMES_FILE)
+    images = read_images(image_paths)
+    size = images.shape[1:3]
+    mask = read_mask(files.mask, size) if files.mask is not None else np.ones(size, dtype=bool)
+    gt = None if files.normals is None else GroundTruth(normal=_read_normals(files.normals, size))
+    scene = Scene(
+        camera=Camera(width=size[1], height=size[0], pixel_size=1.0),
+        lights=files.lights,
+        relative_irradiance=True,  # light_intensities.txt: relative RGB intensities
+    )
+    saturation = png_saturation(image_paths)
+    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=saturation, image_names=selection.names, excluded_images=selection.excluded)
+
+
+class _DiligentFiles(NamedTuple):
+    """What reading a DiLiGenT folder reads, found (and its three lists parsed) without
+    decoding an image."""
+
+    folder: Path
+    #: The lights of the images kept.
+    lights: tuple[Light, ...]
+    images: list[Path]
+    selection: ImageSelection
+    mask: Path | None
+    normals: Path | None
+
+    def paths(self) -> list[Path]:
+        lists = [self.folder / name for name in (FILENAMES_FILE, DIRECTIONS_FILE, INTENSITIES_FILE)]
+        optional = [path for path in (self.mask, self.normals) if path is not None]
+        return [self.folder, *lists, *self.images, *optional]
+
+
+def _diligent_files(folder: Path, ground_truth: bool, exclude_images: str | None) -> _DiligentFiles:
     names, name_lines = _read_filenames(folder / FILENAMES_FILE)
     directions, direction_lines = _read_table(folder / DIRECTIONS_FILE)
     intensities, intensity_lines = _read_table(folder / INTENSITIES_FILE)
@@ -93,20 +130,29 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
     image_paths = [folder / names[k] for k in selection.kept]
     for image_path, line in zip(image_paths, [name_lines[k] for k in selection.kept], strict=True):
         check_file(image_path, f"listed on line {line} of {FILENAMES_FILE}")
-    check_stack_memory(image_paths, where=folder / FILENAMES_FILE)
-    images = read_images(image_paths)
-    size = images.shape[1:3]
-    mask_path = folder / MASK_FILE
-    mask = read_mask(mask_path, size) if optional_file(mask_path) else np.ones(size, dtype=bool)
-    normals_path = folder / NORMALS_FILE
-    gt = GroundTruth(normal=_read_normals(normals_path, size)) if ground_truth and optional_file(normals_path) else None
-    scene = Scene(
-        camera=Camera(width=size[1], height=size[0], pixel_size=1.0),
-        lights=tuple(Light(direction=directions[k], irradiance=intensities[k]) for k in selection.kept),
-        relative_irradiance=True,  # light_intensities.txt: relative RGB intensities
-    )
-    saturation = png_saturation(image_paths)
-    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=saturation, image_names=selection.names, excluded_images=selection.excluded)
+    lights = tuple(Light(direction=directions[k], irradiance=intensities[k]) for k in selection.kept)
+    mask = folder / MASK_FILE if optional_file(folder / MASK_FILE) else None
+    normals = folder / NORMALS_FILE if ground_truth and optional_file(folder / NORMALS_FILE) else None
+    return _DiligentFiles(folder, lights, image_paths, selection, mask, normals)
+
+
+def diligent_inputs(path: str | Path, *, ground_truth: bool = True, exclude_images: str | None = None) -> list[Path]:
+    """Every file and folder that `load_diligent` reads, found by the code that reads them:
+    the folder, its three lists, the images listed (wherever they are) but those left out,
+    the mask and the true normals when present.
+
+    Raises
+    ------
+    DatasetError, ArgumentError
+        As `load_diligent`, for what is found wrong without decoding an image.
+    """
+    return _diligent_files(check_folder(path), ground_truth, exclude_images).paths()
+
+
+def diligent_ground_truth_inputs(path: str | Path) -> list[Path]:
+    """The folder and, when present, the ``Normal_gt.mat`` that `load_diligent_ground_truth` reads."""
+    folder = check_folder(path)
+    return [folder, *([folder / NORMALS_FILE] if optional_file(folder / NORMALS_FILE) else [])]
 
 
 def load_diligent_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | None:
@@ -135,15 +181,9 @@ def diligent_image_names(folder: str | Path) -> tuple[str, ...]:
 
 def _read_lines(path: Path) -> list[tuple[int, str]]:
     """Non-blank lines of a text file, stripped, with their 1-based line numbers."""
-    check_file(path, f"a DiLiGenT folder needs {FILENAMES_FILE}, {DIRECTIONS_FILE} and {INTENSITIES_FILE}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise DatasetError(
-            f"{path}: missing (a DiLiGenT folder needs {FILENAMES_FILE}, {DIRECTIONS_FILE} and {INTENSITIES_FILE})"
-        ) from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise DatasetError(f"{path}: cannot read ({error})") from None
+    needed = f"a DiLiGenT folder needs {FILENAMES_FILE}, {DIRECTIONS_FILE} and {INTENSITIES_FILE}"
+    check_file(path, needed)
+    text = read_text(path)
     return [(number, line.strip()) for number, line in enumerate(text.splitlines(), start=1) if line.strip()]
 
 

@@ -19,7 +19,8 @@ from typing import NamedTuple
 from pathlib import PurePosixPath
 
 from irtps.data import Dataset
-from irtps.errors import ArgumentError, DatasetError
+from irtps.errors import ArgumentError
+from irtps.guarded import MAX_DIGITS, parse_int
 from irtps.scene import MIN_LIGHTS
 
 __all__ = ["ImageSelection", "exclude_images", "excluded_indices", "exclusions_by_name", "format_image_names", "format_images_fitted", "parse_image_list", "select_images"]
@@ -46,7 +47,8 @@ def parse_image_list(images: str) -> tuple[str, ...]:
     Raises
     ------
     ArgumentError
-        Naming ``exclude_images``: not a text, an empty item, a range that runs backwards.
+        Naming ``exclude_images``: not a text, an empty item, a range that runs backwards,
+        a number of more than `irtps.guarded.MAX_DIGITS` digits.
 
     Examples
     --------
@@ -89,10 +91,9 @@ def excluded_indices(names: Sequence[str], images: str, *, where: str) -> list[i
     Raises
     ------
     ArgumentError
-        If the list is malformed (`parse_image_list`).
-    DatasetError
-        Naming `where` and the item: an item that names none of the images, or a list
-        that leaves fewer than 3 images.
+        Naming ``exclude_images``: a malformed list (`parse_image_list`), an item that names
+        none of the images (naming `where` and the item), or a list that leaves fewer than 3
+        images.
 
     Examples
     --------
@@ -102,22 +103,22 @@ def excluded_indices(names: Sequence[str], images: str, *, where: str) -> list[i
     >>> excluded_indices(names, "97", where="bearPNG")
     Traceback (most recent call last):
     ...
-    irtps.errors.DatasetError: bearPNG: no image is named '97' (the images: 001.png, 002.png, 003.png, ... 096.png)
+    irtps.errors.ArgumentError: exclude_images: bearPNG has no image named '97' (the images: 001.png, 002.png, 003.png, ... 096.png)
     """
     items = parse_image_list(images)
     stems = [PurePosixPath(name).stem for name in names]
-    numbers = [int(stem) if _NUMBER.fullmatch(stem) else None for stem in stems]
+    numbers = [int(stem) if _NUMBER.fullmatch(stem) and len(stem) <= MAX_DIGITS else None for stem in stems]
     chosen: set[int] = set()
     for item in items:
         span = _numbers(item)
         hits = [k for k, (name, stem, number) in enumerate(zip(names, stems, numbers, strict=True)) if item in (name, stem) or _within(number, span)]
         if not hits:
             what = f"numbered {span[0]} to {span[1]}" if span is not None and span[0] != span[1] else f"named {item!r}"
-            raise DatasetError(f"{where}: no image is {what} (the images: {format_image_names(names)})")
+            raise ArgumentError("exclude_images", f"{where} has no image {what} (the images: {format_image_names(names)})")
         chosen.update(hits)
     kept = len(names) - len(chosen)
     if kept < MIN_LIGHTS:
-        raise DatasetError(f"{where}: leaving out {len(chosen)} of its {len(names)} images leaves {kept}; photometric stereo needs at least {MIN_LIGHTS}")
+        raise ArgumentError("exclude_images", f"leaving out {len(chosen)} of the {len(names)} images of {where} leaves {kept}; photometric stereo needs at least {MIN_LIGHTS}")
     return sorted(chosen)
 
 
@@ -174,8 +175,8 @@ def _numbers(item: str) -> tuple[int, int] | None:
     """The numbers from and to which an item of a list names images, if it is a number or a
     range of them."""
     if span := _RANGE.fullmatch(item):
-        return int(span[1]), int(span[2])
-    return (int(item), int(item)) if _NUMBER.fullmatch(item) else None
+        return parse_int(span[1], "exclude_images"), parse_int(span[2], "exclude_images")
+    return (parse_int(item, "exclude_images"),) * 2 if _NUMBER.fullmatch(item) else None
 
 
 class ImageSelection(NamedTuple):
@@ -227,9 +228,8 @@ def exclude_images(dataset: Dataset, images: str) -> Dataset:
     Raises
     ------
     ArgumentError
-        If `dataset` is not a `Dataset`, or `images` is malformed (`parse_image_list`).
-    DatasetError
-        As `excluded_indices`, naming ``dataset.source``.
+        If `dataset` is not a `Dataset`; as `excluded_indices` for `images`, naming
+        ``dataset.source``.
 
     Examples
     --------

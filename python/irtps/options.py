@@ -24,6 +24,7 @@ from typing import Any, ClassVar, TypeVar
 import numpy as np
 
 from irtps.errors import ArgumentError
+from irtps.guarded import parse_int
 from irtps.imageio import MAX_IMAGE_PIXELS
 from irtps.integrate import METHODS as INTEGRATION_METHODS
 from irtps.ps import ROBUST_CHOICES, ROBUST_MODES
@@ -419,7 +420,7 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
         target.add_argument(
             flag,
             dest=item.name,
-            type=_word_or(spec) if spec.words else spec.kind,
+            type=spec.kind if spec.kind is str else _converter(spec),
             default=default,
             choices=spec.choices,
             nargs="+" if spec.many else None,
@@ -428,18 +429,38 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
         )
 
 
-def _word_or(spec: _Spec):
-    """The command-line converter of an option that takes a number or one of its words."""
+def _converter(spec: _Spec):
+    """The command-line converter of a number option: one of its words, or its kind (an
+    integer read by `irtps.guarded.parse_int`, bounded)."""
 
     def convert(text: str) -> Any:
         if text in spec.words:
             return text
         try:
-            return spec.kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not {dataclasses.replace(spec, optional=False).describe()}") from None
+            return int_argument(text) if spec.kind is int else spec.kind(text)
+        except (ValueError, argparse.ArgumentTypeError):
+            raise argparse.ArgumentTypeError(f"{_value_text(text)} is not {dataclasses.replace(spec, optional=False).describe()}") from None
 
     return convert
+
+
+def int_argument(text: str) -> int:
+    """An integer given on the command line (argparse's ``type``), bounded in digits.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        For anything but an integer of at most `irtps.guarded.MAX_DIGITS` digits.
+
+    Examples
+    --------
+    >>> int_argument("64")
+    64
+    """
+    try:
+        return parse_int(text, "value")
+    except ArgumentError as error:
+        raise argparse.ArgumentTypeError(f"{_value_text(text)}: {error.problem}") from None
 
 
 def _help(spec: _Spec, default: Any) -> str:

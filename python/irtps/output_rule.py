@@ -14,15 +14,11 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from irtps.dataset import RENDERING_RECORD
 from irtps.errors import IrtpsError
 from irtps.paths import file_problem, folder_problem
+from irtps.records import written_by_irtps
 
-__all__ = ["OutputError", "check_output", "escaped", "written_by_irtps"]
-
-
-#: The record that each kind of output folder of irtps holds (see `written_by_irtps`).
-OUTPUT_RECORDS = ("run.json", "table.json", "batch.json", "index.html", RENDERING_RECORD)
+__all__ = ["OutputError", "check_output", "escaped"]
 
 
 class OutputError(IrtpsError, ValueError):
@@ -48,7 +44,7 @@ def check_output(out: str | Path, inputs: Iterable[str | Path], *, force: bool =
     OutputError
         Naming the option and the path: `out` is a symbolic-link loop; it is, holds or lies
         inside an input; it is an existing file (without `force`) or something else that is
-        not a folder; it is a folder with content that is not `written_by_irtps` (without
+        not a folder; it is a folder with content that is not `irtps.records.written_by_irtps` (without
         `force`).
 
     Examples
@@ -87,24 +83,6 @@ def check_output(out: str | Path, inputs: Iterable[str | Path], *, force: bool =
             f"{option} {shown}: is a folder with content that irtps did not write; writing there would replace it: "
             "choose a new or empty folder, or pass --force"
         )
-
-
-def written_by_irtps(folder: str | Path) -> bool:
-    """Whether a folder is an output of irtps, which a later run may replace.
-
-    Each holds its record: a reconstruction ``run.json``, a table ``table.json``, a batch
-    ``batch.json``, a report ``index.html``, a data set that irtps rendered
-    ``gt/rendering.json`` (a data set captured or rendered elsewhere has none).
-
-    Parameters
-    ----------
-    folder : str or pathlib.Path
-
-    Returns
-    -------
-    bool
-    """
-    return any(os.path.lexists(Path(folder) / name) for name in OUTPUT_RECORDS)
 
 
 def _kind(path: Path, option: str, shown: str) -> str | None:

@@ -19,6 +19,7 @@ from irtps.atomic import atomic_output_dir
 from irtps.data import pixel_observations
 from irtps.dataset import Dataset, load_dataset, read_albedo_map, read_height_map, read_normal_map
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
+from irtps.guarded import read_json
 from irtps.image_agreement import ImageAgreement, image_agreement
 from irtps.imageio import read_mask, write_exr, write_png
 from irtps.interreflection import Iteration, remove_interreflections
@@ -29,6 +30,7 @@ from irtps.pipeline import choose_dataset_robust, fit_photometric_stereo, recons
 from irtps.placement import Placement
 from irtps.ps import FITTED, FLAGS, LOBE_ADVISED, LOBE_FITTED, PsResult, check_lights, format_lobe_share
 from irtps.radiometry import AlbedoScale
+from irtps.records import RUN, stamp
 
 #: Indirect images written at once, one per core up to 4 (on 2 cores, 2 writers take 0.7 of
 #: one writer's time).
@@ -416,8 +418,6 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
     DatasetError
         If the folder cannot be written.
     """
-    from irtps import __version__
-
     if not isinstance(result, Reconstruction):
         raise ArgumentError("result", f"expected a Reconstruction, got {type(result).__name__}")
     with atomic_output_dir(path) as folder:
@@ -429,7 +429,7 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
         write_ply(folder / "mesh.ply", vertices, faces, colors=colors, normals=normals)
         write_obj(folder / "mesh.obj", vertices, faces, normals=normals)
         run = {
-            "irtps": __version__,
+            **stamp(RUN),
             "python": platform.python_version(),
             "numpy": np.__version__,
             "source": source,
@@ -547,7 +547,7 @@ def load_run_record(path: str | Path) -> dict:
     ------
     IrtpsError
         Naming the folder or the file and field: a missing folder or ``run.json``, text
-        that is not JSON, or a field missing or of the wrong type (``source`` a string or
+        that is not JSON or is past the bounds of `irtps.guarded`, or a field missing or of the wrong type (``source`` a string or
         null; ``parameters``, ``timings_s`` and ``flags`` objects; ``pixel_size`` a
         number; ``history`` a list of objects with an integer ``index``, a numeric or
         null ``height_change`` and an object or null ``metrics``).
@@ -565,12 +565,7 @@ def load_run_record(path: str | Path) -> dict:
     """
     folder = check_folder(path, missing="no such reconstruction folder")
     run_path = check_file(folder / "run.json", "not a reconstruction folder written by irtps reconstruct?")
-    try:
-        record = json.loads(run_path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise IrtpsError(f"{run_path}: not valid JSON ({error})") from None
-    except OSError as error:
-        raise IrtpsError(f"{run_path}: cannot be read ({error.strerror or error})") from None
+    record = read_json(run_path, error=IrtpsError)
     _check_fields(run_path, "", record, _RUN_FIELDS, _OPTIONAL_RUN_FIELDS)
     for k, step in enumerate(record["history"]):
         _check_fields(run_path, f"history[{k}]", step, _HISTORY_FIELDS, {})

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from irtps.atomic import atomic_output_dir
-from irtps.dataset import GroundTruth, load_ground_truth
+from irtps.dataset import GroundTruth, ground_truth_inputs, load_ground_truth
 from irtps.display import albedo_to_rgb, hillshade, normal_to_rgb, object_window, radiance_to_rgb
 from irtps.errors import IrtpsError
 from irtps.evaluate import ErrorMaps, Metrics, error_maps, evaluate
@@ -273,8 +273,9 @@ def _indirect_figure(folder: Path, mask: np.ndarray, window: tuple[slice, slice]
 
 
 def report_inputs(run_dir: str | Path, truth: str | Path | None = None) -> list[Path]:
-    """What a report of `run_dir` reads: the reconstruction's files and the data set of its
-    ground truth (`truth`, else the source recorded in ``run.json`` when it is there).
+    """What a report of `run_dir` reads: the reconstruction's files and what is read of the
+    data set of its ground truth (`truth`, else the source recorded in ``run.json`` when it
+    is there; `irtps.dataset.ground_truth_inputs`).
 
     Parameters
     ----------
@@ -285,16 +286,24 @@ def report_inputs(run_dir: str | Path, truth: str | Path | None = None) -> list[
     Returns
     -------
     list of pathlib.Path
+
+    Raises
+    ------
+    DatasetError
+        As `irtps.load_ground_truth`, for what is found wrong with the ground truth's data
+        set without decoding a map.
     """
     folder = Path(run_dir)
     inputs = [folder / name for name in RECONSTRUCTION_FILES]
-    if truth is not None:
-        return [*inputs, Path(truth)]
-    try:
-        source = load_run_record(folder)["source"]
-    except IrtpsError:
-        source = None  # the report itself says what is wrong with run.json
-    return inputs if source is None else [*inputs, Path(source)]
+    if truth is None:
+        try:
+            source = load_run_record(folder)["source"]
+        except IrtpsError:
+            return inputs  # the report itself says what is wrong with run.json
+        if source is None or not Path(source).is_dir():
+            return inputs  # no ground truth is read
+        truth = source
+    return [*inputs, *ground_truth_inputs(truth)]
 
 
 def _ground_truth(record: dict, truth: str | Path | None, size: tuple[int, int]) -> tuple[GroundTruth | None, str]:

@@ -18,6 +18,7 @@ from irtps.image_selection import format_images_fitted
 from irtps.placement import format_placement
 from irtps.ps import format_lobe_share
 from irtps.radiometry import format_albedo_scale
+from irtps.records import REPORT_MARKER
 
 if TYPE_CHECKING:
     from irtps.report import Report, ReportFigure
@@ -73,6 +74,7 @@ def report_html(report: Report) -> str:
         '<html lang="en">',
         "<head>",
         '<meta charset="utf-8">',
+        REPORT_MARKER,
         '<meta name="viewport" content="width=device-width, initial-scale=1">',
         '<link rel="icon" href="data:,">',
         f"<title>irtps report: {escape(name)}</title>",

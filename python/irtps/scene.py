@@ -18,7 +18,8 @@ import numpy as np
 from irtps.atomic import atomic_write_text
 from irtps.errors import DatasetError
 from irtps.imageio import MAX_IMAGE_PIXELS
-from irtps.paths import MISSING, file_problem
+from irtps.guarded import read_json
+from irtps.paths import exists
 
 FORMAT = "irtps.scene/1"
 """The value of the ``format`` field this version reads and writes."""
@@ -256,26 +257,13 @@ def load_scene(path: str | Path) -> Scene:
     DatasetError
         If the file is missing, not a readable regular file (a directory, a FIFO, a
         symlink loop ...; checked before opening it), is not valid JSON (the message gives
-        the line and column), or does not follow the contract.
+        the line and column) or is JSON past the bounds of `irtps.guarded` (nesting, digits,
+        size, repeated keys), or does not follow the contract.
     """
     path = Path(path)
-    problem = file_problem(path)  # before opening: reading a FIFO would block
-    if problem is not None:
-        raise DatasetError(f"{path}: {'file not found' if problem == MISSING else problem}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise DatasetError(f"{path}: file not found") from None
-    except UnicodeDecodeError:
-        raise DatasetError(f"{path}: not UTF-8 text") from None
-    except OSError as error:
-        raise DatasetError(f"{path}: cannot read ({error.strerror})") from None
-    try:
-        obj = json.loads(text, object_pairs_hook=lambda pairs: _unique_keys(pairs, path))
-    except json.JSONDecodeError as error:
-        raise DatasetError(f"{path}: invalid JSON at line {error.lineno}, column {error.colno}: {error.msg}") from None
-    except RecursionError:
-        raise DatasetError(f"{path}: JSON nested too deeply to be a scene") from None
+    if not exists(path):
+        raise DatasetError(f"{path}: file not found")
+    obj = read_json(path)
     return parse_scene(obj, str(path))
 
 
@@ -378,15 +366,6 @@ def _environment_to_dict(box: CornellBox | None) -> dict:
 
 def _floats(values) -> list[float]:
     return [float(v) for v in values]
-
-
-def _unique_keys(pairs: list[tuple[str, object]], path: Path) -> dict:
-    obj = {}
-    for key, value in pairs:
-        if key in obj:
-            raise DatasetError(f"{path}: duplicate key {key!r} in a JSON object")
-        obj[key] = value
-    return obj
 
 
 def _json_type(value: object) -> str:
