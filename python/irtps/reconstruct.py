@@ -21,7 +21,7 @@ from irtps.dataset import Dataset, load_dataset, read_albedo_map, read_height_ma
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
 from irtps.image_agreement import ImageAgreement, image_agreement
 from irtps.imageio import read_mask, write_exr, write_png
-from irtps.interreflection import Iteration, remove_interreflections
+from irtps.interreflection import Iteration, check_traceable, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
 from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
@@ -176,7 +176,11 @@ def reconstruct(
     ------
     DatasetError
         Naming ``dataset.source``: lights that are (nearly) coplanar or have a zero
-        irradiance, or images black on the whole object.
+        irradiance, or images black on the whole object; for IRT-PS, naming its mask file, a
+        mask with no 2×2 block of object pixels, which makes no surface to trace
+        (`irtps.interreflection.check_traceable`; ``ArgumentError`` naming
+        ``dataset.mask`` for a data set made in memory). Classic photometric stereo fits
+        any mask, pixel by pixel.
     OptionError
         Naming the option: a value out of range or not among the choices (also a
         `ValueError`).
@@ -204,6 +208,8 @@ def reconstruct(
         settings["method"] = method
     options = resolve_options(dataset, ReconstructOptions.build(options, **settings))
     _check_input(dataset, options.saturation, options.robust)
+    if options.method == "irtps":
+        check_traceable(dataset)
     parameters = options.to_dict()
     timings: dict[str, float] = {}
     share = None

@@ -84,7 +84,7 @@ def footprint_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 
     if rows < 2 or cols < 2:
         return normals
     # Block (i, j): triangle 1 is (i,j) (i+1,j) (i,j+1), triangle 2 (i,j+1) (i+1,j) (i+1,j+1).
-    meshed = mask[:-1, :-1] & mask[1:, :-1] & mask[:-1, 1:] & mask[1:, 1:]
+    meshed = meshed_blocks(mask)
     h00, h10, h01, h11 = height[:-1, :-1], height[1:, :-1], height[:-1, 1:], height[1:, 1:]
     first = _unit_normals((h01 - h00) / pixel_size, (h10 - h00) / pixel_size)
     second = _unit_normals((h11 - h10) / pixel_size, (h11 - h01) / pixel_size)
@@ -96,6 +96,21 @@ def footprint_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 
         normals[r, c] += np.where(meshed[..., None], part, 0.0)
         weight[r, c] += meshed
     return normals / np.maximum(weight, 1.0)[..., None]
+
+
+def meshed_blocks(mask: np.ndarray) -> np.ndarray:
+    """bool (H - 1, W - 1): the 2×2 blocks of pixels all four of which `mask` sets, those that
+    the contract's surface spans with two triangles (§2); block (i, j) has pixel (i, j) as its
+    top-left corner.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> meshed_blocks(np.array([[1, 1, 0], [1, 1, 1]], bool)).tolist()
+    [[True, False]]
+    """
+    mask = np.asarray(mask, dtype=bool)
+    return mask[:-1, :-1] & mask[1:, :-1] & mask[:-1, 1:] & mask[1:, 1:]
 
 
 def surface_albedo(albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0, *, largest: float | None = 1.0) -> np.ndarray:
