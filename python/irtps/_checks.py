@@ -23,10 +23,13 @@ from irtps.errors import ArgumentError, IrtpsError
 F = TypeVar("F", bound=Callable)
 
 
-def check_array(name: str, value, shape: tuple[int | None, ...], *, match: str | None = None, dtype: type | None = np.float64, copy: bool = True) -> np.ndarray:
+def check_array(
+    name: str, value, shape: tuple[int | None, ...], *, match: str | None = None, dtype: type | None = np.float64, copy: bool = True, nonempty: bool = False
+) -> np.ndarray:
     """`value` as an array of `shape` (None: any length on that axis), converted to `dtype`
     (None: kept as it is; a float type: refused unless `value` holds real numbers); a copy
-    unless `copy` is False and `value` is already of `dtype`.
+    unless `copy` is False and `value` is already of `dtype`. With `nonempty`, no axis may
+    have length 0.
 
     Examples
     --------
@@ -36,11 +39,19 @@ def check_array(name: str, value, shape: tuple[int | None, ...], *, match: str |
     Traceback (most recent call last):
     ...
     irtps.errors.ArgumentError: albedo: shape (2,), expected (N, 3) to match the vertices
+    >>> check_array("height", np.zeros((0, 4)), (None, None), nonempty=True)
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: height: shape (0, 4) is empty: expected (H, W) with every length at least 1
     """
+    if isinstance(value, (str, bytes)):
+        raise ArgumentError(name, f"expected an array of shape {_shape_text(shape)}, got {type(value).__name__} {value!r:.40}")
     array = np.asarray(value)
     if array.ndim != len(shape) or any(want is not None and have != want for have, want in zip(array.shape, shape)):
         expected = _shape_text(shape)
         raise ArgumentError(name, f"shape {array.shape}, expected {expected}" + (f" to match {match}" if match else ""))
+    if nonempty and array.size == 0:
+        raise ArgumentError(name, f"shape {array.shape} is empty: expected {_shape_text(shape)} with every length at least 1")
     if dtype is None:
         return array
     if np.issubdtype(dtype, np.floating) and not (np.issubdtype(array.dtype, np.number) or array.dtype == bool) or np.iscomplexobj(array):
@@ -71,7 +82,7 @@ def check_mask(mask, shape: tuple[int, int] | None = None, *, match: str | None 
     """
     if mask is None and shape is not None:
         return np.ones(shape, dtype=bool)
-    mask = check_array(name, mask, (None, None) if shape is None else tuple(shape), match=match, dtype=bool)
+    mask = check_array(name, mask, (None, None) if shape is None else tuple(shape), match=match, dtype=bool, nonempty=True)
     if nonempty and not mask.any():
         raise ArgumentError(name, "empty (no pixel set)")
     return mask
@@ -125,6 +136,26 @@ def check_finite(name: str | Path, array: np.ndarray, where: np.ndarray | None =
     raise error(f"{name}: {message}")
 
 
+def check_images_finite(name: str, images: np.ndarray, mask: np.ndarray) -> None:
+    """Refuse a NaN or an infinity in images (K, H, W, C) at the pixels `mask` (H, W) sets,
+    naming the first by its image, row and column; two passes over the images and no copy
+    when every value is finite.
+
+    Examples
+    --------
+    >>> images = np.zeros((2, 1, 2, 3)); images[1, 0, 1, 2] = np.nan
+    >>> check_images_finite("images", images, np.array([[True, True]]))
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: images[1]: non-finite value nan at row 0, column 1
+    >>> check_images_finite("images", images, np.array([[True, False]]))
+    """
+    if images.size == 0 or (np.isfinite(images.min()) and np.isfinite(images.max())):
+        return
+    for k, image in enumerate(images):
+        check_finite(f"{name}[{k}]", image, mask)
+
+
 def check_positive(name: str, value) -> float:
     """`value` as a float, refused unless it is a positive finite number.
 
@@ -142,7 +173,8 @@ def check_positive(name: str, value) -> float:
 
 
 def check_number(name: str, value, *, what: str = "a finite number") -> float:
-    """`value` as a float, refused unless it is a finite number.
+    """`value` as a float, refused unless it is a finite number (a text or a bool is not one,
+    even ``"0.1"``).
 
     Examples
     --------
@@ -150,7 +182,13 @@ def check_number(name: str, value, *, what: str = "a finite number") -> float:
     Traceback (most recent call last):
     ...
     irtps.errors.ArgumentError: base_height: expected a finite number, got 'high'
+    >>> check_number("shadow_fraction", "0.1")
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: shadow_fraction: expected a finite number, got '0.1'
     """
+    if isinstance(value, (str, bytes, bool, np.bool_)):
+        raise ArgumentError(name, f"expected {what}, got {value!r}")
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -158,6 +196,21 @@ def check_number(name: str, value, *, what: str = "a finite number") -> float:
     if not np.isfinite(number):
         raise ArgumentError(name, f"expected {what}, got {value!r}")
     return number
+
+
+def check_instance(name: str, value, kind: type):
+    """`value`, refused unless it is a `kind`.
+
+    Examples
+    --------
+    >>> check_instance("dataset", {"images": []}, tuple)
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: dataset: expected a tuple, got dict
+    """
+    if not isinstance(value, kind):
+        raise ArgumentError(name, f"expected a {kind.__name__}, got {type(value).__name__}")
+    return value
 
 
 def check_choice(name: str, value, choices) -> None:

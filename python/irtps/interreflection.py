@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from irtps._checks import check_instance
 from irtps.data import Dataset, pixel_observations
 from irtps.dataset import MASK_FILE
 from irtps.denoise import denoise_indirect
@@ -180,8 +181,8 @@ def remove_interreflections(
     DatasetError or ArgumentError
         If the mask has no 2×2 block of object pixels (`check_traceable`).
     """
-    options = resolve_options(dataset, ReconstructOptions.build(options, method="irtps", **settings))
     check_traceable(dataset)
+    options = resolve_options(dataset, ReconstructOptions.build(options, method="irtps", **settings))
     if options.robust == "auto":
         options, _ = choose_dataset_robust(dataset, options)
     scene, mask = dataset.scene, dataset.mask
@@ -322,6 +323,7 @@ def check_traceable(dataset: Dataset) -> None:
     ...
     irtps.errors.ArgumentError: dataset.mask: no 2x2 block of object pixels: IRT-PS traces the surface of the mask's 2x2 blocks (two triangles each) and this mask makes none; classic photometric stereo (--method ps) fits it pixel by pixel
     """
+    check_instance("dataset", dataset, Dataset)
     if meshed_blocks(dataset.mask).any():
         return
     problem = (

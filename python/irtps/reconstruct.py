@@ -15,6 +15,7 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
+from irtps._checks import check_instance
 from irtps.atomic import atomic_output_dir
 from irtps.data import pixel_observations
 from irtps.dataset import Dataset, load_dataset, read_albedo_map, read_height_map, read_normal_map
@@ -174,6 +175,8 @@ def reconstruct(
 
     Raises
     ------
+    ArgumentError
+        If `dataset` is not a `Dataset`.
     DatasetError
         Naming ``dataset.source``: lights that are (nearly) coplanar or have a zero
         irradiance, or images black on the whole object; for IRT-PS, naming its mask file, a
@@ -204,6 +207,7 @@ def reconstruct(
     ...
     irtps.options.OptionError: samples: 0 is out of range: expected an integer from 1 to 1048576
     """
+    check_instance("dataset", dataset, Dataset)
     if method is not None:
         settings["method"] = method
     options = resolve_options(dataset, ReconstructOptions.build(options, **settings))

@@ -109,7 +109,7 @@ def meshed_blocks(mask: np.ndarray) -> np.ndarray:
     >>> meshed_blocks(np.array([[1, 1, 0], [1, 1, 1]], bool)).tolist()
     [[True, False]]
     """
-    mask = np.asarray(mask, dtype=bool)
+    mask = check_mask(mask)
     return mask[:-1, :-1] & mask[1:, :-1] & mask[:-1, 1:] & mask[1:, 1:]
 
 
