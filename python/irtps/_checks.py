@@ -10,6 +10,7 @@ with the argument's name. Data read from a file are checked the same way with
 from __future__ import annotations
 
 import functools
+import os
 import re
 from collections.abc import Callable, Sequence
 from itertools import dropwhile
@@ -211,6 +212,42 @@ def check_instance(name: str, value, kind: type):
     if not isinstance(value, kind):
         raise ArgumentError(name, f"expected a {kind.__name__}, got {type(value).__name__}")
     return value
+
+
+def check_integer(name: str, value, minimum: int) -> int:
+    """`value` as an int, refused unless it is an integer (not a bool, not a text) of at
+    least `minimum`.
+
+    Examples
+    --------
+    >>> check_integer("stride", "2", 1)
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: stride: expected an integer of at least 1, got '2'
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ArgumentError(name, f"expected an integer of at least {minimum}, got {value!r}")
+    return int(value)
+
+
+def check_path(name: str, value) -> Path:
+    """`value` as a `pathlib.Path`: a str, a bytes path (decoded as `os.fsdecode` does) or an
+    `os.PathLike`; refused if it is anything else or empty.
+
+    Examples
+    --------
+    >>> check_path("path", b"data/ball")
+    PosixPath('data/ball')
+    >>> check_path("path", 3)
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: path: expected a path (str, bytes or os.PathLike), got int 3
+    """
+    if isinstance(value, (str, bytes, os.PathLike)):
+        text = os.fsdecode(value)
+        if text:
+            return Path(text)
+    raise ArgumentError(name, f"expected a path (str, bytes or os.PathLike), got {type(value).__name__} {value!r:.60}")
 
 
 def check_choice(name: str, value, choices) -> None:

@@ -14,7 +14,7 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from irtps._checks import check_finite
+from irtps._checks import check_finite, check_instance, check_integer, check_path
 from irtps.atomic import atomic_output_dir
 from irtps.data import Dataset, GroundTruth, image_file_name
 from irtps.diligent import diligent_image_names, load_diligent, load_diligent_ground_truth
@@ -76,6 +76,7 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True, exclude_images:
     IrtpsWarning
         Naming the first image with negative values, if any.
     """
+    path = check_path("path", path)
     if exclude_images is not None:
         parse_image_list(exclude_images)
     folder = check_folder(path)
@@ -154,6 +155,8 @@ def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.n
     ArgumentError
         If ``extra`` is malformed; nothing is written then.
     """
+    check_instance("dataset", dataset, Dataset)
+    path = check_path("path", path)
     dataset.check_shapes()
     if not dataset.mask.any():
         raise DatasetError("Dataset.mask is empty: a data set needs at least one object pixel")
@@ -205,8 +208,11 @@ def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | 
     ------
     DatasetError
         Naming the file: not a data set, a camera of another size, malformed ground truth.
+    ArgumentError
+        If `path` is not a path or `size` not two positive integers.
     """
-    folder = check_folder(path)
+    size = _checked_image_size(size)
+    folder = check_folder(check_path("path", path))
     if exists(folder / SCENE_FILE):
         scene = load_scene(folder / SCENE_FILE)
         camera_size = (scene.camera.height, scene.camera.width)
@@ -218,6 +224,13 @@ def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | 
     if exists(folder / DILIGENT_MARKER):
         return load_diligent_ground_truth(folder, (size[0], size[1]))
     raise DatasetError(f"{folder}: not a data set: it holds neither {SCENE_FILE} nor {DILIGENT_MARKER}")
+
+
+def _checked_image_size(size) -> tuple[int, int]:
+    """`size` as (H, W), two positive integers."""
+    if isinstance(size, (str, bytes)) or np.ndim(size) != 1 or len(size) != 2:
+        raise ArgumentError("size", f"expected (H, W), two positive integers, got {size!r:.60}")
+    return check_integer("size[0]", size[0], 1), check_integer("size[1]", size[1], 1)
 
 
 def _load_irtps(folder: Path, ground_truth: bool, exclude_images: str | None) -> Dataset:
@@ -405,8 +418,10 @@ def load_scene_object(path: str | Path) -> tuple[Scene, np.ndarray, np.ndarray, 
     ------
     DatasetError
         Naming the missing or malformed file, e.g. an albedo outside [0, 1] in the mask.
+    ArgumentError
+        If `path` is not a path.
     """
-    folder = check_folder(path)
+    folder = check_folder(check_path("path", path))
     scene = load_scene(folder / SCENE_FILE)
     size = (scene.camera.height, scene.camera.width)
     height_path, albedo_path = folder / GT_FOLDER / "height.exr", folder / GT_FOLDER / "albedo.exr"

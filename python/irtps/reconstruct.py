@@ -15,7 +15,7 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from irtps._checks import check_instance
+from irtps._checks import check_instance, check_path
 from irtps.atomic import atomic_output_dir
 from irtps.data import pixel_observations
 from irtps.dataset import Dataset, load_dataset, read_albedo_map, read_height_map, read_normal_map
@@ -430,7 +430,7 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
 
     if not isinstance(result, Reconstruction):
         raise ArgumentError("result", f"expected a Reconstruction, got {type(result).__name__}")
-    with atomic_output_dir(path) as folder:
+    with atomic_output_dir(check_path("path", path)) as folder:
         write_exr(folder / "normal.exr", result.normals)
         write_exr(folder / "albedo.exr", result.albedo)
         write_exr(folder / "height.exr", result.height)

@@ -15,6 +15,7 @@ from typing import NoReturn
 
 import numpy as np
 
+from irtps._checks import check_path
 from irtps.atomic import atomic_write_text
 from irtps.errors import DatasetError
 from irtps.imageio import MAX_IMAGE_PIXELS
@@ -258,7 +259,7 @@ def load_scene(path: str | Path) -> Scene:
         symlink loop ...; checked before opening it), is not valid JSON (the message gives
         the line and column), or does not follow the contract.
     """
-    path = Path(path)
+    path = check_path("path", path)
     problem = file_problem(path)  # before opening: reading a FIFO would block
     if problem is not None:
         raise DatasetError(f"{path}: {'file not found' if problem == MISSING else problem}")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from irtps._checks import check_array, check_mask, check_positive
+from irtps._checks import check_array, check_finite, check_mask, check_positive
 
 
 def height_to_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0) -> np.ndarray:
@@ -150,10 +150,13 @@ def surface_albedo(albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, 
 
 
 def _checked_surface(height, mask, pixel_size) -> tuple[np.ndarray, np.ndarray]:
-    """`height` as float64 (H, W) and `mask` as bool of its shape; `pixel_size` positive."""
-    height = check_array("height", height, (None, None))
+    """`height` as float64 (H, W), finite on the mask, and `mask` as bool of its shape;
+    `pixel_size` positive."""
+    height = check_array("height", height, (None, None), nonempty=True)
     check_positive("pixel_size", pixel_size)
-    return height, check_mask(mask, height.shape, match="height")
+    mask = check_mask(mask, height.shape, match="height")
+    check_finite("height", height, mask)
+    return height, mask
 
 
 def _unit_normals(dz_dx: np.ndarray, dz_drow: np.ndarray) -> np.ndarray:
