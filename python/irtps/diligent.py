@@ -196,8 +196,15 @@ def _check_intensities(path: Path, intensities: np.ndarray, lines: list[int]) ->
 
 
 def _read_normals(path: Path, size: tuple[int, int]) -> np.ndarray:
+    """The (H, W, 3) real, finite normals of ``Normal_gt.mat`` at `path`, of the images' `size`.
+
+    A `MemoryError` while reading goes through as it is (the command says there is not
+    enough memory): it says nothing of the file.
+    """
     try:
         variables = scipy.io.loadmat(path)
+    except MemoryError:
+        raise
     except Exception as error:  # scipy raises many types on a malformed file (MatReadError, ValueError, zlib.error...)
         raise DatasetError(f"{path}: not a readable MATLAB file ({error})") from None
     if NORMALS_VARIABLE not in variables:
@@ -208,6 +215,8 @@ def _read_normals(path: Path, size: tuple[int, int]) -> np.ndarray:
         raise DatasetError(f"{path}: {NORMALS_VARIABLE} has shape {normals.shape}, expected (H, W, 3)")
     if normals.shape[:2] != tuple(size):
         raise DatasetError(f"{path}: size {format_size(normals.shape)} does not match the images ({format_size(size)})")
+    if np.iscomplexobj(normals) or not (np.issubdtype(normals.dtype, np.number) or normals.dtype == bool):
+        raise DatasetError(f"{path}: {NORMALS_VARIABLE} holds {normals.dtype} values, expected real numbers")
     normals = normals.astype(np.float32)
     check_finite(path, normals, error=DatasetError)
     return normals

@@ -500,7 +500,8 @@ def load_reconstruction(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.nd
     ------
     DatasetError
         Naming the file: missing, unreadable, non-finite, or of another size than
-        ``normal.exr``.
+        ``normal.exr``; a normal on the mask that is not a unit vector (irtps writes unit
+        normals there, even where a pixel had no light: `_check_unit_normals`).
     """
     folder = check_folder(path, missing="no such reconstruction folder")
     normal_path = check_file(folder / "normal.exr", "not a reconstruction folder?")
@@ -509,7 +510,26 @@ def load_reconstruction(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.nd
     albedo = read_albedo_map(folder / "albedo.exr", size)
     height = read_height_map(folder / "height.exr", size)
     mask = read_mask(folder / "mask.png", size)
+    _check_unit_normals(normal_path, normals, mask)
     return normals, albedo, height, mask
+
+
+#: How far from 1 the length of a reconstruction's normal on its mask may be: float32 files
+#: hold unit normals to 1e-7, half-float ones (written by other tools) to 1e-3.
+NORMAL_LENGTH_TOLERANCE = 1e-2
+
+
+def _check_unit_normals(path: Path, normals: np.ndarray, mask: np.ndarray) -> None:
+    """Refuse a normal on the mask whose length is not 1 (within `NORMAL_LENGTH_TOLERANCE`):
+    a zero normal would be scored as 90° off, an error of the file's, not of the shape's."""
+    length = np.linalg.norm(normals, axis=-1)
+    wrong = mask & (np.abs(length - 1.0) > NORMAL_LENGTH_TOLERANCE)
+    if wrong.any():
+        row, col = np.argwhere(wrong)[0]
+        raise DatasetError(
+            f"{path}: the normal at row {row}, column {col} has length {length[row, col]:.3g}, not 1 "
+            f"({int(wrong.sum())} of the mask's {int(mask.sum())} normals are not unit vectors)"
+        )
 
 
 
