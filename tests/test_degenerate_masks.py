@@ -132,3 +132,15 @@ def test_irtps_with_stray_pixels_beside_the_object_gives_finite_results(tmp_path
         result = irtps.reconstruct(data, "irtps", iterations=1, samples=4)
     assert np.isfinite(result.albedo[data.mask]).all() and np.isfinite(result.normals[data.mask]).all()
     assert len(result.history) == 2
+
+
+@pytest.mark.parametrize("fixture", FIXTURES)
+@pytest.mark.parametrize("shape", DEGENERATE)
+def test_the_command_prints_no_numpy_warning_on_a_degenerate_mask(tmp_path, capsys, fixture, shape):
+    folder = _with_mask(tmp_path, fixture, DEGENERATE[shape])
+    from irtps.cli import main
+
+    assert main(["reconstruct", str(folder), "--out", str(tmp_path / "ps"), "--method", "ps"]) == 0
+    printed = capsys.readouterr().err
+    assert "Warning" not in printed, printed  # only irtps's own "irtps: warning: ..." lines
+    assert all(line.startswith("irtps: warning: ") for line in printed.splitlines()), printed
