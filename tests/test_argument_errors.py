@@ -74,6 +74,8 @@ CASES = {
     "irtps.integrate.place_height": (lambda f: f(HEIGHT, WRONG), "mask: "),
     "irtps.integrate.mask_boundary": (lambda f: f(np.zeros(4, bool)), "mask: "),
     "irtps.interreflection.remove_interreflections": (lambda f: f(_dataset(), bounces=0), "bounces: "),
+    "irtps.interreflection.check_traceable": (lambda f: f({"mask": MASK}), "dataset: "),
+    "irtps.surface.meshed_blocks": (lambda f: f(np.zeros(4, bool)), "mask: "),
     "irtps.mesh.height_field_mesh": (lambda f: f(HEIGHT, MASK, albedo=ALBEDO[:3]), "albedo: "),
     "irtps.mesh.write_ply": (lambda f: f("unused.ply", np.zeros((3, 3)), np.array([[0, 1, 5]])), "faces: "),
     "irtps.mesh.write_obj": (lambda f: f("unused.obj", np.zeros((3, 2)), np.zeros((0, 3), int)), "vertices: "),

@@ -190,6 +190,10 @@ MALFORMED = {
         lambda f: (f / "Normal_gt.mat").write_bytes(b"broken"),
         "Normal_gt.mat: not a readable MATLAB file",
     ),
+    "complex Normal_gt.mat": (
+        lambda f: scipy.io.savemat(f / "Normal_gt.mat", {"Normal_gt": np.full((HEIGHT, WIDTH, 3), 1 + 1j)}),
+        "Normal_gt.mat: Normal_gt holds complex128 values, expected real numbers",
+    ),
 }
 
 
@@ -202,6 +206,15 @@ def test_malformed_diligent_folder_is_rejected_naming_the_file(ball, name):
     message = str(info.value)
     assert message.startswith(str(ball)), message
     assert expected in message, message
+
+
+def test_running_out_of_memory_reading_normal_gt_mat_does_not_blame_the_file(ball, monkeypatch):
+    def out_of_memory(path):
+        raise MemoryError("Unable to allocate 1.00 GiB")
+
+    monkeypatch.setattr(scipy.io, "loadmat", out_of_memory)
+    with pytest.raises(MemoryError, match="Unable to allocate"):
+        load_dataset(ball)
 
 
 @needs_shared

@@ -242,3 +242,26 @@ def test_to_dict_is_json_ready_and_format_metrics_reads_well():
     assert lines[0].split() == ["pixels", "evaluated", "2"]
     assert "n/a" in lines[1] and "albedo error (paper)      0.25  (R 0.25, G 0.25, B 0.25)" in text
     assert "height error (paper)      0.25" in text
+
+
+def test_irtps_evaluate_refuses_a_normal_map_that_is_not_unit_on_the_mask(tmp_path, capsys):
+    import shutil
+    from pathlib import Path
+
+    from irtps import _core
+    from irtps.cli import main
+
+    from cli_helpers import refused
+
+    ball = Path(__file__).parent / "data" / "diligent_ball_small"
+    out = tmp_path / "ball"
+    assert main(["reconstruct", str(ball), "--out", str(out), "--quiet"]) == 0
+    assert main(["evaluate", str(out), "--gt", str(ball), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["normal_mean_angular_deg"] < 5
+    zero = tmp_path / "zero"
+    shutil.copytree(out, zero)
+    normals = _core.read_exr(str(zero / "normal.exr"))
+    _core.write_exr(str(zero / "normal.exr"), np.zeros_like(normals))
+    error = refused(["evaluate", str(zero), "--gt", str(ball)], capsys)
+    assert error.startswith(f"irtps: error: {zero / 'normal.exr'}: the normal at row ")
+    assert "has length 0, not 1" in error

@@ -107,6 +107,12 @@ def _write_png(path, array, bits=8):
     _core.write_png(str(path), np.asarray(array, dtype=np.float32), bits)
 
 
+def _replace_line(path, number, text):
+    lines = path.read_text().splitlines()
+    lines[number - 1] = text
+    path.write_text("\n".join(lines) + "\n")
+
+
 def _coplanar_diligent(folder):
     lines = ["0.6 0 0.8", "-0.6 0 0.8", "0 0 1", "0.28 0 0.96"] * 2
     (folder / "light_directions.txt").write_text("\n".join(lines) + "\n")
@@ -265,6 +271,28 @@ CASES = {
         lambda f: _edit_scene(f, lambda s: s["lights"][1].update(irradiance=[0.0, 0.0, 0.0])),
         [],
         ["{data}: lights[1].irradiance: must be positive in every channel"],
+    ),
+    # irradiance whose products overflow float32 (a RuntimeWarning once, then a wrong error)
+    "overflowing DiLiGenT intensity": (
+        "reconstruct",
+        "ball",
+        lambda f: _replace_line(f / "light_intensities.txt", 2, "1e308 1e308 1e308"),
+        [],
+        ["{data}/light_intensities.txt: line 2: light intensity has channel 0 = 1e+308, out of range: expected 0 or a number from 1e-09 to 1e+09"],
+    ),
+    "vanishing DiLiGenT intensity": (
+        "reconstruct",
+        "ball",
+        lambda f: _replace_line(f / "light_intensities.txt", 1, "1 1e-40 1"),
+        ["--method", "irtps"],
+        ["{data}/light_intensities.txt: line 1: light intensity has channel 1 = 1e-40, out of range"],
+    ),
+    "overflowing scene irradiance": (
+        "render",
+        "mitsuba",
+        lambda f: _edit_scene(f, lambda s: s["lights"][2].update(irradiance=[1.0, 1e308, 1.0])),
+        [],
+        ["{data}/scene.json: lights[2].irradiance has channel 1 = 1e+308, out of range"],
     ),
     # non-unit or downward light directions
     "non-unit light direction": (

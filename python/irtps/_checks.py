@@ -10,6 +10,7 @@ with the argument's name. Data read from a file are checked the same way with
 from __future__ import annotations
 
 import functools
+import os
 import re
 from collections.abc import Callable, Sequence
 from itertools import dropwhile
@@ -23,10 +24,13 @@ from irtps.errors import ArgumentError, IrtpsError
 F = TypeVar("F", bound=Callable)
 
 
-def check_array(name: str, value, shape: tuple[int | None, ...], *, match: str | None = None, dtype: type | None = np.float64, copy: bool = True) -> np.ndarray:
+def check_array(
+    name: str, value, shape: tuple[int | None, ...], *, match: str | None = None, dtype: type | None = np.float64, copy: bool = True, nonempty: bool = False
+) -> np.ndarray:
     """`value` as an array of `shape` (None: any length on that axis), converted to `dtype`
     (None: kept as it is; a float type: refused unless `value` holds real numbers); a copy
-    unless `copy` is False and `value` is already of `dtype`.
+    unless `copy` is False and `value` is already of `dtype`. With `nonempty`, no axis may
+    have length 0.
 
     Examples
     --------
@@ -36,11 +40,19 @@ def check_array(name: str, value, shape: tuple[int | None, ...], *, match: str |
     Traceback (most recent call last):
     ...
     irtps.errors.ArgumentError: albedo: shape (2,), expected (N, 3) to match the vertices
+    >>> check_array("height", np.zeros((0, 4)), (None, None), nonempty=True)
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: height: shape (0, 4) is empty: expected (H, W) with every length at least 1
     """
+    if isinstance(value, (str, bytes)):
+        raise ArgumentError(name, f"expected an array of shape {_shape_text(shape)}, got {type(value).__name__} {value!r:.40}")
     array = np.asarray(value)
     if array.ndim != len(shape) or any(want is not None and have != want for have, want in zip(array.shape, shape)):
         expected = _shape_text(shape)
         raise ArgumentError(name, f"shape {array.shape}, expected {expected}" + (f" to match {match}" if match else ""))
+    if nonempty and array.size == 0:
+        raise ArgumentError(name, f"shape {array.shape} is empty: expected {_shape_text(shape)} with every length at least 1")
     if dtype is None:
         return array
     if np.issubdtype(dtype, np.floating) and not (np.issubdtype(array.dtype, np.number) or array.dtype == bool) or np.iscomplexobj(array):
@@ -71,7 +83,7 @@ def check_mask(mask, shape: tuple[int, int] | None = None, *, match: str | None 
     """
     if mask is None and shape is not None:
         return np.ones(shape, dtype=bool)
-    mask = check_array(name, mask, (None, None) if shape is None else tuple(shape), match=match, dtype=bool)
+    mask = check_array(name, mask, (None, None) if shape is None else tuple(shape), match=match, dtype=bool, nonempty=True)
     if nonempty and not mask.any():
         raise ArgumentError(name, "empty (no pixel set)")
     return mask
@@ -125,6 +137,26 @@ def check_finite(name: str | Path, array: np.ndarray, where: np.ndarray | None =
     raise error(f"{name}: {message}")
 
 
+def check_images_finite(name: str, images: np.ndarray, mask: np.ndarray) -> None:
+    """Refuse a NaN or an infinity in images (K, H, W, C) at the pixels `mask` (H, W) sets,
+    naming the first by its image, row and column; two passes over the images and no copy
+    when every value is finite.
+
+    Examples
+    --------
+    >>> images = np.zeros((2, 1, 2, 3)); images[1, 0, 1, 2] = np.nan
+    >>> check_images_finite("images", images, np.array([[True, True]]))
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: images[1]: non-finite value nan at row 0, column 1
+    >>> check_images_finite("images", images, np.array([[True, False]]))
+    """
+    if images.size == 0 or (np.isfinite(images.min()) and np.isfinite(images.max())):
+        return
+    for k, image in enumerate(images):
+        check_finite(f"{name}[{k}]", image, mask)
+
+
 def check_positive(name: str, value) -> float:
     """`value` as a float, refused unless it is a positive finite number.
 
@@ -142,7 +174,8 @@ def check_positive(name: str, value) -> float:
 
 
 def check_number(name: str, value, *, what: str = "a finite number") -> float:
-    """`value` as a float, refused unless it is a finite number.
+    """`value` as a float, refused unless it is a finite number (a text or a bool is not one,
+    even ``"0.1"``).
 
     Examples
     --------
@@ -150,7 +183,13 @@ def check_number(name: str, value, *, what: str = "a finite number") -> float:
     Traceback (most recent call last):
     ...
     irtps.errors.ArgumentError: base_height: expected a finite number, got 'high'
+    >>> check_number("shadow_fraction", "0.1")
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: shadow_fraction: expected a finite number, got '0.1'
     """
+    if isinstance(value, (str, bytes, bool, np.bool_)):
+        raise ArgumentError(name, f"expected {what}, got {value!r}")
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -158,6 +197,57 @@ def check_number(name: str, value, *, what: str = "a finite number") -> float:
     if not np.isfinite(number):
         raise ArgumentError(name, f"expected {what}, got {value!r}")
     return number
+
+
+def check_instance(name: str, value, kind: type):
+    """`value`, refused unless it is a `kind`.
+
+    Examples
+    --------
+    >>> check_instance("dataset", {"images": []}, tuple)
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: dataset: expected a tuple, got dict
+    """
+    if not isinstance(value, kind):
+        raise ArgumentError(name, f"expected a {kind.__name__}, got {type(value).__name__}")
+    return value
+
+
+def check_integer(name: str, value, minimum: int) -> int:
+    """`value` as an int, refused unless it is an integer (not a bool, not a text) of at
+    least `minimum`.
+
+    Examples
+    --------
+    >>> check_integer("stride", "2", 1)
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: stride: expected an integer of at least 1, got '2'
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ArgumentError(name, f"expected an integer of at least {minimum}, got {value!r}")
+    return int(value)
+
+
+def check_path(name: str, value) -> Path:
+    """`value` as a `pathlib.Path`: a str, a bytes path (decoded as `os.fsdecode` does) or an
+    `os.PathLike`; refused if it is anything else or empty.
+
+    Examples
+    --------
+    >>> check_path("path", b"data/ball")
+    PosixPath('data/ball')
+    >>> check_path("path", 3)
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: path: expected a path (str, bytes or os.PathLike), got int 3
+    """
+    if isinstance(value, (str, bytes, os.PathLike)):
+        text = os.fsdecode(value)
+        if text:
+            return Path(text)
+    raise ArgumentError(name, f"expected a path (str, bytes or os.PathLike), got {type(value).__name__} {value!r:.60}")
 
 
 def check_choice(name: str, value, choices) -> None:

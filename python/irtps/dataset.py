@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from irtps._checks import check_finite
+from irtps._checks import check_finite, check_instance, check_integer, check_path
 from irtps.atomic import atomic_output_dir
 from irtps.data import Dataset, GroundTruth, image_file_name
 from irtps.diligent import diligent_ground_truth_inputs, diligent_image_names, diligent_inputs, load_diligent, load_diligent_ground_truth
@@ -78,6 +78,7 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True, exclude_images:
     IrtpsWarning
         Naming the first image with negative values, if any.
     """
+    path = check_path("path", path)
     if exclude_images is not None:
         parse_image_list(exclude_images)
     folder = check_folder(path)
@@ -152,6 +153,8 @@ def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.n
     ArgumentError
         If ``extra`` is malformed; nothing is written then.
     """
+    check_instance("dataset", dataset, Dataset)
+    path = check_path("path", path)
     dataset.check_shapes()
     if not dataset.mask.any():
         raise DatasetError("Dataset.mask is empty: a data set needs at least one object pixel")
@@ -201,8 +204,11 @@ def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | 
     ------
     DatasetError
         Naming the file: not a data set, a camera of another size, malformed ground truth.
+    ArgumentError
+        If `path` is not a path or `size` not two positive integers.
     """
-    folder = check_folder(path)
+    size = _checked_image_size(size)
+    folder = check_folder(check_path("path", path))
     if _layout(folder) == "diligent":
         return load_diligent_ground_truth(folder, (size[0], size[1]))
     scene, truth = _ground_truth_files(folder)
@@ -256,7 +262,7 @@ def dataset_inputs(path: str | Path, *, ground_truth: bool = True, exclude_image
     """
     if exclude_images is not None:
         parse_image_list(exclude_images)
-    folder = check_folder(path)
+    folder = check_folder(check_path("path", path))
     if _layout(folder) == "diligent":
         return diligent_inputs(folder, ground_truth=ground_truth, exclude_images=exclude_images)
     return _irtps_files(folder, ground_truth, exclude_images).paths()
@@ -270,7 +276,7 @@ def ground_truth_inputs(path: str | Path) -> list[Path]:
     DatasetError
         As `load_ground_truth`, for what is found wrong without decoding a map.
     """
-    folder = check_folder(path)
+    folder = check_folder(check_path("path", path))
     if _layout(folder) == "diligent":
         return diligent_ground_truth_inputs(folder)
     _, truth = _ground_truth_files(folder)
@@ -327,6 +333,13 @@ def _irtps_files(folder: Path, ground_truth: bool, exclude_images: str | None) -
     mask = _optional_path(folder / MASK_FILE)
     truth = _truth_files(folder / GT_FOLDER, len(scene.lights), selection.kept) if ground_truth else None
     return _IrtpsFiles(folder / SCENE_FILE, kept, [paths[k] for k in selection.kept], selection, mask, truth)
+
+
+def _checked_image_size(size) -> tuple[int, int]:
+    """`size` as (H, W), two positive integers."""
+    if isinstance(size, (str, bytes)) or np.ndim(size) != 1 or len(size) != 2:
+        raise ArgumentError("size", f"expected (H, W), two positive integers, got {size!r:.60}")
+    return check_integer("size[0]", size[0], 1), check_integer("size[1]", size[1], 1)
 
 
 def _load_irtps(folder: Path, ground_truth: bool, exclude_images: str | None) -> Dataset:
@@ -517,8 +530,10 @@ def load_scene_object(path: str | Path) -> tuple[Scene, np.ndarray, np.ndarray, 
     ------
     DatasetError
         Naming the missing or malformed file, e.g. an albedo outside [0, 1] in the mask.
+    ArgumentError
+        If `path` is not a path.
     """
-    files = _scene_object_files(check_folder(path))
+    files = _scene_object_files(check_folder(check_path("path", path)))
     scene, albedo_path = files.scene, files.albedo
     size = (scene.camera.height, scene.camera.width)
     height = read_height_map(files.height, size)
@@ -563,4 +578,4 @@ def scene_object_inputs(path: str | Path) -> list[Path]:
     DatasetError
         As `load_scene_object`, for what is found wrong without decoding a map.
     """
-    return _scene_object_files(check_folder(path)).paths()
+    return _scene_object_files(check_folder(check_path("path", path))).paths()

@@ -21,7 +21,7 @@ from irtps.guarded import read_text
 from irtps.image_selection import ImageSelection, select_images
 from irtps.imageio import check_stack_memory, format_size, png_saturation, read_images, read_mask
 from irtps.paths import check_file, check_folder, optional_file
-from irtps.scene import MIN_LIGHTS, Camera, Light, Scene
+from irtps.scene import MIN_LIGHTS, Camera, Light, Scene, irradiance_problem
 
 FILENAMES_FILE = "filenames.txt"
 DIRECTIONS_FILE = "light_directions.txt"
@@ -63,7 +63,8 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
         Naming the file (and line) and the problem: a missing file or one that is
         not a readable regular file (a directory, a FIFO, a symlink loop), line counts
         that disagree, a direction that is not a unit vector (beyond 1e-2) or
-        has z <= 0, a negative intensity, fewer than 3 lights, images of
+        has z <= 0, a negative intensity or one out of range
+        (`irtps.scene.irradiance_problem`), fewer than 3 lights, images of
         different sizes or with non-finite values.
     ArgumentError
         Naming ``exclude_images``: malformed, an item that names no image, or fewer than 3
@@ -125,7 +126,7 @@ def _diligent_files(folder: Path, ground_truth: bool, exclude_images: str | None
             f"{folder / FILENAMES_FILE}: {len(names)} images: photometric stereo needs at least {MIN_LIGHTS}"
         )
     directions = _unit_directions(folder / DIRECTIONS_FILE, directions, direction_lines)
-    _check_non_negative(folder / INTENSITIES_FILE, intensities, intensity_lines)
+    _check_intensities(folder / INTENSITIES_FILE, intensities, intensity_lines)
     selection = select_images(names, exclude_images, where=str(folder))
     image_paths = [folder / names[k] for k in selection.kept]
     for image_path, line in zip(image_paths, [name_lines[k] for k in selection.kept], strict=True):
@@ -223,15 +224,27 @@ def _unit_directions(path: Path, directions: np.ndarray, lines: list[int]) -> np
     return directions / norms[:, None]
 
 
-def _check_non_negative(path: Path, intensities: np.ndarray, lines: list[int]) -> None:
+def _check_intensities(path: Path, intensities: np.ndarray, lines: list[int]) -> None:
+    """Refuse a line with a negative intensity or one out of the core's range
+    (`irtps.scene.irradiance_problem`)."""
     for row, line in zip(intensities, lines, strict=True):
         if (row < 0.0).any():
             raise DatasetError(f"{path}: line {line}: light intensities must not be negative, got {row.tolist()}")
+        problem = irradiance_problem(row)
+        if problem is not None:
+            raise DatasetError(f"{path}: line {line}: light intensity {problem}")
 
 
 def _read_normals(path: Path, size: tuple[int, int]) -> np.ndarray:
+    """The (H, W, 3) real, finite normals of ``Normal_gt.mat`` at `path`, of the images' `size`.
+
+    A `MemoryError` while reading goes through as it is (the command says there is not
+    enough memory): it says nothing of the file.
+    """
     try:
         variables = scipy.io.loadmat(path)
+    except MemoryError:
+        raise
     except Exception as error:  # scipy raises many types on a malformed file (MatReadError, ValueError, zlib.error...)
         raise DatasetError(f"{path}: not a readable MATLAB file ({error})") from None
     if NORMALS_VARIABLE not in variables:
@@ -242,6 +255,8 @@ def _read_normals(path: Path, size: tuple[int, int]) -> np.ndarray:
         raise DatasetError(f"{path}: {NORMALS_VARIABLE} has shape {normals.shape}, expected (H, W, 3)")
     if normals.shape[:2] != tuple(size):
         raise DatasetError(f"{path}: size {format_size(normals.shape)} does not match the images ({format_size(size)})")
+    if np.iscomplexobj(normals) or not (np.issubdtype(normals.dtype, np.number) or normals.dtype == bool):
+        raise DatasetError(f"{path}: {NORMALS_VARIABLE} holds {normals.dtype} values, expected real numbers")
     normals = normals.astype(np.float32)
     check_finite(path, normals, error=DatasetError)
     return normals

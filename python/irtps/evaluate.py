@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from irtps._checks import check_finite, check_image, check_mask, check_number
+from irtps._checks import check_finite, check_image, check_instance, check_mask, check_number
 from irtps.data import GroundTruth
 
 __all__ = ["ErrorMaps", "Metrics", "angular_error_deg", "error_maps", "evaluate", "format_metrics"]
@@ -312,7 +312,7 @@ def _compare(mask, normals, albedo, height, gt, base_height) -> tuple[Metrics, E
     normals = _as_optional("normals", normals, mask, 3)
     albedo = _as_optional("albedo", albedo, mask, 3)
     height = _as_optional("height", height, mask, None)
-    gt = gt if gt is not None else GroundTruth()
+    gt = GroundTruth() if gt is None else check_instance("gt", gt, GroundTruth)
     gt_normal = _as_optional("gt.normal", gt.normal, mask, 3)
     gt_albedo = _as_optional("gt.albedo", gt.albedo, mask, 3)
     gt_height = _as_optional("gt.height", gt.height, mask, None)

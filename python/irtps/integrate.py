@@ -29,7 +29,7 @@ import scipy.fft
 import scipy.ndimage
 import scipy.sparse
 
-from irtps._checks import check_choice, check_finite, check_mask, check_number, check_positive, document_choices
+from irtps._checks import check_array, check_choice, check_finite, check_integer, check_mask, check_number, check_positive, document_choices
 from irtps.errors import ArgumentError
 from irtps.robust_stats import median_and_sigma
 
@@ -245,10 +245,9 @@ def integrate_normals(
         tolerance = _DEFAULT_TOLERANCE.get(method, 1e-5)
     tolerance = check_positive("tolerance", tolerance)
     check_choice("method", method, METHODS)
+    iterations = check_integer("iterations", iterations, 0)
     if method == "mestimator":
         check_choice("robust_weight", robust_weight, ROBUST_WEIGHTS)
-        if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 0:
-            raise ArgumentError("iterations", f"expected a non-negative integer, got {iterations!r}")
     if not mask.any():
         raise ArgumentError("mask", "empty (no pixel set)")
 
@@ -320,12 +319,7 @@ def place_height(height, mask=None, *, base_height: float = 0.0, per_component: 
     >>> float(z[0, 0]), float(z[2, 2])
     (1.0, 5.0)
     """
-    height = np.asarray(height)
-    if height.ndim != 2:
-        raise ArgumentError("height", f"expected an (H, W) array, got shape {height.shape}")
-    if not np.issubdtype(height.dtype, np.number) or np.iscomplexobj(height):
-        raise ArgumentError("height", f"expected real numbers, got dtype {height.dtype}")
-    height = height.astype(np.float64)
+    height = check_array("height", height, (None, None), nonempty=True)
     mask = check_mask(mask, height.shape, match="height")
     if not mask.any():
         raise ArgumentError("mask", "empty (no pixel set)")
@@ -374,15 +368,8 @@ def mask_boundary(mask) -> np.ndarray:
 
 
 def _check_normals_mask(normals, mask):
-    normals = np.asarray(normals)
-    if normals.ndim != 3 or normals.shape[2] != 3:
-        raise ArgumentError("normals", f"expected an (H, W, 3) array, got shape {normals.shape}")
-    if normals.shape[0] == 0 or normals.shape[1] == 0:
-        raise ArgumentError("normals", f"the image is empty, shape {normals.shape}")
-    if not np.issubdtype(normals.dtype, np.number) or np.iscomplexobj(normals):
-        raise ArgumentError("normals", f"expected real numbers, got dtype {normals.dtype}")
+    normals = check_array("normals", normals, (None, None, 3), nonempty=True)
     mask = check_mask(mask, normals.shape[:2], match="normals")
-    normals = normals.astype(np.float64)
     check_finite("normals", normals, mask)
     return normals, mask
 

@@ -25,13 +25,16 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
+from irtps._checks import check_instance
 from irtps.data import Dataset, pixel_observations
+from irtps.dataset import MASK_FILE
 from irtps.denoise import denoise_indirect
-from irtps.errors import IrtpsWarning
+from irtps.errors import ArgumentError, DatasetError, IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
 from irtps.paper_estimator import paper_indirect
@@ -40,9 +43,10 @@ from irtps.placement import Placement
 from irtps.ps import PsResult
 from irtps.radiometry import AlbedoScale
 from irtps.residual import Residual, render_with_residual
+from irtps.surface import meshed_blocks
 from irtps.surroundings import surroundings_light
 
-__all__ = ["InterreflectionResult", "Iteration", "remove_interreflections"]
+__all__ = ["InterreflectionResult", "Iteration", "check_traceable", "remove_interreflections"]
 
 #: Bounds of the adaptive step toward each new estimate. Above 2 the Monte-Carlo noise of
 #: the estimates would grow without bound; the upper bound keeps it within √3 of one
@@ -174,7 +178,10 @@ def remove_interreflections(
     ------
     OptionError
         Naming the option, for a value out of range.
+    DatasetError or ArgumentError
+        If the mask has no 2×2 block of object pixels (`check_traceable`).
     """
+    check_traceable(dataset)
     options = resolve_options(dataset, ReconstructOptions.build(options, method="irtps", **settings))
     if options.robust == "auto":
         options, _ = choose_dataset_robust(dataset, options)
@@ -286,6 +293,47 @@ def remove_interreflections(
         albedo_scale=chosen_pass.albedo_scale,
         first_fit=first_fit,
     )
+
+
+def check_traceable(dataset: Dataset) -> None:
+    """Refuse a data set whose mask makes no surface to trace.
+
+    The reconstruction is rendered as the contract's surface (§2): two triangles for each
+    2×2 block of object pixels. A mask with no such block (one pixel, a checkerboard, a line
+    one pixel wide) makes no triangle, so nothing casts a shadow or reflects light, and every
+    pass would be classic photometric stereo, or worse where the surroundings' light is
+    subtracted from pixels that keep no light of the object. Classic photometric stereo fits
+    such a mask pixel by pixel.
+
+    Raises
+    ------
+    DatasetError
+        Naming the mask file of a data set read from a folder.
+    ArgumentError
+        Naming ``dataset.mask`` where no mask file holds it (a data set made in memory).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from irtps.synth import synthesize
+    >>> data, _ = synthesize("cap", size=16, lights=4, bounces=0, environment="none")
+    >>> data.mask = np.eye(16, dtype=bool)
+    >>> check_traceable(data)
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: dataset.mask: no 2x2 block of object pixels: IRT-PS traces the surface of the mask's 2x2 blocks (two triangles each) and this mask makes none; classic photometric stereo (--method ps) fits it pixel by pixel
+    """
+    check_instance("dataset", dataset, Dataset)
+    if meshed_blocks(dataset.mask).any():
+        return
+    problem = (
+        "no 2x2 block of object pixels: IRT-PS traces the surface of the mask's 2x2 blocks (two triangles each) and this mask makes none; "
+        "classic photometric stereo (--method ps) fits it pixel by pixel"
+    )
+    mask_file = None if dataset.source is None else Path(dataset.source) / MASK_FILE
+    if mask_file is None or not mask_file.is_file():
+        raise ArgumentError("dataset.mask", problem)
+    raise DatasetError(f"{mask_file}: {problem}")
 
 
 def _postfix(residual: Residual, metrics: dict | None) -> dict:

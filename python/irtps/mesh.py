@@ -29,6 +29,7 @@ import numpy as np
 from irtps._checks import check_array, check_finite, check_image, check_mask, check_positive
 from irtps.atomic import atomic_write_bytes
 from irtps.errors import ArgumentError
+from irtps.surface import meshed_blocks
 
 __all__ = ["height_field_mesh", "write_obj", "write_ply"]
 
@@ -94,7 +95,7 @@ def height_field_mesh(
     normals = None if normals is None else check_image("normals", normals, mask, finite=False)
     s = check_positive("pixel_size", pixel_size)
 
-    block = mask[:-1, :-1] & mask[1:, :-1] & mask[:-1, 1:] & mask[1:, 1:]
+    block = meshed_blocks(mask)
     used = np.zeros_like(mask)
     used[:-1, :-1] |= block
     used[1:, :-1] |= block

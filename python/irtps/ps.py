@@ -9,9 +9,10 @@ import numpy as np
 from tqdm import tqdm
 
 from irtps import _core
-from irtps._checks import check_array, check_choice, check_mask, check_number, check_positive, document_choices
+from irtps._checks import check_array, check_choice, check_finite, check_images_finite, check_mask, check_number, check_positive, document_choices
 from irtps.data import coarse_to_fine, spread_pixels
 from irtps.errors import ArgumentError
+from irtps.scene import irradiance_problem
 
 #: Robust modes of a fit, the default first.
 ROBUST_MODES = ("tukey", "lobe", "threshold", "trim", "none")
@@ -68,9 +69,38 @@ def check_lights(light_directions: np.ndarray, light_irradiance: np.ndarray) -> 
     ArgumentError
         Naming the field (``lights`` or ``lights[k].irradiance``) and the problem.
     """
-    directions = np.ascontiguousarray(light_directions, dtype=np.float32)
-    irradiance = np.ascontiguousarray(light_irradiance, dtype=np.float32)
-    _core.check_lights(directions, irradiance)
+    _core.check_lights(*checked_lights(light_directions, light_irradiance))
+
+
+def checked_lights(light_directions, light_irradiance, count: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """`light_directions` and `light_irradiance` as the core takes them, C-contiguous
+    float32 (K, 3) arrays: K = `count` (the images') if given, finite values, each light's
+    irradiance in range (`irtps.scene.irradiance_problem`).
+
+    Raises
+    ------
+    ArgumentError
+        Naming the argument, or ``light_irradiance[k]``.
+
+    Examples
+    --------
+    >>> checked_lights([[0, 0, 1]], [[1e308, 1, 1]])
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: light_irradiance[0]: has channel 0 = 1e+308, out of range: expected 0 or a number from 1e-09 to 1e+09
+    """
+    match = None if count is None else "the images"
+    arrays = []
+    for name, value in (("light_directions", light_directions), ("light_irradiance", light_irradiance)):
+        array = check_array(name, value, (count, 3), match=match)
+        check_finite(name, array, unit="light")
+        arrays.append(array)
+    directions, irradiance = arrays
+    for k, light in enumerate(irradiance):
+        problem = irradiance_problem(light)
+        if problem is not None:
+            raise ArgumentError(f"light_irradiance[{k}]", problem)
+    return np.ascontiguousarray(directions, dtype=np.float32), np.ascontiguousarray(irradiance, dtype=np.float32)
 
 
 @document_choices(robust=ROBUST_CHOICES)
@@ -169,12 +199,13 @@ def photometric_stereo(
     >>> print(np.round(fit.normals[0, 0], 4), np.round(fit.albedo[0, 0], 4))
     [0.  0.6 0.8] [0.5 0.5 0.5]
     """
-    images = np.ascontiguousarray(check_array("images", images, (None, None, None, 3), dtype=np.float32, copy=False))
+    images = np.ascontiguousarray(check_array("images", images, (None, None, None, 3), dtype=np.float32, copy=False, nonempty=True))
     mask = np.ascontiguousarray(check_mask(mask, images.shape[1:3], match="images"))
+    check_images_finite("images", images, mask)
     check_choice("robust", robust, ROBUST_CHOICES)
     if robust == "auto":
         return _fit_auto(images, mask, light_directions, light_irradiance, shadow_fraction, saturation, progress)
-    settings = _core_settings(light_directions, light_irradiance, robust, shadow_fraction, saturation)
+    settings = _core_settings(images, light_directions, light_irradiance, robust, shadow_fraction, saturation)
     if not progress:
         return PsResult(*_core.photometric_stereo(images, mask, *settings))
     return _fit_in_bands(images, mask, settings)
@@ -184,7 +215,7 @@ def _fit_auto(images: np.ndarray, mask: np.ndarray, light_directions: np.ndarray
     """`photometric_stereo` of float32 `images` with ``robust="auto"``: the Tukey fit and,
     beside it in the same call, `lobe_share`'s first pixels; then the rest of the check, if
     those leave the share undecided, and the lobe fit, if it is chosen."""
-    settings = _core_settings(light_directions, light_irradiance, "lobe", shadow_fraction, saturation)
+    settings = _core_settings(images, light_directions, light_irradiance, "lobe", shadow_fraction, saturation)
     directions, irradiance, _, shadow_fraction, saturation = settings
     check = _LobeCheck(mask, LOBE_SAMPLE)
     tukey, flags = _core.tukey_with_lobe_check(images, mask, check.next_indices(mask.shape[1]), directions, irradiance, shadow_fraction, saturation, LOBE_CHECK_ROUNDS)
@@ -203,11 +234,11 @@ def _fit_auto(images: np.ndarray, mask: np.ndarray, light_directions: np.ndarray
 _CoreSettings = tuple[np.ndarray, np.ndarray, str, float, float | None]
 
 
-def _core_settings(light_directions: np.ndarray, light_irradiance: np.ndarray, robust: str, shadow_fraction: float, saturation: float | None) -> _CoreSettings:
-    """The arguments of `_core.photometric_stereo` after the images and the mask, checked."""
-    directions = np.ascontiguousarray(light_directions, dtype=np.float32)
-    irradiance = np.ascontiguousarray(light_irradiance, dtype=np.float32)
+def _core_settings(images: np.ndarray, light_directions: np.ndarray, light_irradiance: np.ndarray, robust: str, shadow_fraction: float, saturation: float | None) -> _CoreSettings:
+    """The arguments of `_core.photometric_stereo` after `images` and the mask, checked."""
+    directions, irradiance = checked_lights(light_directions, light_irradiance, len(images))
     check_choice("robust", robust, ROBUST_MODES)
+    shadow_fraction = check_number("shadow_fraction", shadow_fraction, what="a number in [0, 1)")
     if not 0 <= shadow_fraction < 1:
         raise ArgumentError("shadow_fraction", f"{shadow_fraction} is not in [0, 1)")
     if saturation is not None:
@@ -386,11 +417,12 @@ def lobe_share(
     >>> lobe_share(images, lights, np.full((5, 3), np.pi))  # a matte pixel takes no lobe
     0.0
     """
-    images = check_array("images", images, (None, None, None, 3), dtype=None)
+    images = check_array("images", images, (None, None, None, 3), dtype=None, nonempty=True)
     mask = check_mask(mask, images.shape[1:3], match="images")
+    check_images_finite("images", images, mask)
     if isinstance(sample, bool) or not (isinstance(sample, (int, np.integer)) and sample >= 1):
         raise ArgumentError("sample", f"{sample!r} is not a positive integer")
-    settings = _core_settings(light_directions, light_irradiance, "lobe", shadow_fraction, saturation)
+    settings = _core_settings(images, light_directions, light_irradiance, "lobe", shadow_fraction, saturation)
     check = _LobeCheck(mask, int(sample))
     while not check.done(stop_early):
         check.fit_next(images, settings)

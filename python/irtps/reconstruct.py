@@ -15,6 +15,7 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
+from irtps._checks import check_instance, check_path
 from irtps.atomic import atomic_output_dir
 from irtps.data import pixel_observations
 from irtps.dataset import Dataset, load_dataset, read_albedo_map, read_height_map, read_normal_map
@@ -22,7 +23,7 @@ from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
 from irtps.guarded import read_json
 from irtps.image_agreement import ImageAgreement, image_agreement
 from irtps.imageio import read_mask, write_exr, write_png
-from irtps.interreflection import Iteration, remove_interreflections
+from irtps.interreflection import Iteration, check_traceable, remove_interreflections
 from irtps.mesh import height_field_mesh, write_obj, write_ply
 from irtps.options import ReconstructOptions
 from irtps.paths import check_file, check_folder
@@ -176,9 +177,15 @@ def reconstruct(
 
     Raises
     ------
+    ArgumentError
+        If `dataset` is not a `Dataset`.
     DatasetError
         Naming ``dataset.source``: lights that are (nearly) coplanar or have a zero
-        irradiance, or images black on the whole object.
+        irradiance, or images black on the whole object; for IRT-PS, naming its mask file, a
+        mask with no 2×2 block of object pixels, which makes no surface to trace
+        (`irtps.interreflection.check_traceable`; ``ArgumentError`` naming
+        ``dataset.mask`` for a data set made in memory). Classic photometric stereo fits
+        any mask, pixel by pixel.
     OptionError
         Naming the option: a value out of range or not among the choices (also a
         `ValueError`).
@@ -202,10 +209,13 @@ def reconstruct(
     ...
     irtps.options.OptionError: samples: 0 is out of range: expected an integer from 1 to 1048576
     """
+    check_instance("dataset", dataset, Dataset)
     if method is not None:
         settings["method"] = method
     options = resolve_options(dataset, ReconstructOptions.build(options, **settings))
     _check_input(dataset, options.saturation, options.robust)
+    if options.method == "irtps":
+        check_traceable(dataset)
     parameters = options.to_dict()
     timings: dict[str, float] = {}
     share = None
@@ -420,7 +430,7 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
     """
     if not isinstance(result, Reconstruction):
         raise ArgumentError("result", f"expected a Reconstruction, got {type(result).__name__}")
-    with atomic_output_dir(path) as folder:
+    with atomic_output_dir(check_path("path", path)) as folder:
         write_exr(folder / "normal.exr", result.normals)
         write_exr(folder / "albedo.exr", result.albedo)
         write_exr(folder / "height.exr", result.height)
@@ -490,7 +500,8 @@ def load_reconstruction(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.nd
     ------
     DatasetError
         Naming the file: missing, unreadable, non-finite, or of another size than
-        ``normal.exr``.
+        ``normal.exr``; a normal on the mask that is not a unit vector (irtps writes unit
+        normals there, even where a pixel had no light: `_check_unit_normals`).
     """
     folder = check_folder(path, missing="no such reconstruction folder")
     normal_path = check_file(folder / "normal.exr", "not a reconstruction folder?")
@@ -499,7 +510,26 @@ def load_reconstruction(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.nd
     albedo = read_albedo_map(folder / "albedo.exr", size)
     height = read_height_map(folder / "height.exr", size)
     mask = read_mask(folder / "mask.png", size)
+    _check_unit_normals(normal_path, normals, mask)
     return normals, albedo, height, mask
+
+
+#: How far from 1 the length of a reconstruction's normal on its mask may be: float32 files
+#: hold unit normals to 1e-7, half-float ones (written by other tools) to 1e-3.
+NORMAL_LENGTH_TOLERANCE = 1e-2
+
+
+def _check_unit_normals(path: Path, normals: np.ndarray, mask: np.ndarray) -> None:
+    """Refuse a normal on the mask whose length is not 1 (within `NORMAL_LENGTH_TOLERANCE`):
+    a zero normal would be scored as 90° off, an error of the file's, not of the shape's."""
+    length = np.linalg.norm(normals, axis=-1)
+    wrong = mask & (np.abs(length - 1.0) > NORMAL_LENGTH_TOLERANCE)
+    if wrong.any():
+        row, col = np.argwhere(wrong)[0]
+        raise DatasetError(
+            f"{path}: the normal at row {row}, column {col} has length {length[row, col]:.3g}, not 1 "
+            f"({int(wrong.sum())} of the mask's {int(mask.sum())} normals are not unit vectors)"
+        )
 
 
 

@@ -8,7 +8,7 @@ import numpy as np
 from tqdm import tqdm
 
 from irtps import _core
-from irtps._checks import check_array, check_mask
+from irtps._checks import check_array, check_finite, check_instance, check_integer, check_mask
 from irtps.errors import ArgumentError
 from irtps.options import RenderOptions
 from irtps.resources import check_memory
@@ -74,12 +74,13 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
     Raises
     ------
     ArgumentError
-        If the arrays do not match the camera.
+        If `scene` is not a `Scene`, the arrays do not match the camera, or the height or
+        the albedo is not finite on the mask.
     IrtpsError
         If the light visibility cache (about ``4 * K * H * W`` bytes) would need more
         memory than is available.
     """
-    camera = scene.camera
+    camera = check_instance("scene", scene, Scene).camera
     check_memory(
         _CACHE_BYTES_PER_PIXEL * len(scene.lights) * camera.height * camera.width,
         f"lights: {len(scene.lights)} lights of {camera.width}x{camera.height} images (light visibility cache)",
@@ -88,6 +89,8 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
     height = np.ascontiguousarray(check_array("height", height, expected, match="the camera", dtype=np.float32))
     mask = np.ascontiguousarray(check_mask(mask, expected, match="the camera"))
     albedo = np.ascontiguousarray(check_array("albedo", albedo, (*expected, 3), match="the camera", dtype=np.float32))
+    check_finite("height", height, mask)
+    check_finite("albedo", albedo, mask)
     return _core.Renderer(
         height,
         mask,
@@ -194,6 +197,7 @@ def render(
     >>> round(float(flat.direct[1, 4, 4, 0]), 4)  # albedo · cos θ = 0.5 · 0.8
     0.4
     """
+    check_instance("scene", scene, Scene)
     check_counts(bounces, samples, seed)
     direct_samples = min(samples, DEFAULT_DIRECT_SAMPLES) if direct_samples is None else direct_samples
     if direct_samples < 0 or (direct_samples == 0 and bounces == 0):
@@ -240,11 +244,11 @@ def render_indirect(
     numpy.ndarray
         float32 (K, H, W, 3).
     """
+    check_instance("scene", scene, Scene)
     check_counts(bounces, samples, seed)
     if bounces < 1:
         raise ArgumentError("bounces", f"{bounces} must be at least 1")
-    if stride < 1:
-        raise ArgumentError("stride", f"{stride} must be at least 1")
+    stride = check_integer("stride", stride, 1)
     check_frame_memory(scene)
     renderer = make_renderer(scene, height, albedo, mask)
     if stride == 1:

@@ -15,6 +15,7 @@ from typing import NoReturn
 
 import numpy as np
 
+from irtps._checks import check_path
 from irtps.atomic import atomic_write_text
 from irtps.errors import DatasetError
 from irtps.imageio import MAX_IMAGE_PIXELS
@@ -260,7 +261,7 @@ def load_scene(path: str | Path) -> Scene:
         the line and column) or is JSON past the bounds of `irtps.guarded` (nesting, digits,
         size, repeated keys), or does not follow the contract.
     """
-    path = Path(path)
+    path = check_path("path", path)
     if not exists(path):
         raise DatasetError(f"{path}: file not found")
     obj = read_json(path)
@@ -289,6 +290,33 @@ def write_scene(scene: Scene, path: str | Path) -> None:
 #: coordinates (up to the image size times this) must stay finite and above its smallest
 #: normal number.
 MIN_PIXEL_SIZE, MAX_PIXEL_SIZE = 1e-9, 1e9
+
+
+#: Range of each positive channel of a light's irradiance (0 is a channel the light lacks).
+#: The core works in float32: the images divided by the irradiance, the albedo fitted in its
+#: units (relative irradiance) and the renderings of albedo times irradiance must stay finite
+#: and above its smallest normal number (at 1e-40 the residual's ratios overflowed).
+MIN_IRRADIANCE, MAX_IRRADIANCE = 1e-9, 1e9
+
+
+def irradiance_problem(irradiance) -> str | None:
+    """What makes an RGB irradiance unusable, or None: a negative channel, or a positive one
+    outside [`MIN_IRRADIANCE`, `MAX_IRRADIANCE`].
+
+    Examples
+    --------
+    >>> irradiance_problem([1.0, 0.0, 2.5]) is None
+    True
+    >>> irradiance_problem([1e308, 1.0, 1.0])
+    'has channel 0 = 1e+308, out of range: expected 0 or a number from 1e-09 to 1e+09'
+    """
+    values = [float(value) for value in irradiance]
+    if min(values) < 0.0:
+        return f"must not be negative, got {values}"
+    for channel, value in enumerate(values):
+        if value != 0.0 and not MIN_IRRADIANCE <= value <= MAX_IRRADIANCE:
+            return f"has channel {channel} = {value:g}, out of range: expected 0 or a number from {MIN_IRRADIANCE:g} to {MAX_IRRADIANCE:g}"
+    return None
 
 
 def _parse_camera(fields: _Fields, value: object) -> Camera:
@@ -320,8 +348,9 @@ def _parse_lights(fields: _Fields, value: object) -> tuple[Light, ...]:
         if direction[2] <= 0.0:
             fields.fail(f"{where}.direction", f"must point toward the camera side (z > 0), got z = {direction[2]:g}")
         irradiance = fields.vector3(light["irradiance"], f"{where}.irradiance")
-        if min(irradiance) < 0.0:
-            fields.fail(f"{where}.irradiance", f"must not be negative, got {list(irradiance)}")
+        problem = irradiance_problem(irradiance)
+        if problem is not None:
+            fields.fail(f"{where}.irradiance", problem)
         lights.append(Light(direction=np.array(direction), irradiance=np.array(irradiance)))
     return tuple(lights)
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from irtps._checks import check_array, check_mask, check_positive
+from irtps._checks import check_array, check_finite, check_mask, check_positive
 
 
 def height_to_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0) -> np.ndarray:
@@ -84,7 +84,7 @@ def footprint_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 
     if rows < 2 or cols < 2:
         return normals
     # Block (i, j): triangle 1 is (i,j) (i+1,j) (i,j+1), triangle 2 (i,j+1) (i+1,j) (i+1,j+1).
-    meshed = mask[:-1, :-1] & mask[1:, :-1] & mask[:-1, 1:] & mask[1:, 1:]
+    meshed = meshed_blocks(mask)
     h00, h10, h01, h11 = height[:-1, :-1], height[1:, :-1], height[:-1, 1:], height[1:, 1:]
     first = _unit_normals((h01 - h00) / pixel_size, (h10 - h00) / pixel_size)
     second = _unit_normals((h11 - h10) / pixel_size, (h11 - h01) / pixel_size)
@@ -96,6 +96,21 @@ def footprint_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 
         normals[r, c] += np.where(meshed[..., None], part, 0.0)
         weight[r, c] += meshed
     return normals / np.maximum(weight, 1.0)[..., None]
+
+
+def meshed_blocks(mask: np.ndarray) -> np.ndarray:
+    """bool (H - 1, W - 1): the 2×2 blocks of pixels all four of which `mask` sets, those that
+    the contract's surface spans with two triangles (§2); block (i, j) has pixel (i, j) as its
+    top-left corner.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> meshed_blocks(np.array([[1, 1, 0], [1, 1, 1]], bool)).tolist()
+    [[True, False]]
+    """
+    mask = check_mask(mask)
+    return mask[:-1, :-1] & mask[1:, :-1] & mask[:-1, 1:] & mask[1:, 1:]
 
 
 def surface_albedo(albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0, *, largest: float | None = 1.0) -> np.ndarray:
@@ -135,10 +150,13 @@ def surface_albedo(albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, 
 
 
 def _checked_surface(height, mask, pixel_size) -> tuple[np.ndarray, np.ndarray]:
-    """`height` as float64 (H, W) and `mask` as bool of its shape; `pixel_size` positive."""
-    height = check_array("height", height, (None, None))
+    """`height` as float64 (H, W), finite on the mask, and `mask` as bool of its shape;
+    `pixel_size` positive."""
+    height = check_array("height", height, (None, None), nonempty=True)
     check_positive("pixel_size", pixel_size)
-    return height, check_mask(mask, height.shape, match="height")
+    mask = check_mask(mask, height.shape, match="height")
+    check_finite("height", height, mask)
+    return height, mask
 
 
 def _unit_normals(dz_dx: np.ndarray, dz_drow: np.ndarray) -> np.ndarray:

@@ -20,7 +20,10 @@ the reconstruction does not resolve: on the shared cap_cornell (its edge 1 unit 
 floor) the rendered light was off by a third of the object's own light in the edge pixels
 and the loop drifted away. The light of a pixel is subtracted only where moving the object
 by one pixel (the data's resolution) up or down changes it, under every light, by less than
-`STABILITY` of its largest; elsewhere the pixel is left as it was observed.
+`STABILITY` of its largest; elsewhere the pixel is left as it was observed. So is a masked
+pixel that no triangle touches (a stray pixel, a line one pixel wide): the whole of its
+footprint is surroundings to the reconstruction, and subtracting their light would leave none
+of the object's to fit.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import numpy as np
 from irtps.render import make_renderer
 from irtps.residual import DIRECT_SAMPLES
 from irtps.scene import Scene
+from irtps.surface import meshed_blocks
 
 __all__ = ["STABILITY", "SurroundingsLight", "edge_pixels", "mesh_coverage", "surroundings_light"]
 
@@ -93,7 +97,7 @@ def mesh_coverage(mask: np.ndarray) -> np.ndarray:
     [[0.25, 0.5, 0.25], [0.5, 1.0, 0.5], [0.25, 0.5, 0.25]]
     """
     mask = np.asarray(mask, dtype=bool)
-    meshed = (mask[:-1, :-1] & mask[1:, :-1] & mask[:-1, 1:] & mask[1:, 1:]).astype(np.float64)
+    meshed = meshed_blocks(mask).astype(np.float64)
     quarters = np.zeros(mask.shape)
     for rows, cols in ((slice(None, -1), slice(None, -1)), (slice(1, None), slice(1, None)), (slice(1, None), slice(None, -1)), (slice(None, -1), slice(1, None))):
         quarters[rows, cols] += meshed
@@ -156,7 +160,8 @@ def surroundings_light(scene: Scene, height: np.ndarray, albedo: np.ndarray, mas
     seen = rendered(0.0)
     change = np.maximum(*(np.abs(rendered(offset) - seen).sum(axis=2) for offset in (-step, step))).max(axis=0)
     size = np.abs(seen).sum(axis=2).max(axis=0)
-    stable = (size > 0) & (change <= STABILITY * size)
+    touched = mesh_coverage(mask)[edge] > 0  # a pixel no triangle touches has no object light to keep
+    stable = (size > 0) & (change <= STABILITY * size) & touched
     at = edge[mask]
     light[:, at] = np.where(stable[None, :, None], seen, 0)
     corrected[at] = stable
