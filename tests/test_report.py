@@ -176,6 +176,7 @@ def test_a_folder_that_is_not_a_reconstruction_is_named(tmp_path):
         (lambda text: text.replace('"pixel_size": ', '"pixel_size": ' + "9" * 5000 + ", \"x\": "), "run.json: line [0-9]+, column [0-9]+: a number with 5000 digits"),
         (lambda text: "[" * 5000 + "]" * 5000, "run.json: arrays and objects nested 5000 deep"),
         (lambda text: "[]", "run.json: the file must be an object"),
+        (lambda text: text.replace('"format": "irtps.run/1"', '"format": "irtps.table/1"'), "run.json: format 'irtps.table/1' is not a reconstruction's"),
         (lambda text: text.replace('"history": [', '"history": [1, '), r"run.json: history\[0\] must be an object"),
         (lambda text: text.replace('"source": "', '"source": 3, "x": "'), "run.json: source must be a string or null"),
         (lambda text: text.replace('"index": 1', '"index": "one"'), r"run.json: history\[1\].index must be a number"),

@@ -543,6 +543,7 @@ _RUN_FIELDS = {
 }
 #: Fields that folders written by older versions of irtps lack.
 _OPTIONAL_RUN_FIELDS = {
+    "format": (str,),
     "pixel_size": (int, float),
     "placement": (dict, type(None)),
     "chosen_pass": (int, type(None)),
@@ -577,7 +578,8 @@ def load_run_record(path: str | Path) -> dict:
     ------
     IrtpsError
         Naming the folder or the file and field: a missing folder or ``run.json``, text
-        that is not JSON or is past the bounds of `irtps.guarded`, or a field missing or of the wrong type (``source`` a string or
+        that is not JSON or is past the bounds of `irtps.guarded`, a ``format`` other than
+        ``irtps.run/1`` (folders written before irtps recorded it have none), or a field missing or of the wrong type (``source`` a string or
         null; ``parameters``, ``timings_s`` and ``flags`` objects; ``pixel_size`` a
         number; ``history`` a list of objects with an integer ``index``, a numeric or
         null ``height_change`` and an object or null ``metrics``).
@@ -597,6 +599,8 @@ def load_run_record(path: str | Path) -> dict:
     run_path = check_file(folder / "run.json", "not a reconstruction folder written by irtps reconstruct?")
     record = read_json(run_path, error=IrtpsError)
     _check_fields(run_path, "", record, _RUN_FIELDS, _OPTIONAL_RUN_FIELDS)
+    if record.get("format", RUN) != RUN:
+        raise IrtpsError(f"{run_path}: format {record['format']!r} is not a reconstruction's ({RUN!r})")
     for k, step in enumerate(record["history"]):
         _check_fields(run_path, f"history[{k}]", step, _HISTORY_FIELDS, {})
     return record
