@@ -56,6 +56,21 @@ def _shape_text(shape: tuple[int | None, ...]) -> str:
     return "(" + ", ".join(parts) + ("," if len(parts) == 1 else "") + ")"
 
 
+def check_nonempty(name: str, array: np.ndarray) -> np.ndarray:
+    """`array`, refused unless it holds a value: no axis of length 0.
+
+    Examples
+    --------
+    >>> check_nonempty("images", np.zeros((4, 0, 5, 3)))
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: images: shape (4, 0, 5, 3) is empty
+    """
+    if array.size == 0:
+        raise ArgumentError(name, f"shape {array.shape} is empty")
+    return array
+
+
 def check_mask(mask, shape: tuple[int, int] | None = None, *, match: str | None = None, name: str = "mask", nonempty: bool = False) -> np.ndarray:
     """`mask` as a bool (H, W) array: of `shape` if given (that of the array named by
     `match`; None is then every pixel), with a pixel set if `nonempty`.

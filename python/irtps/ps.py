@@ -9,7 +9,7 @@ import numpy as np
 from tqdm import tqdm
 
 from irtps import _core
-from irtps._checks import check_array, check_choice, check_mask, check_number, check_positive, document_choices
+from irtps._checks import check_array, check_choice, check_mask, check_nonempty, check_number, check_positive, document_choices
 from irtps.data import coarse_to_fine, spread_pixels
 from irtps.errors import ArgumentError
 
@@ -169,7 +169,7 @@ def photometric_stereo(
     >>> print(np.round(fit.normals[0, 0], 4), np.round(fit.albedo[0, 0], 4))
     [0.  0.6 0.8] [0.5 0.5 0.5]
     """
-    images = np.ascontiguousarray(check_array("images", images, (None, None, None, 3), dtype=np.float32, copy=False))
+    images = np.ascontiguousarray(check_nonempty("images", check_array("images", images, (None, None, None, 3), dtype=np.float32, copy=False)))
     mask = np.ascontiguousarray(check_mask(mask, images.shape[1:3], match="images"))
     check_choice("robust", robust, ROBUST_CHOICES)
     if robust == "auto":
@@ -386,7 +386,7 @@ def lobe_share(
     >>> lobe_share(images, lights, np.full((5, 3), np.pi))  # a matte pixel takes no lobe
     0.0
     """
-    images = check_array("images", images, (None, None, None, 3), dtype=None)
+    images = check_nonempty("images", check_array("images", images, (None, None, None, 3), dtype=None))
     mask = check_mask(mask, images.shape[1:3], match="images")
     if isinstance(sample, bool) or not (isinstance(sample, (int, np.integer)) and sample >= 1):
         raise ArgumentError("sample", f"{sample!r} is not a positive integer")
