@@ -14,6 +14,7 @@ use glam::Vec3A;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::memory::{try_collect, try_vec, try_with_capacity};
 use crate::scene::Rgb;
 
 /// Exponent of the cosine between two normals in a neighbour's weight.
@@ -49,8 +50,8 @@ pub struct Denoised {
 /// Filters `indirect` (K, N, 3) at the N pixels of `surface`, and its per-pixel noise energy
 /// `noise_energy` (N,).
 ///
-/// Errors name the argument whose length does not match, or `pixels` when the indices are not
-/// ascending within the image.
+/// Errors name the argument whose length does not match, `pixels` when the indices are not
+/// ascending within the image, and the argument holding a NaN or an infinity.
 pub fn denoise(surface: &Surface<'_>, indirect: &[f32], noise_energy: &[f64]) -> Result<Denoised> {
     let n = surface.pixels.len();
     let (width, height) = surface.size;
@@ -67,13 +68,14 @@ pub fn denoise(surface: &Surface<'_>, indirect: &[f32], noise_energy: &[f64]) ->
             Err(Error::input("indirect", format!("{} values are not (K, {n}, 3)", indirect.len())))
         };
     }
+    check_finite(surface, indirect, noise_energy)?;
     let position = |index: usize| (index / width, index % width);
     let listed = |row: usize, col: usize| surface.pixels.binary_search(&(row * width + col)).ok();
-    let normals = surface_normals(surface, &listed);
+    let mut normals = try_with_capacity(&format!("the filter's normals of {n} pixels"), n)?;
+    normals.par_extend(surface_normals(surface, &listed));
     // Per pixel and window slot: the neighbour and, per channel, the factor its estimate gets.
-    let weights: Vec<([usize; WINDOW], [Rgb; WINDOW], f64)> = (0..n)
-        .into_par_iter()
-        .map(|p| {
+    let mut weights: Vec<([usize; WINDOW], [Rgb; WINDOW], f64)> = try_with_capacity(&format!("the filter's weights of {n} pixels"), n)?;
+    weights.par_extend((0..n).into_par_iter().map(|p| {
             let (row, col) = position(surface.pixels[p]);
             let (normal, height_p, albedo_p) = (normals[p], surface.height_px[p], surface.albedo[p]);
             let mut neighbour = [p; WINDOW];
@@ -107,9 +109,8 @@ pub fn denoise(surface: &Surface<'_>, indirect: &[f32], noise_energy: &[f64]) ->
             }
             let energy = (0..WINDOW).map(|slot| f64::from(factor[slot].iter().sum::<f32>() / 3.0).powi(2) * noise_energy[neighbour[slot]]).sum();
             (neighbour, factor, energy)
-        })
-        .collect();
-    let mut filtered = vec![0f32; indirect.len()];
+        }));
+    let mut filtered = try_vec(&format!("the filtered estimate of {n} pixels"), indirect.len(), 0f32)?;
     filtered.par_chunks_mut(3 * n).zip(indirect.par_chunks(3 * n)).for_each(|(out, plane)| {
         for (p, (neighbour, factor, _)) in weights.iter().enumerate() {
             for c in 0..3 {
@@ -117,18 +118,36 @@ pub fn denoise(surface: &Surface<'_>, indirect: &[f32], noise_energy: &[f64]) ->
             }
         }
     });
-    Ok(Denoised { indirect: filtered, noise_energy: weights.iter().map(|w| w.2).collect() })
+    let noise_energy = try_collect(&format!("the filtered noise energy of {n} pixels"), n, weights.iter().map(|w| w.2))?;
+    Ok(Denoised { indirect: filtered, noise_energy })
+}
+
+/// Refuses a NaN or an infinity in the surface's heights or albedo, the estimate or its noise
+/// energy, naming the argument and the listed pixel.
+fn check_finite(surface: &Surface<'_>, indirect: &[f32], noise_energy: &[f64]) -> Result<()> {
+    let n = surface.pixels.len();
+    let first_bad = |values: &[f32]| values.iter().position(|v| !v.is_finite());
+    let checks: [(&str, usize, Option<usize>); 4] = [
+        ("height_px", 1, first_bad(surface.height_px)),
+        ("albedo", 3, first_bad(surface.albedo.as_flattened())),
+        ("indirect", 3, first_bad(indirect)),
+        ("noise_energy", 1, noise_energy.iter().position(|v| !v.is_finite())),
+    ];
+    match checks.into_iter().find_map(|(name, per_pixel, bad)| bad.map(|index| (name, index / per_pixel % n))) {
+        Some((name, p)) => Err(Error::input(name, format!("non-finite value at listed pixel {p} (row {}, column {})", surface.pixels[p] / surface.size.0, surface.pixels[p] % surface.size.0))),
+        None => Ok(()),
+    }
 }
 
 /// Unit normals of the height field at the listed pixels, from central differences where
 /// both neighbours are on the object, one-sided where one is, flat where none is.
-fn surface_normals(surface: &Surface<'_>, listed: &(impl Fn(usize, usize) -> Option<usize> + Sync)) -> Vec<Vec3A> {
+fn surface_normals<'a>(surface: &'a Surface<'_>, listed: &'a (impl Fn(usize, usize) -> Option<usize> + Sync)) -> impl IndexedParallelIterator<Item = Vec3A> + 'a {
     let (width, height) = surface.size;
     surface
         .pixels
         .par_iter()
         .enumerate()
-        .map(|(p, &index)| {
+        .map(move |(p, &index)| {
             let (row, col) = (index / width, index % width);
             let h = surface.height_px[p];
             let at = |r: isize, c: isize| -> Option<f32> {
@@ -146,7 +165,6 @@ fn surface_normals(surface: &Surface<'_>, listed: &(impl Fn(usize, usize) -> Opt
             // dh/dx = along_col, dh/dy = −along_row.
             Vec3A::new(-along_col, along_row, 1.0).normalize()
         })
-        .collect()
 }
 
 #[cfg(test)]

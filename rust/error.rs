@@ -12,6 +12,8 @@ pub enum Error {
     Format { path: String, message: String },
     /// An in-memory input (an argument or a field) is not acceptable.
     Input { field: String, message: String },
+    /// A buffer could not be allocated: `what` it was for and its size in bytes, when known.
+    Memory { what: String, bytes: Option<usize> },
 }
 
 impl Error {
@@ -29,6 +31,16 @@ impl Error {
     pub fn input(field: &str, message: impl Into<String>) -> Self {
         Error::Input { field: field.to_string(), message: message.into() }
     }
+
+    /// No memory for `bytes` bytes of `what`.
+    pub fn memory(what: impl Into<String>, bytes: usize) -> Self {
+        Error::Memory { what: what.into(), bytes: Some(bytes) }
+    }
+
+    /// No memory for `what`, of a size that a third-party crate did not tell.
+    pub fn memory_of_unknown_size(what: impl Into<String>) -> Self {
+        Error::Memory { what: what.into(), bytes: None }
+    }
 }
 
 impl fmt::Display for Error {
@@ -38,6 +50,8 @@ impl fmt::Display for Error {
                 write!(f, "{path}: {message}")
             }
             Error::Input { field, message } => write!(f, "{field}: {message}"),
+            Error::Memory { what, bytes: Some(bytes) } => write!(f, "{what}: could not allocate {bytes} bytes"),
+            Error::Memory { what, bytes: None } => write!(f, "{what}: could not allocate it"),
         }
     }
 }

@@ -2,6 +2,9 @@
 //!
 //! Pixel data is row-major, top row first, channels interleaved, as `f32`.
 //! PNG values are normalised to [0, 1] by `2^bits - 1` (linear, per the scene contract).
+//! An EXR image is its display window: its data window's pixels are placed where that
+//! window lies in it, the display window's pixels outside the data window are 0 and data
+//! outside the display window is not read.
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter};
@@ -11,6 +14,7 @@ use exr::prelude::*;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::memory::{check_available, try_collect, try_vec};
 
 /// The largest image the readers accept, in pixels (2^27: e.g. 16384 x 8192). A header
 /// claiming more is rejected before any pixel memory is allocated.
@@ -30,17 +34,20 @@ pub struct Image {
 }
 
 impl Image {
-    /// The same image with a single channel replicated to three (RGB unchanged).
-    pub fn into_rgb(self) -> Image {
+    /// The same image with a single channel replicated to three (RGB unchanged), or
+    /// [`Error::Memory`] when the copy cannot be allocated.
+    pub fn into_rgb(self) -> Result<Image> {
         if self.channels == 3 {
-            return self;
+            return Ok(self);
         }
-        let data = self.data.iter().flat_map(|&v| [v, v, v]).collect();
-        Image { channels: 3, data, ..self }
+        let what = format!("an RGB copy of a {}x{} image", self.width, self.height);
+        let data = try_collect(&what, 3 * self.data.len(), self.data.iter().flat_map(|&v| [v, v, v]))?;
+        Ok(Image { channels: 3, data, ..self })
     }
 }
 
-/// Reads an OpenEXR file with channels R, G, B (3 channels) or Y (1 channel).
+/// Reads an OpenEXR file with channels R, G, B (3 channels) or Y (1 channel): the pixels of
+/// its display window (see the module's documentation for the data window).
 pub fn read_exr(path: &Path) -> Result<Image> {
     if !path.is_file() {
         return Err(Error::io(path, "no such file"));
@@ -49,11 +56,15 @@ pub fn read_exr(path: &Path) -> Result<Image> {
         .map_err(|e| Error::format(path, format!("not a readable OpenEXR file ({e})")))?;
     for header in &meta.headers {
         check_size(path, header.layer_size.width(), header.layer_size.height())?;
+        let display = header.shared_attributes.display_window.size;
+        check_size(path, display.width(), display.height())?;
     }
+    check_decoding_memory(path, &meta)?;
     let image = read_first_flat_layer_from_file(path)
         .map_err(|e| Error::format(path, format!("not a readable OpenEXR file ({e})")))?;
+    let display = image.attributes.display_window;
     let layer = image.layer_data;
-    let (width, height) = (layer.size.width(), layer.size.height());
+    let data_window = IntegerBounds::new(layer.attributes.layer_position, layer.size);
     let channels = &layer.channel_data.list;
     let find = |name: &str| channels.iter().find(|c| c.name.eq(name));
     let names: Vec<String> = channels.iter().map(|c| c.name.to_string()).collect();
@@ -69,19 +80,45 @@ pub fn read_exr(path: &Path) -> Result<Image> {
             format!("channels {names:?}: expected R, G, B (optionally A) or a single Y"),
         ));
     };
-    let planes: Vec<Vec<f32>> = wanted
-        .iter()
-        .map(|n| find(n).expect("channel checked above").sample_data.values_as_f32().collect())
-        .collect();
-    let pixel_count = width * height;
-    if planes.iter().any(|p| p.len() != pixel_count) {
+    let planes: Vec<&FlatSamples> = wanted.iter().map(|n| &find(n).expect("channel checked above").sample_data).collect();
+    if planes.iter().any(|p| p.len() != data_window.size.area()) {
         return Err(Error::format(path, "channels are subsampled; only full-resolution channels are supported"));
     }
-    let n = planes.len();
-    let mut data = vec![0.0f32; pixel_count * n];
+    into_display_window(path, &planes, data_window, display)
+}
+
+/// Refuses, with [`Error::Memory`], a file whose decoding the memory left cannot hold: the
+/// EXR decoder allocates its layers' samples (at most 4 bytes each) without a way to fail,
+/// and the image of the display window is made beside them.
+fn check_decoding_memory(path: &Path, meta: &exr::meta::MetaData) -> Result<()> {
+    let samples: usize = meta.headers.iter().map(|h| h.layer_size.area().saturating_mul(h.channels.list.len())).fold(0, usize::saturating_add);
+    let Some(first) = meta.headers.first() else { return Ok(()) };
+    let display = first.shared_attributes.display_window.size;
+    let bytes = samples.saturating_add(display.area().saturating_mul(3)).saturating_mul(4);
+    let what = format!("{}: decoding its {}x{} data window", path.display(), first.layer_size.width(), first.layer_size.height());
+    check_available(&what, bytes)
+}
+
+/// The image of the display window `display` whose pixels inside `data_window` are those
+/// of `planes` (one per channel, the data window's pixels row by row), interleaved; 0
+/// elsewhere.
+fn into_display_window(path: &Path, planes: &[&FlatSamples], data_window: IntegerBounds, display: IntegerBounds) -> Result<Image> {
+    let (width, height, n) = (display.size.width(), display.size.height(), planes.len());
+    let what = format!("{}: the pixels of its {width}x{height} display window", path.display());
+    let mut data = try_vec(&what, width * height * n, 0.0f32)?;
+    let data_width = data_window.size.width();
+    // Where the data window's rows and columns fall in the display window (i64: the
+    // windows may lie anywhere in i32 space).
+    let offset = |data: i32, display: i32| i64::from(data) - i64::from(display);
+    let (dx, dy) = (offset(data_window.position.x(), display.position.x()), offset(data_window.position.y(), display.position.y()));
+    let inside = |offset: i64, data_len: usize, display_len: usize| (offset.max(0), (offset + data_len as i64).min(display_len as i64));
+    let ((x0, x1), (y0, y1)) = (inside(dx, data_width, width), inside(dy, data_window.size.height(), height));
     for (c, plane) in planes.iter().enumerate() {
-        for (i, &v) in plane.iter().enumerate() {
-            data[i * n + c] = v;
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let source = (y - dy) as usize * data_width + (x - dx) as usize;
+                data[(y as usize * width + x as usize) * n + c] = plane.value_by_flat_index(source).to_f32();
+            }
         }
     }
     Ok(Image { width, height, channels: n, data })
@@ -96,14 +133,12 @@ pub fn write_exr(path: &Path, image: &Image) -> Result<()> {
     };
     check_data_len(image)?;
     let n = image.channels;
-    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = names
-        .iter()
-        .enumerate()
-        .map(|(c, name)| {
-            let plane: Vec<f32> = image.data.iter().skip(c).step_by(n).copied().collect();
-            AnyChannel::new(*name, FlatSamples::F32(plane))
-        })
-        .collect();
+    let what = format!("{}: a channel of {}x{} pixels to write", path.display(), image.width, image.height);
+    let mut list: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
+    for (c, name) in names.iter().enumerate() {
+        let plane = try_collect(&what, image.width * image.height, image.data.iter().skip(c).step_by(n).copied())?;
+        list.push(AnyChannel::new(*name, FlatSamples::F32(plane)));
+    }
     let mut layer = Layer::new(
         (image.width, image.height),
         LayerAttributes::default(),
@@ -140,7 +175,7 @@ pub fn read_png(path: &Path) -> Result<(Image, u8)> {
             format!("corrupt PNG: its header claims {width}x{height} pixels, more than its {file_len} bytes can hold"),
         ));
     }
-    let mut buffer = vec![0u8; size];
+    let mut buffer = try_vec(&format!("{}: its decoded {width}x{height} pixels", path.display()), size, 0u8)?;
     let info = reader
         .next_frame(&mut buffer)
         .map_err(|e| Error::format(path, format!("corrupt PNG data ({e})")))?;
@@ -159,36 +194,33 @@ pub fn read_png(path: &Path) -> Result<(Image, u8)> {
             bytes[i] as f32 / scale
         }
     };
-    let mut data = Vec::with_capacity(width * height * keep);
-    for p in 0..width * height {
-        for c in 0..keep {
-            data.push(sample(p * in_channels + c));
-        }
-    }
+    let values = (0..width * height).flat_map(|p| (0..keep).map(move |c| p * in_channels + c)).map(sample);
+    let data = try_collect(&format!("{}: its {width}x{height} pixels as float32", path.display()), width * height * keep, values)?;
     Ok((Image { width, height, channels: keep, data }, bits))
 }
 
 /// Writes an image of values in [0, 1] (clipped) as an 8- or 16-bit gray or RGB PNG.
+///
+/// A NaN or an infinity is refused (naming its row and column): it has no PNG value.
 pub fn write_png(path: &Path, image: &Image, bit_depth: u8) -> Result<()> {
     check_data_len(image)?;
+    if let Some(index) = image.data.iter().position(|v| !v.is_finite()) {
+        let pixel = index / image.channels;
+        let (row, column) = (pixel / image.width, pixel % image.width);
+        return Err(Error::input("image", format!("non-finite value {} at row {row}, column {column}", image.data[index])));
+    }
     let color = match image.channels {
         1 => png::ColorType::Grayscale,
         3 => png::ColorType::Rgb,
         n => return Err(Error::input("image", format!("{n} channels: PNG output takes 1 or 3"))),
     };
+    let what = format!("{}: the {}x{} pixels to write", path.display(), image.width, image.height);
     let (depth, bytes): (png::BitDepth, Vec<u8>) = match bit_depth {
-        8 => (
-            png::BitDepth::Eight,
-            image.data.iter().map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect(),
-        ),
-        16 => (
-            png::BitDepth::Sixteen,
-            image
-                .data
-                .iter()
-                .flat_map(|&v| ((v.clamp(0.0, 1.0) * 65535.0).round() as u16).to_be_bytes())
-                .collect(),
-        ),
+        8 => (png::BitDepth::Eight, try_collect(&what, image.data.len(), image.data.iter().map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8))?),
+        16 => {
+            let bytes = image.data.iter().flat_map(|&v| ((v.clamp(0.0, 1.0) * 65535.0).round() as u16).to_be_bytes());
+            (png::BitDepth::Sixteen, try_collect(&what, 2 * image.data.len(), bytes)?)
+        }
         b => return Err(Error::input("bit_depth", format!("{b}: PNG output takes 8 or 16"))),
     };
     let file = File::create(path).map_err(|e| Error::io(path, e))?;
@@ -208,7 +240,7 @@ pub fn read_image_rgb(path: &Path) -> Result<Image> {
         Some("png") => read_png(path)?.0,
         _ => return Err(Error::format(path, "unknown image type: expected .exr or .png")),
     };
-    Ok(image.into_rgb())
+    image.into_rgb()
 }
 
 /// Reads a stack of images in parallel into one `(K, H, W, 3)` buffer.
@@ -223,7 +255,8 @@ pub fn read_image_stack(paths: &[PathBuf]) -> Result<(usize, usize, Vec<f32>)> {
     let first = read_image_rgb(first_path)?;
     let (width, height) = (first.width, first.height);
     let plane = width * height * 3;
-    let mut data = vec![0.0f32; paths.len() * plane];
+    let what = format!("the {} images of {width}x{height} as float32 RGB", paths.len());
+    let mut data = try_vec(&what, paths.len().saturating_mul(plane), 0.0f32)?;
     data[..plane].copy_from_slice(&first.data);
     drop(first);
     data.par_chunks_mut(plane).zip(paths).skip(1).try_for_each(|(slot, path)| -> Result<()> {
@@ -263,7 +296,12 @@ fn check_size(path: &Path, width: usize, height: usize) -> Result<()> {
     Ok(())
 }
 
+/// Refuses an image of no pixel, or whose data are not `width` × `height` × `channels`
+/// values.
 fn check_data_len(image: &Image) -> Result<()> {
+    if image.width == 0 || image.height == 0 {
+        return Err(Error::input("image", format!("size {}x{} has no pixel", image.width, image.height)));
+    }
     if image.data.len() != image.width * image.height * image.channels {
         return Err(Error::input("image", "data length does not match width x height x channels"));
     }
@@ -293,6 +331,42 @@ mod tests {
             write_exr(&path, &image).unwrap();
             assert_eq!(read_exr(&path).unwrap(), image);
         }
+    }
+
+    /// Writes the 1-channel `image` as the data window at `position` of the display window
+    /// `display`.
+    fn write_windowed(path: &Path, image: &Image, position: (i32, i32), display: IntegerBounds) {
+        let channels = AnyChannels::sort(SmallVec::from_vec(vec![AnyChannel::new("Y", FlatSamples::F32(image.data.clone()))]));
+        let mut layer = Layer::new((image.width, image.height), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, channels);
+        layer.attributes.layer_position = Vec2(position.0, position.1);
+        Image2::new(ImageAttributes::new(display), layer).write().to_file(path).unwrap();
+    }
+
+    #[test]
+    fn exr_data_window_is_placed_in_the_display_window() {
+        let dir = temp_dir();
+        let path = dir.path().join("offset.exr");
+        let data = ramp(3, 2, 1);
+        write_windowed(&path, &data, (11, 21), IntegerBounds::new((10, 20), (4, 3)));
+        let read = read_exr(&path).unwrap();
+        assert_eq!((read.width, read.height, read.channels), (4, 3, 1));
+        #[rustfmt::skip]
+        let expected = [
+            0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.01, 0.02,
+            0.0, 0.03, 0.04, 0.05,
+        ];
+        assert_eq!(read.data, expected);
+    }
+
+    #[test]
+    fn exr_data_outside_the_display_window_is_not_read() {
+        let dir = temp_dir();
+        let path = dir.path().join("overscan.exr");
+        write_windowed(&path, &ramp(3, 3, 1), (-1, 1), IntegerBounds::new((0, 0), (2, 2)));
+        assert_eq!(read_exr(&path).unwrap().data, [0.0, 0.0, 0.01, 0.02]);
+        write_windowed(&path, &ramp(3, 3, 1), (5, 5), IntegerBounds::new((0, 0), (2, 2)));
+        assert_eq!(read_exr(&path).unwrap().data, [0.0; 4]);
     }
 
     #[test]

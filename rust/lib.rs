@@ -12,6 +12,7 @@ pub mod height_field_accel;
 pub mod image_io;
 mod lanes;
 pub mod light_cache;
+pub mod memory;
 pub mod lobe;
 pub mod ps;
 pub mod robust_ps;

@@ -28,6 +28,7 @@
 
 use glam::Vec3;
 
+use crate::error::Result;
 use crate::lanes::{Floats, Ints, Isa, Portable};
 use crate::ps::{fit_masked, flag, PixelFit, PsOutput};
 use crate::robust_ps::{gather, Lights, Scratch, LANES, MAD_TO_SIGMA, SATURATED};
@@ -66,7 +67,7 @@ const TILE: usize = 32;
 /// `images` laid out `(K, pixels, 3)`, with a diffuse term and a specular lobe, each
 /// exponent fitted for at most `rounds` rounds from each start, in the widest registers the
 /// CPU has (the same results in each).
-pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, rounds: usize, out: &mut PsOutput) {
+pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, rounds: usize, out: &mut PsOutput) -> Result<()> {
     let job = Job::new(images, lights, rounds, out);
     let work = || Box::new((Scratch::default(), Work::default()));
     #[cfg(target_arch = "x86_64")]
@@ -74,7 +75,7 @@ pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, rounds:
         // SAFETY: `detect` found AVX2 and FMA.
         return fit_masked(mask, TILE, out, work, |state, tile, fits| unsafe { job.fit_tile_avx2(avx2, state, tile, fits) });
     }
-    fit_masked(mask, TILE, out, work, |state, tile, fits| job.fit_tile(Portable, state, tile, fits));
+    fit_masked(mask, TILE, out, work, |state, tile, fits| job.fit_tile(Portable, state, tile, fits))
 }
 
 /// What every tile's fit reads.
@@ -678,7 +679,7 @@ mod tests {
         }
         let n = normals.len();
         let mut out = PsOutput { normals: vec![[0.0; 3]; n], albedo: vec![[0.0; 3]; n], flags: vec![flag::MASKED_OUT; n], used: vec![0; n] };
-        crate::tukey::fit_pixels(&images, &vec![true; n], &lights, 0.05, &mut out);
+        crate::tukey::fit_pixels(&images, &vec![true; n], &lights, 0.05, &mut out).unwrap();
         let job = Job::new(&images, &lights, LOBE_ROUNDS, &out);
         let pixels: Vec<usize> = (0..n).collect();
         let mut state = (Scratch::default(), Work::default());

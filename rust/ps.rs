@@ -26,6 +26,7 @@ use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::memory::{try_vec, try_with_capacity};
 use crate::robust_ps::Lights;
 use crate::scene::Light;
 
@@ -103,6 +104,19 @@ pub struct PsOutput {
     pub used: Vec<u16>,
 }
 
+impl PsOutput {
+    /// The output of `n` pixels, all masked out until fitted.
+    fn new(n: usize) -> Result<PsOutput> {
+        let what = |array: &str| format!("photometric stereo's {array} of {n} pixels");
+        Ok(PsOutput {
+            normals: try_vec(&what("normals"), n, [0.0; 3])?,
+            albedo: try_vec(&what("albedo"), n, [0.0; 3])?,
+            flags: try_vec(&what("flags"), n, flag::MASKED_OUT)?,
+            used: try_vec(&what("observation counts"), n, 0)?,
+        })
+    }
+}
+
 /// One pixel's fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct PixelFit {
@@ -127,6 +141,9 @@ pub fn check_lights(lights: &[Light]) -> Result<Mat3> {
         return Err(Error::input("lights", format!("{} given; photometric stereo needs at least 3", lights.len())));
     }
     for (k, light) in lights.iter().enumerate() {
+        if !(light.direction.is_finite() && light.direction.length_squared() > 0.0) {
+            return Err(Error::input(&format!("lights[{k}].direction"), format!("{:?} is not a finite non-zero vector", light.direction.to_array())));
+        }
         if light.irradiance.iter().any(|&e| !(e > 0.0 && e.is_finite())) {
             return Err(Error::input(&format!("lights[{k}].irradiance"), "must be positive in every channel"));
         }
@@ -143,27 +160,57 @@ pub fn check_lights(lights: &[Light]) -> Result<Mat3> {
 /// interleaved) for the pixels where `mask` is true.
 pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], settings: &PsSettings) -> Result<PsOutput> {
     let gram = check_lights(lights)?;
-    let k_count = lights.len();
+    check_images(images, mask, lights.len())?;
+    check_settings(settings)?;
+    let fit = Fit::new(lights, gram, settings);
+    let mut out = PsOutput::new(mask.len())?;
+    let per_pixel = Lights::new(&fit.directions, &fit.scale, &fit.saturated_b, gram);
+    match settings.robust {
+        Robust::Tukey => crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out)?,
+        Robust::Lobe => {
+            crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out)?;
+            crate::lobe::fit_pixels(images, mask, &per_pixel, settings.lobe_rounds, &mut out)?;
+        }
+        Robust::Trim => crate::robust_ps::fit_pixels(images, mask, &per_pixel, &mut out)?,
+        Robust::None | Robust::Threshold => return Ok(fit.streamed(images, mask, out)),
+    }
+    Ok(out)
+}
+
+/// Refuses images that are not `(K, pixels, 3)` for `k_count` lights and the pixels of
+/// `mask`, a mask of no pixel, and a NaN or infinity at a pixel where `mask` is true (named
+/// by image and pixel index).
+fn check_images(images: &[f32], mask: &[bool], k_count: usize) -> Result<()> {
     let n = mask.len();
+    if n == 0 {
+        return Err(Error::input("images", "no pixel: the images and the mask are empty"));
+    }
     if images.len() != k_count * n * 3 {
         return Err(Error::input("images", format!("{} values for {k_count} lights x {n} pixels x 3", images.len())));
+    }
+    let bad = images.par_chunks_exact(3 * n).enumerate().find_map_first(|(k, image)| {
+        let pixels = image.chunks_exact(3).zip(mask).enumerate();
+        pixels.filter(|(_, (_, &inside))| inside).find_map(|(p, (rgb, _))| rgb.iter().find(|v| !v.is_finite()).map(|&v| (k, p, v)))
+    });
+    match bad {
+        Some((k, p, v)) => Err(Error::input("images", format!("non-finite value {v} in image {k} at pixel {p} (row-major)"))),
+        None => Ok(()),
+    }
+}
+
+/// Refuses a shadow fraction outside [0, 1), a saturation level that is not a positive
+/// finite number, and no lobe rounds.
+fn check_settings(settings: &PsSettings) -> Result<()> {
+    if !(0.0..1.0).contains(&settings.shadow_fraction) {
+        return Err(Error::input("shadow_fraction", format!("{} is not in [0, 1)", settings.shadow_fraction)));
+    }
+    if let Some(level) = settings.saturation.filter(|level| !(*level > 0.0 && level.is_finite())) {
+        return Err(Error::input("saturation", format!("{level} is not a positive finite number")));
     }
     if settings.lobe_rounds == 0 {
         return Err(Error::input("lobe_rounds", "must be at least 1"));
     }
-    let fit = Fit::new(lights, gram, settings);
-    let mut out = PsOutput { normals: vec![[0.0; 3]; n], albedo: vec![[0.0; 3]; n], flags: vec![flag::MASKED_OUT; n], used: vec![0; n] };
-    let per_pixel = Lights::new(&fit.directions, &fit.scale, &fit.saturated_b, gram);
-    match settings.robust {
-        Robust::Tukey => crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out),
-        Robust::Lobe => {
-            crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out);
-            crate::lobe::fit_pixels(images, mask, &per_pixel, settings.lobe_rounds, &mut out);
-        }
-        Robust::Trim => crate::robust_ps::fit_pixels(images, mask, &per_pixel, &mut out),
-        Robust::None | Robust::Threshold => return Ok(fit.streamed(images, mask, out)),
-    }
-    Ok(out)
+    Ok(())
 }
 
 /// The auto mode's two fits at once: `images` where `mask` is true in the Tukey mode (the
@@ -178,8 +225,15 @@ pub fn tukey_with_lobe_check(images: &[f32], mask: &[bool], check: &[usize], lig
     if let Some(&pixel) = check.iter().find(|&&pixel| pixel >= n) {
         return Err(Error::input("check", format!("pixel {pixel} is outside the {n} pixels of the mask")));
     }
+    if check_rounds == 0 {
+        return Err(Error::input("check_rounds", "must be at least 1"));
+    }
     let tukey = PsSettings { robust: Robust::Tukey, ..*settings };
     let lobe = PsSettings { robust: Robust::Lobe, lobe_rounds: check_rounds, ..*settings };
+    if check.is_empty() {
+        return Ok((photometric_stereo(images, mask, lights, &tukey)?, Vec::new()));
+    }
+    check_images(images, mask, lights.len())?;
     let look = || {
         let observed: Vec<f32> = images.chunks_exact(3 * n).flat_map(|image| check.iter().flat_map(move |&pixel| image[3 * pixel..3 * pixel + 3].iter().copied())).collect();
         photometric_stereo(&observed, &vec![true; check.len()], lights, &lobe)
@@ -191,9 +245,10 @@ pub fn tukey_with_lobe_check(images: &[f32], mask: &[bool], check: &[usize], lig
 /// Fits the pixels where `mask` is true, `chunk` of them at a time in parallel, into `out`:
 /// `fit` appends (pixel, fit) for each pixel of a chunk (pixel indices in increasing order),
 /// with the working state that `init` makes for each thread, and each chunk's fits go
-/// straight into its own rows of `out`.
-pub(crate) fn fit_masked<S>(mask: &[bool], chunk: usize, out: &mut PsOutput, init: impl Fn() -> S + Sync + Send, fit: impl Fn(&mut S, &[usize], &mut Vec<(usize, PixelFit)>) + Sync + Send) {
-    let pixels = masked_pixels(mask);
+/// straight into its own rows of `out`. Fails only when the list of the mask's pixels
+/// cannot be allocated.
+pub(crate) fn fit_masked<S>(mask: &[bool], chunk: usize, out: &mut PsOutput, init: impl Fn() -> S + Sync + Send, fit: impl Fn(&mut S, &[usize], &mut Vec<(usize, PixelFit)>) + Sync + Send) -> Result<()> {
+    let pixels = masked_pixels(mask)?;
     let chunks: Vec<&[usize]> = pixels.chunks(chunk).collect();
     let mut windows = Vec::with_capacity(chunks.len());
     let (mut normals, mut albedo, mut flags, mut used) = (&mut out.normals[..], &mut out.albedo[..], &mut out.flags[..], &mut out.used[..]);
@@ -220,20 +275,22 @@ pub(crate) fn fit_masked<S>(mask: &[bool], chunk: usize, out: &mut PsOutput, ini
             (normals[i], albedo[i], flags[i], used[i]) = (pixel.normal, pixel.albedo, pixel.flag, pixel.used);
         }
     });
+    Ok(())
 }
 
 /// The indices where `mask` is true, in increasing order (before the threads start: blocks
 /// of the mask with none are skipped).
-fn masked_pixels(mask: &[bool]) -> Vec<usize> {
+fn masked_pixels(mask: &[bool]) -> Result<Vec<usize>> {
     const BLOCK: usize = 64;
-    let mut pixels = Vec::new();
+    let count = mask.iter().filter(|&&inside| inside).count();
+    let mut pixels = try_with_capacity(&format!("the list of the mask's {count} pixels"), count)?;
     for (block, flags) in mask.chunks(BLOCK).enumerate() {
         // Without an early exit, so that it runs over whole registers.
         if flags.iter().fold(false, |any, &m| any | m) {
             pixels.extend(flags.iter().enumerate().filter_map(|(i, &m)| m.then_some(block * BLOCK + i)));
         }
     }
-    pixels
+    Ok(pixels)
 }
 
 /// Runs `work` on every item of `items`, in parallel, with one working state that `init`
@@ -614,7 +671,7 @@ mod tests {
         for n in [0, 1, 63, 64, 65, 200, 1000] {
             let mask: Vec<bool> = (0..n).map(|i: usize| (i / 70) % 3 == 1 || i % 97 == 5 || i + 1 == n).collect();
             let expected: Vec<usize> = (0..n).filter(|&i| mask[i]).collect();
-            assert_eq!(masked_pixels(&mask), expected, "{n} pixels");
+            assert_eq!(masked_pixels(&mask).unwrap(), expected, "{n} pixels");
         }
     }
 

@@ -1,20 +1,23 @@
 //! The pyo3 bindings (`irtps._core`): conversions only. Heavy work runs with the GIL
 //! released, and every core error becomes, here and only here, the Python exception that
 //! irtps raises for it: `irtps.errors.ArgumentError` for an argument, `DatasetError` for a
-//! file. Their types for Python are in python/irtps/_core.pyi.
+//! file, `MemoryError` for a buffer that could not be allocated. Their types for Python
+//! are in python/irtps/_core.pyi.
 
+use std::borrow::Cow;
 use std::path::PathBuf;
 
 use glam::vec3a;
 use numpy::ndarray::{Array, Array2, IxDyn};
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyArray2, PyArray3, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods};
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyMemoryError, PyValueError};
 use pyo3::prelude::*;
 use rayon::prelude::*;
 
 use crate::denoise::{denoise as core_denoise, Surface};
 use crate::error::Error;
 use crate::image_io::{self, Image};
+use crate::memory::{try_collect, try_vec};
 use crate::ps::{check_lights as core_check_lights, photometric_stereo as core_ps, tukey_with_lobe_check as core_tukey_with_lobe_check, PsOutput, PsSettings, Robust};
 use crate::render::{RenderSettings, Renderer as CoreRenderer};
 use crate::residual::{compare as core_compare, Observed, RenderedPlanes};
@@ -36,6 +39,7 @@ fn to_py(err: Error) -> PyErr {
     match err {
         Error::Input { field, message } => argument_error(&field, message),
         Error::Io { .. } | Error::Format { .. } => DatasetError::new_err(err.to_string()),
+        Error::Memory { .. } => PyMemoryError::new_err(err.to_string()),
     }
 }
 
@@ -45,6 +49,8 @@ fn image_to_array(py: Python<'_>, image: Image) -> PyResult<Bound<'_, PyArrayDyn
     Ok(array.into_pyarray(py))
 }
 
+/// The (H, W) or (H, W, C) array `array` as an image, refused by `name` unless it has a
+/// pixel.
 fn array_to_image(array: &PyReadonlyArrayDyn<'_, f32>, name: &str) -> PyResult<Image> {
     let shape = array.shape();
     let (height, width, channels) = match *shape {
@@ -52,8 +58,19 @@ fn array_to_image(array: &PyReadonlyArrayDyn<'_, f32>, name: &str) -> PyResult<I
         [h, w, c] => (h, w, c),
         _ => return Err(argument_error(name, format!("expected an (H, W) or (H, W, C) array, got shape {shape:?}"))),
     };
-    let data = array.as_array().iter().copied().collect();
+    if height == 0 || width == 0 {
+        return Err(argument_error(name, format!("shape {shape:?} has no pixel")));
+    }
+    let data = flat(array, name)?.into_owned();
     Ok(Image { width, height, channels, data })
+}
+
+/// `err` with the core's input `field` renamed `argument`, the binding's name for it.
+fn renamed(err: Error, field: &str, argument: &str) -> Error {
+    match err {
+        Error::Input { field: f, message } if f == field => Error::input(argument, message),
+        other => other,
+    }
 }
 
 /// Reads an OpenEXR file: float32 (H, W, 3) for R, G, B or (H, W) for a single Y channel.
@@ -67,7 +84,7 @@ fn read_exr(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArrayDyn<f32>
 #[pyfunction]
 fn write_exr(py: Python<'_>, path: PathBuf, array: PyReadonlyArrayDyn<'_, f32>) -> PyResult<()> {
     let image = array_to_image(&array, "array")?;
-    py.detach(|| image_io::write_exr(&path, &image)).map_err(to_py)
+    py.detach(|| image_io::write_exr(&path, &image)).map_err(|e| to_py(renamed(e, "image", "array")))
 }
 
 /// Reads an 8- or 16-bit PNG: (values / (2^bits − 1) as float32, (H, W) or (H, W, 3); bits).
@@ -81,7 +98,7 @@ fn read_png(py: Python<'_>, path: PathBuf) -> PyResult<(Bound<'_, PyArrayDyn<f32
 #[pyfunction]
 fn write_png(py: Python<'_>, path: PathBuf, array: PyReadonlyArrayDyn<'_, f32>, bit_depth: u8) -> PyResult<()> {
     let image = array_to_image(&array, "array")?;
-    py.detach(|| image_io::write_png(&path, &image, bit_depth)).map_err(to_py)
+    py.detach(|| image_io::write_png(&path, &image, bit_depth)).map_err(|e| to_py(renamed(e, "image", "array")))
 }
 
 /// Reads EXR/PNG images in parallel into one float32 (K, H, W, 3) array.
@@ -100,24 +117,27 @@ fn rows_of_3(array: &PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<Vec<[f32
     Ok(a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
 }
 
-/// The rows of an (N, 3) array as one flat slice: borrowed when the array is C-contiguous,
-/// copied otherwise.
-fn flat_rows_of_3<'a>(array: &'a PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<std::borrow::Cow<'a, [f32]>> {
+/// The rows of an (N, 3) array of finite values as one flat slice: borrowed when the array
+/// is C-contiguous, copied otherwise.
+fn flat_rows_of_3<'a>(array: &'a PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<Cow<'a, [f32]>> {
     if array.shape()[1] != 3 {
         return Err(argument_error(name, format!("expected shape (N, 3), got {:?}", array.shape())));
     }
-    Ok(match array.as_array().to_slice() {
-        Some(flat) => std::borrow::Cow::Borrowed(flat),
-        None => std::borrow::Cow::Owned(array.as_array().iter().copied().collect()),
-    })
+    let values = flat(array, name)?;
+    if let Some(index) = values.iter().position(|v| !v.is_finite()) {
+        return Err(argument_error(name, format!("non-finite value {} in row {}", values[index], index / 3)));
+    }
+    Ok(values)
 }
 
-/// An array's values in C order: borrowed when the array is C-contiguous, copied otherwise.
-fn flat<'a, T: numpy::Element + Copy, D: numpy::ndarray::Dimension>(array: &'a numpy::PyReadonlyArray<'_, T, D>) -> std::borrow::Cow<'a, [T]> {
+/// An array's values in C order: borrowed when the array is C-contiguous, copied otherwise
+/// (a `MemoryError` naming `name` when the copy cannot be allocated).
+fn flat<'a, T: numpy::Element + Copy, D: numpy::ndarray::Dimension>(array: &'a numpy::PyReadonlyArray<'_, T, D>, name: &str) -> PyResult<Cow<'a, [T]>> {
     // numpy's own `as_slice` also lends Fortran-ordered data: ndarray's `to_slice` only C order.
-    match array.as_array().to_slice() {
-        Some(values) => std::borrow::Cow::Borrowed(values),
-        None => std::borrow::Cow::Owned(array.as_array().iter().copied().collect()),
+    let view = array.as_array();
+    match view.to_slice() {
+        Some(values) => Ok(Cow::Borrowed(values)),
+        None => Ok(Cow::Owned(try_collect(&format!("a C-ordered copy of {name}"), view.len(), view.iter().copied()).map_err(to_py)?)),
     }
 }
 
@@ -195,14 +215,11 @@ impl Renderer {
         if directions.len() != irradiance.len() {
             return Err(argument_error("light_irradiance", "needs one row per light direction"));
         }
-        let albedo_view = albedo.as_array();
+        let albedo_values = flat(&albedo, "albedo")?;
         let surface = HeightField {
-            height: height.as_array().iter().copied().collect(),
-            mask: mask.as_array().iter().copied().collect(),
-            albedo: albedo_view.as_slice().map_or_else(
-                || albedo_view.outer_iter().flat_map(|r| r.outer_iter().map(|p| [p[0], p[1], p[2]]).collect::<Vec<_>>()).collect(),
-                |s| s.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect(),
-            ),
+            height: flat(&height, "height")?.into_owned(),
+            mask: flat(&mask, "mask")?.into_owned(),
+            albedo: albedo_values.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect(),
         };
         let scene = Scene {
             camera: Camera { width: w, height: h, pixel_size },
@@ -223,7 +240,7 @@ impl Renderer {
             .zip(&irradiance)
             .map(|(d, e)| Light { direction: vec3a(d[0], d[1], d[2]), irradiance: *e })
             .collect();
-        let inner = py.detach(|| CoreRenderer::new(&scene, &lights)).map_err(to_py)?;
+        let inner = py.detach(|| CoreRenderer::new(&scene, &lights)).map_err(|e| to_py(renamed(renamed(e, "camera", "height"), "camera.pixel_size", "pixel_size")))?;
         Ok(Renderer { inner })
     }
 
@@ -235,10 +252,10 @@ impl Renderer {
         if albedo.shape() != [camera.height, camera.width, 3] {
             return Err(argument_error("albedo", format!("shape {:?}, expected {:?}", albedo.shape(), [camera.height, camera.width, 3])));
         }
-        let values = flat(&albedo);
+        let values = flat(&albedo, "albedo")?;
         let albedo: Vec<Rgb> = values.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
         let irradiance = rows_of_3(&light_irradiance, "light_irradiance")?;
-        let inner = py.detach(|| self.inner.with_reflectance(&albedo, &irradiance)).map_err(to_py)?;
+        let inner = py.detach(|| self.inner.with_reflectance(&albedo, &irradiance)).map_err(|e| to_py(renamed(e, "irradiance", "light_irradiance")))?;
         Ok(Renderer { inner })
     }
 
@@ -301,9 +318,16 @@ impl Renderer {
         if o.len() != d.len() {
             return Err(argument_error("directions", "needs one row per origin"));
         }
+        if let Some(row) = d.chunks_exact(3).position(|d| d == [0.0; 3]) {
+            return Err(argument_error("directions", format!("row {row} is the zero vector")));
+        }
+        if threads == Some(0) {
+            return Err(argument_error("threads", "must be at least 1 (None: all cores)"));
+        }
         let tracer = self.inner.tracer();
-        let mut t = vec![f32::INFINITY; o.len() / 3];
-        let mut id = vec![-1i64; o.len() / 3];
+        let rays = o.len() / 3;
+        let mut t = try_vec(&format!("the distances of {rays} rays"), rays, f32::INFINITY).map_err(to_py)?;
+        let mut id = try_vec(&format!("the triangles of {rays} rays"), rays, -1i64).map_err(to_py)?;
         // A batch of rays (flat xyz rows) into its outputs.
         let batch = |t: &mut [f32], id: &mut [i64], o: &[f32], d: &[f32]| {
             let mut out = t.iter_mut().zip(id.iter_mut());
@@ -485,17 +509,17 @@ fn compare_rendering<'py>(
         }
     }
     let total = observed.shape()[1];
-    if observed.shape()[0] != lights || observed.shape()[2] != 3 || first + pixels > total {
-        return Err(argument_error("observed", format!("shape {:?} does not hold pixels {first}..{} of {lights} lights", observed.shape(), first + pixels)));
+    if observed.shape()[0] != lights || observed.shape()[2] != 3 || first.checked_add(pixels).is_none_or(|end| end > total) {
+        return Err(argument_error("observed", format!("shape {:?} does not hold {pixels} pixels from {first} for {lights} lights", observed.shape())));
     }
     if let Some(keep) = &keep {
         if keep.shape() != [lights, total] {
             return Err(argument_error("keep", format!("shape {:?}, expected {:?}", keep.shape(), [lights, total])));
         }
     }
-    let (direct, observed) = (flat(&direct), flat(&observed));
-    let halves: Vec<_> = halves.iter().map(flat).collect();
-    let keep = keep.as_ref().map(flat);
+    let (direct, observed) = (flat(&direct, "direct")?, flat(&observed, "observed")?);
+    let halves = halves.iter().map(|half| flat(half, "halves")).collect::<PyResult<Vec<_>>>()?;
+    let keep = keep.as_ref().map(|keep| flat(keep, "keep")).transpose()?;
     let comparison = py
         .detach(|| {
             let half_slices: Vec<&[f32]> = halves.iter().map(|h| h.as_ref()).collect();
@@ -524,6 +548,9 @@ fn denoise_indirect<'py>(
     albedo: PyReadonlyArray3<'_, f32>,
 ) -> PyResult<DenoisedArrays<'py>> {
     let (h, w) = (mask.shape()[0], mask.shape()[1]);
+    if h == 0 || w == 0 {
+        return Err(argument_error("mask", format!("shape {:?} has no pixel", mask.shape())));
+    }
     if height_px.shape() != [h, w] {
         return Err(argument_error("height_px", format!("shape {:?} differs from mask {:?}", height_px.shape(), [h, w])));
     }
@@ -535,10 +562,10 @@ fn denoise_indirect<'py>(
     if shape[1..] != [pixels.len(), 3] {
         return Err(argument_error("indirect", format!("shape {shape:?}, expected (K, {}, 3) for the mask's pixels", pixels.len())));
     }
-    let (heights, albedo_all) = (flat(&height_px), flat(&albedo));
+    let (heights, albedo_all) = (flat(&height_px, "height_px")?, flat(&albedo, "albedo")?);
     let height_px: Vec<f32> = pixels.iter().map(|&i| heights[i]).collect();
     let albedo: Vec<Rgb> = pixels.iter().map(|&i| [albedo_all[3 * i], albedo_all[3 * i + 1], albedo_all[3 * i + 2]]).collect();
-    let (indirect, noise_energy) = (flat(&indirect), flat(&noise_energy));
+    let (indirect, noise_energy) = (flat(&indirect, "indirect")?, flat(&noise_energy, "noise_energy")?);
     let surface = Surface { size: (w, h), pixels: &pixels, height_px: &height_px, albedo: &albedo };
     let denoised = py.detach(|| core_denoise(&surface, &indirect, &noise_energy)).map_err(to_py)?;
     let filtered = Array::from_shape_vec((shape[0], shape[1], 3), denoised.indirect).map_err(|e| PyValueError::new_err(e.to_string()))?;

@@ -15,9 +15,19 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::geometry::Mesh;
 use crate::light_cache::LightCache;
+use crate::memory::{check_available, try_collect, try_vec};
 use crate::sampler::{cosine_hemisphere, hash, low_discrepancy_4d, unit_float, Rng};
 use crate::scene::{check_albedo, validate_lights, Camera, Light, Rgb, Scene};
 use crate::tracer::Tracer;
+
+/// Bytes per camera pixel that building a scene takes at its peak, with room to spare: the
+/// mesh (a vertex and two triangles a pixel, their normals and albedo), the height-field
+/// grid, the BVH of the surroundings and their build's temporaries. [`Renderer::new`]
+/// reserves them up front, as the BVH (obvhs) allocates without a way to fail.
+const SCENE_BYTES_PER_PIXEL: usize = 512;
+/// Bytes per camera pixel and light of the light cache: the visibility of each light at the
+/// object's vertices and at the panels' grid points, about a pixel apart.
+const LIGHT_CACHE_BYTES_PER_PIXEL: usize = 2;
 
 /// How much to render.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -75,6 +85,9 @@ impl Renderer {
             return Err(Error::input("lights", "no lights given"));
         }
         validate_lights(lights)?;
+        let (pixels, k) = (scene.camera.pixel_count(), lights.len());
+        let estimate = pixels.saturating_mul(SCENE_BYTES_PER_PIXEL.saturating_add(LIGHT_CACHE_BYTES_PER_PIXEL.saturating_mul(k)));
+        check_available(&format!("the mesh, BVH and light cache of a {}x{} scene under {k} lights", scene.camera.width, scene.camera.height), estimate)?;
         let mesh = Mesh::from_scene(scene);
         let tracer = Arc::new(Tracer::new(&mesh));
         let (lo, hi) = mesh.near_bounds();
@@ -140,7 +153,7 @@ impl Renderer {
             return Err(Error::input("rows", format!("{rows:?} is not inside 0..{}", self.camera.height)));
         }
         let w = self.camera.width;
-        let pixels: Vec<usize> = (rows.start * w..rows.end * w).collect();
+        let pixels = try_collect(&format!("the indices of rows {rows:?} of {w} pixels"), (rows.end - rows.start) * w, rows.start * w..rows.end * w)?;
         self.render_pixels(&pixels, settings)
     }
 
@@ -152,12 +165,13 @@ impl Renderer {
             return Err(Error::input("pixels", format!("index {bad} is outside the {}x{} image", w, self.camera.height)));
         }
         let stride = settings.planes() * k_count * 3;
-        let mut per_pixel = vec![0.0f32; pixels.len() * stride];
+        let what = format!("the rendering of {} pixels under {k_count} lights ({} planes)", pixels.len(), settings.planes());
+        let mut per_pixel = try_vec(&what, pixels.len().saturating_mul(stride), 0.0f32)?;
         per_pixel.par_chunks_mut(stride).zip(pixels).for_each(|(acc, &p)| self.render_pixel(p / w, p % w, settings, acc));
         // Transpose pixel-major (pixel, plane, c, k) to image-major (plane, k, pixel, c).
         let planes = settings.planes() * k_count;
         let plane_len = pixels.len() * 3;
-        let mut out = vec![0.0f32; planes * plane_len];
+        let mut out = try_vec(&what, planes * plane_len, 0.0f32)?;
         out.par_chunks_mut(plane_len.max(1)).enumerate().for_each(|(image, dst)| {
             let (plane, k) = (image / k_count, image % k_count);
             for (p, px) in dst.chunks_exact_mut(3).enumerate() {

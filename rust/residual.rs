@@ -9,6 +9,7 @@
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::memory::try_vec;
 
 /// The planes of a rendering of N pixels under K lights, each laid out (K, N, 3).
 pub struct RenderedPlanes<'a> {
@@ -69,8 +70,8 @@ pub struct Comparison {
 /// Compares `planes` (N pixels, K lights) with the observations of the same pixels in
 /// `observed`.
 ///
-/// Errors name the argument whose length does not match, or the counts when there are not
-/// one or two halves with a path each.
+/// Errors name the argument whose length does not match or that holds a NaN or an infinity,
+/// or the counts when there are not one or two halves with a path each.
 pub fn compare(planes: &RenderedPlanes<'_>, observed: &Observed<'_>, lights: usize, pixels: usize) -> Result<Comparison> {
     let size = lights * pixels * 3;
     let check = |name: &str, len: usize, expected: usize| {
@@ -81,8 +82,8 @@ pub fn compare(planes: &RenderedPlanes<'_>, observed: &Observed<'_>, lights: usi
         }
     };
     check("direct", planes.direct.len(), size)?;
-    if observed.first + pixels > observed.total {
-        return Err(Error::input("first", format!("pixels {}..{} of {}", observed.first, observed.first + pixels, observed.total)));
+    if observed.first.checked_add(pixels).is_none_or(|end| end > observed.total) {
+        return Err(Error::input("first", format!("pixels {}..{}+{pixels} of {}", observed.first, observed.first, observed.total)));
     }
     check("observed", observed.values.len(), lights * observed.total * 3)?;
     if let Some(keep) = observed.keep {
@@ -94,9 +95,17 @@ pub fn compare(planes: &RenderedPlanes<'_>, observed: &Observed<'_>, lights: usi
     for half in planes.halves {
         check("halves", half.len(), size)?;
     }
+    check_finite("direct", planes.direct, pixels, 0)?;
+    for half in planes.halves {
+        check_finite("halves", half, pixels, 0)?;
+    }
+    for k in 0..lights {
+        let seen = &observed.values[3 * (k * observed.total + observed.first)..][..3 * pixels];
+        check_finite("observed", seen, pixels, k * pixels)?;
+    }
     let samples = planes.counts.iter().sum::<usize>() as f32;
     let weights: Vec<f32> = planes.counts.iter().map(|&c| c as f32).collect();
-    let mut indirect = vec![0f32; size];
+    let mut indirect = try_vec(&format!("the inter-reflected light of {pixels} pixels under {lights} lights"), size, 0f32)?;
     let row = pixels * 3;
     let sums = if size == 0 {
         ResidualSums::default()
@@ -141,6 +150,19 @@ pub fn compare(planes: &RenderedPlanes<'_>, observed: &Observed<'_>, lights: usi
         });
     }
     Ok(Comparison { indirect, noise_energy, sums })
+}
+
+/// Refuses a NaN or an infinity in `values`, the RGB values of `pixels` pixels for each
+/// light from the one that `skipped` pixels precede, naming `name`, the light and the pixel
+/// (counted from the first compared).
+fn check_finite(name: &str, values: &[f32], pixels: usize, skipped: usize) -> Result<()> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(index) => {
+            let at = skipped + index / 3;
+            Err(Error::input(name, format!("non-finite value {} for light {}, pixel {}", values[index], at / pixels, at % pixels)))
+        }
+        None => Ok(()),
+    }
 }
 
 #[cfg(test)]

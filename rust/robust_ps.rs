@@ -9,6 +9,7 @@
 
 use glam::{Mat3, Vec3};
 
+use crate::error::Result;
 use crate::ps::{finish, fit_masked, flag, PixelFit, PsOutput, COPLANAR_RATIO};
 
 /// The trim mode drops this fraction of each pixel's darkest observations...
@@ -104,7 +105,7 @@ struct Work {
 }
 
 /// Trims each pixel where `mask` is true, from `images` laid out `(K, pixels, 3)`, into `out`.
-pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, out: &mut PsOutput) {
+pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, out: &mut PsOutput) -> Result<()> {
     let n = mask.len();
     fit_masked(mask, TILE, out, || Box::new(Scratch::default()), |scratch, tile, fits| {
         gather(images, n, tile, lights, scratch);
@@ -114,7 +115,7 @@ pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, out: &m
             let pixel = Pixel { grey: &grey[i * padded..][..padded], rgb: &rgb[i * lights.count..][..lights.count] };
             fits.push((p, trim(&pixel, lights, work)));
         }
-    });
+    })
 }
 
 /// Copies the tile's observations into `scratch`, pixel-major.

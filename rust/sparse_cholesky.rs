@@ -10,9 +10,11 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{LltError, LltRegularization};
 use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::sparse::FaerError;
 use faer::{Conj, MatMut, Par, Side};
 
 use crate::error::{Error, Result};
+use crate::memory::try_vec;
 
 /// The `L Lᵀ` factorisation of a sparse symmetric positive definite matrix.
 #[derive(Debug)]
@@ -34,15 +36,14 @@ impl SparseCholesky {
         let structure = SymbolicSparseColMatRef::new_checked(n, n, indptr, None, indices);
         let matrix = SparseColMatRef::new(structure, data);
         let symbolic = factorize_symbolic_cholesky(structure, Side::Upper, Default::default(), Default::default())
-            .map_err(|e| Error::input(name, format!("symbolic Cholesky analysis failed: {e:?}")))?;
-        let mut values = Vec::new();
-        values
-            .try_reserve_exact(symbolic.len_val())
-            .map_err(|_| Error::input(name, format!("out of memory for a Cholesky factor of {} values", symbolic.len_val())))?;
-        values.resize(symbolic.len_val(), 0.0);
+            .map_err(|e| match e {
+                FaerError::OutOfMemory => Error::memory_of_unknown_size(format!("{name}: the symbolic Cholesky analysis of a {n}x{n} matrix")),
+                e => Error::input(name, format!("symbolic Cholesky analysis failed: {e:?}")),
+            })?;
+        let mut values = try_vec(&format!("{name}: a Cholesky factor of {} values", symbolic.len_val()), symbolic.len_val(), 0.0)?;
         let par = faer::get_global_parallelism();
-        let mut scratch = MemBuffer::try_new(symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()))
-            .map_err(|_| Error::input(name, "out of memory for the Cholesky factorisation's workspace"))?;
+        let workspace = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
+        let mut scratch = MemBuffer::try_new(workspace).map_err(|_| Error::memory(format!("{name}: the Cholesky factorisation's workspace"), workspace.size_bytes()))?;
         symbolic
             .factorize_numeric_llt(&mut values, matrix, Side::Upper, LltRegularization::default(), par, MemStack::new(&mut scratch), Default::default())
             .map_err(|LltError::NonPositivePivot { index }| {
@@ -70,8 +71,11 @@ impl SparseCholesky {
             return Err(Error::input(name, format!("{} values for {columns} right-hand sides of length {n}", rhs.len())));
         }
         let par = Par::Seq;
-        let mut scratch = MemBuffer::try_new(self.symbolic.solve_in_place_scratch::<f64>(columns, par))
-            .map_err(|_| Error::input(name, "out of memory for the solve's workspace"))?;
+        if let Some(value) = rhs.iter().find(|v| !v.is_finite()) {
+            return Err(Error::input(name, format!("non-finite value {value}")));
+        }
+        let workspace = self.symbolic.solve_in_place_scratch::<f64>(columns, par);
+        let mut scratch = MemBuffer::try_new(workspace).map_err(|_| Error::memory(format!("{name}: the solve's workspace"), workspace.size_bytes()))?;
         let target = MatMut::from_column_major_slice_mut(rhs, n, columns);
         LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(Conj::No, target, par, MemStack::new(&mut scratch));
         Ok(())
@@ -80,6 +84,9 @@ impl SparseCholesky {
 
 /// Checks compressed sparse column arrays, so that faer's own checks (which panic) pass.
 fn check_compressed(name: &str, n: usize, indptr: &[usize], indices: &[usize], data: &[f64]) -> Result<()> {
+    if n == 0 {
+        return Err(Error::input(name, "a 0x0 matrix has nothing to factor"));
+    }
     if indptr.len() != n + 1 {
         return Err(Error::input(name, format!("indptr has {} entries for {n} columns (expected {})", indptr.len(), n + 1)));
     }
@@ -93,7 +100,7 @@ fn check_compressed(name: &str, n: usize, indptr: &[usize], indices: &[usize], d
         return Err(Error::input(name, format!("non-finite value {value}")));
     }
     for (column, bounds) in indptr.windows(2).enumerate() {
-        if bounds[0] > bounds[1] {
+        if bounds[0] > bounds[1] || bounds[1] > indices.len() {
             return Err(Error::input(name, format!("indptr decreases at column {column}")));
         }
         let rows = &indices[bounds[0]..bounds[1]];

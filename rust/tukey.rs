@@ -30,6 +30,7 @@ use std::ops::{BitAnd, BitXor};
 
 use glam::{Mat3, Vec3};
 
+use crate::error::Result;
 use crate::lanes::{Floats, Ints, Isa, Portable};
 use crate::ps::{fit_masked, flag, PixelFit, PsOutput};
 use crate::robust_ps::{full_fit, solved, Lights, LANES, MAD_TO_SIGMA, SATURATED};
@@ -70,7 +71,7 @@ const STAGE_GAP: usize = 16;
 
 /// Fits the pixels where `mask` is true from `images` laid out `(K, pixels, 3)` into `out`,
 /// in the widest registers the CPU has (the same results in each).
-pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, shadow_fraction: f32, out: &mut PsOutput) {
+pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, shadow_fraction: f32, out: &mut PsOutput) -> Result<()> {
     let source = Source { images, n: mask.len(), lights, shadow_fraction };
     #[cfg(target_arch = "x86_64")]
     {
@@ -83,7 +84,7 @@ pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, shadow_
             return fit_masked(mask, CHUNK, out, || Box::new(Machine::new(lights)), |machine, chunk, fits| unsafe { machine.run_avx2(avx2, &source, chunk, fits) });
         }
     }
-    fit_masked(mask, CHUNK, out, || Box::new(Machine::<8>::new(lights)), |machine, chunk, fits| machine.run_in(Portable, Portable, &source, chunk, fits));
+    fit_masked(mask, CHUNK, out, || Box::new(Machine::<8>::new(lights)), |machine, chunk, fits| machine.run_in(Portable, Portable, &source, chunk, fits))
 }
 
 /// Where the pixels' observations come from.

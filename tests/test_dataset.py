@@ -416,3 +416,26 @@ def test_reference_data_sets_load_and_round_trip(tmp_path, name):
     assert np.all(gt.normal[dataset.mask][:, 2] > 0.0)
     save_dataset(dataset, tmp_path / name)
     assert_same_dataset(load_dataset(tmp_path / name), dataset)
+
+
+def _shift_exr_data_window(path, dx):
+    """Move the data window of an EXR written by `write_exr` `dx` columns right, leaving its
+    display window (and the file's scanlines, which only hold their row) where they were."""
+    data = bytearray(path.read_bytes())
+    window = data.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4
+    x0, y0, x1, y1 = np.frombuffer(bytes(data[window : window + 16]), "<i4")
+    data[window : window + 16] = np.array([x0 + dx, y0, x1 + dx, y1], "<i4").tobytes()
+    path.write_bytes(bytes(data))
+
+
+def test_an_exr_data_window_is_placed_in_its_display_window(tmp_path):
+    path = tmp_path / "offset.exr"
+    image = np.arange(3 * 4 * 3, dtype=np.float32).reshape(3, 4, 3) + 1
+    write_exr(path, image)
+    _shift_exr_data_window(path, 2)
+    read = read_exr(path)
+    assert read.shape == (3, 4, 3)
+    np.testing.assert_array_equal(read[:, :2], 0)
+    np.testing.assert_array_equal(read[:, 2:], image[:, :2])
+    _shift_exr_data_window(path, -3)  # one column left of the display window
+    np.testing.assert_array_equal(read_exr(path), np.concatenate([image[:, 1:], np.zeros((3, 1, 3), np.float32)], axis=1))

@@ -196,3 +196,54 @@ def test_the_command_fixes_glibcs_mmap_threshold():
     # Its effect on a run's peak is measured by benches/memory_bench.py (1.52x -> 1.40x the
     # decoded images on DiLiGenT reading); here, that glibc takes the setting.
     assert return_freed_memory()
+
+
+# An allocation of the core that fails: an error, not an abort -------------------------------
+
+_LIMITED_CHILD = """
+import resource, sys
+import irtps.resources
+from irtps import _core
+from irtps.cli import main
+margin = int(sys.argv[1])
+irtps.resources.available_memory_bytes = lambda: None  # as where it cannot be read: no check up front
+in_use = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmSize")) * 1024
+resource.setrlimit(resource.RLIMIT_AS, (in_use + margin, in_use + margin))
+if sys.argv[2] == "read_images":
+    try:
+        _core.read_images([sys.argv[3]] * int(sys.argv[4]))
+    except MemoryError as error:
+        print(error, file=sys.stderr)
+        sys.exit(3)
+    sys.exit(0)
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def _run_limited(margin, *argv):
+    """Run `argv` (the command's, or ``read_images PATH COUNT``) in a child whose address space
+    is limited to what it uses after the imports plus `margin` bytes."""
+    return subprocess.run(
+        [sys.executable, "-c", _LIMITED_CHILD, str(margin), *map(str, argv)], capture_output=True, text=True, timeout=300, check=False
+    )
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="address-space limit and /proc/self/status, Linux")
+def test_an_image_too_large_for_the_address_space_is_a_memory_error_not_an_abort(tmp_path):
+    data = shutil.copytree(MITSUBA, tmp_path / "data")
+    _claim_exr_size(data / "images" / "000.exr", 10_000, 10_000)  # 1.2 GB of samples to decode
+    result = _run_limited(256 << 20, "reconstruct", data, "--out", tmp_path / "out", "--quiet")
+    assert result.returncode == 2, (result.returncode, result.stderr)
+    image = data / "images" / "000.exr"
+    assert result.stderr == (
+        f"irtps: error: not enough memory ({image}: decoding its 10000x10000 data window: could not allocate 1200110592 bytes)\n"
+    )
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="address-space limit and /proc/self/status, Linux")
+def test_a_stack_of_images_too_large_for_the_address_space_is_a_memory_error():
+    image = MITSUBA / "images" / "000.exr"
+    result = _run_limited(64 << 20, "read_images", image, 1000)  # 1000 x 96 x 96 x 12 bytes: 110.6 MB
+    assert result.returncode == 3, (result.returncode, result.stderr)
+    assert result.stderr == "the 1000 images of 96x96 as float32 RGB: could not allocate 110592000 bytes\n"

@@ -29,7 +29,10 @@ MAX_IMAGE_PIXELS = _core.MAX_IMAGE_PIXELS
 
 
 def read_exr(path: str | Path) -> np.ndarray:
-    """Read an OpenEXR file with channels R, G, B or a single Y.
+    """Read an OpenEXR file with channels R, G, B or a single Y: the image of its display
+    window, in which the pixels of its data window are placed where that window lies; the
+    display window's pixels outside the data window are 0, and data outside the display
+    window are not read.
 
     Parameters
     ----------
@@ -252,9 +255,20 @@ def _png_size(head: bytes) -> tuple[int, int] | None:
 
 
 def _exr_size(head: bytes) -> tuple[int, int] | None:
-    """The data window of the first header of an EXR file."""
+    """The (H, W) that reading the first header of an EXR file takes memory for: the larger of
+    its data window (decoded) and its display window (the image read)."""
     if not head.startswith(_EXR_MAGIC) or len(head) < 8:
         return None
+    windows = _exr_windows(head)
+    if windows is None or len(windows) < 2:
+        return None
+    return max(windows, key=lambda size: size[0] * size[1])
+
+
+def _exr_windows(head: bytes) -> list[tuple[int, int]] | None:
+    """The (H, W) of the data and display windows of the first header of an EXR file, in
+    the header's order; None if one is empty or the header cannot be parsed."""
+    windows = []
     at = 8
     while at < len(head) and head[at] != 0:
         name_end = head.find(b"\0", at)
@@ -266,12 +280,14 @@ def _exr_size(head: bytes) -> tuple[int, int] | None:
         value = head[type_end + 5 : type_end + 5 + length]
         if length < 0 or len(value) < length:
             return None
-        if name == b"dataWindow" and length == 16:
+        if name in (b"dataWindow", b"displayWindow") and length == 16:
             x0, y0, x1, y1 = (int.from_bytes(value[i : i + 4], "little", signed=True) for i in range(0, 16, 4))
             width, height = x1 - x0 + 1, y1 - y0 + 1
-            return (height, width) if width > 0 and height > 0 else None
+            if width <= 0 or height <= 0:
+                return None
+            windows.append((height, width))
         at = type_end + 5 + length
-    return None
+    return windows
 
 
 def check_stack_memory(paths: list[Path], size: tuple[int, int] | None = None, where: str | Path | None = None) -> None:
