@@ -1,6 +1,8 @@
 """Helpers shared by the tests that run the ``irtps`` command as a user would."""
 
+import os
 import signal
+from pathlib import Path
 
 from irtps import _core
 from irtps.cli import main
@@ -32,3 +34,20 @@ def interruptible() -> None:
     a program keeps an ignored signal ignored, and the tests that press Ctrl-C would then
     see the command run on."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def tree(root) -> dict:
+    """Every file's bytes and every link's target under `root` (links not followed): what a
+    run must leave as it was."""
+    state = {}
+    for folder, folders, files in os.walk(root):
+        for name in folders + files:
+            path = Path(folder) / name
+            key = str(path.relative_to(root))
+            if path.is_symlink():
+                state[key] = ("link", os.readlink(path))
+            elif path.is_file():
+                state[key] = ("file", path.read_bytes())
+            else:
+                state[key] = ("folder", None)
+    return state

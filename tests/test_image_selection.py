@@ -58,12 +58,15 @@ def test_names_that_are_not_numbers_are_matched_whole():
         ("", "empty item"),
         ("1-3,", "empty item"),
         ("20-1", "runs backwards; write 1-20"),
+        ("9" * 5000, "an integer with 5000 digits; at most 40 are accepted"),
     ],
 )
 def test_a_malformed_list_is_refused_before_any_data_set(images, problem):
     with pytest.raises(ArgumentError, match=problem) as caught:
         parse_image_list(images)
     assert str(caught.value).startswith("exclude_images: ")
+    with pytest.raises(ArgumentError, match=problem):
+        exclude_images(load_dataset(FIXTURE), images)
 
 
 def test_only_a_data_set_has_images_to_leave_out():

@@ -24,7 +24,7 @@ from irtps.batch import local_cluster
 from irtps.cli import main
 from irtps.dataset import dataset_inputs, ground_truth_inputs, load_dataset, load_ground_truth, load_scene_object, scene_object_inputs
 
-from cli_helpers import refused
+from cli_helpers import refused, tree as _tree
 
 DATA = Path(__file__).parent / "data"
 BALL = DATA / "diligent_ball_small"  # DiLiGenT layout, 48x44, 8 lights, with Normal_gt.mat
@@ -98,22 +98,6 @@ def _argv(command, data, out, scheduler, run):
         "report": ["report", str(run), "--truth", str(data), "--out", str(out)],
         "batch": ["batch", str(data), "--out", str(out), "--scheduler", scheduler],
     }[command] + ["--quiet"]
-
-
-def _tree(root):
-    """Every file's bytes and every link's target under `root` (links not followed)."""
-    state = {}
-    for folder, folders, files in os.walk(root):
-        for name in folders + files:
-            path = Path(folder) / name
-            key = str(path.relative_to(root))
-            if path.is_symlink():
-                state[key] = ("link", os.readlink(path))
-            elif path.is_file():
-                state[key] = ("file", path.read_bytes())
-            else:
-                state[key] = ("folder", None)
-    return state
 
 
 CASES = [(command, kind) for command, kinds in READS.items() for kind in kinds]

@@ -9,7 +9,6 @@ input (as the system resolves them, or as the name that would be replaced) are r
 """
 
 import json
-import os
 import random
 import shutil
 from pathlib import Path
@@ -19,7 +18,7 @@ import pytest
 from irtps.batch import local_cluster
 from irtps.cli import main
 
-from cli_helpers import refused
+from cli_helpers import refused, tree as _tree
 
 DATA = Path(__file__).parent / "data"
 BALL = DATA / "diligent_ball_small"  # DiLiGenT layout, 48x44, 8 lights, with Normal_gt.mat
@@ -56,22 +55,6 @@ def _argv(command, data, out, scheduler, run):
 
 #: The data set each command reads (None: it reads none).
 SOURCE = {"reconstruct": BALL, "render": MITSUBA, "synth": None, "table": BALL, "report": BALL, "batch": BALL, "demo": None}
-
-
-def _tree(root):
-    """Every file's bytes and every link's target under `root` (links not followed)."""
-    state = {}
-    for folder, folders, files in os.walk(root):
-        for name in folders + files:
-            path = Path(folder) / name
-            key = str(path.relative_to(root))
-            if path.is_symlink():
-                state[key] = ("link", os.readlink(path))
-            elif path.is_file():
-                state[key] = ("file", path.read_bytes())
-            else:
-                state[key] = ("folder", None)
-    return state
 
 
 def _refused(argv, capsys):
