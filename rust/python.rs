@@ -297,11 +297,11 @@ impl Renderer {
         Ok(array.into_pyarray(py))
     }
 
-    /// The scene's triangles: (positions (V, 3) float32, triangles (T, 3) uint32, vertex
+    /// The scene's triangles: (positions (V, 3) float32 in world units, triangles (T, 3) uint32, vertex
     /// albedo (V, 3) float32, facing unit normals (T, 3) float32).
     fn mesh_arrays<'py>(&self, py: Python<'py>) -> MeshArrays<'py> {
-        let mesh = self.inner.mesh();
-        let positions = Array2::from_shape_fn((mesh.positions.len(), 3), |(i, c)| mesh.positions[i][c]);
+        let (mesh, frame) = (self.inner.mesh(), self.inner.frame());
+        let positions = Array2::from_shape_fn((mesh.positions.len(), 3), |(i, c)| frame.to_world(mesh.positions[i])[c]);
         let triangles = Array2::from_shape_fn((mesh.triangles.len(), 3), |(t, c)| mesh.triangles[t][c]);
         let albedo = Array2::from_shape_fn((mesh.albedo.len(), 3), |(i, c)| mesh.albedo[i][c]);
         let normals = Array2::from_shape_fn((mesh.normals.len(), 3), |(t, c)| mesh.normals[t][c]);
@@ -324,17 +324,17 @@ impl Renderer {
         if threads == Some(0) {
             return Err(argument_error("threads", "must be at least 1 (None: all cores)"));
         }
-        let tracer = self.inner.tracer();
+        let (tracer, frame) = (self.inner.tracer(), self.inner.frame());
         let rays = o.len() / 3;
         let mut t = try_vec(&format!("the distances of {rays} rays"), rays, f32::INFINITY).map_err(to_py)?;
         let mut id = try_vec(&format!("the triangles of {rays} rays"), rays, -1i64).map_err(to_py)?;
         // A batch of rays (flat xyz rows) into its outputs.
         let batch = |t: &mut [f32], id: &mut [i64], o: &[f32], d: &[f32]| {
             let mut out = t.iter_mut().zip(id.iter_mut());
-            let rays = o.chunks_exact(3).zip(d.chunks_exact(3)).map(|(o, d)| (vec3a(o[0], o[1], o[2]), vec3a(d[0], d[1], d[2])));
+            let rays = o.chunks_exact(3).zip(d.chunks_exact(3)).map(|(o, d)| (frame.to_local(vec3a(o[0], o[1], o[2])), vec3a(d[0], d[1], d[2])));
             tracer.closest_hits(rays, f32::INFINITY, |hit| {
                 if let (Some((t, id)), Some(hit)) = (out.next(), hit) {
-                    (*t, *id) = (hit.t, hit.triangle as i64);
+                    (*t, *id) = (frame.to_world_length(hit.t), hit.triangle as i64);
                 }
             });
         };

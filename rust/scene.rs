@@ -133,6 +133,100 @@ impl Scene {
     }
 }
 
+/// Largest distance, in pixel sizes, of any coordinate of the geometry from the working
+/// frame's origin (the middle of the object's heights). float32 resolves a sixteenth of a
+/// pixel out to 10^6 pixel sizes (the largest base height the contract accepts) and a pixel
+/// out to 10^7; the height-field walk's slab distances (a coordinate over a direction
+/// component it clamps to 10^-30) stay finite below about 3·10^8.
+pub const MAX_FRAME_EXTENT: f64 = 1e7;
+
+/// The similarity the core renders in: one unit a pixel, z measured from the middle of the
+/// object's heights. A scene described at any scale or height (float32 world units) lands
+/// in the same working frame, where every tolerance of the core is set; so a rendering,
+/// which is unitless, does not depend on the scene's scale. The camera's x and y are
+/// already centred on 0 and stay so.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frame {
+    /// World units per unit of the working frame: the pixel size.
+    pub scale: f64,
+    /// World z of the working frame's origin.
+    pub z_origin: f64,
+}
+
+impl Frame {
+    /// The working frame of `scene`: z from the middle of the range of the object's heights
+    /// (of the base height when no pixel is masked).
+    pub fn of(scene: &Scene) -> Frame {
+        let s = &scene.surface;
+        let heights = s.height.iter().zip(&s.mask).filter(|(_, &m)| m).map(|(&h, _)| f64::from(h));
+        let (lo, hi) = heights.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), h| (lo.min(h), hi.max(h)));
+        let z_origin = if lo <= hi { 0.5 * (lo + hi) } else { f64::from(scene.base_height()) };
+        Frame { scale: f64::from(scene.camera.pixel_size), z_origin }
+    }
+
+    /// Working-frame coordinate of world x or y `v`.
+    pub fn local_xy(&self, v: f32) -> f64 {
+        f64::from(v) / self.scale
+    }
+
+    /// Working-frame coordinate of world z `z`.
+    pub fn local_z(&self, z: f32) -> f64 {
+        (f64::from(z) - self.z_origin) / self.scale
+    }
+
+    /// The world point of working-frame point `p`.
+    pub fn to_world(&self, p: Vec3A) -> Vec3A {
+        let [x, y, z] = p.to_array().map(|c| f64::from(c) * self.scale);
+        Vec3A::new(x as f32, y as f32, (z + self.z_origin) as f32)
+    }
+
+    /// The working-frame point of world point `p`.
+    pub fn to_local(&self, p: Vec3A) -> Vec3A {
+        Vec3A::new(self.local_xy(p.x) as f32, self.local_xy(p.y) as f32, self.local_z(p.z) as f32)
+    }
+
+    /// The world length of working-frame length `t`.
+    pub fn to_world_length(&self, t: f32) -> f32 {
+        (f64::from(t) * self.scale) as f32
+    }
+
+    /// `scene` (validated) in this frame: a pixel size of 1 and every coordinate moved and
+    /// scaled. Refuses, naming the field, a coordinate farther than [`MAX_FRAME_EXTENT`]
+    /// pixel sizes from the frame's origin, which float32 cannot resolve.
+    pub fn local_scene(&self, scene: &Scene) -> Result<Scene> {
+        let s = &scene.surface;
+        let mut height = Vec::with_capacity(s.height.len());
+        for (p, (&h, &m)) in s.height.iter().zip(&s.mask).enumerate() {
+            let z = if m { self.local_z(h) } else { 0.0 };
+            height.push(resolvable("height", z, || format!("at pixel {}", describe_pixel(p, &scene.camera)))?);
+        }
+        let floor = match scene.floor {
+            Some(f) => Some(Floor { height: resolvable("floor.height", self.local_z(f.height), String::new)?, ..f }),
+            None => None,
+        };
+        let cornell_box = match scene.cornell_box {
+            Some(b) => {
+                let xy = |v: [f32; 2]| -> Result<[f32; 2]> { Ok([resolvable("environment", self.local_xy(v[0]), String::new)?, resolvable("environment", self.local_xy(v[1]), String::new)?]) };
+                Some(CornellBox { x: xy(b.x)?, y: xy(b.y)?, z_top: resolvable("environment.z_top", self.local_z(b.z_top), String::new)?, ..b })
+            }
+            None => None,
+        };
+        let camera = Camera { pixel_size: 1.0, ..scene.camera };
+        Ok(Scene { camera, surface: HeightField { height, mask: s.mask.clone(), albedo: s.albedo.clone() }, floor, cornell_box })
+    }
+}
+
+/// `v` as float32 if it lies within [`MAX_FRAME_EXTENT`] of the working frame's origin;
+/// otherwise the error names `field` (and `place()`, where the field has many values).
+fn resolvable(field: &str, v: f64, place: impl FnOnce() -> String) -> Result<f32> {
+    if v.abs() <= MAX_FRAME_EXTENT {
+        return Ok(v as f32);
+    }
+    let place = place();
+    let at = if place.is_empty() { String::new() } else { format!(" {place}") };
+    Err(Error::input(field, format!("lies{at} {:.3e} pixel sizes from the object: the core's float32 geometry resolves at most {MAX_FRAME_EXTENT:e}", v.abs())))
+}
+
 /// Checks that every light has a unit direction pointing up (z > 0) and a finite,
 /// non-negative irradiance.
 pub fn validate_lights(lights: &[Light]) -> Result<()> {

@@ -1,5 +1,6 @@
 """The renderer against analytic truth: Lambert's law, a form factor, albedo scaling."""
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -9,6 +10,8 @@ import pytest
 
 from irtps import Camera, CornellBox, Light, Scene, render
 from irtps.errors import IrtpsError
+from irtps.scene import MAX_PIXEL_SIZE, MIN_PIXEL_SIZE
+from irtps.synth import synthesize
 
 PI = np.pi
 
@@ -132,3 +135,30 @@ def test_sparse_indirect_estimate_is_exact_where_rendered_and_close_elsewhere():
 
     assert error(sparse) < 1.2 * error(full)
     assert (sparse[:, ~data.mask] == 0).all()
+
+
+def _scaled(scene, height, factor, lift):
+    """`scene` and `height` at `factor` times their size, raised by `lift` pixel sizes."""
+    size = scene.camera.pixel_size * factor
+    z = lambda h: h * factor + lift * size  # noqa: E731
+    box = scene.environment
+    moved = dataclasses.replace(
+        scene,
+        camera=dataclasses.replace(scene.camera, pixel_size=size),
+        floor=dataclasses.replace(scene.floor, height=z(scene.floor.height)),
+        environment=dataclasses.replace(box, x=tuple(v * factor for v in box.x), y=tuple(v * factor for v in box.y), z_top=z(box.z_top)),
+    )
+    return moved, z(np.float64(height))
+
+
+@pytest.mark.parametrize("pixel_size", [MIN_PIXEL_SIZE, 1e-3, 1e3, 1e7, MAX_PIXEL_SIZE])
+def test_direct_light_is_the_same_at_every_accepted_scale(pixel_size):
+    # A direct-light rendering is unitless: the same object at another scale renders the same.
+    # Issue 44: from a pixel size of about 3e7 the images went black.
+    data, _ = synthesize("cap", size=16, lights=3, bounces=0, environment="cornell", floor=True)
+    render_at = lambda scene, height: render(scene, height, data.gt.albedo, data.mask, bounces=0, samples=4).direct  # noqa: E731
+    truth = render_at(*_scaled(data.scene, data.gt.height, 1.0 / data.scene.camera.pixel_size, 0.0))
+    assert truth[:, data.mask].mean() > 0.3
+    for lift in (0.0, -1e3):  # heights and floor 1000 pixel sizes below 0: float32 keeps them to 2^-14
+        image = render_at(*_scaled(data.scene, data.gt.height, pixel_size / data.scene.camera.pixel_size, lift))
+        np.testing.assert_allclose(image, truth, atol=1e-3, err_msg=f"lift {lift}")

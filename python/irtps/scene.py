@@ -286,9 +286,10 @@ def write_scene(scene: Scene, path: str | Path) -> None:
     atomic_write_text(path, json.dumps(obj, indent=1) + "\n")
 
 
-#: Range of a pixel's world size: the core's geometry is float32, and the squares of its
-#: coordinates (up to the image size times this) must stay finite and above its smallest
-#: normal number.
+#: Range of a pixel's world size. The core's geometry is float32; it renders in a frame of
+#: one unit a pixel (z from the middle of the object's heights), so every pixel size in the
+#: range renders alike, and the squares of world coordinates (up to the image size times
+#: this) stay finite and above float32's smallest normal number.
 MIN_PIXEL_SIZE, MAX_PIXEL_SIZE = 1e-9, 1e9
 
 
