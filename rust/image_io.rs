@@ -60,7 +60,17 @@ pub fn read_exr(path: &Path) -> Result<Image> {
         check_size(path, display.width(), display.height())?;
     }
     check_decoding_memory(path, &meta)?;
-    let image = read_first_flat_layer_from_file(path)
+    // On the calling thread: the parallel decoder builds a thread pool for each file (with
+    // its threads' stacks and allocator arenas, which an address-space limit counts and
+    // whose failure aborts), and the stack of a data set is decoded in parallel by file.
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .non_parallel()
+        .from_file(path)
         .map_err(|e| Error::format(path, format!("not a readable OpenEXR file ({e})")))?;
     let display = image.attributes.display_window;
     let layer = image.layer_data;
@@ -146,8 +156,14 @@ pub fn write_exr(path: &Path, image: &Image) -> Result<()> {
         AnyChannels::sort(list),
     );
     layer.encoding.compression = Compression::ZIP16;
+    // On the calling thread, as the files are read (see `read_exr`): one block of 16 rows
+    // at a time, whose copies (the rows, their bytes regrouped, the compressed bytes and
+    // the compressor's state) the encoder allocates without a way to fail.
+    let block = image.width.saturating_mul(n).saturating_mul(16 * 4);
+    check_available(&format!("{}: the OpenEXR encoder's buffers", path.display()), block.saturating_mul(4).saturating_add(1 << 20))?;
     Image2::from_layer(layer)
         .write()
+        .non_parallel()
         .to_file(path)
         .map_err(|e| Error::io(path, format!("could not write OpenEXR ({e})")))
 }

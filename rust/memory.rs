@@ -39,6 +39,56 @@ pub fn check_available(what: &str, bytes: usize) -> Result<()> {
     try_with_capacity::<u8>(what, bytes).map(drop)
 }
 
+/// The bytes of address space that faer's dense matrix kernels (private-gemm-x86) take, on
+/// a thread's first matrix product, for a workspace that lives as long as the thread and
+/// cannot fail gracefully: twice the last-level (L3) cache, as that crate sizes it from
+/// `/sys/devices/system/cpu` (64 MiB on a machine with 32 MiB of L3). Elsewhere, or where
+/// the caches cannot be read, the crate's defaults (2 MiB of L3), raised like its own
+/// figures to at least 4 times the L2 cache and 16 times the L1 cache.
+pub fn dense_kernel_workspace_bytes() -> usize {
+    static BYTES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    *BYTES.get_or_init(|| {
+        let [l1, l2, l3] = cache_sizes().unwrap_or([0; 3]);
+        let l1 = l1.max(32 << 10);
+        let l2 = l2.max(256 << 10).max(4 * l1);
+        let l3 = l3.max(2 << 20).max(4 * l2);
+        2 * l3.next_multiple_of(4096)
+    })
+}
+
+/// The largest data (or unified) cache of levels 1, 2 and 3 that Linux reports, in bytes.
+fn cache_sizes() -> Option<[usize; 3]> {
+    let mut sizes = [0usize; 3];
+    for cpu in std::fs::read_dir("/sys/devices/system/cpu").ok()?.flatten() {
+        if !cpu.file_name().to_string_lossy().starts_with("cpu") {
+            continue;
+        }
+        let Ok(indices) = std::fs::read_dir(cpu.path().join("cache")) else { continue };
+        for index in indices.flatten() {
+            let read = |name: &str| std::fs::read_to_string(index.path().join(name)).map(|s| s.trim().to_string()).unwrap_or_default();
+            if !matches!(read("type").as_str(), "Data" | "Unified") {
+                continue;
+            }
+            let Ok(level @ 1..=3) = read("level").parse::<usize>() else { continue };
+            let size = read("size");
+            let (digits, unit) = match size.strip_suffix('K') {
+                Some(digits) => (digits, 1 << 10),
+                None => match size.strip_suffix('M') {
+                    Some(digits) => (digits, 1 << 20),
+                    None => match size.strip_suffix('G') {
+                        Some(digits) => (digits, 1 << 30),
+                        None => (size.as_str(), 1),
+                    },
+                },
+            };
+            if let Ok(count) = digits.parse::<usize>() {
+                sizes[level - 1] = sizes[level - 1].max(count.saturating_mul(unit));
+            }
+        }
+    }
+    Some(sizes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -56,5 +106,12 @@ mod tests {
         assert_eq!(try_vec("four", 4, 7u8).unwrap(), vec![7; 4]);
         assert_eq!(try_collect("three", 3, 0..10).unwrap(), vec![0, 1, 2]);
         check_available("a kilobyte", 1000).unwrap();
+    }
+
+    #[test]
+    fn the_dense_kernels_workspace_is_at_least_the_crates_default() {
+        let bytes = dense_kernel_workspace_bytes();
+        assert!(bytes >= 2 * (2 << 20) && bytes % 4096 == 0, "{bytes}");
+        assert!(bytes <= 1 << 40, "{bytes}");
     }
 }

@@ -629,6 +629,15 @@ impl SparseCholesky {
 /// The compiled core of irtps.
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // The core's threads are started at import: rayon starts them on first use, and panics
+    // there when one cannot be started (its stack is address space, which a limit such as
+    // `ulimit -v` may have run out of by then).
+    if let Err(err) = rayon::ThreadPoolBuilder::new().build_global() {
+        // An I/O error is a thread that could not be started; else the pool was running.
+        if std::error::Error::source(&err).is_some() {
+            return Err(PyMemoryError::new_err(format!("the core's threads could not be started ({err})")));
+        }
+    }
     m.add_function(wrap_pyfunction!(read_exr, m)?)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(read_png, m)?)?;

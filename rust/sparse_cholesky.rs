@@ -14,7 +14,16 @@ use faer::sparse::FaerError;
 use faer::{Conj, MatMut, Par, Side};
 
 use crate::error::{Error, Result};
-use crate::memory::try_vec;
+use crate::memory::{check_available, dense_kernel_workspace_bytes, try_vec};
+
+/// Refuses, with [`Error::Memory`], a factorisation or solve on a thread that might not have
+/// the address space for the workspace faer's dense kernels allocate, without a way to
+/// fail, on the thread's first matrix product (64 MiB on a machine with 32 MiB of L3).
+/// Checked before every call, so that a thread that already holds it is refused slightly
+/// early rather than a new one aborting the process.
+fn check_dense_kernel_workspace(name: &str) -> Result<()> {
+    check_available(&format!("{name}: the workspace of the dense matrix kernels"), dense_kernel_workspace_bytes())
+}
 
 /// The `L Lᵀ` factorisation of a sparse symmetric positive definite matrix.
 #[derive(Debug)]
@@ -41,9 +50,13 @@ impl SparseCholesky {
                 e => Error::input(name, format!("symbolic Cholesky analysis failed: {e:?}")),
             })?;
         let mut values = try_vec(&format!("{name}: a Cholesky factor of {} values", symbolic.len_val()), symbolic.len_val(), 0.0)?;
-        let par = faer::get_global_parallelism();
+        // On the calling thread only: each thread that runs a dense kernel takes a workspace
+        // of its own (see `check_dense_kernel_workspace`), and the supernodes of an
+        // integration's Laplacian are too small for threads to pay.
+        let par = Par::Seq;
         let workspace = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
         let mut scratch = MemBuffer::try_new(workspace).map_err(|_| Error::memory(format!("{name}: the Cholesky factorisation's workspace"), workspace.size_bytes()))?;
+        check_dense_kernel_workspace(name)?;
         symbolic
             .factorize_numeric_llt(&mut values, matrix, Side::Upper, LltRegularization::default(), par, MemStack::new(&mut scratch), Default::default())
             .map_err(|LltError::NonPositivePivot { index }| {
@@ -76,6 +89,7 @@ impl SparseCholesky {
         }
         let workspace = self.symbolic.solve_in_place_scratch::<f64>(columns, par);
         let mut scratch = MemBuffer::try_new(workspace).map_err(|_| Error::memory(format!("{name}: the solve's workspace"), workspace.size_bytes()))?;
+        check_dense_kernel_workspace(name)?;
         let target = MatMut::from_column_major_slice_mut(rhs, n, columns);
         LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(Conj::No, target, par, MemStack::new(&mut scratch));
         Ok(())

@@ -8,6 +8,7 @@ replacing `irtps.resources.available_memory_bytes`, except for the 10^8 lights o
 """
 
 import platform
+import re
 import resource
 import shutil
 import struct
@@ -247,3 +248,50 @@ def test_a_stack_of_images_too_large_for_the_address_space_is_a_memory_error():
     result = _run_limited(64 << 20, "read_images", image, 1000)  # 1000 x 96 x 96 x 12 bytes: 110.6 MB
     assert result.returncode == 3, (result.returncode, result.stderr)
     assert result.stderr == "the 1000 images of 96x96 as float32 RGB: could not allocate 110592000 bytes\n"
+
+
+_CHOLESKY_CHILD = """
+import resource, sys
+import numpy as np
+import scipy.sparse as sp
+from irtps import _core
+side, margin = int(sys.argv[1]), int(sys.argv[2])
+line = sp.diags([-np.ones(side - 1), 2 * np.ones(side), -np.ones(side - 1)], [-1, 0, 1])
+matrix = sp.csr_matrix(sp.kron(sp.identity(side), line) + sp.kron(line, sp.identity(side)) + 1e-3 * sp.identity(side * side))
+arrays = (matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64), matrix.data)
+in_use = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmSize")) * 1024
+resource.setrlimit(resource.RLIMIT_AS, (in_use + margin, in_use + margin))
+try:
+    _core.SparseCholesky(*arrays, "laplacian").solve(np.ones(side * side))
+except MemoryError as error:
+    print(error, file=sys.stderr)
+    sys.exit(3)
+"""
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="address-space limit and /proc/self/status, Linux")
+def test_a_factorisation_without_room_for_the_dense_kernels_workspace_is_a_memory_error():
+    # faer's dense kernels take, on a thread's first matrix product, a workspace of twice
+    # the L3 cache (at least 4 MiB) that cannot fail gracefully: the process aborted there
+    # (or, factoring on rayon's threads, panicked when they could not be started).
+    result = subprocess.run(
+        [sys.executable, "-c", _CHOLESKY_CHILD, "24", str(3 << 20)], capture_output=True, text=True, timeout=300, check=False
+    )
+    assert result.returncode == 3, (result.returncode, result.stderr)
+    assert re.fullmatch(r"laplacian: the workspace of the dense matrix kernels: could not allocate \d+ bytes\n", result.stderr), result.stderr
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="address-space limit and /proc/self/status, Linux")
+@pytest.mark.parametrize("margin_mib", [32, 64, 80])
+def test_irtps_with_little_address_space_left_succeeds_or_says_so(margin_mib, tmp_path):
+    # On a machine with 32 MiB of L3, 64 MiB left is refused at the integration's
+    # factorisation (its dense kernels' workspace), which aborted the process before.
+    out = tmp_path / "out"
+    result = _run_limited(margin_mib << 20, "reconstruct", BALL, "--out", out, "--method", "irtps", "--iterations", "1", "--samples", "8", "--quiet")
+    errors = [line for line in result.stderr.splitlines() if not line.startswith("irtps: warning:")]
+    if result.returncode == 0:
+        assert errors == [] and (out / "normal.exr").is_file()
+    else:
+        assert result.returncode == 2, (result.returncode, result.stderr)
+        assert len(errors) == 1 and errors[0].startswith("irtps: error: not enough memory ("), result.stderr
+        assert not out.exists()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import sys
 from pathlib import Path
 
 from irtps.errors import IrtpsError
@@ -23,14 +24,17 @@ MMAP_THRESHOLD_BYTES = 128 * 1024
 _MEMINFO = Path("/proc/meminfo")
 _CGROUP_V2 = Path("/sys/fs/cgroup")
 _CGROUP_V1 = Path("/sys/fs/cgroup/memory")
+_STATUS = Path("/proc/self/status")
 
 
 def available_memory_bytes() -> int | None:
     """The memory this process can still allocate without swapping, in bytes, if known.
 
     On Linux ``MemAvailable`` of ``/proc/meminfo``, lowered to what is left under the
-    process's control-group limit (a container's memory limit) when there is one;
-    elsewhere the free physical pages (``os.sysconf``). None when neither can be read.
+    process's control-group limit (a container's memory limit) when there is one, and to
+    what is left of its address-space limit (``RLIMIT_AS``, ``ulimit -v``: the limit less
+    the ``VmSize`` of ``/proc/self/status``) when there is one; elsewhere the free physical
+    pages (``os.sysconf``). None when none of these can be read.
 
     Returns
     -------
@@ -39,9 +43,9 @@ def available_memory_bytes() -> int | None:
     available = _meminfo_available()
     if available is None:
         available = _sysconf_available()
-    left = _cgroup_left()
-    if left is not None:
-        available = left if available is None else min(available, left)
+    for left in (_cgroup_left(), _address_space_left()):
+        if left is not None:
+            available = left if available is None else min(available, left)
     return available
 
 
@@ -151,6 +155,32 @@ def _cgroup_left() -> int | None:
         if limit >= 1 << 60:  # cgroup v1 writes a huge number for "no limit"
             return None
         return max(0, limit - usage)
+    return None
+
+
+def _address_space_left() -> int | None:
+    """What is left of the process's address-space limit (soft ``RLIMIT_AS``), if there is one.
+
+    The limit counts every mapping, touched or not (thread stacks, the C library's arenas,
+    reserved buffers), as ``VmSize`` does.
+    """
+    try:
+        import resource
+    except ImportError:  # not on Unix
+        return None
+    try:
+        limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+    except (AttributeError, ValueError, OSError):
+        return None
+    if limit == resource.RLIM_INFINITY or limit < 0 or not sys.platform.startswith("linux"):
+        return None
+    try:
+        for line in _STATUS.read_text().splitlines():
+            name, _, value = line.partition(":")
+            if name == "VmSize":
+                return max(0, limit - int(value.split()[0]) * 1024)
+    except (OSError, ValueError, IndexError):
+        return None
     return None
 
 
