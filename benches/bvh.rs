@@ -27,11 +27,20 @@ fn relief(i: usize, j: usize, n: usize) -> f32 {
     let scale = n as f32 / 512.0;
     let (u, v) = (j as f32 / n as f32, i as f32 / n as f32);
     let tau = std::f32::consts::TAU;
-    let waves = 6.0 * (tau * 3.0 * u).sin() * (tau * 2.0 * v).cos() + 4.0 * (tau * (5.0 * u + 4.0 * v)).sin() + 3.0 * (tau * 7.0 * v).cos();
-    let (dx, dy) = (j as f32 + 0.5 - n as f32 / 2.0, i as f32 + 0.5 - n as f32 / 2.0);
+    let waves = 6.0 * (tau * 3.0 * u).sin() * (tau * 2.0 * v).cos()
+        + 4.0 * (tau * (5.0 * u + 4.0 * v)).sin()
+        + 3.0 * (tau * 7.0 * v).cos();
+    let (dx, dy) = (
+        j as f32 + 0.5 - n as f32 / 2.0,
+        i as f32 + 0.5 - n as f32 / 2.0,
+    );
     let r2 = dx * dx + dy * dy;
     let (sphere, cap) = (200.0 * scale, 150.0 * scale);
-    let bump = if r2 < cap * cap { (sphere * sphere - r2).sqrt() - (sphere * sphere - cap * cap).sqrt() } else { 0.0 };
+    let bump = if r2 < cap * cap {
+        (sphere * sphere - r2).sqrt() - (sphere * sphere - cap * cap).sqrt()
+    } else {
+        0.0
+    };
     (40.0 + waves) * scale + bump
 }
 
@@ -39,12 +48,31 @@ fn relief(i: usize, j: usize, n: usize) -> f32 {
 /// open-topped Cornell box reaching an eighth of the field beyond it on each side.
 fn scene(n: usize) -> Scene {
     let height: Vec<f32> = (0..n * n).map(|p| relief(p / n, p % n, n)).collect();
-    let albedo = (0..n * n).map(|p| [0.5 + 0.3 * (p % n) as f32 / n as f32, 0.6, 0.7 - 0.3 * (p / n) as f32 / n as f32]).collect();
+    let albedo = (0..n * n)
+        .map(|p| {
+            [
+                0.5 + 0.3 * (p % n) as f32 / n as f32,
+                0.6,
+                0.7 - 0.3 * (p / n) as f32 / n as f32,
+            ]
+        })
+        .collect();
     let half = 0.5 * n as f32 + 0.125 * n as f32;
     Scene {
-        camera: Camera { width: n, height: n, pixel_size: 1.0 },
-        surface: HeightField { height, mask: vec![true; n * n], albedo },
-        floor: Some(Floor { height: 0.0, albedo: [0.8, 0.8, 0.8] }),
+        camera: Camera {
+            width: n,
+            height: n,
+            pixel_size: 1.0,
+        },
+        surface: HeightField {
+            height,
+            mask: vec![true; n * n],
+            albedo,
+        },
+        floor: Some(Floor {
+            height: 0.0,
+            albedo: [0.8, 0.8, 0.8],
+        }),
         cornell_box: Some(CornellBox {
             x: [-half, half],
             y: [-half, half],
@@ -77,7 +105,10 @@ fn bench(c: &mut Criterion) {
     let mesh = Mesh::from_scene(&scene);
     let tracer = Tracer::new(&mesh);
     let batch = rays(&mesh, RAYS, 7);
-    let hits = batch.iter().filter(|(o, d)| tracer.closest_hit(*o, *d, f32::INFINITY).is_some()).count();
+    let hits = batch
+        .iter()
+        .filter(|(o, d)| tracer.closest_hit(*o, *d, f32::INFINITY).is_some())
+        .count();
     eprintln!(
         "scene: {SIZE}x{SIZE} height field in a Cornell box, {} triangles; {RAYS} rays per iteration, {:.1}% hit",
         mesh.triangles.len(),
@@ -85,7 +116,11 @@ fn bench(c: &mut Criterion) {
     );
 
     let mut build = c.benchmark_group("bvh_build");
-    build.sample_size(10).sampling_mode(SamplingMode::Flat).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(8));
+    build
+        .sample_size(10)
+        .sampling_mode(SamplingMode::Flat)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(8));
     build.throughput(Throughput::Elements(mesh.triangles.len() as u64));
     build.bench_function("tracer_new", |b| b.iter(|| Tracer::new(black_box(&mesh))));
     build.finish();
@@ -95,14 +130,23 @@ fn bench(c: &mut Criterion) {
     sorted.sort_by(|a, b| (-a.0.y, a.0.x).partial_cmp(&(-b.0.y, b.0.x)).unwrap());
 
     let mut trace = c.benchmark_group("trace_1_thread");
-    trace.sample_size(10).sampling_mode(SamplingMode::Flat).warm_up_time(Duration::from_secs(1)).measurement_time(Duration::from_secs(5));
+    trace
+        .sample_size(10)
+        .sampling_mode(SamplingMode::Flat)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(5));
     trace.throughput(Throughput::Elements(RAYS as u64));
-    for (name, rays) in [("closest_hit", &batch), ("closest_hit_pixel_order", &sorted)] {
+    for (name, rays) in [
+        ("closest_hit", &batch),
+        ("closest_hit_pixel_order", &sorted),
+    ] {
         trace.bench_function(name, |b| {
             b.iter(|| {
                 let mut hits = 0usize;
                 for &(o, d) in rays {
-                    hits += tracer.closest_hit(black_box(o), black_box(d), f32::INFINITY).is_some() as usize;
+                    hits += tracer
+                        .closest_hit(black_box(o), black_box(d), f32::INFINITY)
+                        .is_some() as usize;
                 }
                 hits
             })

@@ -56,16 +56,36 @@ pub fn denoise(surface: &Surface<'_>, indirect: &[f32], noise_energy: &[f64]) ->
     let n = surface.pixels.len();
     let (width, height) = surface.size;
     if surface.height_px.len() != n || surface.albedo.len() != n || noise_energy.len() != n {
-        return Err(Error::input("surface", format!("{n} pixels but {} heights, {} albedos and {} noise energies", surface.height_px.len(), surface.albedo.len(), noise_energy.len())));
+        return Err(Error::input(
+            "surface",
+            format!(
+                "{n} pixels but {} heights, {} albedos and {} noise energies",
+                surface.height_px.len(),
+                surface.albedo.len(),
+                noise_energy.len()
+            ),
+        ));
     }
-    if n > 0 && (surface.pixels.windows(2).any(|w| w[0] >= w[1]) || surface.pixels[n - 1] >= width * height) {
-        return Err(Error::input("pixels", format!("expected ascending indices below {}", width * height)));
+    if n > 0
+        && (surface.pixels.windows(2).any(|w| w[0] >= w[1])
+            || surface.pixels[n - 1] >= width * height)
+    {
+        return Err(Error::input(
+            "pixels",
+            format!("expected ascending indices below {}", width * height),
+        ));
     }
     if n == 0 || !indirect.len().is_multiple_of(3 * n) {
         return if indirect.is_empty() {
-            Ok(Denoised { indirect: Vec::new(), noise_energy: noise_energy.to_vec() })
+            Ok(Denoised {
+                indirect: Vec::new(),
+                noise_energy: noise_energy.to_vec(),
+            })
         } else {
-            Err(Error::input("indirect", format!("{} values are not (K, {n}, 3)", indirect.len())))
+            Err(Error::input(
+                "indirect",
+                format!("{} values are not (K, {n}, 3)", indirect.len()),
+            ))
         };
     }
     check_finite(surface, indirect, noise_energy)?;
@@ -74,52 +94,84 @@ pub fn denoise(surface: &Surface<'_>, indirect: &[f32], noise_energy: &[f64]) ->
     let mut normals = try_with_capacity(&format!("the filter's normals of {n} pixels"), n)?;
     normals.par_extend(surface_normals(surface, &listed));
     // Per pixel and window slot: the neighbour and, per channel, the factor its estimate gets.
-    let mut weights: Vec<([usize; WINDOW], [Rgb; WINDOW], f64)> = try_with_capacity(&format!("the filter's weights of {n} pixels"), n)?;
+    let mut weights: Vec<([usize; WINDOW], [Rgb; WINDOW], f64)> =
+        try_with_capacity(&format!("the filter's weights of {n} pixels"), n)?;
     weights.par_extend((0..n).into_par_iter().map(|p| {
-            let (row, col) = position(surface.pixels[p]);
-            let (normal, height_p, albedo_p) = (normals[p], surface.height_px[p], surface.albedo[p]);
-            let mut neighbour = [p; WINDOW];
-            let mut raw = [0f32; WINDOW];
-            for (slot, (dr, dc)) in (-1isize..=1).flat_map(|dr| (-1isize..=1).map(move |dc| (dr, dc))).enumerate() {
-                let (r, c) = (row as isize + dr, col as isize + dc);
-                if r < 0 || c < 0 || r >= height as isize || c >= width as isize {
-                    continue;
-                }
-                let Some(q) = listed(r as usize, c as usize) else { continue };
-                // x grows with the column, y against the row (contract §1), heights in pixels.
-                let offset = Vec3A::new(dc as f32, -dr as f32, surface.height_px[q] - height_p);
-                let plane = offset.dot(normal);
-                let turn = normal.dot(normals[q]).max(0.0).powi(NORMAL_EXPONENT);
-                neighbour[slot] = q;
-                raw[slot] = (-0.5 * (dr * dr + dc * dc) as f32).exp() * turn * (-0.5 * plane * plane).exp();
+        let (row, col) = position(surface.pixels[p]);
+        let (normal, height_p, albedo_p) = (normals[p], surface.height_px[p], surface.albedo[p]);
+        let mut neighbour = [p; WINDOW];
+        let mut raw = [0f32; WINDOW];
+        for (slot, (dr, dc)) in (-1isize..=1)
+            .flat_map(|dr| (-1isize..=1).map(move |dc| (dr, dc)))
+            .enumerate()
+        {
+            let (r, c) = (row as isize + dr, col as isize + dc);
+            if r < 0 || c < 0 || r >= height as isize || c >= width as isize {
+                continue;
             }
-            // The albedo-weighted mean of the neighbours' irradiance is Σ w·light / Σ w·albedo:
-            // a dark neighbour, whose irradiance the division would blow up, barely counts.
-            let mut factor = [[0f32; 3]; WINDOW];
-            for c in 0..3 {
-                let total: f32 = (0..WINDOW).map(|slot| raw[slot] * surface.albedo[neighbour[slot]][c]).sum();
-                if total > DARK_ALBEDO * raw[WINDOW / 2] {
-                    for slot in 0..WINDOW {
-                        factor[slot][c] = raw[slot] * albedo_p[c] / total;
-                    }
-                } else {
-                    // Nothing to average with: the pixel keeps its own estimate (slot 4 is itself).
-                    factor[WINDOW / 2][c] = 1.0;
+            let Some(q) = listed(r as usize, c as usize) else {
+                continue;
+            };
+            // x grows with the column, y against the row (contract §1), heights in pixels.
+            let offset = Vec3A::new(dc as f32, -dr as f32, surface.height_px[q] - height_p);
+            let plane = offset.dot(normal);
+            let turn = normal.dot(normals[q]).max(0.0).powi(NORMAL_EXPONENT);
+            neighbour[slot] = q;
+            raw[slot] =
+                (-0.5 * (dr * dr + dc * dc) as f32).exp() * turn * (-0.5 * plane * plane).exp();
+        }
+        // The albedo-weighted mean of the neighbours' irradiance is Σ w·light / Σ w·albedo:
+        // a dark neighbour, whose irradiance the division would blow up, barely counts.
+        let mut factor = [[0f32; 3]; WINDOW];
+        for c in 0..3 {
+            let total: f32 = (0..WINDOW)
+                .map(|slot| raw[slot] * surface.albedo[neighbour[slot]][c])
+                .sum();
+            if total > DARK_ALBEDO * raw[WINDOW / 2] {
+                for slot in 0..WINDOW {
+                    factor[slot][c] = raw[slot] * albedo_p[c] / total;
                 }
-            }
-            let energy = (0..WINDOW).map(|slot| f64::from(factor[slot].iter().sum::<f32>() / 3.0).powi(2) * noise_energy[neighbour[slot]]).sum();
-            (neighbour, factor, energy)
-        }));
-    let mut filtered = try_vec(&format!("the filtered estimate of {n} pixels"), indirect.len(), 0f32)?;
-    filtered.par_chunks_mut(3 * n).zip(indirect.par_chunks(3 * n)).for_each(|(out, plane)| {
-        for (p, (neighbour, factor, _)) in weights.iter().enumerate() {
-            for c in 0..3 {
-                out[3 * p + c] = neighbour.iter().zip(factor).map(|(&q, f)| f[c] * plane[3 * q + c]).sum();
+            } else {
+                // Nothing to average with: the pixel keeps its own estimate (slot 4 is itself).
+                factor[WINDOW / 2][c] = 1.0;
             }
         }
-    });
-    let noise_energy = try_collect(&format!("the filtered noise energy of {n} pixels"), n, weights.iter().map(|w| w.2))?;
-    Ok(Denoised { indirect: filtered, noise_energy })
+        let energy = (0..WINDOW)
+            .map(|slot| {
+                f64::from(factor[slot].iter().sum::<f32>() / 3.0).powi(2)
+                    * noise_energy[neighbour[slot]]
+            })
+            .sum();
+        (neighbour, factor, energy)
+    }));
+    let mut filtered = try_vec(
+        &format!("the filtered estimate of {n} pixels"),
+        indirect.len(),
+        0f32,
+    )?;
+    filtered
+        .par_chunks_mut(3 * n)
+        .zip(indirect.par_chunks(3 * n))
+        .for_each(|(out, plane)| {
+            for (p, (neighbour, factor, _)) in weights.iter().enumerate() {
+                for c in 0..3 {
+                    out[3 * p + c] = neighbour
+                        .iter()
+                        .zip(factor)
+                        .map(|(&q, f)| f[c] * plane[3 * q + c])
+                        .sum();
+                }
+            }
+        });
+    let noise_energy = try_collect(
+        &format!("the filtered noise energy of {n} pixels"),
+        n,
+        weights.iter().map(|w| w.2),
+    )?;
+    Ok(Denoised {
+        indirect: filtered,
+        noise_energy,
+    })
 }
 
 /// Refuses a NaN or an infinity in the surface's heights or albedo, the estimate or its noise
@@ -131,17 +183,34 @@ fn check_finite(surface: &Surface<'_>, indirect: &[f32], noise_energy: &[f64]) -
         ("height_px", 1, first_bad(surface.height_px)),
         ("albedo", 3, first_bad(surface.albedo.as_flattened())),
         ("indirect", 3, first_bad(indirect)),
-        ("noise_energy", 1, noise_energy.iter().position(|v| !v.is_finite())),
+        (
+            "noise_energy",
+            1,
+            noise_energy.iter().position(|v| !v.is_finite()),
+        ),
     ];
-    match checks.into_iter().find_map(|(name, per_pixel, bad)| bad.map(|index| (name, index / per_pixel % n))) {
-        Some((name, p)) => Err(Error::input(name, format!("non-finite value at listed pixel {p} (row {}, column {})", surface.pixels[p] / surface.size.0, surface.pixels[p] % surface.size.0))),
+    match checks
+        .into_iter()
+        .find_map(|(name, per_pixel, bad)| bad.map(|index| (name, index / per_pixel % n)))
+    {
+        Some((name, p)) => Err(Error::input(
+            name,
+            format!(
+                "non-finite value at listed pixel {p} (row {}, column {})",
+                surface.pixels[p] / surface.size.0,
+                surface.pixels[p] % surface.size.0
+            ),
+        )),
         None => Ok(()),
     }
 }
 
 /// Unit normals of the height field at the listed pixels, from central differences where
 /// both neighbours are on the object, one-sided where one is, flat where none is.
-fn surface_normals<'a>(surface: &'a Surface<'_>, listed: &'a (impl Fn(usize, usize) -> Option<usize> + Sync)) -> impl IndexedParallelIterator<Item = Vec3A> + 'a {
+fn surface_normals<'a>(
+    surface: &'a Surface<'_>,
+    listed: &'a (impl Fn(usize, usize) -> Option<usize> + Sync),
+) -> impl IndexedParallelIterator<Item = Vec3A> + 'a {
     let (width, height) = surface.size;
     surface
         .pixels
@@ -151,7 +220,10 @@ fn surface_normals<'a>(surface: &'a Surface<'_>, listed: &'a (impl Fn(usize, usi
             let (row, col) = (index / width, index % width);
             let h = surface.height_px[p];
             let at = |r: isize, c: isize| -> Option<f32> {
-                (r >= 0 && c >= 0 && (r as usize) < height && (c as usize) < width).then(|| listed(r as usize, c as usize)).flatten().map(|q| surface.height_px[q])
+                (r >= 0 && c >= 0 && (r as usize) < height && (c as usize) < width)
+                    .then(|| listed(r as usize, c as usize))
+                    .flatten()
+                    .map(|q| surface.height_px[q])
             };
             let slope = |before: Option<f32>, after: Option<f32>| match (before, after) {
                 (Some(b), Some(a)) => 0.5 * (a - b),
@@ -182,16 +254,27 @@ mod tests {
         let size = 16;
         let (pixels, height_px) = plane_surface(size, 0.5);
         let albedo = vec![[0.5, 0.25, 0.8]; pixels.len()];
-        let surface = Surface { size: (size, size), pixels: &pixels, height_px: &height_px, albedo: &albedo };
+        let surface = Surface {
+            size: (size, size),
+            pixels: &pixels,
+            height_px: &height_px,
+            albedo: &albedo,
+        };
         // A linear irradiance times the albedo: the symmetric window keeps it inside.
-        let linear: Vec<f32> = pixels.iter().flat_map(|&i| albedo[i].map(|a| a * (1.0 + 0.1 * (i / size) as f32))).collect();
+        let linear: Vec<f32> = pixels
+            .iter()
+            .flat_map(|&i| albedo[i].map(|a| a * (1.0 + 0.1 * (i / size) as f32)))
+            .collect();
         let energy = vec![1.0; pixels.len()];
         let out = denoise(&surface, &linear, &energy).unwrap();
         for row in 1..size - 1 {
             for col in 1..size - 1 {
                 for c in 0..3 {
                     let i = 3 * (row * size + col) + c;
-                    assert!((out.indirect[i] - linear[i]).abs() < 1e-5 * linear[i], "{row} {col}");
+                    assert!(
+                        (out.indirect[i] - linear[i]).abs() < 1e-5 * linear[i],
+                        "{row} {col}"
+                    );
                 }
             }
         }
@@ -205,12 +288,26 @@ mod tests {
         // A right-angled V (slopes ±1): each side's estimate stays its own.
         let size = 12;
         let pixels: Vec<usize> = (0..size * size).collect();
-        let height_px: Vec<f32> = pixels.iter().map(|&i| ((i % size) as f32 - 5.5).abs()).collect();
+        let height_px: Vec<f32> = pixels
+            .iter()
+            .map(|&i| ((i % size) as f32 - 5.5).abs())
+            .collect();
         let albedo = vec![[1.0; 3]; pixels.len()];
-        let surface = Surface { size: (size, size), pixels: &pixels, height_px: &height_px, albedo: &albedo };
-        let estimate: Vec<f32> = pixels.iter().flat_map(|&i| [if i % size < 6 { 1.0 } else { 0.0 }; 3]).collect();
+        let surface = Surface {
+            size: (size, size),
+            pixels: &pixels,
+            height_px: &height_px,
+            albedo: &albedo,
+        };
+        let estimate: Vec<f32> = pixels
+            .iter()
+            .flat_map(|&i| [if i % size < 6 { 1.0 } else { 0.0 }; 3])
+            .collect();
         let out = denoise(&surface, &estimate, &vec![0.0; pixels.len()]).unwrap();
-        let (left, right) = (out.indirect[3 * (6 * size + 5)], out.indirect[3 * (6 * size + 6)]);
+        let (left, right) = (
+            out.indirect[3 * (6 * size + 5)],
+            out.indirect[3 * (6 * size + 6)],
+        );
         assert!(left > 0.99 && right < 0.01, "{left} {right}");
     }
 
@@ -220,8 +317,22 @@ mod tests {
         // light (black pixels, with no irradiance to tell, neither blow up nor spread).
         let size = 8;
         let (pixels, height_px) = plane_surface(size, 0.0);
-        let albedo: Vec<Rgb> = pixels.iter().map(|&i| if (i / size + i % size) % 2 == 0 { [0.9; 3] } else { [0.0; 3] }).collect();
-        let surface = Surface { size: (size, size), pixels: &pixels, height_px: &height_px, albedo: &albedo };
+        let albedo: Vec<Rgb> = pixels
+            .iter()
+            .map(|&i| {
+                if (i / size + i % size) % 2 == 0 {
+                    [0.9; 3]
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect();
+        let surface = Surface {
+            size: (size, size),
+            pixels: &pixels,
+            height_px: &height_px,
+            albedo: &albedo,
+        };
         let estimate: Vec<f32> = albedo.iter().flat_map(|a| a.map(|v| 2.0 * v)).collect();
         let out = denoise(&surface, &estimate, &vec![0.0; pixels.len()]).unwrap();
         for (got, want) in out.indirect.iter().zip(&estimate) {
@@ -233,11 +344,30 @@ mod tests {
     fn mismatched_inputs_name_the_argument() {
         let (pixels, height_px) = plane_surface(2, 0.0);
         let albedo = vec![[0.5; 3]; 4];
-        let surface = Surface { size: (2, 2), pixels: &pixels, height_px: &height_px, albedo: &albedo };
-        assert!(denoise(&surface, &[0.0; 5], &[0.0; 4]).unwrap_err().to_string().contains("indirect"));
-        assert!(denoise(&surface, &[0.0; 12], &[0.0; 3]).unwrap_err().to_string().contains("surface"));
+        let surface = Surface {
+            size: (2, 2),
+            pixels: &pixels,
+            height_px: &height_px,
+            albedo: &albedo,
+        };
+        assert!(denoise(&surface, &[0.0; 5], &[0.0; 4])
+            .unwrap_err()
+            .to_string()
+            .contains("indirect"));
+        assert!(denoise(&surface, &[0.0; 12], &[0.0; 3])
+            .unwrap_err()
+            .to_string()
+            .contains("surface"));
         let unordered = [1, 0, 2, 3];
-        let surface = Surface { size: (2, 2), pixels: &unordered, height_px: &height_px, albedo: &albedo };
-        assert!(denoise(&surface, &[0.0; 12], &[0.0; 4]).unwrap_err().to_string().contains("pixels"));
+        let surface = Surface {
+            size: (2, 2),
+            pixels: &unordered,
+            height_px: &height_px,
+            albedo: &albedo,
+        };
+        assert!(denoise(&surface, &[0.0; 12], &[0.0; 4])
+            .unwrap_err()
+            .to_string()
+            .contains("pixels"));
     }
 }

@@ -19,27 +19,42 @@ pub enum Error {
 impl Error {
     /// An I/O failure on `path`.
     pub fn io(path: &Path, err: impl fmt::Display) -> Self {
-        Error::Io { path: path.display().to_string(), message: err.to_string() }
+        Error::Io {
+            path: path.display().to_string(),
+            message: err.to_string(),
+        }
     }
 
     /// A content problem in the file at `path`.
     pub fn format(path: &Path, message: impl Into<String>) -> Self {
-        Error::Format { path: path.display().to_string(), message: message.into() }
+        Error::Format {
+            path: path.display().to_string(),
+            message: message.into(),
+        }
     }
 
     /// A problem with the input named `field`.
     pub fn input(field: &str, message: impl Into<String>) -> Self {
-        Error::Input { field: field.to_string(), message: message.into() }
+        Error::Input {
+            field: field.to_string(),
+            message: message.into(),
+        }
     }
 
     /// No memory for `bytes` bytes of `what`.
     pub fn memory(what: impl Into<String>, bytes: usize) -> Self {
-        Error::Memory { what: what.into(), bytes: Some(bytes) }
+        Error::Memory {
+            what: what.into(),
+            bytes: Some(bytes),
+        }
     }
 
     /// No memory for `what`, of a size that a third-party crate did not tell.
     pub fn memory_of_unknown_size(what: impl Into<String>) -> Self {
-        Error::Memory { what: what.into(), bytes: None }
+        Error::Memory {
+            what: what.into(),
+            bytes: None,
+        }
     }
 }
 
@@ -50,7 +65,10 @@ impl fmt::Display for Error {
                 write!(f, "{path}: {message}")
             }
             Error::Input { field, message } => write!(f, "{field}: {message}"),
-            Error::Memory { what, bytes: Some(bytes) } => write!(f, "{what}: could not allocate {bytes} bytes"),
+            Error::Memory {
+                what,
+                bytes: Some(bytes),
+            } => write!(f, "{what}: could not allocate {bytes} bytes"),
             Error::Memory { what, bytes: None } => write!(f, "{what}: could not allocate it"),
         }
     }

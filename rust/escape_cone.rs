@@ -31,7 +31,15 @@ pub(crate) fn escape_slopes() -> [f32; 256] {
 /// within the 3×3 cells around its own cell (at most 27), each at its least distance from
 /// the block; a quadrant's rays only pass over the cells that reach the block's column
 /// (row), or the one before it, or beyond, on the side they go.
-pub(crate) fn escape_cones(grid: &HeightFieldGrid, block_top: Vec<f32>, meshed: impl Fn(usize) -> bool + Sync, top: usize, step: (f32, f32), slack: f32, slopes: &[f32; 256]) -> Vec<u8> {
+pub(crate) fn escape_cones(
+    grid: &HeightFieldGrid,
+    block_top: Vec<f32>,
+    meshed: impl Fn(usize) -> bool + Sync,
+    top: usize,
+    step: (f32, f32),
+    slack: f32,
+    slopes: &[f32; 256],
+) -> Vec<u8> {
     let (cols, rows) = (grid.width - 1, grid.height - 1);
     let dims = |level: usize| (((cols - 1) >> level) + 1, ((rows - 1) >> level) + 1);
     // Highest point of every cell of every level (−∞ where there is nothing).
@@ -43,7 +51,12 @@ pub(crate) fn escape_cones(grid: &HeightFieldGrid, block_top: Vec<f32>, meshed: 
             .map(|c| {
                 let (r, q) = (c / w, c % w);
                 let mut z = f32::NEG_INFINITY;
-                for (cr, cq) in [(2 * r, 2 * q), (2 * r, 2 * q + 1), (2 * r + 1, 2 * q), (2 * r + 1, 2 * q + 1)] {
+                for (cr, cq) in [
+                    (2 * r, 2 * q),
+                    (2 * r, 2 * q + 1),
+                    (2 * r + 1, 2 * q),
+                    (2 * r + 1, 2 * q + 1),
+                ] {
                     if cr < child_h && cq < child_w {
                         z = z.max(child[cr * child_w + cq]);
                     }
@@ -63,7 +76,14 @@ pub(crate) fn escape_cones(grid: &HeightFieldGrid, block_top: Vec<f32>, meshed: 
                 return [255; 4];
             }
             let (i, j) = (b / cols, b % cols);
-            let z_ref = [grid.z[i * w + j], grid.z[i * w + j + 1], grid.z[(i + 1) * w + j], grid.z[(i + 1) * w + j + 1]].into_iter().fold(f32::INFINITY, f32::min);
+            let z_ref = [
+                grid.z[i * w + j],
+                grid.z[i * w + j + 1],
+                grid.z[(i + 1) * w + j],
+                grid.z[(i + 1) * w + j + 1],
+            ]
+            .into_iter()
+            .fold(f32::INFINITY, f32::min);
             let headroom = highest - z_ref as f64;
             let (i, j) = (i as i64, j as i64);
             let mut k2 = [0.0f64; 4];
@@ -79,7 +99,14 @@ pub(crate) fn escape_cones(grid: &HeightFieldGrid, block_top: Vec<f32>, meshed: 
                 let (own_r, own_c) = (i >> level, j >> level);
                 // The gap between the block (column or row `own`) and `cell`'s blocks, in
                 // world units, less the origin's allowance off the block.
-                let gap = |own: i64, cell: i64, spacing: f64| (((cell << level) - own - 1).max(own - ((cell + 1) << level)).max(0) as f64 * spacing - 2.0 * slack as f64).max(0.0);
+                let gap = |own: i64, cell: i64, spacing: f64| {
+                    (((cell << level) - own - 1)
+                        .max(own - ((cell + 1) << level))
+                        .max(0) as f64
+                        * spacing
+                        - 2.0 * slack as f64)
+                        .max(0.0)
+                };
                 let (parent_r, parent_c) = (own_r >> 1, own_c >> 1);
                 // Nor can this level's cells if none of the 3×3 parents holding them can.
                 let (parent_w, parent_h) = dims(level + 1);
@@ -105,10 +132,23 @@ pub(crate) fn escape_cones(grid: &HeightFieldGrid, block_top: Vec<f32>, meshed: 
                         // Which quadrants' rays can pass over the cell: it reaches the block's
                         // column (row) or beyond on their side, or the column (row) next to it,
                         // where an origin up to `slack` off the block lies.
-                        let (first_r, last_r, first_c, last_c) = (r << level, ((r + 1) << level) - 1, c << level, ((c + 1) << level) - 1);
+                        let (first_r, last_r, first_c, last_c) = (
+                            r << level,
+                            ((r + 1) << level) - 1,
+                            c << level,
+                            ((c + 1) << level) - 1,
+                        );
                         for (q, slope2) in k2.iter_mut().enumerate() {
-                            let along_c = if q & 1 != 0 { last_c >= j - 1 } else { first_c <= j + 1 };
-                            let along_r = if q & 2 != 0 { last_r >= i - 1 } else { first_r <= i + 1 };
+                            let along_c = if q & 1 != 0 {
+                                last_c >= j - 1
+                            } else {
+                                first_c <= j + 1
+                            };
+                            let along_r = if q & 2 != 0 {
+                                last_r >= i - 1
+                            } else {
+                                first_r <= i + 1
+                            };
                             if along_c && along_r && rise * rise > *slope2 * d2 {
                                 *slope2 = rise * rise / d2;
                             }
@@ -117,7 +157,11 @@ pub(crate) fn escape_cones(grid: &HeightFieldGrid, block_top: Vec<f32>, meshed: 
                 }
             }
             // Far more than the rounding of the ray's test, and of its heights.
-            k2.map(|k2| slopes.partition_point(|&s| (s as f64) < k2 * (1.0 + 1e-4)).min(255) as u8)
+            k2.map(|k2| {
+                slopes
+                    .partition_point(|&s| (s as f64) < k2 * (1.0 + 1e-4))
+                    .min(255) as u8
+            })
         })
         .collect()
 }

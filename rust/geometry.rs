@@ -137,14 +137,17 @@ impl Panel {
         let t = d.dot(self.edge_v) / self.edge_v.length_squared();
         let gs = (s - self.grid_lo[0]) / (self.grid_hi[0] - self.grid_lo[0]) * self.cells.0 as f32;
         let gt = (t - self.grid_lo[1]) / (self.grid_hi[1] - self.grid_lo[1]) * self.cells.1 as f32;
-        let inside = (0.0..=self.cells.0 as f32).contains(&gs) && (0.0..=self.cells.1 as f32).contains(&gt);
+        let inside =
+            (0.0..=self.cells.0 as f32).contains(&gs) && (0.0..=self.cells.1 as f32).contains(&gt);
         inside.then_some((gs, gt))
     }
 
     /// World position of grid vertex (`a`, `b`).
     pub fn grid_point(&self, a: usize, b: usize) -> Vec3A {
-        let s = self.grid_lo[0] + (self.grid_hi[0] - self.grid_lo[0]) * a as f32 / self.cells.0 as f32;
-        let t = self.grid_lo[1] + (self.grid_hi[1] - self.grid_lo[1]) * b as f32 / self.cells.1 as f32;
+        let s =
+            self.grid_lo[0] + (self.grid_hi[0] - self.grid_lo[0]) * a as f32 / self.cells.0 as f32;
+        let t =
+            self.grid_lo[1] + (self.grid_hi[1] - self.grid_lo[1]) * b as f32 / self.cells.1 as f32;
         self.origin + self.edge_u * s + self.edge_v * t
     }
 }
@@ -246,11 +249,35 @@ impl Mesh {
     /// A rectangle `origin + [0,1]·edge_u + [0,1]·edge_v` as two triangles, facing `facing`,
     /// with its light cached on `cells` over the parameter window `grid_lo..grid_hi`.
     #[allow(clippy::too_many_arguments)]
-    fn add_panel(&mut self, origin: Vec3A, edge_u: Vec3A, edge_v: Vec3A, albedo: Rgb, kind: SurfaceKind, window: ([f32; 2], [f32; 2]), cells: (usize, usize)) -> usize {
+    fn add_panel(
+        &mut self,
+        origin: Vec3A,
+        edge_u: Vec3A,
+        edge_v: Vec3A,
+        albedo: Rgb,
+        kind: SurfaceKind,
+        window: ([f32; 2], [f32; 2]),
+        cells: (usize, usize),
+    ) -> usize {
         let normal = edge_u.cross(edge_v).normalize();
         let id = self.panels.len() as u32;
-        self.panels.push(Panel { origin, edge_u, edge_v, normal, grid_lo: window.0, grid_hi: window.1, cells, unbounded: false });
-        let c = [origin, origin + edge_u, origin + edge_u + edge_v, origin + edge_v].map(|p| self.add_vertex(p, albedo, u32::MAX));
+        self.panels.push(Panel {
+            origin,
+            edge_u,
+            edge_v,
+            normal,
+            grid_lo: window.0,
+            grid_hi: window.1,
+            cells,
+            unbounded: false,
+        });
+        let c = [
+            origin,
+            origin + edge_u,
+            origin + edge_u + edge_v,
+            origin + edge_v,
+        ]
+        .map(|p| self.add_vertex(p, albedo, u32::MAX));
         self.add_triangle([c[0], c[1], c[2]], normal, kind, id);
         self.add_triangle([c[0], c[2], c[3]], normal, kind, id);
         id as usize
@@ -273,11 +300,18 @@ impl Mesh {
         for i in 0..h {
             for j in 0..w {
                 let (ii, jj) = (i as isize, j as isize);
-                let used = block(ii - 1, jj - 1) || block(ii - 1, jj) || block(ii, jj - 1) || block(ii, jj);
+                let used = block(ii - 1, jj - 1)
+                    || block(ii - 1, jj)
+                    || block(ii, jj - 1)
+                    || block(ii, jj);
                 if used {
                     let (x, y) = cam.pixel_center(i, j);
                     let p = i * w + j;
-                    self.pixel_vertex[p] = self.add_vertex(vec3a(x, y, surface.height[p]), surface.albedo[p], p as u32);
+                    self.pixel_vertex[p] = self.add_vertex(
+                        vec3a(x, y, surface.height[p]),
+                        surface.albedo[p],
+                        p as u32,
+                    );
                 }
             }
         }
@@ -310,15 +344,33 @@ impl Mesh {
                 let (ii, jj) = (i as isize, j as isize);
                 // Horizontal edge (i, j)–(i, j+1): block (i−1, j) above it, (i, j) below it.
                 if j + 1 < w && block(ii - 1, jj) != block(ii, jj) {
-                    let (outward, owner) = if block(ii, jj) { (Vec3A::Y, (i, j, BlockSide::Top)) } else { (-Vec3A::Y, (i - 1, j, BlockSide::Bottom)) };
-                    let triangles = self.add_skirt(v(i, j), v(i, j + 1), outward, base, cam.pixel_size);
-                    skirt.push(SkirtEdge { block: (owner.0 * bw + owner.1) as u32, side: owner.2, triangles });
+                    let (outward, owner) = if block(ii, jj) {
+                        (Vec3A::Y, (i, j, BlockSide::Top))
+                    } else {
+                        (-Vec3A::Y, (i - 1, j, BlockSide::Bottom))
+                    };
+                    let triangles =
+                        self.add_skirt(v(i, j), v(i, j + 1), outward, base, cam.pixel_size);
+                    skirt.push(SkirtEdge {
+                        block: (owner.0 * bw + owner.1) as u32,
+                        side: owner.2,
+                        triangles,
+                    });
                 }
                 // Vertical edge (i, j)–(i+1, j): block (i, j−1) left of it, (i, j) right of it.
                 if i + 1 < h && block(ii, jj - 1) != block(ii, jj) {
-                    let (outward, owner) = if block(ii, jj) { (-Vec3A::X, (i, j, BlockSide::Left)) } else { (Vec3A::X, (i, j - 1, BlockSide::Right)) };
-                    let triangles = self.add_skirt(v(i, j), v(i + 1, j), outward, base, cam.pixel_size);
-                    skirt.push(SkirtEdge { block: (owner.0 * bw + owner.1) as u32, side: owner.2, triangles });
+                    let (outward, owner) = if block(ii, jj) {
+                        (-Vec3A::X, (i, j, BlockSide::Left))
+                    } else {
+                        (Vec3A::X, (i, j - 1, BlockSide::Right))
+                    };
+                    let triangles =
+                        self.add_skirt(v(i, j), v(i + 1, j), outward, base, cam.pixel_size);
+                    skirt.push(SkirtEdge {
+                        block: (owner.0 * bw + owner.1) as u32,
+                        side: owner.2,
+                        triangles,
+                    });
                 }
             }
         }
@@ -339,10 +391,29 @@ impl Mesh {
     }
 
     /// Adds the skirt under the edge `top_a`–`top_b`; returns the range of its triangles.
-    fn add_skirt(&mut self, top_a: u32, top_b: u32, outward: Vec3A, base: f32, pixel_size: f32) -> std::ops::Range<u32> {
+    fn add_skirt(
+        &mut self,
+        top_a: u32,
+        top_b: u32,
+        outward: Vec3A,
+        base: f32,
+        pixel_size: f32,
+    ) -> std::ops::Range<u32> {
         let first = self.triangles.len() as u32;
-        let (pa, pb) = (self.positions[top_a as usize], self.positions[top_b as usize]);
-        let (albedo_a, albedo_b) = ((self.albedo[top_a as usize], self.albedo_pixel[top_a as usize]), (self.albedo[top_b as usize], self.albedo_pixel[top_b as usize]));
+        let (pa, pb) = (
+            self.positions[top_a as usize],
+            self.positions[top_b as usize],
+        );
+        let (albedo_a, albedo_b) = (
+            (
+                self.albedo[top_a as usize],
+                self.albedo_pixel[top_a as usize],
+            ),
+            (
+                self.albedo[top_b as usize],
+                self.albedo_pixel[top_b as usize],
+            ),
+        );
         let drop = pa.z.max(pb.z) - base;
         if drop <= 0.0 {
             return first..first;
@@ -360,8 +431,18 @@ impl Mesh {
         let col_a = column(self, pa, albedo_a);
         let col_b = column(self, pb, albedo_b);
         for r in 0..rows {
-            self.add_triangle([col_a[r], col_b[r], col_a[r + 1]], outward, SurfaceKind::Skirt, NO_PANEL);
-            self.add_triangle([col_b[r], col_b[r + 1], col_a[r + 1]], outward, SurfaceKind::Skirt, NO_PANEL);
+            self.add_triangle(
+                [col_a[r], col_b[r], col_a[r + 1]],
+                outward,
+                SurfaceKind::Skirt,
+                NO_PANEL,
+            );
+            self.add_triangle(
+                [col_b[r], col_b[r + 1], col_a[r + 1]],
+                outward,
+                SurfaceKind::Skirt,
+                NO_PANEL,
+            );
         }
         first..self.triangles.len() as u32
     }
@@ -373,7 +454,11 @@ impl Mesh {
         let s = scene.camera.pixel_size;
         let up = Vec3A::Z * (b.z_top - z0);
         let (ex, ey) = (Vec3A::X * (x1 - x0), Vec3A::Y * (y1 - y0));
-        let (nx, ny, nz) = (cells_for(x1 - x0, s), cells_for(y1 - y0, s), cells_for(b.z_top - z0, s));
+        let (nx, ny, nz) = (
+            cells_for(x1 - x0, s),
+            cells_for(y1 - y0, s),
+            cells_for(b.z_top - z0, s),
+        );
         let whole = ([0.0, 0.0], [1.0, 1.0]);
         let kind = SurfaceKind::Wall;
         // Edge order makes edge_u × edge_v point into the box.
@@ -390,16 +475,39 @@ impl Mesh {
             let (sx, sy) = (b.x[1] - b.x[0], b.y[1] - b.y[0]);
             let cells = (cells_for(sx, s), cells_for(sy, s));
             let origin = vec3a(b.x[0], b.y[0], z0);
-            self.add_panel(origin, Vec3A::X * sx, Vec3A::Y * sy, albedo, kind, ([0.0, 0.0], [1.0, 1.0]), cells);
+            self.add_panel(
+                origin,
+                Vec3A::X * sx,
+                Vec3A::Y * sy,
+                albedo,
+                kind,
+                ([0.0, 0.0], [1.0, 1.0]),
+                cells,
+            );
             return;
         }
         // Unbounded floor: one large panel, cached only near the object.
         let (lo, hi) = self.near_floor_extent(scene);
         let reach = FAR_FLOOR_SCALE * (hi.0 - lo.0).max(hi.1 - lo.1);
-        let (fx0, fy0, size) = (lo.0 - reach, lo.1 - reach, 2.0 * reach + (hi.0 - lo.0).max(hi.1 - lo.1));
-        let window = ([(lo.0 - fx0) / size, (lo.1 - fy0) / size], [(hi.0 - fx0) / size, (hi.1 - fy0) / size]);
+        let (fx0, fy0, size) = (
+            lo.0 - reach,
+            lo.1 - reach,
+            2.0 * reach + (hi.0 - lo.0).max(hi.1 - lo.1),
+        );
+        let window = (
+            [(lo.0 - fx0) / size, (lo.1 - fy0) / size],
+            [(hi.0 - fx0) / size, (hi.1 - fy0) / size],
+        );
         let cells = (cells_for(hi.0 - lo.0, s), cells_for(hi.1 - lo.1, s));
-        let id = self.add_panel(vec3a(fx0, fy0, z0), Vec3A::X * size, Vec3A::Y * size, albedo, kind, window, cells);
+        let id = self.add_panel(
+            vec3a(fx0, fy0, z0),
+            Vec3A::X * size,
+            Vec3A::Y * size,
+            albedo,
+            kind,
+            window,
+            cells,
+        );
         self.panels[id].unbounded = true;
     }
 
@@ -409,7 +517,11 @@ impl Mesh {
         let cam = &scene.camera;
         let (x0, y1) = cam.image_to_world(0.0, 0.0);
         let (x1, y0) = cam.image_to_world(cam.height as f32, cam.width as f32);
-        let top = self.positions.iter().map(|p| p.z).fold(scene.base_height(), f32::max);
+        let top = self
+            .positions
+            .iter()
+            .map(|p| p.z)
+            .fold(scene.base_height(), f32::max);
         let margin = 3.0 * (top - scene.base_height()) + cam.pixel_size;
         ((x0 - margin, y0 - margin), (x1 + margin, y1 + margin))
     }
@@ -434,10 +546,19 @@ mod tests {
     use super::*;
     use crate::scene::{Camera, CornellBox, Floor, HeightField};
 
-    pub(crate) fn flat_scene(w: usize, h: usize, z: f32, mask: impl Fn(usize, usize) -> bool) -> Scene {
+    pub(crate) fn flat_scene(
+        w: usize,
+        h: usize,
+        z: f32,
+        mask: impl Fn(usize, usize) -> bool,
+    ) -> Scene {
         let n = w * h;
         Scene {
-            camera: Camera { width: w, height: h, pixel_size: 1.0 },
+            camera: Camera {
+                width: w,
+                height: h,
+                pixel_size: 1.0,
+            },
             surface: HeightField {
                 height: vec![z; n],
                 mask: (0..n).map(|p| mask(p / w, p % w)).collect(),
@@ -453,7 +574,9 @@ mod tests {
         let mut scene = flat_scene(3, 2, 0.0, |_, _| true);
         scene.surface.height = vec![0.0, 1.0, 2.0, 3.0, 4.0, 5.0];
         let mesh = Mesh::from_scene(&scene);
-        let object: Vec<_> = (0..mesh.triangles.len()).filter(|&t| mesh.kinds[t] == SurfaceKind::Object).collect();
+        let object: Vec<_> = (0..mesh.triangles.len())
+            .filter(|&t| mesh.kinds[t] == SurfaceKind::Object)
+            .collect();
         assert_eq!(object.len(), 4);
         // First triangle of block (0,0): pixels (0,0), (1,0), (0,1), normal facing +z.
         let corners = mesh.corners(object[0]);
@@ -469,14 +592,19 @@ mod tests {
         }
         // z = j + 3 i  →  dz/dx = 1, dz/dy = −3 (rows grow downward): n ∝ (−1, 3, 1).
         let n = mesh.normals[object[0]];
-        assert!((n - vec3a(-1.0, 3.0, 1.0).normalize()).length() < 1e-6, "{n:?}");
+        assert!(
+            (n - vec3a(-1.0, 3.0, 1.0).normalize()).length() < 1e-6,
+            "{n:?}"
+        );
     }
 
     #[test]
     fn skirt_closes_the_object_and_faces_outward() {
         let scene = flat_scene(4, 4, 2.0, |i, j| (1..3).contains(&i) && (1..3).contains(&j));
         let mesh = Mesh::from_scene(&scene);
-        let skirt: Vec<_> = (0..mesh.triangles.len()).filter(|&t| mesh.kinds[t] == SurfaceKind::Skirt).collect();
+        let skirt: Vec<_> = (0..mesh.triangles.len())
+            .filter(|&t| mesh.kinds[t] == SurfaceKind::Skirt)
+            .collect();
         // One block, four boundary edges, two skirt rows of two triangles each.
         assert_eq!(skirt.len(), 4 * 2 * 2);
         for &t in &skirt {
@@ -490,7 +618,10 @@ mod tests {
     #[test]
     fn box_walls_face_inside_and_floor_faces_up() {
         let mut scene = flat_scene(4, 4, 1.0, |_, _| false);
-        scene.floor = Some(Floor { height: 0.0, albedo: [0.8; 3] });
+        scene.floor = Some(Floor {
+            height: 0.0,
+            albedo: [0.8; 3],
+        });
         scene.cornell_box = Some(CornellBox {
             x: [-3.0, 3.0],
             y: [-3.0, 3.0],
@@ -504,13 +635,19 @@ mod tests {
         for t in 0..mesh.triangles.len() {
             let centroid = mesh.corners(t).iter().sum::<Vec3A>() / 3.0;
             let inside = vec3a(0.0, 0.0, 1.0) - centroid;
-            assert!(mesh.normals[t].dot(inside) > 0.0, "triangle {t} faces outward");
+            assert!(
+                mesh.normals[t].dot(inside) > 0.0,
+                "triangle {t} faces outward"
+            );
         }
         assert_eq!(mesh.panels.len(), 5);
         for panel in &mesh.panels {
             let centre = panel.origin + (panel.edge_u + panel.edge_v) * 0.5;
             assert!(panel.normal.dot(vec3a(0.0, 0.0, 1.0) - centre) > 0.0);
-            assert_eq!(panel.grid_coords(centre), Some((panel.cells.0 as f32 / 2.0, panel.cells.1 as f32 / 2.0)));
+            assert_eq!(
+                panel.grid_coords(centre),
+                Some((panel.cells.0 as f32 / 2.0, panel.cells.1 as f32 / 2.0))
+            );
         }
     }
 }

@@ -40,7 +40,10 @@ struct Range {
     max: f32,
 }
 
-const NOTHING: Range = Range { min: f32::INFINITY, max: f32::INFINITY };
+const NOTHING: Range = Range {
+    min: f32::INFINITY,
+    max: f32::INFINITY,
+};
 
 /// Bounds of the triangles of a pyramid cell and the ring of blocks around it between two
 /// parallel planes: every point of them has `c_lo <= z − a·x − b·y <= c_hi`. The planes follow
@@ -56,7 +59,12 @@ struct Band {
     c_hi: f32,
 }
 
-const EMPTY: Band = Band { a: 0.0, b: 0.0, c_lo: f32::INFINITY, c_hi: f32::INFINITY };
+const EMPTY: Band = Band {
+    a: 0.0,
+    b: 0.0,
+    c_lo: f32::INFINITY,
+    c_hi: f32::INFINITY,
+};
 
 /// Steepest slope a band's planes may have: it bounds the rounding of `z − a·x − b·y` (see
 /// [`GridRay::z_slack`]); a steeper cell gets a thicker band, never a wrong one.
@@ -77,9 +85,18 @@ fn vertex_flags(block_flags: &[u8], width: usize, height: usize) -> Vec<u8> {
         if f == 0 {
             continue;
         }
-        let v = if f & SKIRT != 0 { MESHED_VERTEX | SKIRT_VERTEX } else { MESHED_VERTEX };
+        let v = if f & SKIRT != 0 {
+            MESHED_VERTEX | SKIRT_VERTEX
+        } else {
+            MESHED_VERTEX
+        };
         let (i, j) = (b / cols, b % cols);
-        for k in [i * width + j, i * width + j + 1, (i + 1) * width + j, (i + 1) * width + j + 1] {
+        for k in [
+            i * width + j,
+            i * width + j + 1,
+            (i + 1) * width + j,
+            (i + 1) * width + j + 1,
+        ] {
             flags[k] |= v;
         }
     }
@@ -91,11 +108,21 @@ fn vertex_flags(block_flags: &[u8], width: usize, height: usize) -> Vec<u8> {
 /// and a ring of one block, bounded between the least-squares plane of their vertices' heights
 /// and its parallels (or between horizontal planes when those are closer). Triangles are flat,
 /// so bounding their vertices (and the base under skirt vertices) bounds them.
-fn cell_band(grid: &HeightFieldGrid, vertex_flags: &[u8], level: usize, row: i32, col: i32) -> Band {
+fn cell_band(
+    grid: &HeightFieldGrid,
+    vertex_flags: &[u8],
+    level: usize,
+    row: i32,
+    col: i32,
+) -> Band {
     let size = 1i64 << level;
     let (w, h) = (grid.width as i64, grid.height as i64);
-    let rows = ((row as i64 * size - 1).max(0) as usize)..=(((row as i64 + 1) * size + 1).min(h - 1) as usize);
-    let (c0, c1) = ((col as i64 * size - 1).max(0) as usize, ((col as i64 + 1) * size + 1).min(w - 1) as usize);
+    let rows = ((row as i64 * size - 1).max(0) as usize)
+        ..=(((row as i64 + 1) * size + 1).min(h - 1) as usize);
+    let (c0, c1) = (
+        (col as i64 * size - 1).max(0) as usize,
+        ((col as i64 + 1) * size + 1).min(w - 1) as usize,
+    );
     let row_of = |i: usize| {
         let k = i * grid.width;
         (&grid.z[k + c0..=k + c1], &vertex_flags[k + c0..=k + c1])
@@ -156,7 +183,11 @@ fn cell_band(grid: &HeightFieldGrid, vertex_flags: &[u8], level: usize, row: i32
                 let ax = a64 * x as f64;
                 let top = z as f64;
                 let bottom = if f & SKIRT_VERTEX != 0 { base } else { top };
-                let (low, high) = if bottom < top { (bottom, top) } else { (top, bottom) };
+                let (low, high) = if bottom < top {
+                    (bottom, top)
+                } else {
+                    (top, bottom)
+                };
                 let plane = ax + by;
                 if low - plane < lo {
                     lo = low - plane;
@@ -179,7 +210,12 @@ fn cell_band(grid: &HeightFieldGrid, vertex_flags: &[u8], level: usize, row: i32
         Band { a, b, c_lo, c_hi }
     } else {
         let (c_lo, c_hi) = outward(z_lo, z_hi);
-        Band { a: 0.0, b: 0.0, c_lo, c_hi }
+        Band {
+            a: 0.0,
+            b: 0.0,
+            c_lo,
+            c_hi,
+        }
     }
 }
 
@@ -328,13 +364,31 @@ impl HeightFieldAccel {
             .skirt
             .iter()
             .map(|edge| {
-                let corners: Vec<[Vec3A; 3]> = edge.triangles.clone().map(|t| mesh.corners(t as usize)).collect();
-                let top = corners.iter().flatten().map(|p| p.z).fold(f32::NEG_INFINITY, f32::max);
-                SkirtQuad { block: edge.block, side: edge.side, top, first_triangle: edge.triangles.start, corners }
+                let corners: Vec<[Vec3A; 3]> = edge
+                    .triangles
+                    .clone()
+                    .map(|t| mesh.corners(t as usize))
+                    .collect();
+                let top = corners
+                    .iter()
+                    .flatten()
+                    .map(|p| p.z)
+                    .fold(f32::NEG_INFINITY, f32::max);
+                SkirtQuad {
+                    block: edge.block,
+                    side: edge.side,
+                    top,
+                    first_triangle: edge.triangles.start,
+                    corners,
+                }
             })
             .collect();
         let mut first_skirt = vec![u32::MAX; cols * rows];
-        let mut block_flags: Vec<u8> = grid.block_triangles.iter().map(|&t| if t == NO_TRIANGLE { 0 } else { SURFACE }).collect();
+        let mut block_flags: Vec<u8> = grid
+            .block_triangles
+            .iter()
+            .map(|&t| if t == NO_TRIANGLE { 0 } else { SURFACE })
+            .collect();
         for (k, quad) in skirt.iter().enumerate().rev() {
             first_skirt[quad.block as usize] = k as u32;
             block_flags[quad.block as usize] |= SKIRT;
@@ -347,15 +401,34 @@ impl HeightFieldAccel {
                     return NOTHING;
                 }
                 let (i, j) = (b / cols, b % cols);
-                let z = [grid.z[i * w + j], grid.z[i * w + j + 1], grid.z[(i + 1) * w + j], grid.z[(i + 1) * w + j + 1]];
-                let (mut lo, hi) = (z.iter().copied().fold(f32::INFINITY, f32::min), z.iter().copied().fold(f32::NEG_INFINITY, f32::max));
+                let z = [
+                    grid.z[i * w + j],
+                    grid.z[i * w + j + 1],
+                    grid.z[(i + 1) * w + j],
+                    grid.z[(i + 1) * w + j + 1],
+                ];
+                let (mut lo, hi) = (
+                    z.iter().copied().fold(f32::INFINITY, f32::min),
+                    z.iter().copied().fold(f32::NEG_INFINITY, f32::max),
+                );
                 if block_flags[b] & SKIRT != 0 {
                     lo = lo.min(grid.base);
                 }
                 Range { min: lo, max: hi }
             })
             .collect();
-        let field = own.iter().fold(NOTHING, |a, &b| if a == NOTHING { b } else if b == NOTHING { a } else { Range { min: a.min.min(b.min), max: a.max.max(b.max) } });
+        let field = own.iter().fold(NOTHING, |a, &b| {
+            if a == NOTHING {
+                b
+            } else if b == NOTHING {
+                a
+            } else {
+                Range {
+                    min: a.min.min(b.min),
+                    max: a.max.max(b.max),
+                }
+            }
+        });
         let (ci, ri) = (cols as i32, rows as i32);
         let vertex_flags = vertex_flags(&block_flags, w, grid.height);
         let mut top = 0;
@@ -365,7 +438,12 @@ impl HeightFieldAccel {
         assert!(top < MAX_LEVELS, "height field too large for the pyramid");
         let mut pyramid = Vec::new();
         let mut level_info = [LevelInfo::default(); MAX_LEVELS];
-        level_info[0] = LevelInfo { origin: 0, stride: 0, last_col: ci as u32 + 1, last_row: ri as u32 + 1 };
+        level_info[0] = LevelInfo {
+            origin: 0,
+            stride: 0,
+            last_col: ci as u32 + 1,
+            last_row: ri as u32 + 1,
+        };
         for (level, info) in level_info.iter_mut().enumerate().take(top + 1).skip(1) {
             // Cells −1..=(blocks >> level) of this level, and one more of nothing each side.
             let (level_cols, level_rows) = ((ci >> level) + 2, (ri >> level) + 2);
@@ -376,7 +454,8 @@ impl HeightFieldAccel {
                 .flat_map_iter(|r| {
                     let (grid, vertex_flags) = (&grid, &vertex_flags);
                     (-2..level_cols).map(move |c| {
-                        let in_ring = (-1..level_rows - 1).contains(&r) && (-1..level_cols - 1).contains(&c);
+                        let in_ring =
+                            (-1..level_rows - 1).contains(&r) && (-1..level_cols - 1).contains(&c);
                         if in_ring {
                             cell_band(grid, vertex_flags, level, r, c)
                         } else {
@@ -386,27 +465,79 @@ impl HeightFieldAccel {
                 })
                 .collect();
             pyramid.extend(bands);
-            *info = LevelInfo { origin: start + 2 * stride + 2, stride, last_col: level_cols as u32 - 1, last_row: level_rows as u32 - 1 };
+            *info = LevelInfo {
+                origin: start + 2 * stride + 2,
+                stride,
+                last_col: level_cols as u32 - 1,
+                last_row: level_rows as u32 - 1,
+            };
         }
-        let step = ((grid.xs[cols] - grid.xs[0]) / cols as f32, (grid.ys[rows] - grid.ys[0]) / rows as f32);
+        let step = (
+            (grid.xs[cols] - grid.xs[0]) / cols as f32,
+            (grid.ys[rows] - grid.ys[0]) / rows as f32,
+        );
         // Block boundaries are computed as k·step + start: allow for its rounding.
-        let extent = grid.xs[0].abs().max(grid.xs[cols].abs()).max(grid.ys[0].abs()).max(grid.ys[rows].abs());
+        let extent = grid.xs[0]
+            .abs()
+            .max(grid.xs[cols].abs())
+            .max(grid.ys[0].abs())
+            .max(grid.ys[rows].abs());
         let slack = step.0.abs() * 1e-6 + extent * 4.0 * f32::EPSILON;
         let mut packed_flags = vec![0u8; block_flags.len().div_ceil(4)];
         for (b, &f) in block_flags.iter().enumerate() {
             packed_flags[b / 4] |= f << (2 * (b % 4));
         }
-        let field_box = (Vec3A::new(grid.xs[0] - slack, grid.ys[rows] - slack, field.min), Vec3A::new(grid.xs[cols] + slack, grid.ys[0] + slack, field.max));
+        let field_box = (
+            Vec3A::new(grid.xs[0] - slack, grid.ys[rows] - slack, field.min),
+            Vec3A::new(grid.xs[cols] + slack, grid.ys[0] + slack, field.max),
+        );
         let escape_slopes = escape_slopes();
-        let block_top = own.iter().map(|r| if r.max.is_finite() { r.max } else { f32::NEG_INFINITY }).collect();
-        let escape = escape_cones(&grid, block_top, |b| block_flags[b] & SURFACE != 0, top, step, slack, &escape_slopes);
-        Some(HeightFieldAccel { block_cols: ci, block_rows: ri, packed_flags, pyramid, level_info, top, field, field_box, escape, escape_slopes, first_skirt, skirt, slack, step, inv_step: (1.0 / step.0, 1.0 / step.1), grid })
+        let block_top = own
+            .iter()
+            .map(|r| {
+                if r.max.is_finite() {
+                    r.max
+                } else {
+                    f32::NEG_INFINITY
+                }
+            })
+            .collect();
+        let escape = escape_cones(
+            &grid,
+            block_top,
+            |b| block_flags[b] & SURFACE != 0,
+            top,
+            step,
+            slack,
+            &escape_slopes,
+        );
+        Some(HeightFieldAccel {
+            block_cols: ci,
+            block_rows: ri,
+            packed_flags,
+            pyramid,
+            level_info,
+            top,
+            field,
+            field_box,
+            escape,
+            escape_slopes,
+            first_skirt,
+            skirt,
+            slack,
+            step,
+            inv_step: (1.0 / step.0, 1.0 / step.1),
+            grid,
+        })
     }
 
     /// Corners of the box holding every triangle of the field and its skirt.
     pub fn bounds(&self) -> (Vec3A, Vec3A) {
         let g = &self.grid;
-        (Vec3A::new(g.xs[0], g.ys[g.height - 1], self.field.min), Vec3A::new(g.xs[g.width - 1], g.ys[0], self.field.max))
+        (
+            Vec3A::new(g.xs[0], g.ys[g.height - 1], self.field.min),
+            Vec3A::new(g.xs[g.width - 1], g.ys[0], self.field.max),
+        )
     }
 
     /// The closest hit along `origin + t·direction` for `t` in [0, `t_max`]. With `FUSED`,
@@ -414,16 +545,28 @@ impl HeightFieldAccel {
     /// instructions): the same hit, but for which triangle a ray through an edge or vertex
     /// several share gets.
     #[inline(always)]
-    pub fn closest_hit<const FUSED: bool>(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
+    pub fn closest_hit<const FUSED: bool>(
+        &self,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+    ) -> Option<Hit> {
         let ray = GridRay::<FUSED>::new(self, origin, direction);
         let mut best: Option<BlockHit> = None;
         self.walk::<false, FUSED>(&ray, t_max, &mut best);
         best.map(|h| {
             let triangle = match h.triangle {
-                Triangle::Surface { block, second } => self.grid.block_triangles[block] as usize + usize::from(second),
+                Triangle::Surface { block, second } => {
+                    self.grid.block_triangles[block] as usize + usize::from(second)
+                }
                 Triangle::Skirt(t) => t as usize,
             };
-            Hit { triangle, t: h.t, u: h.u, v: h.v }
+            Hit {
+                triangle,
+                t: h.t,
+                u: h.u,
+                v: h.v,
+            }
         })
     }
 
@@ -440,12 +583,23 @@ impl HeightFieldAccel {
     /// Visits, in order along the ray, the blocks it may meet before `t_limit`, keeping in
     /// `best` the nearest hit (with `ANY`, the first hit found, which ends the walk).
     #[inline(always)]
-    fn walk<const ANY: bool, const F: bool>(&self, ray: &GridRay<F>, t_limit: f32, best: &mut Option<BlockHit>) {
-        let Some((mut state, reach)) = self.start(ray, t_limit) else { return };
+    fn walk<const ANY: bool, const F: bool>(
+        &self,
+        ray: &GridRay<F>,
+        t_limit: f32,
+        best: &mut Option<BlockHit>,
+    ) {
+        let Some((mut state, reach)) = self.start(ray, t_limit) else {
+            return;
+        };
         // Nothing lies beyond the field's box, nor beyond `reach`.
         let mut t_limit = min(min(t_limit, ray.t_far), reach);
         loop {
-            let alive = if state.level > 0 { self.cell_step(ray, &mut state, t_limit) } else { self.block_step::<ANY, F>(ray, &mut state, &mut t_limit, best) };
+            let alive = if state.level > 0 {
+                self.cell_step(ray, &mut state, t_limit)
+            } else {
+                self.block_step::<ANY, F>(ray, &mut state, &mut t_limit, best)
+            };
             if !alive {
                 return;
             }
@@ -455,8 +609,18 @@ impl HeightFieldAccel {
     /// Tests block (`row`, `col`) over the ray's stretch `span`: a hit nearer than `t_limit`
     /// goes to `best` and lowers the limit. True when the walk is over (`ANY` and a hit).
     #[inline(always)]
-    fn visit<const ANY: bool, const F: bool>(&self, ray: &GridRay<F>, row: i32, col: i32, span: (f32, f32), t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
-        let Some(hit) = self.block_hit(ray, row, col, span, *t_limit, ANY) else { return false };
+    fn visit<const ANY: bool, const F: bool>(
+        &self,
+        ray: &GridRay<F>,
+        row: i32,
+        col: i32,
+        span: (f32, f32),
+        t_limit: &mut f32,
+        best: &mut Option<BlockHit>,
+    ) -> bool {
+        let Some(hit) = self.block_hit(ray, row, col, span, *t_limit, ANY) else {
+            return false;
+        };
         *best = Some(hit);
         *t_limit = hit.t;
         ANY
@@ -475,41 +639,103 @@ impl HeightFieldAccel {
             return None;
         }
         if t_in != 0.0 {
-            return Some((WalkState { level: self.top, row: 0, col: 0, entry: 0, t_in }, f32::INFINITY));
+            return Some((
+                WalkState {
+                    level: self.top,
+                    row: 0,
+                    col: 0,
+                    entry: 0,
+                    t_in,
+                },
+                f32::INFINITY,
+            ));
         }
-        let (row, col) = (Self::block_of::<false>(ray.origin.y, &g.ys, self.inv_step.1, self.block_rows), Self::block_of::<true>(ray.origin.x, &g.xs, self.inv_step.0, self.block_cols));
+        let (row, col) = (
+            Self::block_of::<false>(ray.origin.y, &g.ys, self.inv_step.1, self.block_rows),
+            Self::block_of::<true>(ray.origin.x, &g.xs, self.inv_step.0, self.block_cols),
+        );
         // Going away from a side of the block its origin lies strictly inside, the ray
         // cannot meet the block behind that side: treat it as the side the ray came in
         // through. (An origin on a side may lie on that block's skirt.)
         // SAFETY: `block_of` gives a block of the field: its vertex column and row and the
         // next exist.
-        let (x0, x1, y0, y1) = unsafe { (*g.xs.get_unchecked(col as usize), *g.xs.get_unchecked(col as usize + 1), *g.ys.get_unchecked(row as usize), *g.ys.get_unchecked(row as usize + 1)) };
+        let (x0, x1, y0, y1) = unsafe {
+            (
+                *g.xs.get_unchecked(col as usize),
+                *g.xs.get_unchecked(col as usize + 1),
+                *g.ys.get_unchecked(row as usize),
+                *g.ys.get_unchecked(row as usize + 1),
+            )
+        };
         let (ox, oy) = (ray.origin.x, ray.origin.y);
-        let entry = if x0 < ox && ox < x1 && y1 < oy && oy < y0 { X_ENTRY | Y_ENTRY } else { 0 };
+        let entry = if x0 < ox && ox < x1 && y1 < oy && oy < y0 {
+            X_ENTRY | Y_ENTRY
+        } else {
+            0
+        };
         let quadrant = usize::from(ray.forward_x) + 2 * usize::from(ray.forward_y);
         // SAFETY: as above, four codes a block; a code indexes the 256 slopes.
-        let k2 = unsafe { *self.escape_slopes.get_unchecked(*self.escape.get_unchecked(4 * (row as usize * self.block_cols as usize + col as usize) + quadrant) as usize) };
+        let k2 = unsafe {
+            *self.escape_slopes.get_unchecked(*self.escape.get_unchecked(
+                4 * (row as usize * self.block_cols as usize + col as usize) + quadrant,
+            ) as usize)
+        };
         let d = ray.direction;
-        if d.z > 0.0 && d.z * d.z >= k2 * (d.x * d.x + d.y * d.y) && ray.origin.z >= self.lowest_vertex(row as usize, col as usize) {
+        if d.z > 0.0
+            && d.z * d.z >= k2 * (d.x * d.x + d.y * d.y)
+            && ray.origin.z >= self.lowest_vertex(row as usize, col as usize)
+        {
             // To where the ray leaves the ring, and the rounding of its points there.
             let (fx, fy) = (i32::from(ray.forward_x), i32::from(ray.forward_y));
             let (tx, ty) = ray.boundaries(row - 1 + 3 * fy, col - 1 + 3 * fx);
             let t = min(tx, ty);
-            return Some((WalkState { level: 0, row, col, entry, t_in }, t + 4.0 * ray.margin + t * 1e-6));
+            return Some((
+                WalkState {
+                    level: 0,
+                    row,
+                    col,
+                    entry,
+                    t_in,
+                },
+                t + 4.0 * ray.margin + t * 1e-6,
+            ));
         }
-        Some((WalkState { level: 0, row, col, entry, t_in }, f32::INFINITY))
+        Some((
+            WalkState {
+                level: 0,
+                row,
+                col,
+                entry,
+                t_in,
+            },
+            f32::INFINITY,
+        ))
     }
 
     /// One step of the walk in a cell above the blocks: down into the child the ray is in
     /// when the ray may meet the cell's range, else on to the next cell. False when the walk
     /// is over.
     #[inline(always)]
-    fn cell_step<const F: bool>(&self, ray: &GridRay<F>, state: &mut WalkState, t_limit: f32) -> bool {
-        let WalkState { level, row, col, t_in, .. } = *state;
+    fn cell_step<const F: bool>(
+        &self,
+        ray: &GridRay<F>,
+        state: &mut WalkState,
+        t_limit: f32,
+    ) -> bool {
+        let WalkState {
+            level,
+            row,
+            col,
+            t_in,
+            ..
+        } = *state;
         let (tx, ty, t_out) = ray.exits(level, row, col, t_in);
         let info = self.level_info[level % MAX_LEVELS];
         let cell = info.origin + row as isize * info.stride + col as isize;
-        debug_assert!((0..self.pyramid.len() as isize).contains(&cell), "cell ({row}, {col}) of level {level}");
+        debug_assert!(
+            (0..self.pyramid.len() as isize).contains(&cell),
+            "cell ({row}, {col}) of level {level}"
+        );
         // SAFETY: the walk keeps to the ring's cells and their children, which lie within
         // the padding of one cell around the ring.
         let band = unsafe { *self.pyramid.get_unchecked(cell as usize) };
@@ -528,8 +754,20 @@ impl HeightFieldAccel {
     /// One step of the walk in a block: visits it and any neighbour whose side the ray
     /// runs along, then moves on to the next cell. False when the walk is over.
     #[inline(always)]
-    fn block_step<const ANY: bool, const F: bool>(&self, ray: &GridRay<F>, state: &mut WalkState, t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
-        let WalkState { row, col, t_in, entry, .. } = *state;
+    fn block_step<const ANY: bool, const F: bool>(
+        &self,
+        ray: &GridRay<F>,
+        state: &mut WalkState,
+        t_limit: &mut f32,
+        best: &mut Option<BlockHit>,
+    ) -> bool {
+        let WalkState {
+            row,
+            col,
+            t_in,
+            entry,
+            ..
+        } = *state;
         let (tx, ty, t_out) = ray.exits(0, row, col, t_in);
         let along_x = tx < ty;
         let span = (t_in - ray.margin, t_out + ray.margin);
@@ -537,16 +775,31 @@ impl HeightFieldAccel {
         if (col + 1) as u32 <= info.last_col && (row + 1) as u32 <= info.last_row {
             // A block of the field, or of the ring around it (which has no triangles but
             // may run along the field's side).
-            if (col as u32) < self.block_cols as u32 && (row as u32) < self.block_rows as u32 && self.visit::<ANY, F>(ray, row, col, span, t_limit, best) {
+            if (col as u32) < self.block_cols as u32
+                && (row as u32) < self.block_rows as u32
+                && self.visit::<ANY, F>(ray, row, col, span, t_limit, best)
+            {
                 return false;
             }
             let exit = if along_x { X_EXIT } else { Y_EXIT };
             // Sides the ray runs within twice the slack of: before it passes the entry
             // side's line plus the slack, or after the exit side's line minus it (the signs
             // of the four differences, the exits' negated, say it lane by lane).
-            let behind = Vec4::new(t_in, t_in, t_out, t_out) + ray.reach - Vec4::new(tx, ty, tx, ty);
-            let sides = (behind * Vec4::new(1.0, 1.0, -1.0, -1.0)).is_negative_bitmask() as u8 & !(entry | exit);
-            if sides != 0 && self.visit_neighbours::<ANY, F>(ray, row, col, sides, (span.0 - ray.margin, span.1 + ray.margin), t_limit, best) {
+            let behind =
+                Vec4::new(t_in, t_in, t_out, t_out) + ray.reach - Vec4::new(tx, ty, tx, ty);
+            let sides = (behind * Vec4::new(1.0, 1.0, -1.0, -1.0)).is_negative_bitmask() as u8
+                & !(entry | exit);
+            if sides != 0
+                && self.visit_neighbours::<ANY, F>(
+                    ray,
+                    row,
+                    col,
+                    sides,
+                    (span.0 - ray.margin, span.1 + ray.margin),
+                    t_limit,
+                    best,
+                )
+            {
                 return false;
             }
         }
@@ -556,7 +809,13 @@ impl HeightFieldAccel {
     /// Steps to the next cell of the state's level (along x or y), then up as many levels
     /// as the step crossed parent boundaries. False past the ring.
     #[inline(always)]
-    fn advance<const F: bool>(&self, ray: &GridRay<F>, state: &mut WalkState, along_x: bool, t_out: f32) -> bool {
+    fn advance<const F: bool>(
+        &self,
+        ray: &GridRay<F>,
+        state: &mut WalkState,
+        along_x: bool,
+        t_out: f32,
+    ) -> bool {
         let info = self.level_info[state.level % MAX_LEVELS];
         let (fx, fy) = (i32::from(ray.forward_x), i32::from(ray.forward_y));
         let up = if along_x {
@@ -589,7 +848,12 @@ impl HeightFieldAccel {
         debug_assert!(i + 1 < g.height && j + 1 < w);
         // SAFETY: (i, j) is a block of the field: its four vertices exist.
         let z = |k: usize| unsafe { *g.z.get_unchecked(k) };
-        (z(i * w + j), z(i * w + j + 1), z((i + 1) * w + j), z((i + 1) * w + j + 1))
+        (
+            z(i * w + j),
+            z(i * w + j + 1),
+            z((i + 1) * w + j),
+            z((i + 1) * w + j + 1),
+        )
     }
 
     /// The height of the lowest of block (`i`, `j`)'s four vertices.
@@ -602,7 +866,12 @@ impl HeightFieldAccel {
     /// The block column (row) whose vertex columns `vertices` (`INCREASING` or decreasing)
     /// enclose coordinate `v`, clamped to the `blocks` of the field.
     #[inline(always)]
-    fn block_of<const INCREASING: bool>(v: f32, vertices: &[f32], inv_step: f32, blocks: i32) -> i32 {
+    fn block_of<const INCREASING: bool>(
+        v: f32,
+        vertices: &[f32],
+        inv_step: f32,
+        blocks: i32,
+    ) -> i32 {
         let last = (blocks - 1) as f32;
         let k = (v - vertices[0]) * inv_step;
         // Clamped (NaN to 0) in floats, so that the conversion needs no saturation.
@@ -624,11 +893,32 @@ impl HeightFieldAccel {
     /// visit ended the walk.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn visit_neighbours<const ANY: bool, const F: bool>(&self, ray: &GridRay<F>, row: i32, col: i32, sides: u8, span: (f32, f32), t_limit: &mut f32, best: &mut Option<BlockHit>) -> bool {
-        let (dc, dr) = (2 * i32::from(ray.forward_x) - 1, 2 * i32::from(ray.forward_y) - 1);
-        for (side, (dr, dc)) in [(X_ENTRY, (0, -dc)), (Y_ENTRY, (-dr, 0)), (X_EXIT, (0, dc)), (Y_EXIT, (dr, 0))] {
+    fn visit_neighbours<const ANY: bool, const F: bool>(
+        &self,
+        ray: &GridRay<F>,
+        row: i32,
+        col: i32,
+        sides: u8,
+        span: (f32, f32),
+        t_limit: &mut f32,
+        best: &mut Option<BlockHit>,
+    ) -> bool {
+        let (dc, dr) = (
+            2 * i32::from(ray.forward_x) - 1,
+            2 * i32::from(ray.forward_y) - 1,
+        );
+        for (side, (dr, dc)) in [
+            (X_ENTRY, (0, -dc)),
+            (Y_ENTRY, (-dr, 0)),
+            (X_EXIT, (0, dc)),
+            (Y_EXIT, (dr, 0)),
+        ] {
             let (r, c) = (row + dr, col + dc);
-            if sides & side != 0 && (0..self.block_rows).contains(&r) && (0..self.block_cols).contains(&c) && self.visit::<ANY, F>(ray, r, c, span, t_limit, best) {
+            if sides & side != 0
+                && (0..self.block_rows).contains(&r)
+                && (0..self.block_cols).contains(&c)
+                && self.visit::<ANY, F>(ray, r, c, span, t_limit, best)
+            {
                 return true;
             }
         }
@@ -639,7 +929,15 @@ impl HeightFieldAccel {
     /// `any`). With a `span`, the block is skipped when the ray passes above or below it
     /// over that stretch.
     #[inline(always)]
-    fn block_hit<const F: bool>(&self, ray: &GridRay<F>, row: i32, col: i32, span: (f32, f32), t_limit: f32, any: bool) -> Option<BlockHit> {
+    fn block_hit<const F: bool>(
+        &self,
+        ray: &GridRay<F>,
+        row: i32,
+        col: i32,
+        span: (f32, f32),
+        t_limit: f32,
+        any: bool,
+    ) -> Option<BlockHit> {
         let g = &self.grid;
         let (i, j) = (row as usize, col as usize);
         let block = i * self.block_cols as usize + j;
@@ -659,15 +957,32 @@ impl HeightFieldAccel {
             return None;
         }
         // SAFETY: as above.
-        let (x0, x1, y0, y1) = unsafe { (*g.xs.get_unchecked(j), *g.xs.get_unchecked(j + 1), *g.ys.get_unchecked(i), *g.ys.get_unchecked(i + 1)) };
-        let (p00, p10, p01, p11) = (Vec3A::new(x0, y0, z00), Vec3A::new(x0, y1, z10), Vec3A::new(x1, y0, z01), Vec3A::new(x1, y1, z11));
+        let (x0, x1, y0, y1) = unsafe {
+            (
+                *g.xs.get_unchecked(j),
+                *g.xs.get_unchecked(j + 1),
+                *g.ys.get_unchecked(i),
+                *g.ys.get_unchecked(i + 1),
+            )
+        };
+        let (p00, p10, p01, p11) = (
+            Vec3A::new(x0, y0, z00),
+            Vec3A::new(x0, y1, z10),
+            Vec3A::new(x1, y0, z01),
+            Vec3A::new(x1, y1, z11),
+        );
         let mut best: Option<BlockHit> = None;
         let mut limit = t_limit;
         for (second, corners) in [(false, [p00, p10, p01]), (true, [p01, p10, p11])] {
             if let Some((t, u, v)) = intersect_triangle(ray, &corners, limit) {
                 // The hit's mesh index is looked up when the walk ends: load it meanwhile.
                 prefetch(&g.block_triangles[block]);
-                best = Some(BlockHit { triangle: Triangle::Surface { block, second }, t, u, v });
+                best = Some(BlockHit {
+                    triangle: Triangle::Surface { block, second },
+                    t,
+                    u,
+                    v,
+                });
                 limit = t;
                 if any {
                     return best;
@@ -693,39 +1008,70 @@ impl HeightFieldAccel {
 
     /// The nearest hit of `ray` on a skirt edge of block (`i`, `j`) before `t_limit`.
     #[inline(always)]
-    fn skirt_hit<const F: bool>(&self, ray: &GridRay<F>, quad: &SkirtQuad, (i, j): (usize, usize), t_limit: f32) -> Option<BlockHit> {
+    fn skirt_hit<const F: bool>(
+        &self,
+        ray: &GridRay<F>,
+        quad: &SkirtQuad,
+        (i, j): (usize, usize),
+        t_limit: f32,
+    ) -> Option<BlockHit> {
         let g = &self.grid;
         // The skirt lies in a vertical plane; test its trapezoid's box before its triangles.
         let (t, along, range) = match quad.side {
             BlockSide::Top | BlockSide::Bottom => {
-                let y = if quad.side == BlockSide::Top { g.ys[i] } else { g.ys[i + 1] };
+                let y = if quad.side == BlockSide::Top {
+                    g.ys[i]
+                } else {
+                    g.ys[i + 1]
+                };
                 let t = (y - ray.origin.y) * ray.inv.y;
-                (t, ray.origin.x + t * ray.direction.x, (g.xs[j], g.xs[j + 1]))
+                (
+                    t,
+                    ray.origin.x + t * ray.direction.x,
+                    (g.xs[j], g.xs[j + 1]),
+                )
             }
             BlockSide::Left | BlockSide::Right => {
-                let x = if quad.side == BlockSide::Left { g.xs[j] } else { g.xs[j + 1] };
+                let x = if quad.side == BlockSide::Left {
+                    g.xs[j]
+                } else {
+                    g.xs[j + 1]
+                };
                 let t = (x - ray.origin.x) * ray.inv.x;
-                (t, ray.origin.y + t * ray.direction.y, (g.ys[i + 1], g.ys[i]))
+                (
+                    t,
+                    ray.origin.y + t * ray.direction.y,
+                    (g.ys[i + 1], g.ys[i]),
+                )
             }
         };
         let e = self.slack;
         let z = ray.origin.z + t * ray.direction.z;
         let near_plane = t.is_finite() && t >= -e && t <= t_limit * (1.0 + 4.0 * f32::EPSILON) + e;
-        if !(near_plane && along >= range.0 - e && along <= range.1 + e && z >= g.base - e && z <= quad.top + e) {
+        if !(near_plane
+            && along >= range.0 - e
+            && along <= range.1 + e
+            && z >= g.base - e
+            && z <= quad.top + e)
+        {
             return None;
         }
         let mut best: Option<BlockHit> = None;
         let mut limit = t_limit;
         for (k, corners) in quad.corners.iter().enumerate() {
             if let Some((t, u, v)) = intersect_triangle(ray, corners, limit) {
-                best = Some(BlockHit { triangle: Triangle::Skirt(quad.first_triangle + k as u32), t, u, v });
+                best = Some(BlockHit {
+                    triangle: Triangle::Skirt(quad.first_triangle + k as u32),
+                    t,
+                    u,
+                    v,
+                });
                 limit = t;
             }
         }
         best
     }
 }
-
 
 impl<const FUSED: bool> GridRay<FUSED> {
     #[inline(always)]
@@ -745,7 +1091,8 @@ impl<const FUSED: bool> GridRay<FUSED> {
             y_start: (g.ys[0] - origin.y) * inv.y,
             margin: e * max(inv.x.abs(), inv.y.abs()),
             reach: {
-                let (x_width, y_width) = ((accel.step.0 * inv.x).abs(), (accel.step.1 * inv.y).abs());
+                let (x_width, y_width) =
+                    ((accel.step.0 * inv.x).abs(), (accel.step.1 * inv.y).abs());
                 let (x_graze, y_graze) = (2.0 * e * inv.x.abs(), 2.0 * e * inv.y.abs());
                 Vec4::new(x_width - x_graze, y_width - y_graze, x_graze, y_graze)
             },
@@ -780,21 +1127,32 @@ impl<const FUSED: bool> GridRay<FUSED> {
     /// `row`.
     #[inline(always)]
     fn boundaries(&self, row: i32, col: i32) -> (f32, f32) {
-        (Self::madd(col as f32, self.x_step, self.x_start), Self::madd(row as f32, self.y_step, self.y_start))
+        (
+            Self::madd(col as f32, self.x_step, self.x_start),
+            Self::madd(row as f32, self.y_step, self.y_start),
+        )
     }
 
     /// Distances at which the ray leaves cell (`row`, `col`) of `level` through its x side
     /// and its y side, and the distance it leaves the cell (not before `t_in`).
     #[inline(always)]
     fn exits(&self, level: usize, row: i32, col: i32, t_in: f32) -> (f32, f32, f32) {
-        let (tx, ty) = self.boundaries((row + i32::from(self.forward_y)) << level, (col + i32::from(self.forward_x)) << level);
+        let (tx, ty) = self.boundaries(
+            (row + i32::from(self.forward_y)) << level,
+            (col + i32::from(self.forward_x)) << level,
+        );
         (tx, ty, max(min(tx, ty), t_in))
     }
 
     /// Whether the ray's stretch [`t_in`, `t_out`] may meet heights in `range`.
     #[inline(always)]
     fn meets(&self, range: Range, (t_in, t_out): (f32, f32)) -> bool {
-        self.meets_linear(self.origin.z, self.direction.z, (t_in, t_out), (range.min, range.max))
+        self.meets_linear(
+            self.origin.z,
+            self.direction.z,
+            (t_in, t_out),
+            (range.min, range.max),
+        )
     }
 
     /// Distances at which the ray enters (0 if it starts inside) and leaves the box with
@@ -824,7 +1182,13 @@ impl<const FUSED: bool> GridRay<FUSED> {
     /// Whether `h0 + dh·t` may lie in [`lo`, `hi`] for some t of [`t_in`, `t_out`] (cut at
     /// `t_far`), allowing for rounding: it does not when it is above or below at both ends.
     #[inline(always)]
-    fn meets_linear(&self, h0: f32, dh: f32, (t_in, t_out): (f32, f32), (lo, hi): (f32, f32)) -> bool {
+    fn meets_linear(
+        &self,
+        h0: f32,
+        dh: f32,
+        (t_in, t_out): (f32, f32),
+        (lo, hi): (f32, f32),
+    ) -> bool {
         let t_out = min(t_out, self.t_far);
         let (hp, hq) = (Self::madd(dh, t_in, h0), Self::madd(dh, t_out, h0));
         let above = min(hp, hq) - self.z_slack > hi;
@@ -839,7 +1203,9 @@ fn prefetch<T>(value: &T) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: prefetching a valid reference's address has no effect but on the caches.
     unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((value as *const T).cast());
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
+            (value as *const T).cast(),
+        );
     }
 }
 
@@ -866,7 +1232,11 @@ fn max(a: f32, b: f32) -> f32 {
 /// Möller–Trumbore intersection with triangle `corners` for t in [0, `t_limit`]: (t, u, v),
 /// with u and v the weights of corners 1 and 2. Points on an edge count as inside.
 #[inline(always)]
-fn intersect_triangle<const F: bool>(ray: &GridRay<F>, corners: &[Vec3A; 3], t_limit: f32) -> Option<(f32, f32, f32)> {
+fn intersect_triangle<const F: bool>(
+    ray: &GridRay<F>,
+    corners: &[Vec3A; 3],
+    t_limit: f32,
+) -> Option<(f32, f32, f32)> {
     let [v0, v1, v2] = *corners;
     let (e1, e2) = (v1 - v0, v2 - v0);
     let ng = e2.cross(e1);
@@ -900,12 +1270,31 @@ mod tests {
     fn ragged_scene(w: usize, h: usize, seed: u64) -> Scene {
         let mut rng = Rng::new(seed);
         let n = w * h;
-        let height = (0..n).map(|p| (((p % w) as f32 * 0.9).sin() * 4.0 + ((p / w) as f32 * 0.6).cos() * 3.0 + rng.next_f32() * 2.0).max(-0.5) + 1.0).collect();
+        let height = (0..n)
+            .map(|p| {
+                (((p % w) as f32 * 0.9).sin() * 4.0
+                    + ((p / w) as f32 * 0.6).cos() * 3.0
+                    + rng.next_f32() * 2.0)
+                    .max(-0.5)
+                    + 1.0
+            })
+            .collect();
         let mask = (0..n).map(|_| rng.next_f32() > 0.15).collect();
         Scene {
-            camera: Camera { width: w, height: h, pixel_size: 0.7 },
-            surface: HeightField { height, mask, albedo: vec![[0.5; 3]; n] },
-            floor: Some(Floor { height: 0.5, albedo: [0.5; 3] }),
+            camera: Camera {
+                width: w,
+                height: h,
+                pixel_size: 0.7,
+            },
+            surface: HeightField {
+                height,
+                mask,
+                albedo: vec![[0.5; 3]; n],
+            },
+            floor: Some(Floor {
+                height: 0.5,
+                albedo: [0.5; 3],
+            }),
             cornell_box: None,
         }
     }
@@ -914,10 +1303,15 @@ mod tests {
     fn brute_force(mesh: &Mesh, ray: &GridRay<false>) -> Option<(usize, f32)> {
         let mut best: Option<(usize, f32)> = None;
         for t in 0..mesh.triangles.len() {
-            if !matches!(mesh.kinds[t], crate::geometry::SurfaceKind::Object | crate::geometry::SurfaceKind::Skirt) {
+            if !matches!(
+                mesh.kinds[t],
+                crate::geometry::SurfaceKind::Object | crate::geometry::SurfaceKind::Skirt
+            ) {
                 continue;
             }
-            if let Some((d, _, _)) = intersect_triangle(ray, &mesh.corners(t), best.map_or(f32::INFINITY, |b| b.1)) {
+            if let Some((d, _, _)) =
+                intersect_triangle(ray, &mesh.corners(t), best.map_or(f32::INFINITY, |b| b.1))
+            {
                 best = Some((t, d));
             }
         }
@@ -927,24 +1321,65 @@ mod tests {
     /// A ray from a random point of a random object triangle (from its first corner, a
     /// grid vertex, when `at_vertex`), `offset` off it along its normal, in a direction of
     /// the upper hemisphere or a little below it.
-    fn ray_off_the_surface(mesh: &Mesh, object: &[usize], rng: &mut Rng, at_vertex: bool, offset: f32) -> (Vec3A, Vec3A) {
+    fn ray_off_the_surface(
+        mesh: &Mesh,
+        object: &[usize],
+        rng: &mut Rng,
+        at_vertex: bool,
+        offset: f32,
+    ) -> (Vec3A, Vec3A) {
         let t = object[(rng.next_f32() * object.len() as f32) as usize % object.len()];
         let [a, b, c] = mesh.corners(t);
         let (u, v) = (rng.next_f32(), rng.next_f32());
-        let (u, v) = if u + v > 1.0 { (1.0 - u, 1.0 - v) } else { (u, v) };
-        let on_surface = if at_vertex { a } else { a + (b - a) * u + (c - a) * v };
-        let direction = vec3a(rng.next_f32() * 2.0 - 1.0, rng.next_f32() * 2.0 - 1.0, rng.next_f32() * 1.6 - 0.3).normalize();
+        let (u, v) = if u + v > 1.0 {
+            (1.0 - u, 1.0 - v)
+        } else {
+            (u, v)
+        };
+        let on_surface = if at_vertex {
+            a
+        } else {
+            a + (b - a) * u + (c - a) * v
+        };
+        let direction = vec3a(
+            rng.next_f32() * 2.0 - 1.0,
+            rng.next_f32() * 2.0 - 1.0,
+            rng.next_f32() * 1.6 - 0.3,
+        )
+        .normalize();
         (on_surface + mesh.normals[t] * offset, direction)
     }
 
     /// Asserts that both queries agree with testing every triangle; whether the ray hits.
-    fn assert_agrees(mesh: &Mesh, accel: &HeightFieldAccel, origin: Vec3A, direction: Vec3A, what: &str) -> bool {
+    fn assert_agrees(
+        mesh: &Mesh,
+        accel: &HeightFieldAccel,
+        origin: Vec3A,
+        direction: Vec3A,
+        what: &str,
+    ) -> bool {
         let expected = brute_force(mesh, &GridRay::<false>::new(accel, origin, direction));
         let got = accel.closest_hit::<false>(origin, direction, f32::INFINITY);
-        assert_eq!(got.map(|g| (g.triangle, g.t)), expected, "ray {origin:?} {direction:?} in {what}");
-        assert_eq!(accel.closest_hit::<true>(origin, direction, f32::INFINITY), got, "fused walk, ray {origin:?} {direction:?} in {what}");
-        assert_eq!(accel.occluded::<false>(origin, direction, f32::INFINITY), expected.is_some(), "ray {origin:?} {direction:?} in {what}");
-        assert_eq!(accel.occluded::<true>(origin, direction, f32::INFINITY), expected.is_some(), "fused walk, ray {origin:?} {direction:?} in {what}");
+        assert_eq!(
+            got.map(|g| (g.triangle, g.t)),
+            expected,
+            "ray {origin:?} {direction:?} in {what}"
+        );
+        assert_eq!(
+            accel.closest_hit::<true>(origin, direction, f32::INFINITY),
+            got,
+            "fused walk, ray {origin:?} {direction:?} in {what}"
+        );
+        assert_eq!(
+            accel.occluded::<false>(origin, direction, f32::INFINITY),
+            expected.is_some(),
+            "ray {origin:?} {direction:?} in {what}"
+        );
+        assert_eq!(
+            accel.occluded::<true>(origin, direction, f32::INFINITY),
+            expected.is_some(),
+            "fused walk, ray {origin:?} {direction:?} in {what}"
+        );
         expected.is_some()
     }
 
@@ -959,23 +1394,51 @@ mod tests {
             let (mut hits, mut skirt_hits) = (0, 0);
             for _ in 0..4000 {
                 // From anywhere around the field toward a point in its box.
-                let origin = vec3a((rng.next_f32() - 0.5) * sx * 2.0, (rng.next_f32() - 0.5) * sy * 2.0, rng.next_f32() * 12.0 - 1.0);
-                let target = vec3a((rng.next_f32() - 0.5) * sx, (rng.next_f32() - 0.5) * sy, rng.next_f32() * 8.0);
+                let origin = vec3a(
+                    (rng.next_f32() - 0.5) * sx * 2.0,
+                    (rng.next_f32() - 0.5) * sy * 2.0,
+                    rng.next_f32() * 12.0 - 1.0,
+                );
+                let target = vec3a(
+                    (rng.next_f32() - 0.5) * sx,
+                    (rng.next_f32() - 0.5) * sy,
+                    rng.next_f32() * 8.0,
+                );
                 let direction = (target - origin).normalize();
                 let ray = GridRay::<false>::new(&accel, origin, direction);
                 let expected = brute_force(&mesh, &ray);
                 let got = accel.closest_hit::<false>(origin, direction, f32::INFINITY);
-                assert_eq!(got.map(|g| (g.triangle, g.t)), expected, "ray {origin:?} {direction:?} in {w}x{h}");
-                assert_eq!(accel.closest_hit::<true>(origin, direction, f32::INFINITY), got, "fused walk, ray {origin:?} {direction:?} in {w}x{h}");
-                assert_eq!(accel.occluded::<false>(origin, direction, f32::INFINITY), expected.is_some());
-                assert_eq!(accel.occluded::<true>(origin, direction, f32::INFINITY), expected.is_some());
+                assert_eq!(
+                    got.map(|g| (g.triangle, g.t)),
+                    expected,
+                    "ray {origin:?} {direction:?} in {w}x{h}"
+                );
+                assert_eq!(
+                    accel.closest_hit::<true>(origin, direction, f32::INFINITY),
+                    got,
+                    "fused walk, ray {origin:?} {direction:?} in {w}x{h}"
+                );
+                assert_eq!(
+                    accel.occluded::<false>(origin, direction, f32::INFINITY),
+                    expected.is_some()
+                );
+                assert_eq!(
+                    accel.occluded::<true>(origin, direction, f32::INFINITY),
+                    expected.is_some()
+                );
                 if let Some((t, d)) = expected {
                     hits += 1;
                     skirt_hits += usize::from(mesh.kinds[t] == crate::geometry::SurfaceKind::Skirt);
-                    assert!(!accel.occluded::<false>(origin, direction, d * 0.999) && !accel.occluded::<true>(origin, direction, d * 0.999));
+                    assert!(
+                        !accel.occluded::<false>(origin, direction, d * 0.999)
+                            && !accel.occluded::<true>(origin, direction, d * 0.999)
+                    );
                 }
             }
-            assert!(hits > 1500 && skirt_hits > 200, "{w}x{h}: {hits} hits, {skirt_hits} on the skirt");
+            assert!(
+                hits > 1500 && skirt_hits > 200,
+                "{w}x{h}: {hits} hits, {skirt_hits} on the skirt"
+            );
         }
     }
 
@@ -988,13 +1451,22 @@ mod tests {
             let scene = ragged_scene(w, h, seed);
             let mesh = Mesh::from_scene(&scene);
             let accel = HeightFieldAccel::new(&mesh).expect("a height-field mesh has a grid");
-            let object: Vec<usize> = (0..mesh.triangles.len()).filter(|&t| mesh.kinds[t] == crate::geometry::SurfaceKind::Object).collect();
+            let object: Vec<usize> = (0..mesh.triangles.len())
+                .filter(|&t| mesh.kinds[t] == crate::geometry::SurfaceKind::Object)
+                .collect();
             let mut rng = Rng::new(seed);
             let mut hits = 0;
             for k in 0..6000 {
                 // Every third ray starts at a vertex of the grid.
-                let (origin, direction) = ray_off_the_surface(&mesh, &object, &mut rng, k % 3 == 0, 1e-3);
-                hits += usize::from(assert_agrees(&mesh, &accel, origin, direction, &format!("{w}x{h}")));
+                let (origin, direction) =
+                    ray_off_the_surface(&mesh, &object, &mut rng, k % 3 == 0, 1e-3);
+                hits += usize::from(assert_agrees(
+                    &mesh,
+                    &accel,
+                    origin,
+                    direction,
+                    &format!("{w}x{h}"),
+                ));
             }
             assert!(hits > 1000, "{w}x{h}: only {hits} hits");
         }
@@ -1007,13 +1479,23 @@ mod tests {
     /// heights.)
     #[test]
     fn steep_and_scaled_fields_agree_with_testing_every_triangle() {
-        for (w, h, pixel_size, lift, seed) in [(37, 29, 0.013f32, 0.0f32, 21u64), (33, 41, 3.7, 900.0, 22), (64, 16, 1.0, -40.0, 23), (20, 20, 1e-3, 5.0, 54), (30, 25, 250.0, -3e4, 55)] {
+        for (w, h, pixel_size, lift, seed) in [
+            (37, 29, 0.013f32, 0.0f32, 21u64),
+            (33, 41, 3.7, 900.0, 22),
+            (64, 16, 1.0, -40.0, 23),
+            (20, 20, 1e-3, 5.0, 54),
+            (30, 25, 250.0, -3e4, 55),
+        ] {
             let mut scene = ragged_scene(w, h, seed);
             scene.camera.pixel_size = pixel_size;
             let mut rng = Rng::new(seed);
             for (p, z) in scene.surface.height.iter_mut().enumerate() {
                 let (i, j) = ((p / w) as f32, (p % w) as f32);
-                let ramp = if j < w as f32 / 2.0 { 15.0 * j } else { 4.0 * (i * 0.8).sin() };
+                let ramp = if j < w as f32 / 2.0 {
+                    15.0 * j
+                } else {
+                    4.0 * (i * 0.8).sin()
+                };
                 let spike = if rng.next_f32() < 0.03 { 25.0 } else { 0.0 };
                 *z = (ramp + spike + (i * 0.3).floor() * 3.0) * pixel_size + lift;
             }
@@ -1022,7 +1504,9 @@ mod tests {
             }
             let mesh = Mesh::from_scene(&scene);
             let accel = HeightFieldAccel::new(&mesh).expect("a height-field mesh has a grid");
-            let object: Vec<usize> = (0..mesh.triangles.len()).filter(|&t| mesh.kinds[t] == crate::geometry::SurfaceKind::Object).collect();
+            let object: Vec<usize> = (0..mesh.triangles.len())
+                .filter(|&t| mesh.kinds[t] == crate::geometry::SurfaceKind::Object)
+                .collect();
             let (lo, hi) = accel.bounds();
             let span = hi - lo;
             let mut hits = 0;
@@ -1036,7 +1520,13 @@ mod tests {
                     let target = lo + span * vec3a(rng.next_f32(), rng.next_f32(), rng.next_f32());
                     (origin, (target - origin).normalize())
                 };
-                hits += usize::from(assert_agrees(&mesh, &accel, origin, direction, &format!("{w}x{h} at pixel size {pixel_size}")));
+                hits += usize::from(assert_agrees(
+                    &mesh,
+                    &accel,
+                    origin,
+                    direction,
+                    &format!("{w}x{h} at pixel size {pixel_size}"),
+                ));
             }
             assert!(hits > 1500, "{w}x{h}: only {hits} hits");
         }
@@ -1049,7 +1539,15 @@ mod tests {
         let (w, h) = (40, 40);
         let mut scene = ragged_scene(w, h, 6);
         scene.surface.mask = vec![true; w * h];
-        scene.surface.height = (0..w * h).map(|p| if (p / w, p % w) == (30, 31) { 20.0 } else { 1.0 }).collect();
+        scene.surface.height = (0..w * h)
+            .map(|p| {
+                if (p / w, p % w) == (30, 31) {
+                    20.0
+                } else {
+                    1.0
+                }
+            })
+            .collect();
         let mesh = Mesh::from_scene(&scene);
         let accel = HeightFieldAccel::new(&mesh).expect("grid");
         let g = mesh.grid.as_ref().expect("grid");
@@ -1057,10 +1555,29 @@ mod tests {
         let mut rng = Rng::new(8);
         let (mut hits, mut misses) = (0, 0);
         for _ in 0..3000 {
-            let origin = vec3a(g.xs[3] + rng.next_f32() * 6.0 * 0.7, g.ys[4] - rng.next_f32() * 6.0 * 0.7, 1.0 + 1e-3);
-            let aim = top + vec3a((rng.next_f32() - 0.5) * 0.6, (rng.next_f32() - 0.5) * 0.6, 0.5 - rng.next_f32() * 5.0);
-            let hit = assert_agrees(&mesh, &accel, origin, (aim - origin).normalize(), "the spike field");
-            (hits, misses) = if hit { (hits + 1, misses) } else { (hits, misses + 1) };
+            let origin = vec3a(
+                g.xs[3] + rng.next_f32() * 6.0 * 0.7,
+                g.ys[4] - rng.next_f32() * 6.0 * 0.7,
+                1.0 + 1e-3,
+            );
+            let aim = top
+                + vec3a(
+                    (rng.next_f32() - 0.5) * 0.6,
+                    (rng.next_f32() - 0.5) * 0.6,
+                    0.5 - rng.next_f32() * 5.0,
+                );
+            let hit = assert_agrees(
+                &mesh,
+                &accel,
+                origin,
+                (aim - origin).normalize(),
+                "the spike field",
+            );
+            (hits, misses) = if hit {
+                (hits + 1, misses)
+            } else {
+                (hits, misses + 1)
+            };
         }
         assert!(hits > 300 && misses > 300, "{hits} hits, {misses} misses");
     }
@@ -1076,11 +1593,17 @@ mod tests {
         // Straight down through every vertex and every edge midpoint: always the surface.
         for i in 0..16 {
             for j in 0..16 {
-                for (x, y) in [(g.xs[j], g.ys[i]), (g.xs[j], g.ys[i] - 0.35), (g.xs[j] + 0.35, g.ys[i])] {
-                    let hit = accel.closest_hit::<false>(vec3a(x, y, 50.0), -Vec3A::Z, f32::INFINITY);
+                for (x, y) in [
+                    (g.xs[j], g.ys[i]),
+                    (g.xs[j], g.ys[i] - 0.35),
+                    (g.xs[j] + 0.35, g.ys[i]),
+                ] {
+                    let hit =
+                        accel.closest_hit::<false>(vec3a(x, y, 50.0), -Vec3A::Z, f32::INFINITY);
                     // Through a vertex or an edge, the fused walk may meet another of the
                     // triangles there first: the same point, to their rounding.
-                    let fused = accel.closest_hit::<true>(vec3a(x, y, 50.0), -Vec3A::Z, f32::INFINITY);
+                    let fused =
+                        accel.closest_hit::<true>(vec3a(x, y, 50.0), -Vec3A::Z, f32::INFINITY);
                     assert_eq!(fused.is_some(), hit.is_some(), "({x}, {y})");
                     if let (Some(a), Some(b)) = (fused, hit) {
                         assert!((a.t - b.t).abs() <= 1e-5 * b.t, "({x}, {y}): {a:?} {b:?}");

@@ -14,7 +14,17 @@
 use std::ops::{Add, AddAssign, BitAnd, BitXor, Div, Mul, Sub, SubAssign};
 
 /// `W` `f32` in registers.
-pub trait Floats<const W: usize>: Copy + Add<Output = Self> + Sub<Output = Self> + Mul<Output = Self> + Mul<f32, Output = Self> + Div<Output = Self> + BitAnd<Output = Self> + BitXor<Output = Self> + AddAssign {
+pub trait Floats<const W: usize>:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Mul<f32, Output = Self>
+    + Div<Output = Self>
+    + BitAnd<Output = Self>
+    + BitXor<Output = Self>
+    + AddAssign
+{
     /// The integers of the same instruction set.
     type Ints: Ints<W, Floats = Self>;
     /// Mask of `self < other` (false where either is a NaN).
@@ -32,7 +42,14 @@ pub trait Floats<const W: usize>: Copy + Add<Output = Self> + Sub<Output = Self>
 }
 
 /// `W` `i32` in registers (additions and subtractions wrap).
-pub trait Ints<const W: usize>: Copy + Add<Output = Self> + Sub<Output = Self> + SubAssign + BitAnd<Output = Self> + BitXor<Output = Self> {
+pub trait Ints<const W: usize>:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + SubAssign
+    + BitAnd<Output = Self>
+    + BitXor<Output = Self>
+{
     /// The floats of the same instruction set.
     type Floats: Floats<W, Ints = Self>;
     /// Mask of `self < other`.
@@ -91,7 +108,10 @@ impl Floats<8> for wide::f32x8 {
     #[inline(always)]
     fn mul_add(self, a: Self, b: Self) -> Self {
         // `wide` rounds once only where the target has fused multiply-adds.
-        if cfg!(any(target_feature = "fma", all(target_arch = "aarch64", target_feature = "neon"))) {
+        if cfg!(any(
+            target_feature = "fma",
+            all(target_arch = "aarch64", target_feature = "neon")
+        )) {
             wide::f32x8::mul_add(self, a, b)
         } else {
             let (x, y, z) = (self.to_array(), a.to_array(), b.to_array());
@@ -190,7 +210,8 @@ mod x86 {
     impl Avx2 {
         /// `Some` when this CPU has AVX2 and FMA.
         pub fn detect() -> Option<Avx2> {
-            (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")).then_some(Avx2(()))
+            (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"))
+                .then_some(Avx2(()))
         }
     }
 
@@ -419,7 +440,10 @@ mod x86 {
         #[inline(always)]
         fn bitand(self, other: F16) -> F16 {
             // AVX-512F has the bitwise operations for integers only.
-            F16(simd!(_mm512_castsi512_ps(_mm512_and_si512(_mm512_castps_si512(self.0), _mm512_castps_si512(other.0)))))
+            F16(simd!(_mm512_castsi512_ps(_mm512_and_si512(
+                _mm512_castps_si512(self.0),
+                _mm512_castps_si512(other.0)
+            ))))
         }
     }
 
@@ -427,7 +451,10 @@ mod x86 {
         type Output = F16;
         #[inline(always)]
         fn bitxor(self, other: F16) -> F16 {
-            F16(simd!(_mm512_castsi512_ps(_mm512_xor_si512(_mm512_castps_si512(self.0), _mm512_castps_si512(other.0)))))
+            F16(simd!(_mm512_castsi512_ps(_mm512_xor_si512(
+                _mm512_castps_si512(self.0),
+                _mm512_castps_si512(other.0)
+            ))))
         }
     }
 
@@ -454,12 +481,20 @@ mod x86 {
 
         #[inline(always)]
         fn simd_lt(self, other: F16) -> F16 {
-            F16(simd!(_mm512_castsi512_ps(widened(_mm512_cmp_ps_mask::<_CMP_LT_OQ>(self.0, other.0)))))
+            F16(simd!(_mm512_castsi512_ps(widened(_mm512_cmp_ps_mask::<
+                _CMP_LT_OQ,
+            >(
+                self.0, other.0
+            )))))
         }
 
         #[inline(always)]
         fn simd_gt(self, other: F16) -> F16 {
-            F16(simd!(_mm512_castsi512_ps(widened(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(self.0, other.0)))))
+            F16(simd!(_mm512_castsi512_ps(widened(_mm512_cmp_ps_mask::<
+                _CMP_GT_OQ,
+            >(
+                self.0, other.0
+            )))))
         }
 
         #[inline(always)]
@@ -530,27 +565,65 @@ mod tests {
     fn check<V: Isa<W>, const W: usize>(isa: V) {
         let a = isa.floats(lanes([1.0, -2.0, 3.0, -4.0, 0.5, 6.0, -0.0, 8.0]));
         let b = isa.splat(2.0);
-        assert_eq!((a + b).to_array(), lanes([3.0, 0.0, 5.0, -2.0, 2.5, 8.0, 2.0, 10.0]));
+        assert_eq!(
+            (a + b).to_array(),
+            lanes([3.0, 0.0, 5.0, -2.0, 2.5, 8.0, 2.0, 10.0])
+        );
         assert_eq!((a - b).to_array()[3], -6.0);
         assert_eq!((a * b).to_array()[5], 12.0);
         assert_eq!((a * 0.5).to_array()[W - 1], 4.0);
-        assert_eq!((a / b).to_array(), lanes([0.5, -1.0, 1.5, -2.0, 0.25, 3.0, -0.0, 4.0]));
-        assert_eq!(a.max(isa.splat(0.0)).to_array(), lanes([1.0, 0.0, 3.0, 0.0, 0.5, 6.0, 0.0, 8.0]));
+        assert_eq!(
+            (a / b).to_array(),
+            lanes([0.5, -1.0, 1.5, -2.0, 0.25, 3.0, -0.0, 4.0])
+        );
+        assert_eq!(
+            a.max(isa.splat(0.0)).to_array(),
+            lanes([1.0, 0.0, 3.0, 0.0, 0.5, 6.0, 0.0, 8.0])
+        );
         let mut sum = a;
         sum += b;
         assert_eq!(sum.to_array()[0], 3.0);
         let near_one = isa.splat(1.0 + f32::EPSILON * 2048.0);
         let fused = near_one.mul_add(near_one, isa.splat(-(1.0 + f32::EPSILON * 4096.0)));
-        assert_eq!(fused.to_array(), [f32::EPSILON / 2.0; W], "a multiply-add rounds once (twice would give 0)");
+        assert_eq!(
+            fused.to_array(),
+            [f32::EPSILON / 2.0; W],
+            "a multiply-add rounds once (twice would give 0)"
+        );
         let nan = isa.splat_int(i32::MAX).to_floats();
-        for mask in [nan.simd_lt(a), nan.simd_gt(a), a.simd_lt(nan), (nan * 0.0).simd_lt(a)] {
-            assert_eq!(mask.to_bits().to_array(), [0; W], "no comparison with a NaN holds");
+        for mask in [
+            nan.simd_lt(a),
+            nan.simd_gt(a),
+            a.simd_lt(nan),
+            (nan * 0.0).simd_lt(a),
+        ] {
+            assert_eq!(
+                mask.to_bits().to_array(),
+                [0; W],
+                "no comparison with a NaN holds"
+            );
         }
-        assert_eq!(nan.max(b).to_array(), [2.0; W], "the maximum of a NaN and a number is the number");
-        assert!(b.max(nan).to_array().iter().all(|v| v.is_nan()), "a NaN second is kept");
-        assert_eq!(a.simd_lt(b).to_bits().to_array(), lanes([-1, -1, 0, -1, -1, 0, -1, 0]));
-        assert_eq!((a & a.simd_gt(b)).to_array(), lanes([0.0, 0.0, 3.0, 0.0, 0.0, 6.0, 0.0, 8.0]));
-        assert_eq!((a ^ isa.splat(-0.0)).to_array(), lanes([-1.0, 2.0, -3.0, 4.0, -0.5, -6.0, 0.0, -8.0]));
+        assert_eq!(
+            nan.max(b).to_array(),
+            [2.0; W],
+            "the maximum of a NaN and a number is the number"
+        );
+        assert!(
+            b.max(nan).to_array().iter().all(|v| v.is_nan()),
+            "a NaN second is kept"
+        );
+        assert_eq!(
+            a.simd_lt(b).to_bits().to_array(),
+            lanes([-1, -1, 0, -1, -1, 0, -1, 0])
+        );
+        assert_eq!(
+            (a & a.simd_gt(b)).to_array(),
+            lanes([0.0, 0.0, 3.0, 0.0, 0.0, 6.0, 0.0, 8.0])
+        );
+        assert_eq!(
+            (a ^ isa.splat(-0.0)).to_array(),
+            lanes([-1.0, 2.0, -3.0, 4.0, -0.5, -6.0, 0.0, -8.0])
+        );
         assert_eq!(a.to_bits().to_floats().to_array(), a.to_array());
         let i = isa.ints(lanes([5, -1, i32::MAX, 0, 7, 7, -8, 2]));
         let j = isa.splat_int(2);
@@ -558,7 +631,10 @@ mod tests {
         assert_eq!(((i + j) - j).to_array()[2], i32::MAX, "integers wrap");
         assert_eq!((i + j).to_array()[2], i32::MIN + 1, "integers wrap");
         assert_eq!(i.simd_eq(j).to_array(), lanes([0, 0, 0, 0, 0, 0, 0, -1]));
-        assert_eq!(i.halved().to_array(), lanes([2, -1, i32::MAX / 2, 0, 3, 3, -4, 1]));
+        assert_eq!(
+            i.halved().to_array(),
+            lanes([2, -1, i32::MAX / 2, 0, 3, 3, -4, 1])
+        );
         assert_eq!(i.min(j).to_array(), lanes([2, -1, 2, 0, 2, 2, -8, 2]));
         assert_eq!(i.max(j).to_array(), lanes([5, 2, i32::MAX, 2, 7, 7, 2, 2]));
         let mut count = isa.splat_int(0);
@@ -566,7 +642,10 @@ mod tests {
         assert_eq!(count.to_array(), lanes([0, 1, 0, 1, 0, 0, 1, 0]));
         assert_eq!((i + j).to_array()[6], -6);
         assert_eq!((i & j).to_array()[2], 2);
-        assert_eq!((i ^ j).to_array(), lanes([7, -3, i32::MAX ^ 2, 2, 5, 5, -6, 0]));
+        assert_eq!(
+            (i ^ j).to_array(),
+            lanes([7, -3, i32::MAX ^ 2, 2, 5, 5, -6, 0])
+        );
     }
 
     #[test]

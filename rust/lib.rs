@@ -12,15 +12,15 @@ pub mod height_field_accel;
 pub mod image_io;
 mod lanes;
 pub mod light_cache;
-pub mod memory;
 pub mod lobe;
+pub mod memory;
 pub mod ps;
-pub mod robust_ps;
 pub mod render;
 pub mod residual;
+pub mod robust_ps;
 pub mod sampler;
-pub mod sparse_cholesky;
 pub mod scene;
+pub mod sparse_cholesky;
 pub mod tracer;
 pub mod tukey;
 

@@ -38,7 +38,8 @@ impl LightCache {
     /// distance by which shadow rays start off the surface.
     pub fn new(mesh: &Mesh, tracer: &Tracer, lights: &[Light], ray_offset: f32) -> LightCache {
         let directions: Vec<Vec3A> = lights.iter().map(|l| l.direction.normalize()).collect();
-        let radiance_scale = [0, 1, 2].map(|c| lights.iter().map(|l| l.irradiance[c] / PI).collect());
+        let radiance_scale =
+            [0, 1, 2].map(|c| lights.iter().map(|l| l.irradiance[c] / PI).collect());
         let direction_xyz = [0, 1, 2].map(|axis| directions.iter().map(|d| d[axis]).collect());
         let mut object_vertex = vec![false; mesh.positions.len()];
         for (tri, &panel) in mesh.triangles.iter().zip(&mesh.panel_of) {
@@ -49,14 +50,16 @@ impl LightCache {
         let visibility_at = |points: &[Option<(Vec3A, Vec3A)>]| -> Vec<u8> {
             let k = directions.len();
             let mut out = vec![0u8; points.len() * k];
-            out.par_chunks_mut(k.max(1)).zip(points).for_each(|(row, point)| {
-                if let Some((p, n)) = point {
-                    let origin = *p + *n * ray_offset;
-                    for (slot, dir) in row.iter_mut().zip(&directions) {
-                        *slot = u8::from(!tracer.occluded(origin, *dir, f32::INFINITY));
+            out.par_chunks_mut(k.max(1))
+                .zip(points)
+                .for_each(|(row, point)| {
+                    if let Some((p, n)) = point {
+                        let origin = *p + *n * ray_offset;
+                        for (slot, dir) in row.iter_mut().zip(&directions) {
+                            *slot = u8::from(!tracer.occluded(origin, *dir, f32::INFINITY));
+                        }
                     }
-                }
-            });
+                });
             out
         };
         let vertex_points: Vec<_> = (0..mesh.positions.len())
@@ -68,18 +71,29 @@ impl LightCache {
             .iter()
             .map(|panel| {
                 let (nu, nv) = panel.cells;
-                let points: Vec<_> =
-                    (0..(nu + 1) * (nv + 1)).map(|i| Some((panel.grid_point(i % (nu + 1), i / (nu + 1)), panel.normal))).collect();
+                let points: Vec<_> = (0..(nu + 1) * (nv + 1))
+                    .map(|i| Some((panel.grid_point(i % (nu + 1), i / (nu + 1)), panel.normal)))
+                    .collect();
                 visibility_at(&points)
             })
             .collect();
-        LightCache { directions, direction_xyz, radiance_scale, vertex_visibility, panel_visibility, ray_offset }
+        LightCache {
+            directions,
+            direction_xyz,
+            radiance_scale,
+            vertex_visibility,
+            panel_visibility,
+            ray_offset,
+        }
     }
 
     /// The same visibility, shading with the irradiance `irradiance` of each light instead.
     pub fn with_irradiance(&self, irradiance: &[Rgb]) -> LightCache {
         let radiance_scale = [0, 1, 2].map(|c| irradiance.iter().map(|e| e[c] / PI).collect());
-        LightCache { radiance_scale, ..self.clone() }
+        LightCache {
+            radiance_scale,
+            ..self.clone()
+        }
     }
 
     /// Number of lights.
@@ -94,19 +108,45 @@ impl LightCache {
     /// crosses there) gets a real shadow ray instead.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    pub fn add_direct_radiance(&self, mesh: &Mesh, tracer: &Tracer, t: usize, (u, v): (f32, f32), point: Vec3A, albedo: Rgb, exact_edges: bool, weight: Rgb, acc: &mut [f32]) {
+    pub fn add_direct_radiance(
+        &self,
+        mesh: &Mesh,
+        tracer: &Tracer,
+        t: usize,
+        (u, v): (f32, f32),
+        point: Vec3A,
+        albedo: Rgb,
+        exact_edges: bool,
+        weight: Rgb,
+        acc: &mut [f32],
+    ) {
         let n = mesh.normals[t];
         let k_count = self.directions.len();
         let panel = mesh.panel_of[t];
         let origin = point + n * self.ray_offset;
-        let traced = |k: usize| f32::from(u8::from(!tracer.occluded(origin, self.directions[k], f32::INFINITY)));
+        let traced = |k: usize| {
+            f32::from(u8::from(!tracer.occluded(
+                origin,
+                self.directions[k],
+                f32::INFINITY,
+            )))
+        };
         if panel == NO_PANEL {
-            let [a, b, c] = mesh.triangles[t].map(|i| &self.vertex_visibility[i as usize * k_count..][..k_count]);
+            let [a, b, c] = mesh.triangles[t]
+                .map(|i| &self.vertex_visibility[i as usize * k_count..][..k_count]);
             let w = 1.0 - u - v;
             if exact_edges {
-                self.add_shaded::<true>(n, albedo, weight, acc, |k| if a[k] == b[k] && b[k] == c[k] { f32::from(a[k]) } else { traced(k) });
+                self.add_shaded::<true>(n, albedo, weight, acc, |k| {
+                    if a[k] == b[k] && b[k] == c[k] {
+                        f32::from(a[k])
+                    } else {
+                        traced(k)
+                    }
+                });
             } else {
-                self.add_shaded::<false>(n, albedo, weight, acc, |k| w * a[k] as f32 + u * b[k] as f32 + v * c[k] as f32);
+                self.add_shaded::<false>(n, albedo, weight, acc, |k| {
+                    w * a[k] as f32 + u * b[k] as f32 + v * c[k] as f32
+                });
             }
             return;
         }
@@ -122,11 +162,27 @@ impl LightCache {
         let vis = &self.panel_visibility[panel_index];
         let row = |a: usize, b: usize| &vis[(b * (nu + 1) + a) * k_count..][..k_count];
         let (v00, v10, v01, v11) = (row(a, b), row(a + 1, b), row(a, b + 1), row(a + 1, b + 1));
-        let (w00, w10, w01, w11) = ((1.0 - fs) * (1.0 - ft), fs * (1.0 - ft), (1.0 - fs) * ft, fs * ft);
+        let (w00, w10, w01, w11) = (
+            (1.0 - fs) * (1.0 - ft),
+            fs * (1.0 - ft),
+            (1.0 - fs) * ft,
+            fs * ft,
+        );
         if exact_edges {
-            self.add_shaded::<true>(n, albedo, weight, acc, |k| if v00[k] == v10[k] && v00[k] == v01[k] && v00[k] == v11[k] { f32::from(v00[k]) } else { traced(k) });
+            self.add_shaded::<true>(n, albedo, weight, acc, |k| {
+                if v00[k] == v10[k] && v00[k] == v01[k] && v00[k] == v11[k] {
+                    f32::from(v00[k])
+                } else {
+                    traced(k)
+                }
+            });
         } else {
-            self.add_shaded::<false>(n, albedo, weight, acc, |k| w00 * v00[k] as f32 + w10 * v10[k] as f32 + w01 * v01[k] as f32 + w11 * v11[k] as f32);
+            self.add_shaded::<false>(n, albedo, weight, acc, |k| {
+                w00 * v00[k] as f32
+                    + w10 * v10[k] as f32
+                    + w01 * v01[k] as f32
+                    + w11 * v11[k] as f32
+            });
         }
     }
 
@@ -135,7 +191,14 @@ impl LightCache {
     /// where the light is in front; otherwise it is read for every light (a light behind
     /// gets 0 all the same) and the loop over lights vectorises.
     #[inline(always)]
-    fn add_shaded<const TRACED: bool>(&self, n: Vec3A, albedo: Rgb, weight: Rgb, acc: &mut [f32], visibility: impl Fn(usize) -> f32) {
+    fn add_shaded<const TRACED: bool>(
+        &self,
+        n: Vec3A,
+        albedo: Rgb,
+        weight: Rgb,
+        acc: &mut [f32],
+        visibility: impl Fn(usize) -> f32,
+    ) {
         let k_count = self.directions.len();
         // Every slice cut to K, so that the loop runs without bounds checks.
         let [x, y, z] = [0, 1, 2].map(|axis| &self.direction_xyz[axis][..k_count]);
@@ -144,7 +207,11 @@ impl LightCache {
         let (green, blue) = rest.split_at_mut(k_count);
         for k in 0..k_count {
             let cosine = (n.x * x[k] + n.y * y[k] + n.z * z[k]).max(0.0);
-            let factor = if TRACED && cosine == 0.0 { 0.0 } else { cosine * visibility(k) };
+            let factor = if TRACED && cosine == 0.0 {
+                0.0
+            } else {
+                cosine * visibility(k)
+            };
             red[k] += albedo[0] * scale_r[k] * factor * weight[0];
             green[k] += albedo[1] * scale_g[k] * factor * weight[1];
             blue[k] += albedo[2] * scale_b[k] * factor * weight[2];
@@ -153,8 +220,22 @@ impl LightCache {
 
     /// Like [`Self::add_direct_radiance`], but with one real shadow ray per light in front.
     #[inline(always)]
-    pub fn add_traced_direct_radiance(&self, tracer: &Tracer, point: Vec3A, n: Vec3A, albedo: Rgb, weight: Rgb, acc: &mut [f32]) {
+    pub fn add_traced_direct_radiance(
+        &self,
+        tracer: &Tracer,
+        point: Vec3A,
+        n: Vec3A,
+        albedo: Rgb,
+        weight: Rgb,
+        acc: &mut [f32],
+    ) {
         let origin = point + n * self.ray_offset;
-        self.add_shaded::<true>(n, albedo, weight, acc, |k| f32::from(u8::from(!tracer.occluded(origin, self.directions[k], f32::INFINITY))));
+        self.add_shaded::<true>(n, albedo, weight, acc, |k| {
+            f32::from(u8::from(!tracer.occluded(
+                origin,
+                self.directions[k],
+                f32::INFINITY,
+            )))
+        });
     }
 }

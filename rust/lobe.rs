@@ -67,15 +67,25 @@ const TILE: usize = 32;
 /// `images` laid out `(K, pixels, 3)`, with a diffuse term and a specular lobe, each
 /// exponent fitted for at most `rounds` rounds from each start, in the widest registers the
 /// CPU has (the same results in each).
-pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, rounds: usize, out: &mut PsOutput) -> Result<()> {
+pub(crate) fn fit_pixels(
+    images: &[f32],
+    mask: &[bool],
+    lights: &Lights,
+    rounds: usize,
+    out: &mut PsOutput,
+) -> Result<()> {
     let job = Job::new(images, lights, rounds, out);
     let work = || Box::new((Scratch::default(), Work::default()));
     #[cfg(target_arch = "x86_64")]
     if let Some(avx2) = crate::lanes::Avx2::detect() {
         // SAFETY: `detect` found AVX2 and FMA.
-        return fit_masked(mask, TILE, out, work, |state, tile, fits| unsafe { job.fit_tile_avx2(avx2, state, tile, fits) });
+        return fit_masked(mask, TILE, out, work, |state, tile, fits| unsafe {
+            job.fit_tile_avx2(avx2, state, tile, fits)
+        });
     }
-    fit_masked(mask, TILE, out, work, |state, tile, fits| job.fit_tile(Portable, state, tile, fits))
+    fit_masked(mask, TILE, out, work, |state, tile, fits| {
+        job.fit_tile(Portable, state, tile, fits)
+    })
 }
 
 /// What every tile's fit reads.
@@ -95,13 +105,32 @@ struct Job<'a> {
 impl<'a> Job<'a> {
     /// The lobe fit of `images` from the Tukey fits in `out`.
     fn new(images: &'a [f32], lights: &'a Lights, rounds: usize, out: &PsOutput) -> Job<'a> {
-        let starts = out.normals.iter().zip(&out.albedo).zip(&out.flags).map(|((&normal, albedo), &f)| (normal, albedo.iter().sum(), f)).collect();
-        Job { images, n: out.flags.len(), lights, half: HalfVectors::new(lights), rounds, starts }
+        let starts = out
+            .normals
+            .iter()
+            .zip(&out.albedo)
+            .zip(&out.flags)
+            .map(|((&normal, albedo), &f)| (normal, albedo.iter().sum(), f))
+            .collect();
+        Job {
+            images,
+            n: out.flags.len(),
+            lights,
+            half: HalfVectors::new(lights),
+            rounds,
+            starts,
+        }
     }
 
     /// Fits the pixels of `tile` into `fits` (those that keep the Tukey fit left out).
     #[inline(always)]
-    fn fit_tile<V: Isa<LANES>>(&self, isa: V, (scratch, work): &mut (Scratch, Work), tile: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
+    fn fit_tile<V: Isa<LANES>>(
+        &self,
+        isa: V,
+        (scratch, work): &mut (Scratch, Work),
+        tile: &[usize],
+        fits: &mut Vec<(usize, PixelFit)>,
+    ) {
         let lights = self.lights;
         gather(self.images, self.n, tile, lights, scratch);
         let padded = lights.padded();
@@ -109,7 +138,18 @@ impl<'a> Job<'a> {
             let (start, start_albedo, start_flag) = self.starts[p];
             let grey = &scratch.grey[i * padded..][..padded];
             let rgb = &scratch.rgb[i * lights.count..][..lights.count];
-            let fit = if start_flag == flag::OK { refit(isa, self, grey, rgb, (Vec3::from(start), start_albedo), work) } else { None };
+            let fit = if start_flag == flag::OK {
+                refit(
+                    isa,
+                    self,
+                    grey,
+                    rgb,
+                    (Vec3::from(start), start_albedo),
+                    work,
+                )
+            } else {
+                None
+            };
             if let Some(fit) = fit {
                 fits.push((p, fit));
             }
@@ -120,7 +160,13 @@ impl<'a> Job<'a> {
     /// that the portable build does not fuse), the sums over [`LANES`] lights in one register.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn fit_tile_avx2(&self, isa: crate::lanes::Avx2, state: &mut (Scratch, Work), tile: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
+    fn fit_tile_avx2(
+        &self,
+        isa: crate::lanes::Avx2,
+        state: &mut (Scratch, Work),
+        tile: &[usize],
+        fits: &mut Vec<(usize, PixelFit)>,
+    ) {
         self.fit_tile(isa, state, tile, fits);
     }
 }
@@ -131,7 +177,8 @@ struct HalfVectors([Vec<Group>; 3]);
 
 impl HalfVectors {
     fn new(lights: &Lights) -> HalfVectors {
-        let mut half: [Vec<Group>; 3] = std::array::from_fn(|_| vec![[0.0; LANES]; lights.padded() / LANES]);
+        let mut half: [Vec<Group>; 3] =
+            std::array::from_fn(|_| vec![[0.0; LANES]; lights.padded() / LANES]);
         for k in 0..lights.count {
             let h = (lights.direction(k) + Vec3::Z).normalize_or_zero();
             for (axis, value) in half.iter_mut().zip(h.to_array()) {
@@ -234,10 +281,25 @@ fn tangents(n: Vec3) -> (Vec3, Vec3) {
 /// of the Tukey fit: one scale for all, so that a fit cannot look better by giving up
 /// observations.
 #[inline(always)]
-fn refit<V: Isa<LANES>>(isa: V, job: &Job, grey: &[f32], rgb: &[[f32; 3]], start: (Vec3, f32), work: &mut Work) -> Option<PixelFit> {
+fn refit<V: Isa<LANES>>(
+    isa: V,
+    job: &Job,
+    grey: &[f32],
+    rgb: &[[f32; 3]],
+    start: (Vec3, f32),
+    work: &mut Work,
+) -> Option<PixelFit> {
     let (lights, half) = (job.lights, &job.half);
     let groups = lights.padded() / LANES;
-    for v in [&mut work.b, &mut work.usable, &mut work.weight, &mut work.diffuse, &mut work.specular, &mut work.nh, &mut work.best_weight] {
+    for v in [
+        &mut work.b,
+        &mut work.usable,
+        &mut work.weight,
+        &mut work.diffuse,
+        &mut work.specular,
+        &mut work.nh,
+        &mut work.best_weight,
+    ] {
         v.clear();
         v.resize(groups, [0.0; LANES]);
     }
@@ -247,10 +309,18 @@ fn refit<V: Isa<LANES>>(isa: V, job: &Job, grey: &[f32], rgb: &[[f32; 3]], start
         work.b[k / LANES][k % LANES] = if ok { value } else { 0.0 };
         work.usable[k / LANES][k % LANES] = if ok { 1.0 } else { 0.0 };
     }
-    let brightest = (0..lights.count).filter(|&k| at(&work.usable, k) > 0.0).max_by(|&i, &j| at(&work.b, i).total_cmp(&at(&work.b, j)))?;
+    let brightest = (0..lights.count)
+        .filter(|&k| at(&work.usable, k) > 0.0)
+        .max_by(|&i, &j| at(&work.b, i).total_cmp(&at(&work.b, j)))?;
     let (normal, albedo) = start;
     shading(isa, lights, half, normal, 0, work);
-    let lit = work.diffuse.as_flattened().iter().zip(work.usable.as_flattened()).filter(|&(&f, &u)| f > 0.0 && u > 0.0).count();
+    let lit = work
+        .diffuse
+        .as_flattened()
+        .iter()
+        .zip(work.usable.as_flattened())
+        .filter(|&(&f, &u)| f > 0.0 && u > 0.0)
+        .count();
     if lit < LOBE_MIN_LIT {
         return None;
     }
@@ -282,15 +352,31 @@ fn refit<V: Isa<LANES>>(isa: V, job: &Job, grey: &[f32], rgb: &[[f32; 3]], start
 
 /// `[n·l]₊` and `[n·l]₊ (n·h)^p` of every light into `work`.
 #[inline(always)]
-fn shading<V: Isa<LANES>>(isa: V, lights: &Lights, half: &HalfVectors, n: Vec3, shift: u32, work: &mut Work) {
+fn shading<V: Isa<LANES>>(
+    isa: V,
+    lights: &Lights,
+    half: &HalfVectors,
+    n: Vec3,
+    shift: u32,
+    work: &mut Work,
+) {
     let groups = work.diffuse.len();
-    let [lx, ly, lz] = lights.direction.each_ref().map(|row| &grouped(row)[..groups]);
+    let [lx, ly, lz] = lights
+        .direction
+        .each_ref()
+        .map(|row| &grouped(row)[..groups]);
     let [hx, hy, hz] = half.0.each_ref().map(|row| &row[..groups]);
-    let (diffuse, specular, nh) = (&mut work.diffuse[..groups], &mut work.specular[..groups], &mut work.nh[..groups]);
+    let (diffuse, specular, nh) = (
+        &mut work.diffuse[..groups],
+        &mut work.specular[..groups],
+        &mut work.nh[..groups],
+    );
     let (zero, nh_min) = (isa.splat(0.0), isa.splat(NH_MIN));
     for g in 0..groups {
-        let nl = (isa.floats(lx[g]) * n.x + isa.floats(ly[g]) * n.y + isa.floats(lz[g]) * n.z).max(zero);
-        let cosine = (isa.floats(hx[g]) * n.x + isa.floats(hy[g]) * n.y + isa.floats(hz[g]) * n.z).max(nh_min);
+        let nl =
+            (isa.floats(lx[g]) * n.x + isa.floats(ly[g]) * n.y + isa.floats(lz[g]) * n.z).max(zero);
+        let cosine = (isa.floats(hx[g]) * n.x + isa.floats(hy[g]) * n.y + isa.floats(hz[g]) * n.z)
+            .max(nh_min);
         let mut lobe = cosine;
         for _ in 0..shift {
             lobe = lobe * lobe;
@@ -304,7 +390,14 @@ fn shading<V: Isa<LANES>>(isa: V, lights: &Lights, half: &HalfVectors, n: Vec3, 
 /// Fits exponent `2^shift` from normal `from` for at most `job`'s rounds, its [`loss`] at
 /// `reach`; leaves the fit's weights in `work.weight`.
 #[inline(always)]
-fn fit_exponent<V: Isa<LANES>>(isa: V, job: &Job, from: Vec3, shift: u32, reach: f32, work: &mut Work) -> LobeFit {
+fn fit_exponent<V: Isa<LANES>>(
+    isa: V,
+    job: &Job,
+    from: Vec3,
+    shift: u32,
+    reach: f32,
+    work: &mut Work,
+) -> LobeFit {
     let (lights, half) = (job.lights, &job.half);
     let p = (1u32 << shift) as f32;
     let mut n = from;
@@ -322,30 +415,64 @@ fn fit_exponent<V: Isa<LANES>>(isa: V, job: &Job, from: Vec3, shift: u32, reach:
         // projection on the free ones of [n·l]₊ and [n·l]₊ (n·h)^p. The sums: the weighted
         // products of those four columns, and j1's and j2's with the residual.
         let groups = work.diffuse.len();
-        let l = lights.direction.each_ref().map(|row| &grouped(row)[..groups]);
+        let l = lights
+            .direction
+            .each_ref()
+            .map(|row| &grouped(row)[..groups]);
         let h = half.0.each_ref().map(|row| &row[..groups]);
-        let (diffuse, specular, nh, weight) = (&work.diffuse[..groups], &work.specular[..groups], &work.nh[..groups], &work.weight[..groups]);
-        let (zero, nh_min, a_v, cp) = (isa.splat(0.0), isa.splat(NH_MIN), isa.splat(a), isa.splat(c * p));
-        let [m11, m12, m22, f1, f2, s1, s2, ff, fs, ss, q1, q2] = summed(isa, groups, #[inline(always)] |g| {
-            let (nl, lit_lobe) = (isa.floats(diffuse[g]), isa.floats(specular[g]));
-            // Unlit observations (and padding) add zeros.
-            let w = nl.simd_gt(zero) & isa.floats(weight[g]);
-            let along_l = a_v + lit_lobe * c / nl.max(nh_min);
-            let along_h = lit_lobe * cp / isa.floats(nh[g]);
-            let dx = along_l * isa.floats(l[0][g]) + along_h * isa.floats(h[0][g]);
-            let dy = along_l * isa.floats(l[1][g]) + along_h * isa.floats(h[1][g]);
-            let dz = along_l * isa.floats(l[2][g]) + along_h * isa.floats(h[2][g]);
-            let j1 = dx * t1.x + dy * t1.y + dz * t1.z;
-            let j2 = dx * t2.x + dy * t2.y + dz * t2.z;
-            let r = residual(isa, work, g, a, c);
-            let (wj1, wj2, wf, ws) = (w * j1, w * j2, w * nl, w * lit_lobe);
-            [wj1 * j1, wj1 * j2, wj2 * j2, wf * j1, wf * j2, ws * j1, ws * j2, wf * nl, wf * lit_lobe, ws * lit_lobe, wj1 * r, wj2 * r]
-        });
+        let (diffuse, specular, nh, weight) = (
+            &work.diffuse[..groups],
+            &work.specular[..groups],
+            &work.nh[..groups],
+            &work.weight[..groups],
+        );
+        let (zero, nh_min, a_v, cp) = (
+            isa.splat(0.0),
+            isa.splat(NH_MIN),
+            isa.splat(a),
+            isa.splat(c * p),
+        );
+        let [m11, m12, m22, f1, f2, s1, s2, ff, fs, ss, q1, q2] = summed(
+            isa,
+            groups,
+            #[inline(always)]
+            |g| {
+                let (nl, lit_lobe) = (isa.floats(diffuse[g]), isa.floats(specular[g]));
+                // Unlit observations (and padding) add zeros.
+                let w = nl.simd_gt(zero) & isa.floats(weight[g]);
+                let along_l = a_v + lit_lobe * c / nl.max(nh_min);
+                let along_h = lit_lobe * cp / isa.floats(nh[g]);
+                let dx = along_l * isa.floats(l[0][g]) + along_h * isa.floats(h[0][g]);
+                let dy = along_l * isa.floats(l[1][g]) + along_h * isa.floats(h[1][g]);
+                let dz = along_l * isa.floats(l[2][g]) + along_h * isa.floats(h[2][g]);
+                let j1 = dx * t1.x + dy * t1.y + dz * t1.z;
+                let j2 = dx * t2.x + dy * t2.y + dz * t2.z;
+                let r = residual(isa, work, g, a, c);
+                let (wj1, wj2, wf, ws) = (w * j1, w * j2, w * nl, w * lit_lobe);
+                [
+                    wj1 * j1,
+                    wj1 * j2,
+                    wj2 * j2,
+                    wf * j1,
+                    wf * j2,
+                    ws * j1,
+                    ws * j2,
+                    wf * nl,
+                    wf * lit_lobe,
+                    ws * lit_lobe,
+                    wj1 * r,
+                    wj2 * r,
+                ]
+            },
+        );
         let (p11, p12, p22) = projected(a > 0.0, c > 0.0, [ff, fs, ss], [f1, s1], [f2, s2]);
         let (m11, m12, m22) = (m11 - p11, m12 - p12, m22 - p22);
         let damping = DAMPING * (m11 + m22) + 1e-12;
         let det = (m11 + damping) * (m22 + damping) - m12 * m12;
-        let (s1, s2) = (((m22 + damping) * q1 - m12 * q2) / det, ((m11 + damping) * q2 - m12 * q1) / det);
+        let (s1, s2) = (
+            ((m22 + damping) * q1 - m12 * q2) / det,
+            ((m11 + damping) * q2 - m12 * q1) / det,
+        );
         let mut step = t1 * s1 + t2 * s2;
         if !step.is_finite() {
             break;
@@ -362,17 +489,34 @@ fn fit_exponent<V: Isa<LANES>>(isa: V, job: &Job, from: Vec3, shift: u32, reach:
     shading(isa, lights, half, n, shift, work);
     let (a, c) = lobe_scales(isa, work);
     let cost = loss(isa, a, c, reach, work);
-    LobeFit { normal: n, cost: if cost.is_finite() { cost } else { f32::INFINITY }, shift, height: c }
+    LobeFit {
+        normal: n,
+        cost: if cost.is_finite() {
+            cost
+        } else {
+            f32::INFINITY
+        },
+        shift,
+        height: c,
+    }
 }
 
 /// `uᵢᵀ G⁻¹ uⱼ` of the tangent columns' products `u1`, `u2` with the diffuse and lobe
 /// columns (Gram `G` = `[ff, fs, ss]`), over the free ones (`diffuse`, `lobe`).
 #[inline(always)]
-fn projected(diffuse: bool, lobe: bool, [ff, fs, ss]: [f32; 3], u1: [f32; 2], u2: [f32; 2]) -> (f32, f32, f32) {
+fn projected(
+    diffuse: bool,
+    lobe: bool,
+    [ff, fs, ss]: [f32; 3],
+    u1: [f32; 2],
+    u2: [f32; 2],
+) -> (f32, f32, f32) {
     let det = ff * ss - fs * fs;
     match (diffuse, lobe) {
         (true, true) if det > 1e-6 * ff * ss => {
-            let quad = |x: [f32; 2], y: [f32; 2]| (x[0] * (ss * y[0] - fs * y[1]) + x[1] * (ff * y[1] - fs * y[0])) / det;
+            let quad = |x: [f32; 2], y: [f32; 2]| {
+                (x[0] * (ss * y[0] - fs * y[1]) + x[1] * (ff * y[1] - fs * y[0])) / det
+            };
             (quad(u1, u1), quad(u1, u2), quad(u2, u2))
         }
         (true, _) if ff > 0.0 => (u1[0] * u1[0] / ff, u1[0] * u2[0] / ff, u2[0] * u2[0] / ff),
@@ -386,7 +530,11 @@ fn projected(diffuse: bool, lobe: bool, [ff, fs, ss]: [f32; 3], u1: [f32; 2], u2
 /// `#[inline(always)]`: a closure does not take the target features of the function it is
 /// written in, and its intrinsics would otherwise be calls.
 #[inline(always)]
-fn summed<V: Isa<LANES>, const N: usize>(isa: V, groups: usize, term: impl Fn(usize) -> [V::F; N]) -> [f32; N] {
+fn summed<V: Isa<LANES>, const N: usize>(
+    isa: V,
+    groups: usize,
+    term: impl Fn(usize) -> [V::F; N],
+) -> [f32; N] {
     let mut lanes = [isa.splat(0.0); N];
     for g in 0..groups {
         for (lane, value) in lanes.iter_mut().zip(term(g)) {
@@ -405,12 +553,27 @@ fn summed<V: Isa<LANES>, const N: usize>(isa: V, groups: usize, term: impl Fn(us
 #[inline(always)]
 fn lobe_scales<V: Isa<LANES>>(isa: V, work: &Work) -> (f32, f32) {
     let groups = work.diffuse.len();
-    let (diffuse, specular, weight, b) = (&work.diffuse[..groups], &work.specular[..groups], &work.weight[..groups], &work.b[..groups]);
-    let [ff, fs, ss, fb, sb] = summed(isa, groups, #[inline(always)] |g| {
-        let (f, s, w, b) = (isa.floats(diffuse[g]), isa.floats(specular[g]), isa.floats(weight[g]), isa.floats(b[g]));
-        let (wf, ws) = (w * f, w * s);
-        [wf * f, wf * s, ws * s, wf * b, ws * b]
-    });
+    let (diffuse, specular, weight, b) = (
+        &work.diffuse[..groups],
+        &work.specular[..groups],
+        &work.weight[..groups],
+        &work.b[..groups],
+    );
+    let [ff, fs, ss, fb, sb] = summed(
+        isa,
+        groups,
+        #[inline(always)]
+        |g| {
+            let (f, s, w, b) = (
+                isa.floats(diffuse[g]),
+                isa.floats(specular[g]),
+                isa.floats(weight[g]),
+                isa.floats(b[g]),
+            );
+            let (wf, ws) = (w * f, w * s);
+            [wf * f, wf * s, ws * s, wf * b, ws * b]
+        },
+    );
     diffuse_and_lobe(ff, fs, ss, fb, sb)
 }
 
@@ -445,8 +608,13 @@ fn robust_scale<V: Isa<LANES>>(isa: V, a: f32, c: f32, work: &mut Work) -> Optio
     let (zero, magnitude) = (isa.splat(0.0), isa.splat_int(i32::MAX).to_floats());
     let mut count = 0;
     for g in 0..work.diffuse.len() {
-        let bits = (residual(isa, work, g, a, c) & magnitude).to_bits().to_array();
-        let counts = (isa.floats(work.diffuse[g]).simd_gt(zero) & isa.floats(work.usable[g]).simd_gt(zero)).to_bits().to_array();
+        let bits = (residual(isa, work, g, a, c) & magnitude)
+            .to_bits()
+            .to_array();
+        let counts = (isa.floats(work.diffuse[g]).simd_gt(zero)
+            & isa.floats(work.usable[g]).simd_gt(zero))
+        .to_bits()
+        .to_array();
         for (bits, counts) in bits.into_iter().zip(counts) {
             work.spread[count] = bits as u32;
             count += (counts & 1) as usize;
@@ -493,20 +661,40 @@ fn select_near(keys: &mut [u32], rank: usize, guess: u32) -> u32 {
 #[inline(always)]
 fn loss<V: Isa<LANES>>(isa: V, a: f32, c: f32, reach: f32, work: &Work) -> f32 {
     let (zero, one) = (isa.splat(0.0), isa.splat(1.0));
-    let [sum] = summed(isa, work.diffuse.len(), #[inline(always)] |g| {
-        let u = residual(isa, work, g, a, c) * reach;
-        let t = (one - u * u).max(zero);
-        [isa.floats(work.usable[g]) * (one - t * t * t)]
-    });
+    let [sum] = summed(
+        isa,
+        work.diffuse.len(),
+        #[inline(always)]
+        |g| {
+            let u = residual(isa, work, g, a, c) * reach;
+            let t = (one - u * u).max(zero);
+            [isa.floats(work.usable[g]) * (one - t * t * t)]
+        },
+    );
     sum
 }
 
 /// The kept fit's normal and each channel's diffuse albedo under its weights.
 #[inline(always)]
-fn finish<V: Isa<LANES>>(isa: V, rgb: &[[f32; 3]], lights: &Lights, half: &HalfVectors, best: &LobeFit, work: &mut Work) -> Option<PixelFit> {
+fn finish<V: Isa<LANES>>(
+    isa: V,
+    rgb: &[[f32; 3]],
+    lights: &Lights,
+    half: &HalfVectors,
+    best: &LobeFit,
+    work: &mut Work,
+) -> Option<PixelFit> {
     shading(isa, lights, half, best.normal, best.shift, work);
-    let (weight, diffuse, specular) = (work.best_weight.as_flattened(), work.diffuse.as_flattened(), work.specular.as_flattened());
-    let used = weight[..lights.count].iter().zip(diffuse).filter(|&(&w, &f)| w > 0.0 && f > 0.0).count() as u16;
+    let (weight, diffuse, specular) = (
+        work.best_weight.as_flattened(),
+        work.diffuse.as_flattened(),
+        work.specular.as_flattened(),
+    );
+    let used = weight[..lights.count]
+        .iter()
+        .zip(diffuse)
+        .filter(|&(&w, &f)| w > 0.0 && f > 0.0)
+        .count() as u16;
     let mut albedo = [0.0f32; 3];
     for (c, value) in albedo.iter_mut().enumerate() {
         let (mut ff, mut fs, mut ss, mut fb, mut sb) = (0.0f32, 0.0f32, 0.0f32, 0.0f32, 0.0f32);
@@ -520,7 +708,16 @@ fn finish<V: Isa<LANES>>(isa: V, rgb: &[[f32; 3]], lights: &Lights, half: &HalfV
         }
         *value = diffuse_and_lobe(ff, fs, ss, fb, sb).0;
     }
-    (best.normal.is_finite() && used >= 3).then(|| PixelFit { normal: best.normal.to_array(), albedo, flag: if best.height > 0.0 { flag::LOBE } else { flag::OK }, used })
+    (best.normal.is_finite() && used >= 3).then(|| PixelFit {
+        normal: best.normal.to_array(),
+        albedo,
+        flag: if best.height > 0.0 {
+            flag::LOBE
+        } else {
+            flag::OK
+        },
+        used,
+    })
 }
 
 #[cfg(test)]
@@ -549,14 +746,42 @@ mod tests {
 
     /// Pixels rendered with a Lambertian base (albedo `rho` per channel) and a Blinn-Phong
     /// lobe of exponent `exponent` and height `height`, fitted in `mode`.
-    fn fit_glossy(normals: &[Vec3], rho: [f32; 3], height: f32, exponent: i32, mode: Robust) -> crate::ps::PsOutput {
-        fit_glossy_with(normals, rho, height, exponent, PsSettings { robust: mode, ..PsSettings::default() }).unwrap()
+    fn fit_glossy(
+        normals: &[Vec3],
+        rho: [f32; 3],
+        height: f32,
+        exponent: i32,
+        mode: Robust,
+    ) -> crate::ps::PsOutput {
+        fit_glossy_with(
+            normals,
+            rho,
+            height,
+            exponent,
+            PsSettings {
+                robust: mode,
+                ..PsSettings::default()
+            },
+        )
+        .unwrap()
     }
 
     /// [`fit_glossy`] with `settings`.
-    fn fit_glossy_with(normals: &[Vec3], rho: [f32; 3], height: f32, exponent: i32, settings: PsSettings) -> crate::error::Result<crate::ps::PsOutput> {
+    fn fit_glossy_with(
+        normals: &[Vec3],
+        rho: [f32; 3],
+        height: f32,
+        exponent: i32,
+        settings: PsSettings,
+    ) -> crate::error::Result<crate::ps::PsOutput> {
         let directions = ring_lights();
-        let lights: Vec<Light> = directions.iter().map(|&d| Light { direction: Vec3A::from(d), irradiance: [std::f32::consts::PI; 3] }).collect();
+        let lights: Vec<Light> = directions
+            .iter()
+            .map(|&d| Light {
+                direction: Vec3A::from(d),
+                irradiance: [std::f32::consts::PI; 3],
+            })
+            .collect();
         let mut images = Vec::new();
         for &l in &directions {
             let h = (l + Vec3::Z).normalize();
@@ -570,7 +795,16 @@ mod tests {
     }
 
     fn tilted(count: usize) -> Vec<Vec3> {
-        (0..count).map(|i| Vec3::new(0.5 * (i as f32 * 0.7).sin(), 0.5 * (i as f32 * 1.3).cos(), 1.0).normalize()).collect()
+        (0..count)
+            .map(|i| {
+                Vec3::new(
+                    0.5 * (i as f32 * 0.7).sin(),
+                    0.5 * (i as f32 * 1.3).cos(),
+                    1.0,
+                )
+                .normalize()
+            })
+            .collect()
     }
 
     #[test]
@@ -578,12 +812,30 @@ mod tests {
         let normals = tilted(40);
         let lobe = fit_glossy(&normals, [0.2, 0.3, 0.4], 4.0, 32, Robust::Lobe);
         let tukey = fit_glossy(&normals, [0.2, 0.3, 0.4], 4.0, 32, Robust::Tukey);
-        let mean = |out: &crate::ps::PsOutput| normals.iter().zip(&out.normals).map(|(&n, &m)| angle_deg(m, n)).sum::<f32>() / normals.len() as f32;
-        assert!(mean(&lobe) < 0.05, "lobe mode's mean error {}°", mean(&lobe));
-        assert!(mean(&tukey) > 5.0 * mean(&lobe), "the Tukey fit is already right ({}°): the test shows nothing", mean(&tukey));
+        let mean = |out: &crate::ps::PsOutput| {
+            normals
+                .iter()
+                .zip(&out.normals)
+                .map(|(&n, &m)| angle_deg(m, n))
+                .sum::<f32>()
+                / normals.len() as f32
+        };
+        assert!(
+            mean(&lobe) < 0.05,
+            "lobe mode's mean error {}°",
+            mean(&lobe)
+        );
+        assert!(
+            mean(&tukey) > 5.0 * mean(&lobe),
+            "the Tukey fit is already right ({}°): the test shows nothing",
+            mean(&tukey)
+        );
         for albedo in &lobe.albedo {
             for (value, truth) in albedo.iter().zip([0.2, 0.3, 0.4]) {
-                assert!((value - truth).abs() < 0.01, "diffuse albedo {albedo:?}, truth [0.2, 0.3, 0.4]");
+                assert!(
+                    (value - truth).abs() < 0.01,
+                    "diffuse albedo {albedo:?}, truth [0.2, 0.3, 0.4]"
+                );
             }
         }
     }
@@ -591,16 +843,57 @@ mod tests {
     #[test]
     fn a_fit_of_few_rounds_tells_glossy_pixels_from_matte_ones() {
         let normals = tilted(40);
-        let shortened = |height, lobe_rounds| fit_glossy_with(&normals, [0.2, 0.3, 0.4], height, 32, PsSettings { robust: Robust::Lobe, lobe_rounds, ..PsSettings::default() }).unwrap();
+        let shortened = |height, lobe_rounds| {
+            fit_glossy_with(
+                &normals,
+                [0.2, 0.3, 0.4],
+                height,
+                32,
+                PsSettings {
+                    robust: Robust::Lobe,
+                    lobe_rounds,
+                    ..PsSettings::default()
+                },
+            )
+            .unwrap()
+        };
         for rounds in [1, 5] {
-            assert!(shortened(4.0, rounds).flags.iter().all(|&f| f == flag::LOBE), "{rounds} rounds: a glossy pixel without a lobe");
-            assert!(shortened(0.0, rounds).flags.iter().all(|&f| f == flag::OK), "{rounds} rounds: a matte pixel with a lobe");
+            assert!(
+                shortened(4.0, rounds)
+                    .flags
+                    .iter()
+                    .all(|&f| f == flag::LOBE),
+                "{rounds} rounds: a glossy pixel without a lobe"
+            );
+            assert!(
+                shortened(0.0, rounds).flags.iter().all(|&f| f == flag::OK),
+                "{rounds} rounds: a matte pixel with a lobe"
+            );
         }
         // Five rounds leave the normals less settled than the full fit's (measured: worst
         // errors 1.30° and 0.13°).
-        let worst = |out: &crate::ps::PsOutput| normals.iter().zip(&out.normals).map(|(&n, &m)| angle_deg(m, n)).fold(0.0f32, f32::max);
-        assert!(worst(&shortened(4.0, 5)) > 3.0 * worst(&shortened(4.0, LOBE_ROUNDS)), "5 rounds fit as well as {LOBE_ROUNDS}: the rounds are not used");
-        let refused = fit_glossy_with(&normals, [0.2, 0.3, 0.4], 4.0, 32, PsSettings { robust: Robust::Lobe, lobe_rounds: 0, ..PsSettings::default() });
+        let worst = |out: &crate::ps::PsOutput| {
+            normals
+                .iter()
+                .zip(&out.normals)
+                .map(|(&n, &m)| angle_deg(m, n))
+                .fold(0.0f32, f32::max)
+        };
+        assert!(
+            worst(&shortened(4.0, 5)) > 3.0 * worst(&shortened(4.0, LOBE_ROUNDS)),
+            "5 rounds fit as well as {LOBE_ROUNDS}: the rounds are not used"
+        );
+        let refused = fit_glossy_with(
+            &normals,
+            [0.2, 0.3, 0.4],
+            4.0,
+            32,
+            PsSettings {
+                robust: Robust::Lobe,
+                lobe_rounds: 0,
+                ..PsSettings::default()
+            },
+        );
         assert!(refused.unwrap_err().to_string().contains("lobe_rounds"));
     }
 
@@ -608,27 +901,77 @@ mod tests {
     fn the_auto_modes_check_beside_the_tukey_fit_is_each_fit_alone() {
         // Half the pixels glossy, half matte: the check's pixels pick from both.
         let directions = ring_lights();
-        let lights: Vec<Light> = directions.iter().map(|&d| Light { direction: Vec3A::from(d), irradiance: [std::f32::consts::PI; 3] }).collect();
+        let lights: Vec<Light> = directions
+            .iter()
+            .map(|&d| Light {
+                direction: Vec3A::from(d),
+                irradiance: [std::f32::consts::PI; 3],
+            })
+            .collect();
         let normals = tilted(60);
         let mut images = Vec::new();
         for &l in &directions {
             let h = (l + Vec3::Z).normalize();
             for (p, &n) in normals.iter().enumerate() {
                 let height = if p % 2 == 0 { 4.0 } else { 0.0 };
-                images.extend([0.2f32, 0.3, 0.4].map(|r| n.dot(l).max(0.0) * (r + height * n.dot(h).max(0.0).powi(32))));
+                images.extend(
+                    [0.2f32, 0.3, 0.4]
+                        .map(|r| n.dot(l).max(0.0) * (r + height * n.dot(h).max(0.0).powi(32))),
+                );
             }
         }
         let mask: Vec<bool> = (0..normals.len()).map(|p| p != 7).collect();
         let check = [3, 10, 11, 40, 59, 2];
         let settings = PsSettings::default();
-        let (fit, flags) = crate::ps::tukey_with_lobe_check(&images, &mask, &check, &lights, &settings, 5).unwrap();
-        assert_eq!(fit, photometric_stereo(&images, &mask, &lights, &PsSettings { robust: Robust::Tukey, ..settings }).unwrap());
-        let observed: Vec<f32> = images.chunks_exact(3 * normals.len()).flat_map(|image| check.iter().flat_map(move |&p| image[3 * p..3 * p + 3].to_vec())).collect();
-        let alone = photometric_stereo(&observed, &[true; 6], &lights, &PsSettings { robust: Robust::Lobe, lobe_rounds: 5, ..settings }).unwrap();
+        let (fit, flags) =
+            crate::ps::tukey_with_lobe_check(&images, &mask, &check, &lights, &settings, 5)
+                .unwrap();
+        assert_eq!(
+            fit,
+            photometric_stereo(
+                &images,
+                &mask,
+                &lights,
+                &PsSettings {
+                    robust: Robust::Tukey,
+                    ..settings
+                }
+            )
+            .unwrap()
+        );
+        let observed: Vec<f32> = images
+            .chunks_exact(3 * normals.len())
+            .flat_map(|image| {
+                check
+                    .iter()
+                    .flat_map(move |&p| image[3 * p..3 * p + 3].to_vec())
+            })
+            .collect();
+        let alone = photometric_stereo(
+            &observed,
+            &[true; 6],
+            &lights,
+            &PsSettings {
+                robust: Robust::Lobe,
+                lobe_rounds: 5,
+                ..settings
+            },
+        )
+        .unwrap();
         assert_eq!(flags, alone.flags);
-        assert_eq!(flags.iter().map(|&f| f == flag::LOBE).collect::<Vec<_>>(), check.map(|p| p % 2 == 0), "the glossy pixels take a lobe, the matte ones none");
-        let outside = crate::ps::tukey_with_lobe_check(&images, &mask, &[60], &lights, &settings, 5).unwrap_err().to_string();
-        assert!(outside.starts_with("check: pixel 60 is outside"), "{outside}");
+        assert_eq!(
+            flags.iter().map(|&f| f == flag::LOBE).collect::<Vec<_>>(),
+            check.map(|p| p % 2 == 0),
+            "the glossy pixels take a lobe, the matte ones none"
+        );
+        let outside =
+            crate::ps::tukey_with_lobe_check(&images, &mask, &[60], &lights, &settings, 5)
+                .unwrap_err()
+                .to_string();
+        assert!(
+            outside.starts_with("check: pixel 60 is outside"),
+            "{outside}"
+        );
     }
 
     #[test]
@@ -636,8 +979,15 @@ mod tests {
         let normals = tilted(40);
         let out = fit_glossy(&normals, [0.5, 0.5, 0.5], 0.0, 1, Robust::Lobe);
         for (&n, (m, albedo)) in normals.iter().zip(out.normals.iter().zip(&out.albedo)) {
-            assert!(angle_deg(*m, n) < 0.05, "normal off by {}°", angle_deg(*m, n));
-            assert!(albedo.iter().all(|&a| (a - 0.5).abs() < 2e-3), "albedo {albedo:?}");
+            assert!(
+                angle_deg(*m, n) < 0.05,
+                "normal off by {}°",
+                angle_deg(*m, n)
+            );
+            assert!(
+                albedo.iter().all(|&a| (a - 0.5).abs() < 2e-3),
+                "albedo {albedo:?}"
+            );
         }
     }
 
@@ -645,7 +995,13 @@ mod tests {
     fn pixels_with_few_lit_observations_keep_the_tukey_fit() {
         // Five lights: a lobe's five unknowns would fit any such pixel's observations.
         let directions: Vec<Vec3> = ring_lights().into_iter().step_by(10).collect();
-        let lights: Vec<Light> = directions.iter().map(|&d| Light { direction: Vec3A::from(d), irradiance: [1.0; 3] }).collect();
+        let lights: Vec<Light> = directions
+            .iter()
+            .map(|&d| Light {
+                direction: Vec3A::from(d),
+                irradiance: [1.0; 3],
+            })
+            .collect();
         let normals = tilted(20);
         let mut images = Vec::new();
         for &l in &directions {
@@ -655,7 +1011,18 @@ mod tests {
             }
         }
         let mask = vec![true; normals.len()];
-        let fit = |robust| photometric_stereo(&images, &mask, &lights, &PsSettings { robust, ..PsSettings::default() }).unwrap();
+        let fit = |robust| {
+            photometric_stereo(
+                &images,
+                &mask,
+                &lights,
+                &PsSettings {
+                    robust,
+                    ..PsSettings::default()
+                },
+            )
+            .unwrap()
+        };
         assert_eq!(fit(Robust::Lobe), fit(Robust::Tukey));
     }
 
@@ -664,21 +1031,49 @@ mod tests {
     fn fits_in_every_instruction_set(count: usize) -> Vec<Vec<(usize, PixelFit)>> {
         let mut rng = crate::sampler::Rng::new(7);
         let mut uniform = || rng.next_f32();
-        let directions: Vec<Vec3> = ring_lights().into_iter().cycle().take(count).enumerate().map(|(k, l)| (l + Vec3::new(0.0, 0.0, 0.01 * k as f32)).normalize()).collect();
-        let gram = directions.iter().fold(glam::Mat3::ZERO, |m, &l| m + crate::ps::outer(l));
-        let lights = Lights::new(&directions, &vec![[1.0; 3]; count], &vec![[2.0; 3]; count], gram);
+        let directions: Vec<Vec3> = ring_lights()
+            .into_iter()
+            .cycle()
+            .take(count)
+            .enumerate()
+            .map(|(k, l)| (l + Vec3::new(0.0, 0.0, 0.01 * k as f32)).normalize())
+            .collect();
+        let gram = directions
+            .iter()
+            .fold(glam::Mat3::ZERO, |m, &l| m + crate::ps::outer(l));
+        let lights = Lights::new(
+            &directions,
+            &vec![[1.0; 3]; count],
+            &vec![[2.0; 3]; count],
+            gram,
+        );
         let normals = tilted(200);
         let mut images = vec![0.0f32; count * normals.len() * 3];
         for (k, &l) in directions.iter().enumerate() {
             let h = (l + Vec3::Z).normalize();
             for (p, &n) in normals.iter().enumerate() {
-                let shade = if uniform() < 0.1 { 0.3 * uniform() } else { 1.0 + 0.01 * (uniform() - 0.5) };
-                let value = shade * n.dot(l).max(0.0) * (0.3 + (p % 3) as f32 * n.dot(h).max(0.0).powi(1 << (p % 7)));
-                images[(k * normals.len() + p) * 3..][..3].copy_from_slice(&[value, 0.9 * value, 0.8 * value]);
+                let shade = if uniform() < 0.1 {
+                    0.3 * uniform()
+                } else {
+                    1.0 + 0.01 * (uniform() - 0.5)
+                };
+                let value = shade
+                    * n.dot(l).max(0.0)
+                    * (0.3 + (p % 3) as f32 * n.dot(h).max(0.0).powi(1 << (p % 7)));
+                images[(k * normals.len() + p) * 3..][..3].copy_from_slice(&[
+                    value,
+                    0.9 * value,
+                    0.8 * value,
+                ]);
             }
         }
         let n = normals.len();
-        let mut out = PsOutput { normals: vec![[0.0; 3]; n], albedo: vec![[0.0; 3]; n], flags: vec![flag::MASKED_OUT; n], used: vec![0; n] };
+        let mut out = PsOutput {
+            normals: vec![[0.0; 3]; n],
+            albedo: vec![[0.0; 3]; n],
+            flags: vec![flag::MASKED_OUT; n],
+            used: vec![0; n],
+        };
         crate::tukey::fit_pixels(&images, &vec![true; n], &lights, 0.05, &mut out).unwrap();
         let job = Job::new(&images, &lights, LOBE_ROUNDS, &out);
         let pixels: Vec<usize> = (0..n).collect();
@@ -701,8 +1096,14 @@ mod tests {
         // 37: lights that fill no whole group of lanes.
         for count in [48, 37] {
             let all = fits_in_every_instruction_set(count);
-            let lobes = all[0].iter().filter(|(_, fit)| fit.flag == flag::LOBE).count();
-            assert!(lobes > 50, "{count} lights: {lobes} of 200 pixels take a lobe, the test shows little");
+            let lobes = all[0]
+                .iter()
+                .filter(|(_, fit)| fit.flag == flag::LOBE)
+                .count();
+            assert!(
+                lobes > 50,
+                "{count} lights: {lobes} of 200 pixels take a lobe, the test shows little"
+            );
             for fits in &all[1..] {
                 assert_eq!(fits, &all[0], "{count} lights");
             }
@@ -715,14 +1116,34 @@ mod tests {
         for trial in 0..500 {
             let count = 1 + trial % 97;
             // Keys of residuals 0.001-10, a tenth of them tied.
-            let keys: Vec<u32> = (0..count).map(|_| if rng.next_f32() < 0.1 { 0.5f32.to_bits() } else { (0.001 * 10_000f32.powf(rng.next_f32())).to_bits() }).collect();
+            let keys: Vec<u32> = (0..count)
+                .map(|_| {
+                    if rng.next_f32() < 0.1 {
+                        0.5f32.to_bits()
+                    } else {
+                        (0.001 * 10_000f32.powf(rng.next_f32())).to_bits()
+                    }
+                })
+                .collect();
             let mut sorted = keys.clone();
             sorted.sort_unstable();
             let rank = (trial * 7) % count;
             let truth = sorted[rank];
             // The guess: the value itself, near it on either side, far off, and the ends.
-            for guess in [truth, truth + 3, truth - truth.min(5_000), truth.saturating_add(1 << 24), truth.saturating_sub(1 << 24), 0, u32::MAX] {
-                assert_eq!(select_near(&mut keys.clone(), rank, guess), truth, "rank {rank} of {count}, guess {guess}");
+            for guess in [
+                truth,
+                truth + 3,
+                truth - truth.min(5_000),
+                truth.saturating_add(1 << 24),
+                truth.saturating_sub(1 << 24),
+                0,
+                u32::MAX,
+            ] {
+                assert_eq!(
+                    select_near(&mut keys.clone(), rank, guess),
+                    truth,
+                    "rank {rank} of {count}, guess {guess}"
+                );
             }
         }
     }

@@ -20,13 +20,19 @@ pub fn try_vec<T: Clone>(what: &str, len: usize, value: T) -> Result<Vec<T>> {
 /// An empty vector with room for `len` values, or [`Error::Memory`] for `what`.
 pub fn try_with_capacity<T>(what: &str, len: usize) -> Result<Vec<T>> {
     let mut values = Vec::new();
-    values.try_reserve_exact(len).map_err(|_| Error::memory(what, len.saturating_mul(size_of::<T>())))?;
+    values
+        .try_reserve_exact(len)
+        .map_err(|_| Error::memory(what, len.saturating_mul(size_of::<T>())))?;
     Ok(values)
 }
 
 /// The values of `values`, at most `len` of them, in a vector allocated for `len`, or
 /// [`Error::Memory`] for `what`.
-pub fn try_collect<T>(what: &str, len: usize, values: impl IntoIterator<Item = T>) -> Result<Vec<T>> {
+pub fn try_collect<T>(
+    what: &str,
+    len: usize,
+    values: impl IntoIterator<Item = T>,
+) -> Result<Vec<T>> {
     let mut out = try_with_capacity(what, len)?;
     out.extend(values.into_iter().take(len));
     Ok(out)
@@ -63,13 +69,21 @@ fn cache_sizes() -> Option<[usize; 3]> {
         if !cpu.file_name().to_string_lossy().starts_with("cpu") {
             continue;
         }
-        let Ok(indices) = std::fs::read_dir(cpu.path().join("cache")) else { continue };
+        let Ok(indices) = std::fs::read_dir(cpu.path().join("cache")) else {
+            continue;
+        };
         for index in indices.flatten() {
-            let read = |name: &str| std::fs::read_to_string(index.path().join(name)).map(|s| s.trim().to_string()).unwrap_or_default();
+            let read = |name: &str| {
+                std::fs::read_to_string(index.path().join(name))
+                    .map(|s| s.trim().to_string())
+                    .unwrap_or_default()
+            };
             if !matches!(read("type").as_str(), "Data" | "Unified") {
                 continue;
             }
-            let Ok(level @ 1..=3) = read("level").parse::<usize>() else { continue };
+            let Ok(level @ 1..=3) = read("level").parse::<usize>() else {
+                continue;
+            };
             let size = read("size");
             let (digits, unit) = match size.strip_suffix('K') {
                 Some(digits) => (digits, 1 << 10),
@@ -97,7 +111,13 @@ mod tests {
     fn an_impossible_allocation_is_an_error_naming_it() {
         let err = try_vec("the test's buffer", usize::MAX / 8, 0u64).unwrap_err();
         assert_eq!(err, Error::memory("the test's buffer", usize::MAX / 8 * 8));
-        assert_eq!(err.to_string(), format!("the test's buffer: could not allocate {} bytes", usize::MAX / 8 * 8));
+        assert_eq!(
+            err.to_string(),
+            format!(
+                "the test's buffer: could not allocate {} bytes",
+                usize::MAX / 8 * 8
+            )
+        );
         assert!(check_available("the BVH", usize::MAX).is_err());
     }
 
@@ -111,7 +131,10 @@ mod tests {
     #[test]
     fn the_dense_kernels_workspace_is_at_least_the_crates_default() {
         let bytes = dense_kernel_workspace_bytes();
-        assert!(bytes >= 2 * (2 << 20) && bytes % 4096 == 0, "{bytes}");
+        assert!(
+            bytes >= 2 * (2 << 20) && bytes.is_multiple_of(4096),
+            "{bytes}"
+        );
         assert!(bytes <= 1 << 40, "{bytes}");
     }
 }

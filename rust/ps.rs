@@ -72,7 +72,12 @@ pub struct PsSettings {
 
 impl Default for PsSettings {
     fn default() -> Self {
-        PsSettings { robust: Robust::Tukey, shadow_fraction: 0.05, saturation: None, lobe_rounds: crate::lobe::LOBE_ROUNDS }
+        PsSettings {
+            robust: Robust::Tukey,
+            shadow_fraction: 0.05,
+            saturation: None,
+            lobe_rounds: crate::lobe::LOBE_ROUNDS,
+        }
     }
 }
 
@@ -131,34 +136,68 @@ pub(crate) struct PixelFit {
 impl PixelFit {
     /// No light reached the pixel.
     pub fn dark(used: u16) -> PixelFit {
-        PixelFit { normal: [0.0, 0.0, 1.0], albedo: [0.0; 3], flag: flag::DARK, used }
+        PixelFit {
+            normal: [0.0, 0.0, 1.0],
+            albedo: [0.0; 3],
+            flag: flag::DARK,
+            used,
+        }
     }
 }
 
 /// Checks the lights for photometric stereo: at least 3, not coplanar, positive irradiance.
 pub fn check_lights(lights: &[Light]) -> Result<Mat3> {
     if lights.len() < 3 {
-        return Err(Error::input("lights", format!("{} given; photometric stereo needs at least 3", lights.len())));
+        return Err(Error::input(
+            "lights",
+            format!(
+                "{} given; photometric stereo needs at least 3",
+                lights.len()
+            ),
+        ));
     }
     for (k, light) in lights.iter().enumerate() {
         if !(light.direction.is_finite() && light.direction.length_squared() > 0.0) {
-            return Err(Error::input(&format!("lights[{k}].direction"), format!("{:?} is not a finite non-zero vector", light.direction.to_array())));
+            return Err(Error::input(
+                &format!("lights[{k}].direction"),
+                format!(
+                    "{:?} is not a finite non-zero vector",
+                    light.direction.to_array()
+                ),
+            ));
         }
-        if light.irradiance.iter().any(|&e| !(e > 0.0 && e.is_finite())) {
-            return Err(Error::input(&format!("lights[{k}].irradiance"), "must be positive in every channel"));
+        if light
+            .irradiance
+            .iter()
+            .any(|&e| !(e > 0.0 && e.is_finite()))
+        {
+            return Err(Error::input(
+                &format!("lights[{k}].irradiance"),
+                "must be positive in every channel",
+            ));
         }
     }
-    let gram = lights.iter().fold(Mat3::ZERO, |m, l| m + outer(l.direction.into()));
+    let gram = lights
+        .iter()
+        .fold(Mat3::ZERO, |m, l| m + outer(l.direction.into()));
     let (min, max) = eigen_range(gram);
     if min < COPLANAR_RATIO * max {
-        return Err(Error::input("lights", "directions are (nearly) coplanar: the normal is not determined"));
+        return Err(Error::input(
+            "lights",
+            "directions are (nearly) coplanar: the normal is not determined",
+        ));
     }
     Ok(gram)
 }
 
 /// Fits normals and albedo to `images` laid out `(K, pixels, 3)` (row-major images, RGB
 /// interleaved) for the pixels where `mask` is true.
-pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], settings: &PsSettings) -> Result<PsOutput> {
+pub fn photometric_stereo(
+    images: &[f32],
+    mask: &[bool],
+    lights: &[Light],
+    settings: &PsSettings,
+) -> Result<PsOutput> {
     let gram = check_lights(lights)?;
     check_images(images, mask, lights.len())?;
     check_settings(settings)?;
@@ -166,7 +205,9 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
     let mut out = PsOutput::new(mask.len())?;
     let per_pixel = Lights::new(&fit.directions, &fit.scale, &fit.saturated_b, gram);
     match settings.robust {
-        Robust::Tukey => crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out)?,
+        Robust::Tukey => {
+            crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out)?
+        }
         Robust::Lobe => {
             crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out)?;
             crate::lobe::fit_pixels(images, mask, &per_pixel, settings.lobe_rounds, &mut out)?;
@@ -183,17 +224,34 @@ pub fn photometric_stereo(images: &[f32], mask: &[bool], lights: &[Light], setti
 fn check_images(images: &[f32], mask: &[bool], k_count: usize) -> Result<()> {
     let n = mask.len();
     if n == 0 {
-        return Err(Error::input("images", "no pixel: the images and the mask are empty"));
+        return Err(Error::input(
+            "images",
+            "no pixel: the images and the mask are empty",
+        ));
     }
     if images.len() != k_count * n * 3 {
-        return Err(Error::input("images", format!("{} values for {k_count} lights x {n} pixels x 3", images.len())));
+        return Err(Error::input(
+            "images",
+            format!(
+                "{} values for {k_count} lights x {n} pixels x 3",
+                images.len()
+            ),
+        ));
     }
-    let bad = images.par_chunks_exact(3 * n).enumerate().find_map_first(|(k, image)| {
-        let pixels = image.chunks_exact(3).zip(mask).enumerate();
-        pixels.filter(|(_, (_, &inside))| inside).find_map(|(p, (rgb, _))| rgb.iter().find(|v| !v.is_finite()).map(|&v| (k, p, v)))
-    });
+    let bad = images
+        .par_chunks_exact(3 * n)
+        .enumerate()
+        .find_map_first(|(k, image)| {
+            let pixels = image.chunks_exact(3).zip(mask).enumerate();
+            pixels
+                .filter(|(_, (_, &inside))| inside)
+                .find_map(|(p, (rgb, _))| rgb.iter().find(|v| !v.is_finite()).map(|&v| (k, p, v)))
+        });
     match bad {
-        Some((k, p, v)) => Err(Error::input("images", format!("non-finite value {v} in image {k} at pixel {p} (row-major)"))),
+        Some((k, p, v)) => Err(Error::input(
+            "images",
+            format!("non-finite value {v} in image {k} at pixel {p} (row-major)"),
+        )),
         None => Ok(()),
     }
 }
@@ -202,10 +260,19 @@ fn check_images(images: &[f32], mask: &[bool], k_count: usize) -> Result<()> {
 /// finite number, and no lobe rounds.
 fn check_settings(settings: &PsSettings) -> Result<()> {
     if !(0.0..1.0).contains(&settings.shadow_fraction) {
-        return Err(Error::input("shadow_fraction", format!("{} is not in [0, 1)", settings.shadow_fraction)));
+        return Err(Error::input(
+            "shadow_fraction",
+            format!("{} is not in [0, 1)", settings.shadow_fraction),
+        ));
     }
-    if let Some(level) = settings.saturation.filter(|level| !(*level > 0.0 && level.is_finite())) {
-        return Err(Error::input("saturation", format!("{level} is not a positive finite number")));
+    if let Some(level) = settings
+        .saturation
+        .filter(|level| !(*level > 0.0 && level.is_finite()))
+    {
+        return Err(Error::input(
+            "saturation",
+            format!("{level} is not a positive finite number"),
+        ));
     }
     if settings.lobe_rounds == 0 {
         return Err(Error::input("lobe_rounds", "must be at least 1"));
@@ -220,22 +287,49 @@ fn check_settings(settings: &PsSettings) -> Result<()> {
 /// the object wants the lobe mode. Returns the Tukey fit and the flag of each pixel of
 /// `check`. The check's few pixels take the threads that the Tukey fit leaves idle, instead
 /// of a call of their own before it.
-pub fn tukey_with_lobe_check(images: &[f32], mask: &[bool], check: &[usize], lights: &[Light], settings: &PsSettings, check_rounds: usize) -> Result<(PsOutput, Vec<u8>)> {
+pub fn tukey_with_lobe_check(
+    images: &[f32],
+    mask: &[bool],
+    check: &[usize],
+    lights: &[Light],
+    settings: &PsSettings,
+    check_rounds: usize,
+) -> Result<(PsOutput, Vec<u8>)> {
     let n = mask.len();
     if let Some(&pixel) = check.iter().find(|&&pixel| pixel >= n) {
-        return Err(Error::input("check", format!("pixel {pixel} is outside the {n} pixels of the mask")));
+        return Err(Error::input(
+            "check",
+            format!("pixel {pixel} is outside the {n} pixels of the mask"),
+        ));
     }
     if check_rounds == 0 {
         return Err(Error::input("check_rounds", "must be at least 1"));
     }
-    let tukey = PsSettings { robust: Robust::Tukey, ..*settings };
-    let lobe = PsSettings { robust: Robust::Lobe, lobe_rounds: check_rounds, ..*settings };
+    let tukey = PsSettings {
+        robust: Robust::Tukey,
+        ..*settings
+    };
+    let lobe = PsSettings {
+        robust: Robust::Lobe,
+        lobe_rounds: check_rounds,
+        ..*settings
+    };
     if check.is_empty() {
-        return Ok((photometric_stereo(images, mask, lights, &tukey)?, Vec::new()));
+        return Ok((
+            photometric_stereo(images, mask, lights, &tukey)?,
+            Vec::new(),
+        ));
     }
     check_images(images, mask, lights.len())?;
     let look = || {
-        let observed: Vec<f32> = images.chunks_exact(3 * n).flat_map(|image| check.iter().flat_map(move |&pixel| image[3 * pixel..3 * pixel + 3].iter().copied())).collect();
+        let observed: Vec<f32> = images
+            .chunks_exact(3 * n)
+            .flat_map(|image| {
+                check
+                    .iter()
+                    .flat_map(move |&pixel| image[3 * pixel..3 * pixel + 3].iter().copied())
+            })
+            .collect();
         photometric_stereo(&observed, &vec![true; check.len()], lights, &lobe)
     };
     let (fit, looked) = rayon::join(|| photometric_stereo(images, mask, lights, &tukey), look);
@@ -247,13 +341,29 @@ pub fn tukey_with_lobe_check(images: &[f32], mask: &[bool], check: &[usize], lig
 /// with the working state that `init` makes for each thread, and each chunk's fits go
 /// straight into its own rows of `out`. Fails only when the list of the mask's pixels
 /// cannot be allocated.
-pub(crate) fn fit_masked<S>(mask: &[bool], chunk: usize, out: &mut PsOutput, init: impl Fn() -> S + Sync + Send, fit: impl Fn(&mut S, &[usize], &mut Vec<(usize, PixelFit)>) + Sync + Send) -> Result<()> {
+pub(crate) fn fit_masked<S>(
+    mask: &[bool],
+    chunk: usize,
+    out: &mut PsOutput,
+    init: impl Fn() -> S + Sync + Send,
+    fit: impl Fn(&mut S, &[usize], &mut Vec<(usize, PixelFit)>) + Sync + Send,
+) -> Result<()> {
     let pixels = masked_pixels(mask)?;
     let chunks: Vec<&[usize]> = pixels.chunks(chunk).collect();
     let mut windows = Vec::with_capacity(chunks.len());
-    let (mut normals, mut albedo, mut flags, mut used) = (&mut out.normals[..], &mut out.albedo[..], &mut out.flags[..], &mut out.used[..]);
+    let (mut normals, mut albedo, mut flags, mut used) = (
+        &mut out.normals[..],
+        &mut out.albedo[..],
+        &mut out.flags[..],
+        &mut out.used[..],
+    );
     let mut start = 0;
-    for next in chunks.iter().skip(1).map(|chunk| chunk[0]).chain([mask.len()]) {
+    for next in chunks
+        .iter()
+        .skip(1)
+        .map(|chunk| chunk[0])
+        .chain([mask.len()])
+    {
         let rows = next - start;
         let window;
         (window, normals, albedo, flags, used) = {
@@ -267,14 +377,19 @@ pub(crate) fn fit_masked<S>(mask: &[bool], chunk: usize, out: &mut PsOutput, ini
         start = next;
     }
     let init = || (init(), Vec::with_capacity(chunk));
-    for_each_with(chunks.into_iter().zip(windows), init, |(state, fits), (pixels, (first, normals, albedo, flags, used))| {
-        fits.clear();
-        fit(state, pixels, fits);
-        for (p, pixel) in fits.drain(..) {
-            let i = p - first;
-            (normals[i], albedo[i], flags[i], used[i]) = (pixel.normal, pixel.albedo, pixel.flag, pixel.used);
-        }
-    });
+    for_each_with(
+        chunks.into_iter().zip(windows),
+        init,
+        |(state, fits), (pixels, (first, normals, albedo, flags, used))| {
+            fits.clear();
+            fit(state, pixels, fits);
+            for (p, pixel) in fits.drain(..) {
+                let i = p - first;
+                (normals[i], albedo[i], flags[i], used[i]) =
+                    (pixel.normal, pixel.albedo, pixel.flag, pixel.used);
+            }
+        },
+    );
     Ok(())
 }
 
@@ -287,7 +402,12 @@ fn masked_pixels(mask: &[bool]) -> Result<Vec<usize>> {
     for (block, flags) in mask.chunks(BLOCK).enumerate() {
         // Without an early exit, so that it runs over whole registers.
         if flags.iter().fold(false, |any, &m| any | m) {
-            pixels.extend(flags.iter().enumerate().filter_map(|(i, &m)| m.then_some(block * BLOCK + i)));
+            pixels.extend(
+                flags
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, &m)| m.then_some(block * BLOCK + i)),
+            );
         }
     }
     Ok(pixels)
@@ -296,17 +416,23 @@ fn masked_pixels(mask: &[bool]) -> Result<Vec<usize>> {
 /// Runs `work` on every item of `items`, in parallel, with one working state that `init`
 /// makes per thread: each thread takes the next item when it is done with one (rayon's
 /// `for_each_init` makes a state for every piece of work it splits off).
-fn for_each_with<T: Send, S>(items: impl Iterator<Item = T> + Send, init: impl Fn() -> S + Sync, work: impl Fn(&mut S, T) + Sync) {
+fn for_each_with<T: Send, S>(
+    items: impl Iterator<Item = T> + Send,
+    init: impl Fn() -> S + Sync,
+    work: impl Fn(&mut S, T) + Sync,
+) {
     let queue = Mutex::new(items);
-    (0..rayon::current_num_threads()).into_par_iter().for_each(|_| {
-        let mut state = init();
-        loop {
-            // Its own statement, so that the lock is let go before the item is worked on.
-            let next = queue.lock().unwrap_or_else(PoisonError::into_inner).next();
-            let Some(item) = next else { break };
-            work(&mut state, item);
-        }
-    });
+    (0..rayon::current_num_threads())
+        .into_par_iter()
+        .for_each(|_| {
+            let mut state = init();
+            loop {
+                // Its own statement, so that the lock is let go before the item is worked on.
+                let next = queue.lock().unwrap_or_else(PoisonError::into_inner).next();
+                let Some(item) = next else { break };
+                work(&mut state, item);
+            }
+        });
 }
 
 impl Fit {
@@ -314,24 +440,36 @@ impl Fit {
     fn streamed(&self, images: &[f32], mask: &[bool], mut out: PsOutput) -> PsOutput {
         let k_count = self.directions.len();
         let n = mask.len();
-        let tiles = out.normals.chunks_mut(TILE).zip(out.albedo.chunks_mut(TILE)).zip(out.flags.chunks_mut(TILE)).zip(out.used.chunks_mut(TILE)).enumerate();
-        for_each_with(tiles, || Box::new(Sums::default()), |sums, (tile, (((normals, albedo), flags), used))| {
-            let start = tile * TILE;
-            let pixels = normals.len();
-            let kept = sums.keep(&mask[start..start + pixels]);
-            if kept == 0 {
-                return;
-            }
-            let src = |k: usize| &images[(k * n + start) * 3..][..pixels * 3];
-            self.accumulate_tile(src, sums, kept, kept == pixels);
-            for (i, &p) in sums.at[..kept].iter().enumerate() {
-                let (normal, rho, f, count) = self.solve(sums, i, || (0..k_count).map(|k| self.observation(src(k), k, p)));
-                normals[p] = normal;
-                albedo[p] = rho;
-                flags[p] = f;
-                used[p] = count;
-            }
-        });
+        let tiles = out
+            .normals
+            .chunks_mut(TILE)
+            .zip(out.albedo.chunks_mut(TILE))
+            .zip(out.flags.chunks_mut(TILE))
+            .zip(out.used.chunks_mut(TILE))
+            .enumerate();
+        for_each_with(
+            tiles,
+            || Box::new(Sums::default()),
+            |sums, (tile, (((normals, albedo), flags), used))| {
+                let start = tile * TILE;
+                let pixels = normals.len();
+                let kept = sums.keep(&mask[start..start + pixels]);
+                if kept == 0 {
+                    return;
+                }
+                let src = |k: usize| &images[(k * n + start) * 3..][..pixels * 3];
+                self.accumulate_tile(src, sums, kept, kept == pixels);
+                for (i, &p) in sums.at[..kept].iter().enumerate() {
+                    let (normal, rho, f, count) = self.solve(sums, i, || {
+                        (0..k_count).map(|k| self.observation(src(k), k, p))
+                    });
+                    normals[p] = normal;
+                    albedo[p] = rho;
+                    flags[p] = f;
+                    used[p] = count;
+                }
+            },
+        );
         out
     }
 }
@@ -355,7 +493,14 @@ struct Sums {
 
 impl Default for Sums {
     fn default() -> Self {
-        Sums { at: [0; TILE], rhs: [[0.0; TILE]; 9], gram: [[0.0; TILE]; 6], count: [0.0; TILE], brightest: [0.0; TILE], b: [[0.0; TILE]; 3] }
+        Sums {
+            at: [0; TILE],
+            rhs: [[0.0; TILE]; 9],
+            gram: [[0.0; TILE]; 6],
+            count: [0.0; TILE],
+            brightest: [0.0; TILE],
+            b: [[0.0; TILE]; 3],
+        }
     }
 }
 
@@ -384,17 +529,33 @@ struct Fit {
 
 impl Fit {
     fn new(lights: &[Light], gram: Mat3, settings: &PsSettings) -> Fit {
-        let scale: Vec<[f32; 3]> = lights.iter().map(|l| l.irradiance.map(|e| PI / e)).collect();
-        let level = settings.saturation.filter(|_| settings.robust != Robust::None).unwrap_or(f32::INFINITY);
+        let scale: Vec<[f32; 3]> = lights
+            .iter()
+            .map(|l| l.irradiance.map(|e| PI / e))
+            .collect();
+        let level = settings
+            .saturation
+            .filter(|_| settings.robust != Robust::None)
+            .unwrap_or(f32::INFINITY);
         let saturated_b = scale.iter().map(|s| s.map(|v| v * level)).collect();
-        Fit { directions: lights.iter().map(|l| l.direction.into()).collect(), scale, saturated_b, gram, settings: *settings }
+        Fit {
+            directions: lights.iter().map(|l| l.direction.into()).collect(),
+            scale,
+            saturated_b,
+            gram,
+            settings: *settings,
+        }
     }
 
     /// `b` of light k at tile pixel p, from that light's interleaved tile data.
     #[inline]
     fn observation(&self, src: &[f32], k: usize, p: usize) -> [f32; 3] {
         let s = self.scale[k];
-        [src[p * 3] * s[0], src[p * 3 + 1] * s[1], src[p * 3 + 2] * s[2]]
+        [
+            src[p * 3] * s[0],
+            src[p * 3 + 1] * s[1],
+            src[p * 3 + 2] * s[2],
+        ]
     }
 
     /// De-interleaves light k's `b` of the kept pixels of a tile (`dense` when they are all
@@ -417,7 +578,13 @@ impl Fit {
 
     /// Fills `sums` for the `kept` pixels of one tile (`dense` when they are all of its
     /// pixels); `src(k)` is light k's interleaved data of the tile.
-    fn accumulate_tile<'a>(&self, src: impl Fn(usize) -> &'a [f32], sums: &mut Sums, kept: usize, dense: bool) {
+    fn accumulate_tile<'a>(
+        &self,
+        src: impl Fn(usize) -> &'a [f32],
+        sums: &mut Sums,
+        kept: usize,
+        dense: bool,
+    ) {
         for row in sums.rhs.iter_mut().chain(sums.gram.iter_mut()) {
             row[..kept].fill(0.0);
         }
@@ -441,9 +608,23 @@ impl Fit {
         for (k, l) in self.directions.iter().enumerate() {
             self.load(sums, src(k), k, kept, dense);
             let sat = self.saturated_b[k];
-            let ll = [l.x * l.x, l.x * l.y, l.x * l.z, l.y * l.y, l.y * l.z, l.z * l.z];
+            let ll = [
+                l.x * l.x,
+                l.x * l.y,
+                l.x * l.z,
+                l.y * l.y,
+                l.y * l.z,
+                l.z * l.z,
+            ];
             let lj = [l.x, l.y, l.z];
-            let Sums { rhs, gram, count, brightest, b, .. } = sums;
+            let Sums {
+                rhs,
+                gram,
+                count,
+                brightest,
+                b,
+                ..
+            } = sums;
             for p in 0..kept {
                 let (b0, b1, b2) = (b[0][p], b[1][p], b[2][p]);
                 let keep = b0 + b1 + b2 > brightest[p] && b0 < sat[0] && b1 < sat[1] && b2 < sat[2];
@@ -465,15 +646,34 @@ impl Fit {
     /// Fits the tile's `p`-th kept pixel from its sums; `all` yields every observation of the
     /// pixel, for the full fit when the robust selection is not enough. Returns (normal,
     /// albedo, flag, observations used).
-    fn solve<I: Iterator<Item = [f32; 3]>>(&self, sums: &Sums, p: usize, all: impl Fn() -> I) -> ([f32; 3], [f32; 3], u8, u16) {
+    fn solve<I: Iterator<Item = [f32; 3]>>(
+        &self,
+        sums: &Sums,
+        p: usize,
+        all: impl Fn() -> I,
+    ) -> ([f32; 3], [f32; 3], u8, u16) {
         let k_count = self.directions.len();
         let g = |m: usize| sums.gram[m][p];
-        let kept_gram = Mat3::from_cols(Vec3::new(g(0), g(1), g(2)), Vec3::new(g(1), g(3), g(4)), Vec3::new(g(2), g(4), g(5)));
-        let kept_rhs = [0, 1, 2].map(|c| Vec3::new(sums.rhs[c][p], sums.rhs[3 + c][p], sums.rhs[6 + c][p]));
+        let kept_gram = Mat3::from_cols(
+            Vec3::new(g(0), g(1), g(2)),
+            Vec3::new(g(1), g(3), g(4)),
+            Vec3::new(g(2), g(4), g(5)),
+        );
+        let kept_rhs =
+            [0, 1, 2].map(|c| Vec3::new(sums.rhs[c][p], sums.rhs[3 + c][p], sums.rhs[6 + c][p]));
         let count = sums.count[p] as usize;
         let (min, max) = eigen_range(kept_gram);
         let (gram, rhs, used, flag) = if count >= 3 && min >= COPLANAR_RATIO * max {
-            (kept_gram, kept_rhs, count, if count == k_count || self.settings.robust != Robust::None { flag::OK } else { flag::FULL_FIT })
+            (
+                kept_gram,
+                kept_rhs,
+                count,
+                if count == k_count || self.settings.robust != Robust::None {
+                    flag::OK
+                } else {
+                    flag::FULL_FIT
+                },
+            )
         } else {
             let mut rhs = [Vec3::ZERO; 3];
             for (b, l) in all().zip(&self.directions) {
@@ -499,7 +699,10 @@ pub(crate) fn finish(gram: Mat3, rhs: [Vec3; 3]) -> Option<([f32; 3], [f32; 3])>
     }
     let normal = g.normalize();
     let denominator = normal.dot(gram * normal);
-    Some((normal.to_array(), [0, 1, 2].map(|c| (normal.dot(rhs[c]) / denominator).max(0.0))))
+    Some((
+        normal.to_array(),
+        [0, 1, 2].map(|c| (normal.dot(rhs[c]) / denominator).max(0.0)),
+    ))
 }
 
 pub(crate) fn outer(l: Vec3) -> Mat3 {
@@ -514,12 +717,16 @@ pub(crate) fn eigen_range(m: Mat3) -> (f32, f32) {
     let q = (a[0][0] + a[1][1] + a[2][2]) / 3.0;
     if p1 <= 1e-30 * q.abs().max(1e-30) {
         let d = [a[0][0], a[1][1], a[2][2]];
-        return (d.iter().copied().fold(f64::INFINITY, f64::min) as f32, d.iter().copied().fold(f64::NEG_INFINITY, f64::max) as f32);
+        return (
+            d.iter().copied().fold(f64::INFINITY, f64::min) as f32,
+            d.iter().copied().fold(f64::NEG_INFINITY, f64::max) as f32,
+        );
     }
     let p2 = (a[0][0] - q).powi(2) + (a[1][1] - q).powi(2) + (a[2][2] - q).powi(2) + 2.0 * p1;
     let p = (p2 / 6.0).sqrt();
     let bm = |i: usize, j: usize| (a[i][j] - if i == j { q } else { 0.0 }) / p;
-    let det = bm(0, 0) * (bm(1, 1) * bm(2, 2) - bm(1, 2) * bm(2, 1)) - bm(0, 1) * (bm(1, 0) * bm(2, 2) - bm(1, 2) * bm(2, 0))
+    let det = bm(0, 0) * (bm(1, 1) * bm(2, 2) - bm(1, 2) * bm(2, 1))
+        - bm(0, 1) * (bm(1, 0) * bm(2, 2) - bm(1, 2) * bm(2, 0))
         + bm(0, 2) * (bm(1, 0) * bm(2, 1) - bm(1, 1) * bm(2, 0));
     let phi = (det / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
     let largest = q + 2.0 * p * phi.cos();
@@ -533,7 +740,12 @@ mod tests {
     use glam::vec3a;
 
     fn lights(dirs: &[[f32; 3]]) -> Vec<Light> {
-        dirs.iter().map(|d| Light { direction: vec3a(d[0], d[1], d[2]).normalize(), irradiance: [2.0, 3.0, 4.0] }).collect()
+        dirs.iter()
+            .map(|d| Light {
+                direction: vec3a(d[0], d[1], d[2]).normalize(),
+                irradiance: [2.0, 3.0, 4.0],
+            })
+            .collect()
     }
 
     fn render(normal: Vec3, albedo: [f32; 3], lights: &[Light]) -> Vec<f32> {
@@ -548,12 +760,36 @@ mod tests {
 
     #[test]
     fn recovers_normal_and_albedo_exactly_without_shadows() {
-        let ls = lights(&[[0.0, 0.0, 1.0], [0.5, 0.1, 0.8], [-0.3, 0.4, 0.8], [0.1, -0.5, 0.8]]);
+        let ls = lights(&[
+            [0.0, 0.0, 1.0],
+            [0.5, 0.1, 0.8],
+            [-0.3, 0.4, 0.8],
+            [0.1, -0.5, 0.8],
+        ]);
         let normal = Vec3::new(0.1, -0.2, 1.0).normalize();
         let images = render(normal, [0.9, 0.5, 0.2], &ls);
-        for robust in [Robust::None, Robust::Threshold, Robust::Trim, Robust::Tukey, Robust::Lobe] {
-            let out = photometric_stereo(&images, &[true], &ls, &PsSettings { robust, ..Default::default() }).unwrap();
-            assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5, "{robust:?} {:?}", out.normals[0]);
+        for robust in [
+            Robust::None,
+            Robust::Threshold,
+            Robust::Trim,
+            Robust::Tukey,
+            Robust::Lobe,
+        ] {
+            let out = photometric_stereo(
+                &images,
+                &[true],
+                &ls,
+                &PsSettings {
+                    robust,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            assert!(
+                (Vec3::from(out.normals[0]) - normal).length() < 1e-5,
+                "{robust:?} {:?}",
+                out.normals[0]
+            );
             for (got, want) in out.albedo[0].iter().zip([0.9, 0.5, 0.2]) {
                 assert!((got - want).abs() < 1e-5);
             }
@@ -562,13 +798,38 @@ mod tests {
 
     #[test]
     fn robust_mode_ignores_attached_shadows() {
-        let ls = lights(&[[0.0, 0.0, 1.0], [0.7, 0.0, 0.7], [-0.7, 0.0, 0.7], [0.0, 0.7, 0.7], [0.0, -0.7, 0.7], [-0.9, -0.3, 0.3]]);
+        let ls = lights(&[
+            [0.0, 0.0, 1.0],
+            [0.7, 0.0, 0.7],
+            [-0.7, 0.0, 0.7],
+            [0.0, 0.7, 0.7],
+            [0.0, -0.7, 0.7],
+            [-0.9, -0.3, 0.3],
+        ]);
         let normal = Vec3::new(0.6, 0.2, 0.8).normalize(); // the last light is behind it
         let images = render(normal, [0.5; 3], &ls);
-        let plain = photometric_stereo(&images, &[true], &ls, &PsSettings { robust: Robust::None, ..Default::default() }).unwrap();
+        let plain = photometric_stereo(
+            &images,
+            &[true],
+            &ls,
+            &PsSettings {
+                robust: Robust::None,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         assert!((Vec3::from(plain.normals[0]) - normal).length() > 1e-2);
         for robust in [Robust::Threshold, Robust::Tukey] {
-            let out = photometric_stereo(&images, &[true], &ls, &PsSettings { robust, ..Default::default() }).unwrap();
+            let out = photometric_stereo(
+                &images,
+                &[true],
+                &ls,
+                &PsSettings {
+                    robust,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
             assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5);
             assert_eq!(out.used[0], 5);
         }
@@ -579,7 +840,11 @@ mod tests {
         let dirs: Vec<[f32; 3]> = (0..24)
             .map(|k| {
                 let (azimuth, elevation) = (k as f32 * 0.9, 0.5 + 0.04 * k as f32);
-                [elevation.cos() * azimuth.cos(), elevation.cos() * azimuth.sin(), elevation.sin()]
+                [
+                    elevation.cos() * azimuth.cos(),
+                    elevation.cos() * azimuth.sin(),
+                    elevation.sin(),
+                ]
             })
             .collect();
         lights(&dirs)
@@ -597,8 +862,23 @@ mod tests {
             images[k * 3..k * 3 + 3].iter_mut().for_each(|v| *v += 0.8); // highlights
         }
         let error = |robust| {
-            let out = photometric_stereo(&images, &[true], &ls, &PsSettings { robust, ..Default::default() }).unwrap();
-            ((Vec3::from(out.normals[0]).dot(normal)).clamp(-1.0, 1.0).acos().to_degrees(), out.used[0])
+            let out = photometric_stereo(
+                &images,
+                &[true],
+                &ls,
+                &PsSettings {
+                    robust,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            (
+                (Vec3::from(out.normals[0]).dot(normal))
+                    .clamp(-1.0, 1.0)
+                    .acos()
+                    .to_degrees(),
+                out.used[0],
+            )
         };
         let (threshold, _) = error(Robust::Threshold);
         let (tukey, used) = error(Robust::Tukey);
@@ -618,7 +898,16 @@ mod tests {
         for &k in &order[19..] {
             images[k * 3..k * 3 + 3].iter_mut().for_each(|v| *v += 1.0);
         }
-        let out = photometric_stereo(&images, &[true], &ls, &PsSettings { robust: Robust::Trim, ..Default::default() }).unwrap();
+        let out = photometric_stereo(
+            &images,
+            &[true],
+            &ls,
+            &PsSettings {
+                robust: Robust::Trim,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5);
         assert_eq!(out.used[0], 24 - 10 - 5);
     }
@@ -632,7 +921,11 @@ mod tests {
         let mut images = vec![0.0; ls.len() * pixels * 3];
         for p in 0..pixels {
             let (u, v) = ((p % 50) as f32 / 50.0 - 0.5, (p / 50) as f32 / 30.0 - 0.5);
-            let observed = render(Vec3::new(u, v, 1.0).normalize(), [0.3 + 0.4 * u.abs(), 0.5, 0.7 - 0.3 * v.abs()], &ls);
+            let observed = render(
+                Vec3::new(u, v, 1.0).normalize(),
+                [0.3 + 0.4 * u.abs(), 0.5, 0.7 - 0.3 * v.abs()],
+                &ls,
+            );
             for (k, rgb) in observed.chunks_exact(3).enumerate() {
                 let factor = match (p * 7 + k * 13) % 17 {
                     0 => 0.3,
@@ -645,22 +938,56 @@ mod tests {
             }
         }
         let every = vec![true; pixels];
-        let some: Vec<bool> = (0..pixels).map(|p| (p * p / 7 + p / 11) % 3 != 0 && !(600..700).contains(&p)).collect();
-        for robust in [Robust::None, Robust::Threshold, Robust::Trim, Robust::Tukey, Robust::Lobe] {
-            let settings = PsSettings { robust, ..Default::default() };
-            let (all, part) = (photometric_stereo(&images, &every, &ls, &settings).unwrap(), photometric_stereo(&images, &some, &ls, &settings).unwrap());
-            assert!(all.flags.iter().all(|&f| f != flag::MASKED_OUT), "{robust:?}");
+        let some: Vec<bool> = (0..pixels)
+            .map(|p| (p * p / 7 + p / 11) % 3 != 0 && !(600..700).contains(&p))
+            .collect();
+        for robust in [
+            Robust::None,
+            Robust::Threshold,
+            Robust::Trim,
+            Robust::Tukey,
+            Robust::Lobe,
+        ] {
+            let settings = PsSettings {
+                robust,
+                ..Default::default()
+            };
+            let (all, part) = (
+                photometric_stereo(&images, &every, &ls, &settings).unwrap(),
+                photometric_stereo(&images, &some, &ls, &settings).unwrap(),
+            );
+            assert!(
+                all.flags.iter().all(|&f| f != flag::MASKED_OUT),
+                "{robust:?}"
+            );
             for p in (0..pixels).step_by(97) {
-                let alone: Vec<f32> = (0..ls.len()).flat_map(|k| images[(k * pixels + p) * 3..][..3].to_vec()).collect();
+                let alone: Vec<f32> = (0..ls.len())
+                    .flat_map(|k| images[(k * pixels + p) * 3..][..3].to_vec())
+                    .collect();
                 let one = photometric_stereo(&alone, &[true], &ls, &settings).unwrap();
-                assert_eq!((one.normals[0], one.albedo[0], one.used[0]), (all.normals[p], all.albedo[p], all.used[p]), "{robust:?} pixel {p} alone");
+                assert_eq!(
+                    (one.normals[0], one.albedo[0], one.used[0]),
+                    (all.normals[p], all.albedo[p], all.used[p]),
+                    "{robust:?} pixel {p} alone"
+                );
             }
             for (p, &kept) in some.iter().enumerate() {
                 if kept {
-                    let bits = |out: &PsOutput| (out.normals[p].map(f32::to_bits), out.albedo[p].map(f32::to_bits), out.flags[p], out.used[p]);
+                    let bits = |out: &PsOutput| {
+                        (
+                            out.normals[p].map(f32::to_bits),
+                            out.albedo[p].map(f32::to_bits),
+                            out.flags[p],
+                            out.used[p],
+                        )
+                    };
                     assert_eq!(bits(&part), bits(&all), "{robust:?} pixel {p}");
                 } else {
-                    assert_eq!((part.normals[p], part.flags[p]), ([0.0; 3], flag::MASKED_OUT), "{robust:?} pixel {p}");
+                    assert_eq!(
+                        (part.normals[p], part.flags[p]),
+                        ([0.0; 3], flag::MASKED_OUT),
+                        "{robust:?} pixel {p}"
+                    );
                 }
             }
         }
@@ -669,7 +996,9 @@ mod tests {
     #[test]
     fn masked_pixels_are_the_true_indices_across_empty_full_and_partial_blocks() {
         for n in [0, 1, 63, 64, 65, 200, 1000] {
-            let mask: Vec<bool> = (0..n).map(|i: usize| (i / 70) % 3 == 1 || i % 97 == 5 || i + 1 == n).collect();
+            let mask: Vec<bool> = (0..n)
+                .map(|i: usize| (i / 70) % 3 == 1 || i % 97 == 5 || i + 1 == n)
+                .collect();
             let expected: Vec<usize> = (0..n).filter(|&i| mask[i]).collect();
             assert_eq!(masked_pixels(&mask).unwrap(), expected, "{n} pixels");
         }
@@ -678,9 +1007,20 @@ mod tests {
     #[test]
     fn too_few_or_coplanar_lights_are_errors() {
         let two = lights(&[[0.0, 0.0, 1.0], [0.5, 0.0, 0.8]]);
-        assert!(check_lights(&two).unwrap_err().to_string().contains("at least 3"));
-        let coplanar = lights(&[[0.0, 0.0, 1.0], [0.5, 0.0, 0.8], [-0.5, 0.0, 0.8], [0.3, 0.0, 0.9]]);
-        assert!(check_lights(&coplanar).unwrap_err().to_string().contains("coplanar"));
+        assert!(check_lights(&two)
+            .unwrap_err()
+            .to_string()
+            .contains("at least 3"));
+        let coplanar = lights(&[
+            [0.0, 0.0, 1.0],
+            [0.5, 0.0, 0.8],
+            [-0.5, 0.0, 0.8],
+            [0.3, 0.0, 0.9],
+        ]);
+        assert!(check_lights(&coplanar)
+            .unwrap_err()
+            .to_string()
+            .contains("coplanar"));
     }
 
     #[test]

@@ -9,7 +9,10 @@ use std::path::PathBuf;
 
 use glam::vec3a;
 use numpy::ndarray::{Array, Array2, IxDyn};
-use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1, PyArray2, PyArray3, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayDyn, PyReadonlyArray1, PyReadonlyArray2,
+    PyReadonlyArray3, PyReadonlyArray4, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
 use pyo3::exceptions::{PyMemoryError, PyValueError};
 use pyo3::prelude::*;
 use rayon::prelude::*;
@@ -18,7 +21,10 @@ use crate::denoise::{denoise as core_denoise, Surface};
 use crate::error::Error;
 use crate::image_io::{self, Image};
 use crate::memory::{try_collect, try_vec};
-use crate::ps::{check_lights as core_check_lights, photometric_stereo as core_ps, tukey_with_lobe_check as core_tukey_with_lobe_check, PsOutput, PsSettings, Robust};
+use crate::ps::{
+    check_lights as core_check_lights, photometric_stereo as core_ps,
+    tukey_with_lobe_check as core_tukey_with_lobe_check, PsOutput, PsSettings, Robust,
+};
 use crate::render::{RenderSettings, Renderer as CoreRenderer};
 use crate::residual::{compare as core_compare, Observed, RenderedPlanes};
 use crate::scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
@@ -44,8 +50,13 @@ fn to_py(err: Error) -> PyErr {
 }
 
 fn image_to_array(py: Python<'_>, image: Image) -> PyResult<Bound<'_, PyArrayDyn<f32>>> {
-    let shape = if image.channels == 1 { vec![image.height, image.width] } else { vec![image.height, image.width, image.channels] };
-    let array = Array::from_shape_vec(IxDyn(&shape), image.data).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let shape = if image.channels == 1 {
+        vec![image.height, image.width]
+    } else {
+        vec![image.height, image.width, image.channels]
+    };
+    let array = Array::from_shape_vec(IxDyn(&shape), image.data)
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(array.into_pyarray(py))
 }
 
@@ -56,13 +67,26 @@ fn array_to_image(array: &PyReadonlyArrayDyn<'_, f32>, name: &str) -> PyResult<I
     let (height, width, channels) = match *shape {
         [h, w] => (h, w, 1),
         [h, w, c] => (h, w, c),
-        _ => return Err(argument_error(name, format!("expected an (H, W) or (H, W, C) array, got shape {shape:?}"))),
+        _ => {
+            return Err(argument_error(
+                name,
+                format!("expected an (H, W) or (H, W, C) array, got shape {shape:?}"),
+            ))
+        }
     };
     if height == 0 || width == 0 {
-        return Err(argument_error(name, format!("shape {shape:?} has no pixel")));
+        return Err(argument_error(
+            name,
+            format!("shape {shape:?} has no pixel"),
+        ));
     }
     let data = flat(array, name)?.into_owned();
-    Ok(Image { width, height, channels, data })
+    Ok(Image {
+        width,
+        height,
+        channels,
+        data,
+    })
 }
 
 /// `err` with the core's input `field` renamed `argument`, the binding's name for it.
@@ -84,7 +108,8 @@ fn read_exr(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArrayDyn<f32>
 #[pyfunction]
 fn write_exr(py: Python<'_>, path: PathBuf, array: PyReadonlyArrayDyn<'_, f32>) -> PyResult<()> {
     let image = array_to_image(&array, "array")?;
-    py.detach(|| image_io::write_exr(&path, &image)).map_err(|e| to_py(renamed(e, "image", "array")))
+    py.detach(|| image_io::write_exr(&path, &image))
+        .map_err(|e| to_py(renamed(e, "image", "array")))
 }
 
 /// Reads an 8- or 16-bit PNG: (values / (2^bits − 1) as float32, (H, W) or (H, W, 3); bits).
@@ -96,48 +121,79 @@ fn read_png(py: Python<'_>, path: PathBuf) -> PyResult<(Bound<'_, PyArrayDyn<f32
 
 /// Writes float32 values in [0, 1], (H, W) gray or (H, W, 3) RGB, as an 8- or 16-bit PNG.
 #[pyfunction]
-fn write_png(py: Python<'_>, path: PathBuf, array: PyReadonlyArrayDyn<'_, f32>, bit_depth: u8) -> PyResult<()> {
+fn write_png(
+    py: Python<'_>,
+    path: PathBuf,
+    array: PyReadonlyArrayDyn<'_, f32>,
+    bit_depth: u8,
+) -> PyResult<()> {
     let image = array_to_image(&array, "array")?;
-    py.detach(|| image_io::write_png(&path, &image, bit_depth)).map_err(|e| to_py(renamed(e, "image", "array")))
+    py.detach(|| image_io::write_png(&path, &image, bit_depth))
+        .map_err(|e| to_py(renamed(e, "image", "array")))
 }
 
 /// Reads EXR/PNG images in parallel into one float32 (K, H, W, 3) array.
 #[pyfunction]
 fn read_images(py: Python<'_>, paths: Vec<PathBuf>) -> PyResult<Bound<'_, PyArrayDyn<f32>>> {
-    let (width, height, data) = py.detach(|| image_io::read_image_stack(&paths)).map_err(to_py)?;
-    let array = Array::from_shape_vec(IxDyn(&[paths.len(), height, width, 3]), data).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let (width, height, data) = py
+        .detach(|| image_io::read_image_stack(&paths))
+        .map_err(to_py)?;
+    let array = Array::from_shape_vec(IxDyn(&[paths.len(), height, width, 3]), data)
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(array.into_pyarray(py))
 }
 
 fn rows_of_3(array: &PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<Vec<[f32; 3]>> {
     let a = array.as_array();
     if a.ncols() != 3 {
-        return Err(argument_error(name, format!("expected shape (N, 3), got {:?}", a.shape())));
+        return Err(argument_error(
+            name,
+            format!("expected shape (N, 3), got {:?}", a.shape()),
+        ));
     }
     Ok(a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
 }
 
 /// The rows of an (N, 3) array of finite values as one flat slice: borrowed when the array
 /// is C-contiguous, copied otherwise.
-fn flat_rows_of_3<'a>(array: &'a PyReadonlyArray2<'_, f32>, name: &str) -> PyResult<Cow<'a, [f32]>> {
+fn flat_rows_of_3<'a>(
+    array: &'a PyReadonlyArray2<'_, f32>,
+    name: &str,
+) -> PyResult<Cow<'a, [f32]>> {
     if array.shape()[1] != 3 {
-        return Err(argument_error(name, format!("expected shape (N, 3), got {:?}", array.shape())));
+        return Err(argument_error(
+            name,
+            format!("expected shape (N, 3), got {:?}", array.shape()),
+        ));
     }
     let values = flat(array, name)?;
     if let Some(index) = values.iter().position(|v| !v.is_finite()) {
-        return Err(argument_error(name, format!("non-finite value {} in row {}", values[index], index / 3)));
+        return Err(argument_error(
+            name,
+            format!("non-finite value {} in row {}", values[index], index / 3),
+        ));
     }
     Ok(values)
 }
 
 /// An array's values in C order: borrowed when the array is C-contiguous, copied otherwise
 /// (a `MemoryError` naming `name` when the copy cannot be allocated).
-fn flat<'a, T: numpy::Element + Copy, D: numpy::ndarray::Dimension>(array: &'a numpy::PyReadonlyArray<'_, T, D>, name: &str) -> PyResult<Cow<'a, [T]>> {
+fn flat<'a, T: numpy::Element + Copy, D: numpy::ndarray::Dimension>(
+    array: &'a numpy::PyReadonlyArray<'_, T, D>,
+    name: &str,
+) -> PyResult<Cow<'a, [T]>> {
     // numpy's own `as_slice` also lends Fortran-ordered data: ndarray's `to_slice` only C order.
     let view = array.as_array();
     match view.to_slice() {
         Some(values) => Ok(Cow::Borrowed(values)),
-        None => Ok(Cow::Owned(try_collect(&format!("a C-ordered copy of {name}"), view.len(), view.iter().copied()).map_err(to_py)?)),
+        None => Ok(Cow::Owned(
+            try_collect(
+                &format!("a C-ordered copy of {name}"),
+                view.len(),
+                view.iter().copied(),
+            )
+            .map_err(to_py)?,
+        )),
     }
 }
 
@@ -145,7 +201,12 @@ fn flat<'a, T: numpy::Element + Copy, D: numpy::ndarray::Dimension>(array: &'a n
 type HitArrays<'py> = (Bound<'py, PyArray1<f32>>, Bound<'py, PyArray1<i64>>);
 
 /// Positions, triangles, vertex albedo and triangle normals of a scene's mesh.
-type MeshArrays<'py> = (Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<u32>>, Bound<'py, PyArray2<f32>>, Bound<'py, PyArray2<f32>>);
+type MeshArrays<'py> = (
+    Bound<'py, PyArray2<f32>>,
+    Bound<'py, PyArray2<u32>>,
+    Bound<'py, PyArray2<f32>>,
+    Bound<'py, PyArray2<f32>>,
+);
 
 /// The floor as Python gives it: `irtps.scene.Floor` (or any object with these attributes).
 #[derive(FromPyObject)]
@@ -205,26 +266,45 @@ impl Renderer {
     ) -> PyResult<Renderer> {
         let (h, w) = (height.shape()[0], height.shape()[1]);
         if mask.shape() != [h, w] {
-            return Err(argument_error("mask", format!("shape {:?} differs from height {:?}", mask.shape(), [h, w])));
+            return Err(argument_error(
+                "mask",
+                format!("shape {:?} differs from height {:?}", mask.shape(), [h, w]),
+            ));
         }
         if albedo.shape() != [h, w, 3] {
-            return Err(argument_error("albedo", format!("shape {:?}, expected {:?}", albedo.shape(), [h, w, 3])));
+            return Err(argument_error(
+                "albedo",
+                format!("shape {:?}, expected {:?}", albedo.shape(), [h, w, 3]),
+            ));
         }
         let directions = rows_of_3(&light_directions, "light_directions")?;
         let irradiance = rows_of_3(&light_irradiance, "light_irradiance")?;
         if directions.len() != irradiance.len() {
-            return Err(argument_error("light_irradiance", "needs one row per light direction"));
+            return Err(argument_error(
+                "light_irradiance",
+                "needs one row per light direction",
+            ));
         }
         let albedo_values = flat(&albedo, "albedo")?;
         let surface = HeightField {
             height: flat(&height, "height")?.into_owned(),
             mask: flat(&mask, "mask")?.into_owned(),
-            albedo: albedo_values.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect(),
+            albedo: albedo_values
+                .chunks_exact(3)
+                .map(|p| [p[0], p[1], p[2]])
+                .collect(),
         };
         let scene = Scene {
-            camera: Camera { width: w, height: h, pixel_size },
+            camera: Camera {
+                width: w,
+                height: h,
+                pixel_size,
+            },
             surface,
-            floor: floor.map(|floor| Floor { height: floor.height, albedo: floor.albedo }),
+            floor: floor.map(|floor| Floor {
+                height: floor.height,
+                albedo: floor.albedo,
+            }),
             cornell_box: cornell_box.map(|walls| CornellBox {
                 x: [walls.x.0, walls.x.1],
                 y: [walls.y.0, walls.y.1],
@@ -238,24 +318,49 @@ impl Renderer {
         let lights: Vec<Light> = directions
             .iter()
             .zip(&irradiance)
-            .map(|(d, e)| Light { direction: vec3a(d[0], d[1], d[2]), irradiance: *e })
+            .map(|(d, e)| Light {
+                direction: vec3a(d[0], d[1], d[2]),
+                irradiance: *e,
+            })
             .collect();
-        let inner = py.detach(|| CoreRenderer::new(&scene, &lights)).map_err(|e| to_py(renamed(renamed(e, "camera", "height"), "camera.pixel_size", "pixel_size")))?;
+        let inner = py
+            .detach(|| CoreRenderer::new(&scene, &lights))
+            .map_err(|e| {
+                to_py(renamed(
+                    renamed(e, "camera", "height"),
+                    "camera.pixel_size",
+                    "pixel_size",
+                ))
+            })?;
         Ok(Renderer { inner })
     }
 
     /// The same scene with the object's albedo `albedo` (H, W, 3) and each light's
     /// irradiance `light_irradiance` (K, 3): the geometry, its BVH and the light visibility
     /// are kept, not built or traced again.
-    fn with_reflectance(&self, py: Python<'_>, albedo: PyReadonlyArray3<'_, f32>, light_irradiance: PyReadonlyArray2<'_, f32>) -> PyResult<Renderer> {
+    fn with_reflectance(
+        &self,
+        py: Python<'_>,
+        albedo: PyReadonlyArray3<'_, f32>,
+        light_irradiance: PyReadonlyArray2<'_, f32>,
+    ) -> PyResult<Renderer> {
         let camera = self.inner.camera();
         if albedo.shape() != [camera.height, camera.width, 3] {
-            return Err(argument_error("albedo", format!("shape {:?}, expected {:?}", albedo.shape(), [camera.height, camera.width, 3])));
+            return Err(argument_error(
+                "albedo",
+                format!(
+                    "shape {:?}, expected {:?}",
+                    albedo.shape(),
+                    [camera.height, camera.width, 3]
+                ),
+            ));
         }
         let values = flat(&albedo, "albedo")?;
         let albedo: Vec<Rgb> = values.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
         let irradiance = rows_of_3(&light_irradiance, "light_irradiance")?;
-        let inner = py.detach(|| self.inner.with_reflectance(&albedo, &irradiance)).map_err(|e| to_py(renamed(e, "irradiance", "light_irradiance")))?;
+        let inner = py
+            .detach(|| self.inner.with_reflectance(&albedo, &irradiance))
+            .map_err(|e| to_py(renamed(e, "irradiance", "light_irradiance")))?;
         Ok(Renderer { inner })
     }
 
@@ -276,11 +381,37 @@ impl Renderer {
     /// (`split_bounces`) or their sum.
     #[pyo3(signature = (row_start, row_end, bounces, samples, direct_samples, seed, split_bounces=true))]
     #[allow(clippy::too_many_arguments)]
-    fn render_rows<'py>(&self, py: Python<'py>, row_start: usize, row_end: usize, bounces: usize, samples: usize, direct_samples: usize, seed: u64, split_bounces: bool) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-        let settings = RenderSettings { bounces, samples, direct_samples, seed, split_bounces, cached_direct: false };
-        let data = py.detach(|| self.inner.render_rows(row_start..row_end, &settings)).map_err(to_py)?;
-        let shape = [settings.planes(), self.inner.light_count(), row_end - row_start, self.inner.camera().width, 3];
-        let array = Array::from_shape_vec(IxDyn(&shape), data).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    fn render_rows<'py>(
+        &self,
+        py: Python<'py>,
+        row_start: usize,
+        row_end: usize,
+        bounces: usize,
+        samples: usize,
+        direct_samples: usize,
+        seed: u64,
+        split_bounces: bool,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let settings = RenderSettings {
+            bounces,
+            samples,
+            direct_samples,
+            seed,
+            split_bounces,
+            cached_direct: false,
+        };
+        let data = py
+            .detach(|| self.inner.render_rows(row_start..row_end, &settings))
+            .map_err(to_py)?;
+        let shape = [
+            settings.planes(),
+            self.inner.light_count(),
+            row_end - row_start,
+            self.inner.camera().width,
+            3,
+        ];
+        let array = Array::from_shape_vec(IxDyn(&shape), data)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
         Ok(array.into_pyarray(py))
     }
 
@@ -289,11 +420,31 @@ impl Renderer {
     /// shadow rays) instead of exactly.
     #[pyo3(signature = (pixels, bounces, samples, direct_samples, seed, split_bounces=true, cached_direct=false))]
     #[allow(clippy::too_many_arguments)]
-    fn render_pixels<'py>(&self, py: Python<'py>, pixels: Vec<usize>, bounces: usize, samples: usize, direct_samples: usize, seed: u64, split_bounces: bool, cached_direct: bool) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-        let settings = RenderSettings { bounces, samples, direct_samples, seed, split_bounces, cached_direct };
-        let data = py.detach(|| self.inner.render_pixels(&pixels, &settings)).map_err(to_py)?;
+    fn render_pixels<'py>(
+        &self,
+        py: Python<'py>,
+        pixels: Vec<usize>,
+        bounces: usize,
+        samples: usize,
+        direct_samples: usize,
+        seed: u64,
+        split_bounces: bool,
+        cached_direct: bool,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let settings = RenderSettings {
+            bounces,
+            samples,
+            direct_samples,
+            seed,
+            split_bounces,
+            cached_direct,
+        };
+        let data = py
+            .detach(|| self.inner.render_pixels(&pixels, &settings))
+            .map_err(to_py)?;
         let shape = [settings.planes(), self.inner.light_count(), pixels.len(), 3];
-        let array = Array::from_shape_vec(IxDyn(&shape), data).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let array = Array::from_shape_vec(IxDyn(&shape), data)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
         Ok(array.into_pyarray(py))
     }
 
@@ -301,37 +452,68 @@ impl Renderer {
     /// albedo (V, 3) float32, facing unit normals (T, 3) float32).
     fn mesh_arrays<'py>(&self, py: Python<'py>) -> MeshArrays<'py> {
         let (mesh, frame) = (self.inner.mesh(), self.inner.frame());
-        let positions = Array2::from_shape_fn((mesh.positions.len(), 3), |(i, c)| frame.to_world(mesh.positions[i])[c]);
-        let triangles = Array2::from_shape_fn((mesh.triangles.len(), 3), |(t, c)| mesh.triangles[t][c]);
+        let positions = Array2::from_shape_fn((mesh.positions.len(), 3), |(i, c)| {
+            frame.to_world(mesh.positions[i])[c]
+        });
+        let triangles =
+            Array2::from_shape_fn((mesh.triangles.len(), 3), |(t, c)| mesh.triangles[t][c]);
         let albedo = Array2::from_shape_fn((mesh.albedo.len(), 3), |(i, c)| mesh.albedo[i][c]);
         let normals = Array2::from_shape_fn((mesh.normals.len(), 3), |(t, c)| mesh.normals[t][c]);
-        (positions.into_pyarray(py), triangles.into_pyarray(py), albedo.into_pyarray(py), normals.into_pyarray(py))
+        (
+            positions.into_pyarray(py),
+            triangles.into_pyarray(py),
+            albedo.into_pyarray(py),
+            normals.into_pyarray(py),
+        )
     }
 
     /// Closest hits of a batch of rays, traced on `threads` threads (all cores if None) in
     /// tasks of [`RAYS_PER_TASK`] rays:
     /// (distance (N,) float32, inf on a miss; triangle (N,) int64, −1 on a miss).
     #[pyo3(signature = (origins, directions, threads=None))]
-    fn intersect<'py>(&self, py: Python<'py>, origins: PyReadonlyArray2<'_, f32>, directions: PyReadonlyArray2<'_, f32>, threads: Option<usize>) -> PyResult<HitArrays<'py>> {
+    fn intersect<'py>(
+        &self,
+        py: Python<'py>,
+        origins: PyReadonlyArray2<'_, f32>,
+        directions: PyReadonlyArray2<'_, f32>,
+        threads: Option<usize>,
+    ) -> PyResult<HitArrays<'py>> {
         let o = flat_rows_of_3(&origins, "origins")?;
         let d = flat_rows_of_3(&directions, "directions")?;
         if o.len() != d.len() {
             return Err(argument_error("directions", "needs one row per origin"));
         }
         if let Some(row) = d.chunks_exact(3).position(|d| d == [0.0; 3]) {
-            return Err(argument_error("directions", format!("row {row} is the zero vector")));
+            return Err(argument_error(
+                "directions",
+                format!("row {row} is the zero vector"),
+            ));
         }
         if threads == Some(0) {
-            return Err(argument_error("threads", "must be at least 1 (None: all cores)"));
+            return Err(argument_error(
+                "threads",
+                "must be at least 1 (None: all cores)",
+            ));
         }
         let (tracer, frame) = (self.inner.tracer(), self.inner.frame());
         let rays = o.len() / 3;
-        let mut t = try_vec(&format!("the distances of {rays} rays"), rays, f32::INFINITY).map_err(to_py)?;
-        let mut id = try_vec(&format!("the triangles of {rays} rays"), rays, -1i64).map_err(to_py)?;
+        let mut t = try_vec(
+            &format!("the distances of {rays} rays"),
+            rays,
+            f32::INFINITY,
+        )
+        .map_err(to_py)?;
+        let mut id =
+            try_vec(&format!("the triangles of {rays} rays"), rays, -1i64).map_err(to_py)?;
         // A batch of rays (flat xyz rows) into its outputs.
         let batch = |t: &mut [f32], id: &mut [i64], o: &[f32], d: &[f32]| {
             let mut out = t.iter_mut().zip(id.iter_mut());
-            let rays = o.chunks_exact(3).zip(d.chunks_exact(3)).map(|(o, d)| (frame.to_local(vec3a(o[0], o[1], o[2])), vec3a(d[0], d[1], d[2])));
+            let rays = o.chunks_exact(3).zip(d.chunks_exact(3)).map(|(o, d)| {
+                (
+                    frame.to_local(vec3a(o[0], o[1], o[2])),
+                    vec3a(d[0], d[1], d[2]),
+                )
+            });
             tracer.closest_hits(rays, f32::INFINITY, |hit| {
                 if let (Some((t, id)), Some(hit)) = (out.next(), hit) {
                     (*t, *id) = (frame.to_world_length(hit.t), hit.triangle as i64);
@@ -339,7 +521,13 @@ impl Renderer {
             });
         };
         let parallel = |t: &mut [f32], id: &mut [i64]| {
-            t.par_chunks_mut(RAYS_PER_TASK).zip(id.par_chunks_mut(RAYS_PER_TASK)).zip(o.par_chunks(3 * RAYS_PER_TASK).zip(d.par_chunks(3 * RAYS_PER_TASK))).for_each(|((t, id), (o, d))| batch(t, id, o, d))
+            t.par_chunks_mut(RAYS_PER_TASK)
+                .zip(id.par_chunks_mut(RAYS_PER_TASK))
+                .zip(
+                    o.par_chunks(3 * RAYS_PER_TASK)
+                        .zip(d.par_chunks(3 * RAYS_PER_TASK)),
+                )
+                .for_each(|((t, id), (o, d))| batch(t, id, o, d))
         };
         py.detach(|| -> PyResult<()> {
             match threads {
@@ -347,7 +535,10 @@ impl Renderer {
                 // One thread: one batch, without a pool or work splitting.
                 Some(1) => batch(&mut t, &mut id, &o, &d),
                 Some(n) => {
-                    let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().map_err(|e| argument_error("threads", format!("{e}")))?;
+                    let pool = rayon::ThreadPoolBuilder::new()
+                        .num_threads(n)
+                        .build()
+                        .map_err(|e| argument_error("threads", format!("{e}")))?;
                     pool.install(|| parallel(&mut t, &mut id));
                 }
             }
@@ -357,24 +548,45 @@ impl Renderer {
     }
 }
 
-fn lights_from(directions: &PyReadonlyArray2<'_, f32>, irradiance: &PyReadonlyArray2<'_, f32>) -> PyResult<Vec<Light>> {
+fn lights_from(
+    directions: &PyReadonlyArray2<'_, f32>,
+    irradiance: &PyReadonlyArray2<'_, f32>,
+) -> PyResult<Vec<Light>> {
     let directions = rows_of_3(directions, "light_directions")?;
     let irradiance = rows_of_3(irradiance, "light_irradiance")?;
     if directions.len() != irradiance.len() {
-        return Err(argument_error("light_irradiance", "needs one row per light direction"));
+        return Err(argument_error(
+            "light_irradiance",
+            "needs one row per light direction",
+        ));
     }
-    Ok(directions.iter().zip(&irradiance).map(|(d, e)| Light { direction: vec3a(d[0], d[1], d[2]), irradiance: *e }).collect())
+    Ok(directions
+        .iter()
+        .zip(&irradiance)
+        .map(|(d, e)| Light {
+            direction: vec3a(d[0], d[1], d[2]),
+            irradiance: *e,
+        })
+        .collect())
 }
 
 /// Checks lights for photometric stereo: at least 3, not (nearly) coplanar, irradiance
 /// positive in every channel. Raises ValueError naming the field otherwise.
 #[pyfunction]
-fn check_lights(light_directions: PyReadonlyArray2<'_, f32>, light_irradiance: PyReadonlyArray2<'_, f32>) -> PyResult<()> {
+fn check_lights(
+    light_directions: PyReadonlyArray2<'_, f32>,
+    light_irradiance: PyReadonlyArray2<'_, f32>,
+) -> PyResult<()> {
     let lights = lights_from(&light_directions, &light_irradiance)?;
     core_check_lights(&lights).map(|_| ()).map_err(to_py)
 }
 
-type PsArrays<'py> = (Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<f32>>, Bound<'py, PyArrayDyn<u8>>, Bound<'py, PyArrayDyn<u16>>);
+type PsArrays<'py> = (
+    Bound<'py, PyArrayDyn<f32>>,
+    Bound<'py, PyArrayDyn<f32>>,
+    Bound<'py, PyArrayDyn<u8>>,
+    Bound<'py, PyArrayDyn<u16>>,
+);
 
 /// Calibrated Lambertian photometric stereo on C-contiguous float32 images (K, H, W, 3):
 /// (normals (H, W, 3), albedo (H, W, 3), flags (H, W) uint8, observations used (H, W) uint16).
@@ -400,11 +612,28 @@ fn photometric_stereo<'py>(
         "trim" => Robust::Trim,
         "tukey" => Robust::Tukey,
         "lobe" => Robust::Lobe,
-        other => return Err(argument_error("robust", format!("unknown mode {other:?}; expected none, threshold, trim, tukey or lobe"))),
+        other => {
+            return Err(argument_error(
+                "robust",
+                format!("unknown mode {other:?}; expected none, threshold, trim, tukey or lobe"),
+            ))
+        }
     };
-    let PsInputs { shape, lights, data, mask: mask_data } = ps_inputs(&images, &mask, &light_directions, &light_irradiance)?;
-    let settings = PsSettings { robust, shadow_fraction, saturation, lobe_rounds: lobe_rounds.unwrap_or(crate::lobe::LOBE_ROUNDS) };
-    let out = py.detach(|| core_ps(data, mask_data, &lights, &settings)).map_err(to_py)?;
+    let PsInputs {
+        shape,
+        lights,
+        data,
+        mask: mask_data,
+    } = ps_inputs(&images, &mask, &light_directions, &light_irradiance)?;
+    let settings = PsSettings {
+        robust,
+        shadow_fraction,
+        saturation,
+        lobe_rounds: lobe_rounds.unwrap_or(crate::lobe::LOBE_ROUNDS),
+    };
+    let out = py
+        .detach(|| core_ps(data, mask_data, &lights, &settings))
+        .map_err(to_py)?;
     ps_arrays(py, out, shape[1], shape[2])
 }
 
@@ -428,15 +657,35 @@ fn ps_inputs<'a>(
 ) -> PyResult<PsInputs<'a>> {
     let shape = images.shape().to_vec();
     if shape[3] != 3 || mask.shape() != [shape[1], shape[2]] {
-        return Err(argument_error("images", format!("shape {shape:?} does not match mask {:?} x 3 channels", mask.shape())));
+        return Err(argument_error(
+            "images",
+            format!(
+                "shape {shape:?} does not match mask {:?} x 3 channels",
+                mask.shape()
+            ),
+        ));
     }
     let lights = lights_from(light_directions, light_irradiance)?;
     if lights.len() != shape[0] {
-        return Err(argument_error("images", format!("{} images for {} lights", shape[0], lights.len())));
+        return Err(argument_error(
+            "images",
+            format!("{} images for {} lights", shape[0], lights.len()),
+        ));
     }
-    let data = images.as_array().to_slice().ok_or_else(|| argument_error("images", "must be C-contiguous"))?;
-    let mask_data = mask.as_array().to_slice().ok_or_else(|| argument_error("mask", "must be C-contiguous"))?;
-    Ok(PsInputs { shape, lights, data, mask: mask_data })
+    let data = images
+        .as_array()
+        .to_slice()
+        .ok_or_else(|| argument_error("images", "must be C-contiguous"))?;
+    let mask_data = mask
+        .as_array()
+        .to_slice()
+        .ok_or_else(|| argument_error("mask", "must be C-contiguous"))?;
+    Ok(PsInputs {
+        shape,
+        lights,
+        data,
+        mask: mask_data,
+    })
 }
 
 /// `out` as the arrays of [`photometric_stereo`], for images `h` × `w`.
@@ -446,8 +695,12 @@ fn ps_arrays(py: Python<'_>, out: PsOutput, h: usize, w: usize) -> PyResult<PsAr
     Ok((
         planar(out.normals).map_err(err)?.into_pyarray(py),
         planar(out.albedo).map_err(err)?.into_pyarray(py),
-        Array::from_shape_vec(IxDyn(&[h, w]), out.flags).map_err(err)?.into_pyarray(py),
-        Array::from_shape_vec(IxDyn(&[h, w]), out.used).map_err(err)?.into_pyarray(py),
+        Array::from_shape_vec(IxDyn(&[h, w]), out.flags)
+            .map_err(err)?
+            .into_pyarray(py),
+        Array::from_shape_vec(IxDyn(&[h, w]), out.used)
+            .map_err(err)?
+            .into_pyarray(py),
     ))
 }
 
@@ -469,15 +722,36 @@ fn tukey_with_lobe_check<'py>(
     saturation: Option<f32>,
     check_rounds: usize,
 ) -> PyResult<(PsArrays<'py>, Bound<'py, PyArray1<u8>>)> {
-    let PsInputs { shape, lights, data, mask: mask_data } = ps_inputs(&images, &mask, &light_directions, &light_irradiance)?;
-    let settings = PsSettings { robust: Robust::Tukey, shadow_fraction, saturation, lobe_rounds: crate::lobe::LOBE_ROUNDS };
-    let (fit, flags) = py.detach(|| core_tukey_with_lobe_check(data, mask_data, &check, &lights, &settings, check_rounds)).map_err(to_py)?;
-    Ok((ps_arrays(py, fit, shape[1], shape[2])?, PyArray1::from_vec(py, flags)))
+    let PsInputs {
+        shape,
+        lights,
+        data,
+        mask: mask_data,
+    } = ps_inputs(&images, &mask, &light_directions, &light_irradiance)?;
+    let settings = PsSettings {
+        robust: Robust::Tukey,
+        shadow_fraction,
+        saturation,
+        lobe_rounds: crate::lobe::LOBE_ROUNDS,
+    };
+    let (fit, flags) = py
+        .detach(|| {
+            core_tukey_with_lobe_check(data, mask_data, &check, &lights, &settings, check_rounds)
+        })
+        .map_err(to_py)?;
+    Ok((
+        ps_arrays(py, fit, shape[1], shape[2])?,
+        PyArray1::from_vec(py, flags),
+    ))
 }
 
 /// A rendering's inter-reflection estimate, the noise energy of each pixel's estimate and
 /// the residual's sums.
-type ComparisonArrays<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray1<f64>>, (f64, f64, f64, f64));
+type ComparisonArrays<'py> = (
+    Bound<'py, PyArray3<f32>>,
+    Bound<'py, PyArray1<f64>>,
+    (f64, f64, f64, f64),
+);
 
 /// Compares a rendering of N pixels under K lights with their observations: the direct
 /// image `direct` and the inter-reflected light of one or two halves of the camera paths,
@@ -500,36 +774,81 @@ fn compare_rendering<'py>(
 ) -> PyResult<ComparisonArrays<'py>> {
     let shape = direct.shape().to_vec();
     if shape[2] != 3 {
-        return Err(argument_error("direct", format!("expected shape (K, N, 3), got {shape:?}")));
+        return Err(argument_error(
+            "direct",
+            format!("expected shape (K, N, 3), got {shape:?}"),
+        ));
     }
     let (lights, pixels) = (shape[0], shape[1]);
     for half in &halves {
         if half.shape() != shape.as_slice() {
-            return Err(argument_error("halves", format!("shape {:?} differs from direct {shape:?}", half.shape())));
+            return Err(argument_error(
+                "halves",
+                format!("shape {:?} differs from direct {shape:?}", half.shape()),
+            ));
         }
     }
     let total = observed.shape()[1];
-    if observed.shape()[0] != lights || observed.shape()[2] != 3 || first.checked_add(pixels).is_none_or(|end| end > total) {
-        return Err(argument_error("observed", format!("shape {:?} does not hold {pixels} pixels from {first} for {lights} lights", observed.shape())));
+    if observed.shape()[0] != lights
+        || observed.shape()[2] != 3
+        || first.checked_add(pixels).is_none_or(|end| end > total)
+    {
+        return Err(argument_error(
+            "observed",
+            format!(
+                "shape {:?} does not hold {pixels} pixels from {first} for {lights} lights",
+                observed.shape()
+            ),
+        ));
     }
     if let Some(keep) = &keep {
         if keep.shape() != [lights, total] {
-            return Err(argument_error("keep", format!("shape {:?}, expected {:?}", keep.shape(), [lights, total])));
+            return Err(argument_error(
+                "keep",
+                format!("shape {:?}, expected {:?}", keep.shape(), [lights, total]),
+            ));
         }
     }
     let (direct, observed) = (flat(&direct, "direct")?, flat(&observed, "observed")?);
-    let halves = halves.iter().map(|half| flat(half, "halves")).collect::<PyResult<Vec<_>>>()?;
+    let halves = halves
+        .iter()
+        .map(|half| flat(half, "halves"))
+        .collect::<PyResult<Vec<_>>>()?;
     let keep = keep.as_ref().map(|keep| flat(keep, "keep")).transpose()?;
     let comparison = py
         .detach(|| {
             let half_slices: Vec<&[f32]> = halves.iter().map(|h| h.as_ref()).collect();
-            let planes = RenderedPlanes { direct: &direct, halves: &half_slices, counts: &counts };
-            core_compare(&planes, &Observed { values: &observed, keep: keep.as_deref(), total, first }, lights, pixels)
+            let planes = RenderedPlanes {
+                direct: &direct,
+                halves: &half_slices,
+                counts: &counts,
+            };
+            core_compare(
+                &planes,
+                &Observed {
+                    values: &observed,
+                    keep: keep.as_deref(),
+                    total,
+                    first,
+                },
+                lights,
+                pixels,
+            )
         })
         .map_err(to_py)?;
-    let indirect = Array::from_shape_vec((lights, pixels, 3), comparison.indirect).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let indirect = Array::from_shape_vec((lights, pixels, 3), comparison.indirect)
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
     let sums = comparison.sums;
-    Ok((indirect.into_pyarray(py), PyArray1::from_vec(py, comparison.noise_energy), (sums.difference, sums.observed, sums.half_difference[0], sums.half_difference[1])))
+    Ok((
+        indirect.into_pyarray(py),
+        PyArray1::from_vec(py, comparison.noise_energy),
+        (
+            sums.difference,
+            sums.observed,
+            sums.half_difference[0],
+            sums.half_difference[1],
+        ),
+    ))
 }
 
 /// A filtered inter-reflection estimate and each pixel's noise energy after the filter.
@@ -549,32 +868,85 @@ fn denoise_indirect<'py>(
 ) -> PyResult<DenoisedArrays<'py>> {
     let (h, w) = (mask.shape()[0], mask.shape()[1]);
     if h == 0 || w == 0 {
-        return Err(argument_error("mask", format!("shape {:?} has no pixel", mask.shape())));
+        return Err(argument_error(
+            "mask",
+            format!("shape {:?} has no pixel", mask.shape()),
+        ));
     }
     if height_px.shape() != [h, w] {
-        return Err(argument_error("height_px", format!("shape {:?} differs from mask {:?}", height_px.shape(), [h, w])));
+        return Err(argument_error(
+            "height_px",
+            format!(
+                "shape {:?} differs from mask {:?}",
+                height_px.shape(),
+                [h, w]
+            ),
+        ));
     }
     if albedo.shape() != [h, w, 3] {
-        return Err(argument_error("albedo", format!("shape {:?}, expected {:?}", albedo.shape(), [h, w, 3])));
+        return Err(argument_error(
+            "albedo",
+            format!("shape {:?}, expected {:?}", albedo.shape(), [h, w, 3]),
+        ));
     }
-    let pixels: Vec<usize> = mask.as_array().iter().enumerate().filter_map(|(i, &inside)| inside.then_some(i)).collect();
+    let pixels: Vec<usize> = mask
+        .as_array()
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &inside)| inside.then_some(i))
+        .collect();
     let shape = indirect.shape().to_vec();
     if shape[1..] != [pixels.len(), 3] {
-        return Err(argument_error("indirect", format!("shape {shape:?}, expected (K, {}, 3) for the mask's pixels", pixels.len())));
+        return Err(argument_error(
+            "indirect",
+            format!(
+                "shape {shape:?}, expected (K, {}, 3) for the mask's pixels",
+                pixels.len()
+            ),
+        ));
     }
     let (heights, albedo_all) = (flat(&height_px, "height_px")?, flat(&albedo, "albedo")?);
     let height_px: Vec<f32> = pixels.iter().map(|&i| heights[i]).collect();
-    let albedo: Vec<Rgb> = pixels.iter().map(|&i| [albedo_all[3 * i], albedo_all[3 * i + 1], albedo_all[3 * i + 2]]).collect();
-    let (indirect, noise_energy) = (flat(&indirect, "indirect")?, flat(&noise_energy, "noise_energy")?);
-    let surface = Surface { size: (w, h), pixels: &pixels, height_px: &height_px, albedo: &albedo };
-    let denoised = py.detach(|| core_denoise(&surface, &indirect, &noise_energy)).map_err(to_py)?;
-    let filtered = Array::from_shape_vec((shape[0], shape[1], 3), denoised.indirect).map_err(|e| PyValueError::new_err(e.to_string()))?;
-    Ok((filtered.into_pyarray(py), PyArray1::from_vec(py, denoised.noise_energy)))
+    let albedo: Vec<Rgb> = pixels
+        .iter()
+        .map(|&i| {
+            [
+                albedo_all[3 * i],
+                albedo_all[3 * i + 1],
+                albedo_all[3 * i + 2],
+            ]
+        })
+        .collect();
+    let (indirect, noise_energy) = (
+        flat(&indirect, "indirect")?,
+        flat(&noise_energy, "noise_energy")?,
+    );
+    let surface = Surface {
+        size: (w, h),
+        pixels: &pixels,
+        height_px: &height_px,
+        albedo: &albedo,
+    };
+    let denoised = py
+        .detach(|| core_denoise(&surface, &indirect, &noise_energy))
+        .map_err(to_py)?;
+    let filtered = Array::from_shape_vec((shape[0], shape[1], 3), denoised.indirect)
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok((
+        filtered.into_pyarray(py),
+        PyArray1::from_vec(py, denoised.noise_energy),
+    ))
 }
 
 /// Non-negative int64 indices as `usize`, or an error naming `name`.
 fn indices_of(array: &PyReadonlyArray1<'_, i64>, name: &str) -> PyResult<Vec<usize>> {
-    array.as_array().iter().map(|&i| usize::try_from(i).map_err(|_| argument_error(name, format!("negative index {i}")))).collect()
+    array
+        .as_array()
+        .iter()
+        .map(|&i| {
+            usize::try_from(i).map_err(|_| argument_error(name, format!("negative index {i}")))
+        })
+        .collect()
 }
 
 /// The Cholesky factorisation `L Lᵀ` of a sparse symmetric positive definite matrix,
@@ -594,13 +966,24 @@ struct SparseCholesky {
 impl SparseCholesky {
     #[new]
     #[pyo3(signature = (indptr, indices, data, name="matrix"))]
-    fn new(py: Python<'_>, indptr: PyReadonlyArray1<'_, i64>, indices: PyReadonlyArray1<'_, i64>, data: PyReadonlyArray1<'_, f64>, name: &str) -> PyResult<SparseCholesky> {
+    fn new(
+        py: Python<'_>,
+        indptr: PyReadonlyArray1<'_, i64>,
+        indices: PyReadonlyArray1<'_, i64>,
+        data: PyReadonlyArray1<'_, f64>,
+        name: &str,
+    ) -> PyResult<SparseCholesky> {
         let indptr = indices_of(&indptr, name)?;
         let indices = indices_of(&indices, name)?;
         let data = data.as_array().to_vec();
         let n = indptr.len().saturating_sub(1);
-        let inner = py.detach(|| CoreSparseCholesky::factor(name, n, &indptr, &indices, &data)).map_err(to_py)?;
-        Ok(SparseCholesky { inner, name: name.to_string() })
+        let inner = py
+            .detach(|| CoreSparseCholesky::factor(name, n, &indptr, &indices, &data))
+            .map_err(to_py)?;
+        Ok(SparseCholesky {
+            inner,
+            name: name.to_string(),
+        })
     }
 
     /// The matrix's dimension n.
@@ -616,12 +999,26 @@ impl SparseCholesky {
     }
 
     /// The solution x of `A x = b` for a float64 (n,) right-hand side `b`.
-    fn solve<'py>(&self, py: Python<'py>, b: PyReadonlyArray1<'_, f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    fn solve<'py>(
+        &self,
+        py: Python<'py>,
+        b: PyReadonlyArray1<'_, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let mut x = b.as_array().to_vec();
         if x.len() != self.inner.dim() {
-            return Err(argument_error("b", format!("length {} for the {}x{} matrix {}", x.len(), self.inner.dim(), self.inner.dim(), self.name)));
+            return Err(argument_error(
+                "b",
+                format!(
+                    "length {} for the {}x{} matrix {}",
+                    x.len(),
+                    self.inner.dim(),
+                    self.inner.dim(),
+                    self.name
+                ),
+            ));
         }
-        py.detach(|| self.inner.solve_in_place("b", &mut x, 1)).map_err(to_py)?;
+        py.detach(|| self.inner.solve_in_place("b", &mut x, 1))
+            .map_err(to_py)?;
         Ok(PyArray1::from_vec(py, x))
     }
 }
@@ -635,7 +1032,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     if let Err(err) = rayon::ThreadPoolBuilder::new().build_global() {
         // An I/O error is a thread that could not be started; else the pool was running.
         if std::error::Error::source(&err).is_some() {
-            return Err(PyMemoryError::new_err(format!("the core's threads could not be started ({err})")));
+            return Err(PyMemoryError::new_err(format!(
+                "the core's threads could not be started ({err})"
+            )));
         }
     }
     m.add_function(wrap_pyfunction!(read_exr, m)?)?;

@@ -54,7 +54,12 @@ impl RenderSettings {
     /// Number of image planes per light: the direct image when it is rendered, then each
     /// bounce or their sum.
     pub fn planes(&self) -> usize {
-        usize::from(self.direct_samples > 0) + if self.split_bounces { self.bounces } else { self.bounces.min(1) }
+        usize::from(self.direct_samples > 0)
+            + if self.split_bounces {
+                self.bounces
+            } else {
+                self.bounces.min(1)
+            }
     }
 
     /// Plane of bounce `b` (1-based) in the output.
@@ -91,23 +96,48 @@ impl Renderer {
         }
         validate_lights(lights)?;
         let (pixels, k) = (scene.camera.pixel_count(), lights.len());
-        let estimate = pixels.saturating_mul(SCENE_BYTES_PER_PIXEL.saturating_add(LIGHT_CACHE_BYTES_PER_PIXEL.saturating_mul(k)));
-        check_available(&format!("the mesh, BVH and light cache of a {}x{} scene under {k} lights", scene.camera.width, scene.camera.height), estimate)?;
+        let estimate = pixels.saturating_mul(
+            SCENE_BYTES_PER_PIXEL.saturating_add(LIGHT_CACHE_BYTES_PER_PIXEL.saturating_mul(k)),
+        );
+        check_available(
+            &format!(
+                "the mesh, BVH and light cache of a {}x{} scene under {k} lights",
+                scene.camera.width, scene.camera.height
+            ),
+            estimate,
+        )?;
         let frame = Frame::of(scene);
         let scene = &frame.local_scene(scene)?;
         let mesh = Mesh::from_scene(scene);
         let tracer = Arc::new(Tracer::new(&mesh));
         let (lo, hi) = mesh.near_bounds();
         let view = scene.camera.width.max(scene.camera.height) as f32;
-        let extent = if lo.x.is_finite() { (hi - lo).max_element().max(view) } else { view };
+        let extent = if lo.x.is_finite() {
+            (hi - lo).max_element().max(view)
+        } else {
+            view
+        };
         let ray_offset = 1e-4 * extent;
-        let camera_z = if hi.z.is_finite() { hi.z + extent } else { extent };
+        let camera_z = if hi.z.is_finite() {
+            hi.z + extent
+        } else {
+            extent
+        };
         let cache = LightCache::new(&mesh, &tracer, lights, ray_offset);
         #[cfg(target_arch = "x86_64")]
         let avx2 = std::is_x86_feature_detected!("avx2");
         #[cfg(not(target_arch = "x86_64"))]
         let avx2 = false;
-        Ok(Renderer { camera: scene.camera, frame, mesh, tracer, cache, ray_offset, camera_z, avx2 })
+        Ok(Renderer {
+            camera: scene.camera,
+            frame,
+            mesh,
+            tracer,
+            cache,
+            ray_offset,
+            camera_z,
+            avx2,
+        })
     }
 
     /// The same scene with the object's albedo `albedo` (one per pixel, row-major; read at
@@ -116,20 +146,53 @@ impl Renderer {
     pub fn with_reflectance(&self, albedo: &[Rgb], irradiance: &[Rgb]) -> Result<Renderer> {
         let pixels = self.camera.width * self.camera.height;
         if albedo.len() != pixels {
-            return Err(Error::input("albedo", format!("{} values for {pixels} pixels", albedo.len())));
+            return Err(Error::input(
+                "albedo",
+                format!("{} values for {pixels} pixels", albedo.len()),
+            ));
         }
         if irradiance.len() != self.light_count() {
-            return Err(Error::input("irradiance", format!("{} values for {} lights", irradiance.len(), self.light_count())));
+            return Err(Error::input(
+                "irradiance",
+                format!(
+                    "{} values for {} lights",
+                    irradiance.len(),
+                    self.light_count()
+                ),
+            ));
         }
-        for &pixel in self.mesh.albedo_pixel.iter().filter(|&&p| (p as usize) < pixels) {
+        for &pixel in self
+            .mesh
+            .albedo_pixel
+            .iter()
+            .filter(|&&p| (p as usize) < pixels)
+        {
             let p = pixel as usize;
-            check_albedo(&format!("albedo at pixel (row {}, column {})", p / self.camera.width, p % self.camera.width), &albedo[p])?;
+            check_albedo(
+                &format!(
+                    "albedo at pixel (row {}, column {})",
+                    p / self.camera.width,
+                    p % self.camera.width
+                ),
+                &albedo[p],
+            )?;
         }
-        let lights: Vec<Light> = irradiance.iter().map(|e| Light { direction: Vec3A::Z, irradiance: *e }).collect();
+        let lights: Vec<Light> = irradiance
+            .iter()
+            .map(|e| Light {
+                direction: Vec3A::Z,
+                irradiance: *e,
+            })
+            .collect();
         validate_lights(&lights)?;
         let mut mesh = self.mesh.clone();
         mesh.set_object_albedo(albedo);
-        Ok(Renderer { mesh, tracer: Arc::clone(&self.tracer), cache: self.cache.with_irradiance(irradiance), ..*self })
+        Ok(Renderer {
+            mesh,
+            tracer: Arc::clone(&self.tracer),
+            cache: self.cache.with_irradiance(irradiance),
+            ..*self
+        })
     }
 
     /// The camera, in the working frame (a pixel size of 1).
@@ -162,10 +225,17 @@ impl Renderer {
     /// bounce 1 … B (or their sum when the bounces are not split).
     pub fn render_rows(&self, rows: Range<usize>, settings: &RenderSettings) -> Result<Vec<f32>> {
         if rows.start >= rows.end || rows.end > self.camera.height {
-            return Err(Error::input("rows", format!("{rows:?} is not inside 0..{}", self.camera.height)));
+            return Err(Error::input(
+                "rows",
+                format!("{rows:?} is not inside 0..{}", self.camera.height),
+            ));
         }
         let w = self.camera.width;
-        let pixels = try_collect(&format!("the indices of rows {rows:?} of {w} pixels"), (rows.end - rows.start) * w, rows.start * w..rows.end * w)?;
+        let pixels = try_collect(
+            &format!("the indices of rows {rows:?} of {w} pixels"),
+            (rows.end - rows.start) * w,
+            rows.start * w..rows.end * w,
+        )?;
         self.render_pixels(&pixels, settings)
     }
 
@@ -174,34 +244,55 @@ impl Renderer {
         self.check(settings)?;
         let (w, k_count) = (self.camera.width, self.light_count());
         if let Some(&bad) = pixels.iter().find(|&&p| p >= self.camera.pixel_count()) {
-            return Err(Error::input("pixels", format!("index {bad} is outside the {}x{} image", w, self.camera.height)));
+            return Err(Error::input(
+                "pixels",
+                format!(
+                    "index {bad} is outside the {}x{} image",
+                    w, self.camera.height
+                ),
+            ));
         }
         let stride = settings.planes() * k_count * 3;
-        let what = format!("the rendering of {} pixels under {k_count} lights ({} planes)", pixels.len(), settings.planes());
+        let what = format!(
+            "the rendering of {} pixels under {k_count} lights ({} planes)",
+            pixels.len(),
+            settings.planes()
+        );
         let mut per_pixel = try_vec(&what, pixels.len().saturating_mul(stride), 0.0f32)?;
-        per_pixel.par_chunks_mut(stride).zip(pixels).for_each(|(acc, &p)| self.render_pixel(p / w, p % w, settings, acc));
+        per_pixel
+            .par_chunks_mut(stride)
+            .zip(pixels)
+            .for_each(|(acc, &p)| self.render_pixel(p / w, p % w, settings, acc));
         // Transpose pixel-major (pixel, plane, c, k) to image-major (plane, k, pixel, c).
         let planes = settings.planes() * k_count;
         let plane_len = pixels.len() * 3;
         let mut out = try_vec(&what, planes * plane_len, 0.0f32)?;
-        out.par_chunks_mut(plane_len.max(1)).enumerate().for_each(|(image, dst)| {
-            let (plane, k) = (image / k_count, image % k_count);
-            for (p, px) in dst.chunks_exact_mut(3).enumerate() {
-                let sums = &per_pixel[p * stride + plane * 3 * k_count..];
-                for (c, value) in px.iter_mut().enumerate() {
-                    *value = sums[c * k_count + k];
+        out.par_chunks_mut(plane_len.max(1))
+            .enumerate()
+            .for_each(|(image, dst)| {
+                let (plane, k) = (image / k_count, image % k_count);
+                for (p, px) in dst.chunks_exact_mut(3).enumerate() {
+                    let sums = &per_pixel[p * stride + plane * 3 * k_count..];
+                    for (c, value) in px.iter_mut().enumerate() {
+                        *value = sums[c * k_count + k];
+                    }
                 }
-            }
-        });
+            });
         Ok(out)
     }
 
     fn check(&self, s: &RenderSettings) -> Result<()> {
         if s.bounces > 0 && s.samples == 0 {
-            return Err(Error::input("samples", "must be at least 1 when bounces are rendered"));
+            return Err(Error::input(
+                "samples",
+                "must be at least 1 when bounces are rendered",
+            ));
         }
         if s.bounces == 0 && s.direct_samples == 0 {
-            return Err(Error::input("direct_samples", "must be at least 1 when no bounces are rendered"));
+            return Err(Error::input(
+                "direct_samples",
+                "must be at least 1 when no bounces are rendered",
+            ));
         }
         Ok(())
     }
@@ -221,7 +312,13 @@ impl Renderer {
     /// eight at a time, the same operations in the same order, so the same results.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn render_pixel_avx2(&self, row: usize, col: usize, s: &RenderSettings, acc: &mut [f32]) {
+    unsafe fn render_pixel_avx2(
+        &self,
+        row: usize,
+        col: usize,
+        s: &RenderSettings,
+        acc: &mut [f32],
+    ) {
         self.render_pixel_portable(row, col, s, acc);
     }
 
@@ -234,9 +331,13 @@ impl Renderer {
         let path_count = if s.bounces > 0 { s.samples } else { 0 };
         for sample in 0..path_count.max(s.direct_samples) {
             let q = low_discrepancy_4d(sample as u32, shift);
-            let (x, y) = self.camera.image_to_world(row as f32 + q[1], col as f32 + q[0]);
+            let (x, y) = self
+                .camera
+                .image_to_world(row as f32 + q[1], col as f32 + q[0]);
             let origin = vec3a(x, y, self.camera_z);
-            let Some(hit) = self.tracer.closest_hit(origin, -Vec3A::Z, f32::INFINITY) else { continue };
+            let Some(hit) = self.tracer.closest_hit(origin, -Vec3A::Z, f32::INFINITY) else {
+                continue;
+            };
             let n = self.mesh.normals[hit.triangle];
             if n.z <= 0.0 {
                 continue;
@@ -247,9 +348,26 @@ impl Renderer {
                 let weight = [1.0 / s.direct_samples as f32; 3];
                 let direct = &mut acc[..k_count * 3];
                 if s.cached_direct {
-                    self.cache.add_direct_radiance(&self.mesh, &self.tracer, hit.triangle, (hit.u, hit.v), point, albedo, true, weight, direct);
+                    self.cache.add_direct_radiance(
+                        &self.mesh,
+                        &self.tracer,
+                        hit.triangle,
+                        (hit.u, hit.v),
+                        point,
+                        albedo,
+                        true,
+                        weight,
+                        direct,
+                    );
                 } else {
-                    self.cache.add_traced_direct_radiance(&self.tracer, point, n, albedo, weight, direct);
+                    self.cache.add_traced_direct_radiance(
+                        &self.tracer,
+                        point,
+                        n,
+                        albedo,
+                        weight,
+                        direct,
+                    );
                 }
             }
             if sample < path_count {
@@ -263,14 +381,32 @@ impl Renderer {
     /// (already divided by the sample count) into its plane of `acc`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn trace_path(&self, mut point: Vec3A, mut n: Vec3A, albedo: Rgb, first: (f32, f32), rng: &mut Rng, s: &RenderSettings, acc: &mut [f32]) {
+    fn trace_path(
+        &self,
+        mut point: Vec3A,
+        mut n: Vec3A,
+        albedo: Rgb,
+        first: (f32, f32),
+        rng: &mut Rng,
+        s: &RenderSettings,
+        acc: &mut [f32],
+    ) {
         let k3 = self.light_count() * 3;
         let inv_samples = 1.0 / s.samples as f32;
         let mut throughput = albedo.map(|a| a * inv_samples);
         for bounce in 1..=s.bounces {
-            let (u1, u2) = if bounce == 1 { first } else { (rng.next_f32(), rng.next_f32()) };
+            let (u1, u2) = if bounce == 1 {
+                first
+            } else {
+                (rng.next_f32(), rng.next_f32())
+            };
             let dir = cosine_hemisphere(u1, u2, n);
-            let Some(hit) = self.tracer.closest_hit(point + n * self.ray_offset, dir, f32::INFINITY) else { return };
+            let Some(hit) =
+                self.tracer
+                    .closest_hit(point + n * self.ray_offset, dir, f32::INFINITY)
+            else {
+                return;
+            };
             let n_hit = self.mesh.normals[hit.triangle];
             if n_hit.dot(dir) >= 0.0 {
                 return; // the back of a surface is black
@@ -279,7 +415,17 @@ impl Renderer {
             let albedo_hit = self.mesh.albedo_at(hit.triangle, hit.u, hit.v);
             let plane = s.bounce_plane(bounce);
             let sums = &mut acc[plane * k3..(plane + 1) * k3];
-            self.cache.add_direct_radiance(&self.mesh, &self.tracer, hit.triangle, (hit.u, hit.v), p_hit, albedo_hit, false, throughput, sums);
+            self.cache.add_direct_radiance(
+                &self.mesh,
+                &self.tracer,
+                hit.triangle,
+                (hit.u, hit.v),
+                p_hit,
+                albedo_hit,
+                false,
+                throughput,
+                sums,
+            );
             throughput = [0, 1, 2].map(|c| throughput[c] * albedo_hit[c]);
             if throughput.iter().all(|&t| t == 0.0) {
                 return;
@@ -297,10 +443,20 @@ mod tests {
     use std::f32::consts::PI;
 
     fn tilted_plate(size: usize, albedo: Rgb) -> Scene {
-        let height = (0..size * size).map(|p| 0.25 * (p % size) as f32 + 3.0).collect();
+        let height = (0..size * size)
+            .map(|p| 0.25 * (p % size) as f32 + 3.0)
+            .collect();
         Scene {
-            camera: Camera { width: size, height: size, pixel_size: 1.0 },
-            surface: HeightField { height, mask: vec![true; size * size], albedo: vec![albedo; size * size] },
+            camera: Camera {
+                width: size,
+                height: size,
+                pixel_size: 1.0,
+            },
+            surface: HeightField {
+                height,
+                mask: vec![true; size * size],
+                albedo: vec![albedo; size * size],
+            },
             floor: None,
             cornell_box: None,
         }
@@ -309,16 +465,29 @@ mod tests {
     #[test]
     fn direct_light_on_an_unshadowed_plane_is_lamberts_law() {
         let albedo = [0.8, 0.5, 0.25];
-        let light = Light { direction: vec3a(-0.3, 0.2, 0.9).normalize(), irradiance: [PI, 2.0, 1.0] };
+        let light = Light {
+            direction: vec3a(-0.3, 0.2, 0.9).normalize(),
+            irradiance: [PI, 2.0, 1.0],
+        };
         let renderer = Renderer::new(&tilted_plate(8, albedo), &[light]).unwrap();
-        let settings = RenderSettings { bounces: 0, samples: 0, direct_samples: 9, seed: 0, split_bounces: true, cached_direct: false };
+        let settings = RenderSettings {
+            bounces: 0,
+            samples: 0,
+            direct_samples: 9,
+            seed: 0,
+            split_bounces: true,
+            cached_direct: false,
+        };
         let image = renderer.render_rows(0..8, &settings).unwrap();
         let cosine = vec3a(-0.25, 0.0, 1.0).normalize().dot(light.direction);
         for (row, col) in [(1, 1), (4, 5), (6, 2)] {
             for c in 0..3 {
                 let expected = albedo[c] * light.irradiance[c] * cosine / PI;
                 let got = image[(row * 8 + col) * 3 + c];
-                assert!((got - expected).abs() <= 1e-6 * expected, "{got} vs {expected}");
+                assert!(
+                    (got - expected).abs() <= 1e-6 * expected,
+                    "{got} vs {expected}"
+                );
             }
         }
     }
@@ -327,13 +496,33 @@ mod tests {
     fn direct_light_from_the_cache_with_traced_shadow_edges_matches_the_traced_one() {
         let mut scene = tilted_plate(8, [0.6, 0.5, 0.4]);
         scene.surface.height[27] += 6.0; // a spike that shadows the plate's lower side
-        let light = Light { direction: vec3a(0.6, 0.0, 0.8), irradiance: [PI; 3] };
+        let light = Light {
+            direction: vec3a(0.6, 0.0, 0.8),
+            irradiance: [PI; 3],
+        };
         let renderer = Renderer::new(&scene, &[light]).unwrap();
-        let traced = RenderSettings { bounces: 0, samples: 0, direct_samples: 16, seed: 1, split_bounces: true, cached_direct: false };
-        let cached = RenderSettings { cached_direct: true, ..traced };
-        let (exact, interpolated) = (renderer.render_rows(0..8, &traced).unwrap(), renderer.render_rows(0..8, &cached).unwrap());
+        let traced = RenderSettings {
+            bounces: 0,
+            samples: 0,
+            direct_samples: 16,
+            seed: 1,
+            split_bounces: true,
+            cached_direct: false,
+        };
+        let cached = RenderSettings {
+            cached_direct: true,
+            ..traced
+        };
+        let (exact, interpolated) = (
+            renderer.render_rows(0..8, &traced).unwrap(),
+            renderer.render_rows(0..8, &cached).unwrap(),
+        );
         for (i, (e, c)) in exact.iter().zip(&interpolated).enumerate() {
-            assert!((e - c).abs() <= 1e-5 * e.max(1e-3), "pixel {}: {e} vs {c}", i / 3);
+            assert!(
+                (e - c).abs() <= 1e-5 * e.max(1e-3),
+                "pixel {}: {e} vs {c}",
+                i / 3
+            );
         }
         // The spike at (3, 3) shadows (3, 1) on its side away from the light.
         assert!(exact[(3 * 8 + 1) * 3] < 0.5 * exact[(3 * 8 + 6) * 3]);
@@ -341,9 +530,19 @@ mod tests {
 
     #[test]
     fn a_convex_object_alone_has_no_inter_reflection() {
-        let light = Light { direction: Vec3A::Z, irradiance: [PI; 3] };
+        let light = Light {
+            direction: Vec3A::Z,
+            irradiance: [PI; 3],
+        };
         let renderer = Renderer::new(&tilted_plate(8, [0.9; 3]), &[light]).unwrap();
-        let settings = RenderSettings { bounces: 2, samples: 16, direct_samples: 1, seed: 0, split_bounces: true, cached_direct: false };
+        let settings = RenderSettings {
+            bounces: 2,
+            samples: 16,
+            direct_samples: 1,
+            seed: 0,
+            split_bounces: true,
+            cached_direct: false,
+        };
         let image = renderer.render_rows(0..8, &settings).unwrap();
         let plane = 8 * 8 * 3;
         assert!(image[..plane].iter().any(|&v| v > 0.0));
@@ -353,18 +552,37 @@ mod tests {
     #[test]
     fn summed_bounces_equal_the_split_ones_added() {
         let mut scene = tilted_plate(8, [0.7; 3]);
-        scene.floor = Some(crate::scene::Floor { height: 0.0, albedo: [0.5; 3] });
-        let light = Light { direction: vec3a(0.3, 0.1, 0.9).normalize(), irradiance: [PI; 3] };
+        scene.floor = Some(crate::scene::Floor {
+            height: 0.0,
+            albedo: [0.5; 3],
+        });
+        let light = Light {
+            direction: vec3a(0.3, 0.1, 0.9).normalize(),
+            irradiance: [PI; 3],
+        };
         let renderer = Renderer::new(&scene, &[light]).unwrap();
-        let split = RenderSettings { bounces: 3, samples: 8, direct_samples: 0, seed: 2, split_bounces: true, cached_direct: false };
-        let summed = RenderSettings { split_bounces: false, ..split };
+        let split = RenderSettings {
+            bounces: 3,
+            samples: 8,
+            direct_samples: 0,
+            seed: 2,
+            split_bounces: true,
+            cached_direct: false,
+        };
+        let summed = RenderSettings {
+            split_bounces: false,
+            ..split
+        };
         assert_eq!((split.planes(), summed.planes()), (3, 1));
         let per_bounce = renderer.render_rows(0..8, &split).unwrap();
         let total = renderer.render_rows(0..8, &summed).unwrap();
         let plane = total.len();
         for (i, &t) in total.iter().enumerate() {
             let expected: f32 = (0..3).map(|b| per_bounce[b * plane + i]).sum();
-            assert!((t - expected).abs() <= 1e-6 * expected.max(1e-3), "{t} vs {expected}");
+            assert!(
+                (t - expected).abs() <= 1e-6 * expected.max(1e-3),
+                "{t} vs {expected}"
+            );
         }
         assert!(total.iter().any(|&v| v > 0.0));
     }
@@ -374,20 +592,54 @@ mod tests {
         // A plate with a spike (skirt walls, shadows) on a floor: bounces and cached direct light.
         let mut scene = tilted_plate(8, [0.3; 3]);
         scene.surface.height[27] += 6.0;
-        scene.floor = Some(crate::scene::Floor { height: -2.0, albedo: [0.5; 3] });
-        let lights = [vec3a(0.6, 0.0, 0.8), vec3a(0.0, -0.6, 0.8)].map(|direction| Light { direction, irradiance: [PI; 3] });
+        scene.floor = Some(crate::scene::Floor {
+            height: -2.0,
+            albedo: [0.5; 3],
+        });
+        let lights = [vec3a(0.6, 0.0, 0.8), vec3a(0.0, -0.6, 0.8)].map(|direction| Light {
+            direction,
+            irradiance: [PI; 3],
+        });
         let albedo: Vec<Rgb> = (0..64).map(|p| [0.1 + 0.01 * p as f32, 0.9, 0.4]).collect();
         let irradiance = [[1.0, 2.0, 3.0], [0.5, 0.5, 0.5]];
-        let renderer = Renderer::new(&scene, &lights).unwrap().with_reflectance(&albedo, &irradiance).unwrap();
+        let renderer = Renderer::new(&scene, &lights)
+            .unwrap()
+            .with_reflectance(&albedo, &irradiance)
+            .unwrap();
         scene.surface.albedo = albedo.clone();
-        let built = Renderer::new(&scene, &lights.map(|l| Light { irradiance: if l.direction.x > 0.0 { irradiance[0] } else { irradiance[1] }, ..l })).unwrap();
-        let settings = RenderSettings { bounces: 2, samples: 4, direct_samples: 4, seed: 3, split_bounces: false, cached_direct: true };
+        let built = Renderer::new(
+            &scene,
+            &lights.map(|l| Light {
+                irradiance: if l.direction.x > 0.0 {
+                    irradiance[0]
+                } else {
+                    irradiance[1]
+                },
+                ..l
+            }),
+        )
+        .unwrap();
+        let settings = RenderSettings {
+            bounces: 2,
+            samples: 4,
+            direct_samples: 4,
+            seed: 3,
+            split_bounces: false,
+            cached_direct: true,
+        };
         let pixels: Vec<usize> = (0..64).collect();
-        assert_eq!(renderer.render_pixels(&pixels, &settings).unwrap(), built.render_pixels(&pixels, &settings).unwrap());
+        assert_eq!(
+            renderer.render_pixels(&pixels, &settings).unwrap(),
+            built.render_pixels(&pixels, &settings).unwrap()
+        );
         let too_bright = vec![[1.5; 3]; 64];
-        let error = |result: Result<Renderer>| result.err().map(|e| e.to_string()).unwrap_or_default();
-        assert!(error(renderer.with_reflectance(&too_bright, &irradiance)).starts_with("albedo at pixel"));
-        assert!(error(renderer.with_reflectance(&albedo, &irradiance[..1])).starts_with("irradiance"));
+        let error =
+            |result: Result<Renderer>| result.err().map(|e| e.to_string()).unwrap_or_default();
+        assert!(error(renderer.with_reflectance(&too_bright, &irradiance))
+            .starts_with("albedo at pixel"));
+        assert!(
+            error(renderer.with_reflectance(&albedo, &irradiance[..1])).starts_with("irradiance")
+        );
     }
 
     /// `scene` at `scale` times its size, its heights raised by `lift` pixel sizes.
@@ -397,8 +649,16 @@ mod tests {
         let mut out = scene.clone();
         out.camera.pixel_size = s;
         out.surface.height = scene.surface.height.iter().map(|&h| z(h)).collect();
-        out.floor = scene.floor.map(|f| crate::scene::Floor { height: z(f.height), ..f });
-        out.cornell_box = scene.cornell_box.map(|b| crate::scene::CornellBox { x: b.x.map(|v| v * scale), y: b.y.map(|v| v * scale), z_top: z(b.z_top), ..b });
+        out.floor = scene.floor.map(|f| crate::scene::Floor {
+            height: z(f.height),
+            ..f
+        });
+        out.cornell_box = scene.cornell_box.map(|b| crate::scene::CornellBox {
+            x: b.x.map(|v| v * scale),
+            y: b.y.map(|v| v * scale),
+            z_top: z(b.z_top),
+            ..b
+        });
         out
     }
 
@@ -407,19 +667,65 @@ mod tests {
         // A shadowing spike on a plate, in a Cornell box: object, skirt, floor and walls.
         let mut scene = tilted_plate(8, [0.6, 0.5, 0.4]);
         scene.surface.height[27] += 6.0;
-        scene.floor = Some(crate::scene::Floor { height: 1.0, albedo: [0.5; 3] });
-        scene.cornell_box = Some(crate::scene::CornellBox { x: [-30.0, 30.0], y: [-30.0, 30.0], z_top: 12.0, left: [0.8, 0.2, 0.2], right: [0.2, 0.8, 0.2], back: [0.6; 3], front: [0.6; 3] });
-        let light = Light { direction: vec3a(0.6, 0.0, 0.8), irradiance: [PI; 3] };
-        let traced = RenderSettings { bounces: 0, samples: 0, direct_samples: 4, seed: 5, split_bounces: true, cached_direct: false };
-        let render = |scene: &Scene, settings: &RenderSettings| Renderer::new(scene, &[light]).unwrap().render_rows(0..8, settings).unwrap();
-        for settings in [traced, RenderSettings { cached_direct: true, ..traced }] {
+        scene.floor = Some(crate::scene::Floor {
+            height: 1.0,
+            albedo: [0.5; 3],
+        });
+        scene.cornell_box = Some(crate::scene::CornellBox {
+            x: [-30.0, 30.0],
+            y: [-30.0, 30.0],
+            z_top: 12.0,
+            left: [0.8, 0.2, 0.2],
+            right: [0.2, 0.8, 0.2],
+            back: [0.6; 3],
+            front: [0.6; 3],
+        });
+        let light = Light {
+            direction: vec3a(0.6, 0.0, 0.8),
+            irradiance: [PI; 3],
+        };
+        let traced = RenderSettings {
+            bounces: 0,
+            samples: 0,
+            direct_samples: 4,
+            seed: 5,
+            split_bounces: true,
+            cached_direct: false,
+        };
+        let render = |scene: &Scene, settings: &RenderSettings| {
+            Renderer::new(scene, &[light])
+                .unwrap()
+                .render_rows(0..8, settings)
+                .unwrap()
+        };
+        for settings in [
+            traced,
+            RenderSettings {
+                cached_direct: true,
+                ..traced
+            },
+        ] {
             let truth = render(&scene, &settings);
             assert!(truth.iter().filter(|&&v| v > 0.0).count() > truth.len() / 2);
             // Heights 10^6 pixel sizes up are exact in float32 at power-of-two scales only
             // (elsewhere rounded to 1/16 pixel size): a lift of 10^3 for the others.
-            for (scale, lift) in [(1e-9, 0.0), (1e-3, 0.0), (1e3, 0.0), (1e7, 0.0), (1e9, 0.0), (1e-9, 1e3), (1e9, -1e3), (1.0, 1e6), (2f32.powi(30), -1e6)] {
+            for (scale, lift) in [
+                (1e-9, 0.0),
+                (1e-3, 0.0),
+                (1e3, 0.0),
+                (1e7, 0.0),
+                (1e9, 0.0),
+                (1e-9, 1e3),
+                (1e9, -1e3),
+                (1.0, 1e6),
+                (2f32.powi(30), -1e6),
+            ] {
                 let image = render(&scaled(&scene, scale, lift), &settings);
-                let worst = image.iter().zip(&truth).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+                let worst = image
+                    .iter()
+                    .zip(&truth)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f32::max);
                 assert!(worst <= 1e-4, "scale {scale:e}, lift {lift:e}: {worst}");
             }
         }
@@ -427,22 +733,51 @@ mod tests {
 
     #[test]
     fn geometry_float32_cannot_resolve_is_refused_by_name() {
-        let light = Light { direction: Vec3A::Z, irradiance: [PI; 3] };
+        let light = Light {
+            direction: Vec3A::Z,
+            irradiance: [PI; 3],
+        };
         let mut scene = tilted_plate(4, [0.5; 3]);
-        scene.floor = Some(crate::scene::Floor { height: -2e7, albedo: [0.5; 3] });
-        let error = Renderer::new(&scene, &[light]).err().map(|e| e.to_string()).unwrap_or_default();
+        scene.floor = Some(crate::scene::Floor {
+            height: -2e7,
+            albedo: [0.5; 3],
+        });
+        let error = Renderer::new(&scene, &[light])
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
         assert!(error.starts_with("floor.height"), "{error}");
         scene.floor = None;
         scene.surface.height[5] = 3e7;
-        let error = Renderer::new(&scene, &[light]).err().map(|e| e.to_string()).unwrap_or_default();
-        assert!(error.starts_with("height") && error.contains("at pixel (row"), "{error}");
+        let error = Renderer::new(&scene, &[light])
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            error.starts_with("height") && error.contains("at pixel (row"),
+            "{error}"
+        );
     }
 
     #[test]
     fn rows_out_of_range_are_an_error_naming_rows() {
-        let light = Light { direction: Vec3A::Z, irradiance: [PI; 3] };
+        let light = Light {
+            direction: Vec3A::Z,
+            irradiance: [PI; 3],
+        };
         let renderer = Renderer::new(&tilted_plate(4, [0.5; 3]), &[light]).unwrap();
-        let settings = RenderSettings { bounces: 1, samples: 1, direct_samples: 1, seed: 0, split_bounces: true, cached_direct: false };
-        assert!(renderer.render_rows(2..9, &settings).unwrap_err().to_string().starts_with("rows"));
+        let settings = RenderSettings {
+            bounces: 1,
+            samples: 1,
+            direct_samples: 1,
+            seed: 0,
+            split_bounces: true,
+            cached_direct: false,
+        };
+        assert!(renderer
+            .render_rows(2..9, &settings)
+            .unwrap_err()
+            .to_string()
+            .starts_with("rows"));
     }
 }

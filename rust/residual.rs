@@ -50,7 +50,10 @@ impl ResidualSums {
         ResidualSums {
             difference: self.difference + other.difference,
             observed: self.observed + other.observed,
-            half_difference: [self.half_difference[0] + other.half_difference[0], self.half_difference[1] + other.half_difference[1]],
+            half_difference: [
+                self.half_difference[0] + other.half_difference[0],
+                self.half_difference[1] + other.half_difference[1],
+            ],
         }
     }
 }
@@ -72,25 +75,58 @@ pub struct Comparison {
 ///
 /// Errors name the argument whose length does not match or that holds a NaN or an infinity,
 /// or the counts when there are not one or two halves with a path each.
-pub fn compare(planes: &RenderedPlanes<'_>, observed: &Observed<'_>, lights: usize, pixels: usize) -> Result<Comparison> {
+pub fn compare(
+    planes: &RenderedPlanes<'_>,
+    observed: &Observed<'_>,
+    lights: usize,
+    pixels: usize,
+) -> Result<Comparison> {
     let size = lights * pixels * 3;
     let check = |name: &str, len: usize, expected: usize| {
         if len == expected {
             Ok(())
         } else {
-            Err(Error::input(name, format!("{len} values, expected {expected} for {lights} lights and {pixels} pixels")))
+            Err(Error::input(
+                name,
+                format!(
+                    "{len} values, expected {expected} for {lights} lights and {pixels} pixels"
+                ),
+            ))
         }
     };
     check("direct", planes.direct.len(), size)?;
-    if observed.first.checked_add(pixels).is_none_or(|end| end > observed.total) {
-        return Err(Error::input("first", format!("pixels {}..{}+{pixels} of {}", observed.first, observed.first, observed.total)));
+    if observed
+        .first
+        .checked_add(pixels)
+        .is_none_or(|end| end > observed.total)
+    {
+        return Err(Error::input(
+            "first",
+            format!(
+                "pixels {}..{}+{pixels} of {}",
+                observed.first, observed.first, observed.total
+            ),
+        ));
     }
-    check("observed", observed.values.len(), lights * observed.total * 3)?;
+    check(
+        "observed",
+        observed.values.len(),
+        lights * observed.total * 3,
+    )?;
     if let Some(keep) = observed.keep {
         check("keep", keep.len(), lights * observed.total)?;
     }
-    if !(1..=2).contains(&planes.halves.len()) || planes.counts.len() != planes.halves.len() || planes.counts.contains(&0) {
-        return Err(Error::input("counts", format!("{:?}: expected one or two halves with at least one path each", planes.counts)));
+    if !(1..=2).contains(&planes.halves.len())
+        || planes.counts.len() != planes.halves.len()
+        || planes.counts.contains(&0)
+    {
+        return Err(Error::input(
+            "counts",
+            format!(
+                "{:?}: expected one or two halves with at least one path each",
+                planes.counts
+            ),
+        ));
     }
     for half in planes.halves {
         check("halves", half.len(), size)?;
@@ -105,7 +141,11 @@ pub fn compare(planes: &RenderedPlanes<'_>, observed: &Observed<'_>, lights: usi
     }
     let samples = planes.counts.iter().sum::<usize>() as f32;
     let weights: Vec<f32> = planes.counts.iter().map(|&c| c as f32).collect();
-    let mut indirect = try_vec(&format!("the inter-reflected light of {pixels} pixels under {lights} lights"), size, 0f32)?;
+    let mut indirect = try_vec(
+        &format!("the inter-reflected light of {pixels} pixels under {lights} lights"),
+        size,
+        0f32,
+    )?;
     let row = pixels * 3;
     let sums = if size == 0 {
         ResidualSums::default()
@@ -118,11 +158,16 @@ pub fn compare(planes: &RenderedPlanes<'_>, observed: &Observed<'_>, lights: usi
                 let direct = &planes.direct[span.clone()];
                 let seen_first = k * observed.total + observed.first;
                 let seen = &observed.values[3 * seen_first..3 * (seen_first + pixels)];
-                let keep = observed.keep.map(|keep| &keep[seen_first..seen_first + pixels]);
+                let keep = observed
+                    .keep
+                    .map(|keep| &keep[seen_first..seen_first + pixels]);
                 let halves: Vec<&[f32]> = planes.halves.iter().map(|h| &h[span.clone()]).collect();
                 let mut sums = ResidualSums::default();
                 for (i, value) in out.iter_mut().enumerate() {
-                    let weighted = halves.iter().zip(&weights).fold(0f32, |acc, (h, w)| acc + w * h[i]);
+                    let weighted = halves
+                        .iter()
+                        .zip(&weights)
+                        .fold(0f32, |acc, (h, w)| acc + w * h[i]);
                     *value = weighted / samples;
                     if keep.is_some_and(|keep| !keep[i / 3]) {
                         continue;
@@ -141,15 +186,22 @@ pub fn compare(planes: &RenderedPlanes<'_>, observed: &Observed<'_>, lights: usi
     let mut noise_energy = vec![0f64; pixels];
     if let [first, second] = planes.halves {
         let factor = (planes.counts[0] * planes.counts[1]) as f64 / f64::from(samples).powi(2);
-        noise_energy.par_iter_mut().enumerate().for_each(|(p, energy)| {
-            let spread: f64 = (0..lights)
-                .flat_map(|k| (0..3).map(move |c| (k * pixels + p) * 3 + c))
-                .map(|i| f64::from(first[i] - second[i]).powi(2))
-                .sum();
-            *energy = spread * factor;
-        });
+        noise_energy
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(p, energy)| {
+                let spread: f64 = (0..lights)
+                    .flat_map(|k| (0..3).map(move |c| (k * pixels + p) * 3 + c))
+                    .map(|i| f64::from(first[i] - second[i]).powi(2))
+                    .sum();
+                *energy = spread * factor;
+            });
     }
-    Ok(Comparison { indirect, noise_energy, sums })
+    Ok(Comparison {
+        indirect,
+        noise_energy,
+        sums,
+    })
 }
 
 /// Refuses a NaN or an infinity in `values`, the RGB values of `pixels` pixels for each
@@ -159,7 +211,15 @@ fn check_finite(name: &str, values: &[f32], pixels: usize, skipped: usize) -> Re
     match values.iter().position(|v| !v.is_finite()) {
         Some(index) => {
             let at = skipped + index / 3;
-            Err(Error::input(name, format!("non-finite value {} for light {}, pixel {}", values[index], at / pixels, at % pixels)))
+            Err(Error::input(
+                name,
+                format!(
+                    "non-finite value {} for light {}, pixel {}",
+                    values[index],
+                    at / pixels,
+                    at % pixels
+                ),
+            ))
         }
         None => Ok(()),
     }
@@ -176,15 +236,44 @@ mod tests {
         let (first, second) = ([2.0; 6], [4.0; 6]);
         let observed = [4.0, 4.0, 4.0, 9.0, 9.0, 9.0];
         let halves: [&[f32]; 2] = [&first, &second];
-        let planes = RenderedPlanes { direct: &direct, halves: &halves, counts: &[1, 3] };
-        let all = compare(&planes, &Observed { values: &observed, keep: None, total: 1, first: 0 }, 2, 1).unwrap();
+        let planes = RenderedPlanes {
+            direct: &direct,
+            halves: &halves,
+            counts: &[1, 3],
+        };
+        let all = compare(
+            &planes,
+            &Observed {
+                values: &observed,
+                keep: None,
+                total: 1,
+                first: 0,
+            },
+            2,
+            1,
+        )
+        .unwrap();
         assert_eq!(all.indirect, vec![3.5; 6]);
         assert_eq!(all.sums.difference, 3.0 * 0.5 + 3.0 * 4.5);
         assert_eq!(all.sums.observed, 39.0);
-        assert_eq!(all.sums.half_difference, [3.0 * 1.0 + 3.0 * 6.0, 3.0 * 1.0 + 3.0 * 4.0]);
+        assert_eq!(
+            all.sums.half_difference,
+            [3.0 * 1.0 + 3.0 * 6.0, 3.0 * 1.0 + 3.0 * 4.0]
+        );
         // 6 values of |2 − 4|² = 4, times n₁n₂/n² = 3/16.
         assert_eq!(all.noise_energy, vec![24.0 * 3.0 / 16.0]);
-        let first_light = compare(&planes, &Observed { values: &observed, keep: Some(&[true, false]), total: 1, first: 0 }, 2, 1).unwrap();
+        let first_light = compare(
+            &planes,
+            &Observed {
+                values: &observed,
+                keep: Some(&[true, false]),
+                total: 1,
+                first: 0,
+            },
+            2,
+            1,
+        )
+        .unwrap();
         assert_eq!(first_light.sums.difference, 1.5);
         assert_eq!(first_light.sums.observed, 12.0);
         assert_eq!(first_light.indirect, all.indirect);
@@ -194,9 +283,24 @@ mod tests {
     fn a_window_of_the_observations_is_compared() {
         // 1 light, observations of 3 pixels; the rendering covers the middle one.
         let halves: [&[f32]; 1] = [&[0.5; 3]];
-        let planes = RenderedPlanes { direct: &[0.5; 3], halves: &halves, counts: &[2] };
+        let planes = RenderedPlanes {
+            direct: &[0.5; 3],
+            halves: &halves,
+            counts: &[2],
+        };
         let values = [9.0, 9.0, 9.0, 1.5, 1.5, 1.5, 9.0, 9.0, 9.0];
-        let middle = compare(&planes, &Observed { values: &values, keep: Some(&[false, true, false]), total: 3, first: 1 }, 1, 1).unwrap();
+        let middle = compare(
+            &planes,
+            &Observed {
+                values: &values,
+                keep: Some(&[false, true, false]),
+                total: 3,
+                first: 1,
+            },
+            1,
+            1,
+        )
+        .unwrap();
         assert_eq!((middle.sums.difference, middle.sums.observed), (1.5, 4.5));
     }
 
@@ -204,8 +308,23 @@ mod tests {
     fn one_half_has_no_noise_estimate() {
         let (direct, half, observed) = ([0.5; 3], [0.25; 3], [1.0; 3]);
         let halves: [&[f32]; 1] = [&half];
-        let planes = RenderedPlanes { direct: &direct, halves: &halves, counts: &[4] };
-        let only = compare(&planes, &Observed { values: &observed, keep: None, total: 1, first: 0 }, 1, 1).unwrap();
+        let planes = RenderedPlanes {
+            direct: &direct,
+            halves: &halves,
+            counts: &[4],
+        };
+        let only = compare(
+            &planes,
+            &Observed {
+                values: &observed,
+                keep: None,
+                total: 1,
+                first: 0,
+            },
+            1,
+            1,
+        )
+        .unwrap();
         assert_eq!(only.noise_energy, vec![0.0]);
         assert_eq!(only.sums.half_difference, [0.75, 0.0]);
     }
@@ -213,12 +332,57 @@ mod tests {
     #[test]
     fn mismatched_lengths_name_the_argument() {
         let halves: [&[f32]; 1] = [&[0.0; 3]];
-        let planes = RenderedPlanes { direct: &[0.0; 3], halves: &halves, counts: &[1] };
-        let err = compare(&planes, &Observed { values: &[0.0; 3], keep: None, total: 2, first: 0 }, 1, 1).unwrap_err().to_string();
+        let planes = RenderedPlanes {
+            direct: &[0.0; 3],
+            halves: &halves,
+            counts: &[1],
+        };
+        let err = compare(
+            &planes,
+            &Observed {
+                values: &[0.0; 3],
+                keep: None,
+                total: 2,
+                first: 0,
+            },
+            1,
+            1,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(err.contains("observed"), "{err}");
-        let err = compare(&planes, &Observed { values: &[0.0; 6], keep: None, total: 2, first: 2 }, 1, 1).unwrap_err().to_string();
+        let err = compare(
+            &planes,
+            &Observed {
+                values: &[0.0; 6],
+                keep: None,
+                total: 2,
+                first: 2,
+            },
+            1,
+            1,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(err.contains("first"), "{err}");
-        let planes = RenderedPlanes { direct: &[0.0; 3], halves: &halves, counts: &[0] };
-        assert!(compare(&planes, &Observed { values: &[0.0; 3], keep: None, total: 1, first: 0 }, 1, 1).unwrap_err().to_string().contains("counts"));
+        let planes = RenderedPlanes {
+            direct: &[0.0; 3],
+            halves: &halves,
+            counts: &[0],
+        };
+        assert!(compare(
+            &planes,
+            &Observed {
+                values: &[0.0; 3],
+                keep: None,
+                total: 1,
+                first: 0
+            },
+            1,
+            1
+        )
+        .unwrap_err()
+        .to_string()
+        .contains("counts"));
     }
 }

@@ -39,14 +39,26 @@ pub(crate) struct Lights {
 
 impl Lights {
     /// From unit `directions`, `scale` = π / E and the saturated level of `b` per light.
-    pub fn new(directions: &[Vec3], scale: &[[f32; 3]], saturated_b: &[[f32; 3]], gram: Mat3) -> Lights {
+    pub fn new(
+        directions: &[Vec3],
+        scale: &[[f32; 3]],
+        saturated_b: &[[f32; 3]],
+        gram: Mat3,
+    ) -> Lights {
         let padded = directions.len().div_ceil(LANES) * LANES;
-        let row = |values: &mut dyn Iterator<Item = f32>| -> Vec<f32> { values.chain(std::iter::repeat(0.0)).take(padded).collect() };
+        let row = |values: &mut dyn Iterator<Item = f32>| -> Vec<f32> {
+            values.chain(std::iter::repeat(0.0)).take(padded).collect()
+        };
         let component = |f: &dyn Fn(Vec3) -> f32| row(&mut directions.iter().map(|&l| f(l)));
-        let channel = |per_light: &[[f32; 3]], c: usize| row(&mut per_light.iter().map(|values| values[c]));
+        let channel =
+            |per_light: &[[f32; 3]], c: usize| row(&mut per_light.iter().map(|values| values[c]));
         Lights {
             count: directions.len(),
-            direction: [component(&|l| l.x), component(&|l| l.y), component(&|l| l.z)],
+            direction: [
+                component(&|l| l.x),
+                component(&|l| l.y),
+                component(&|l| l.z),
+            ],
             outer: [
                 component(&|l| l.x * l.x),
                 component(&|l| l.x * l.y),
@@ -66,7 +78,11 @@ impl Lights {
     }
 
     pub(crate) fn direction(&self, k: usize) -> Vec3 {
-        Vec3::new(self.direction[0][k], self.direction[1][k], self.direction[2][k])
+        Vec3::new(
+            self.direction[0][k],
+            self.direction[1][k],
+            self.direction[2][k],
+        )
     }
 }
 
@@ -105,34 +121,61 @@ struct Work {
 }
 
 /// Trims each pixel where `mask` is true, from `images` laid out `(K, pixels, 3)`, into `out`.
-pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, out: &mut PsOutput) -> Result<()> {
+pub(crate) fn fit_pixels(
+    images: &[f32],
+    mask: &[bool],
+    lights: &Lights,
+    out: &mut PsOutput,
+) -> Result<()> {
     let n = mask.len();
-    fit_masked(mask, TILE, out, || Box::new(Scratch::default()), |scratch, tile, fits| {
-        gather(images, n, tile, lights, scratch);
-        let padded = lights.padded();
-        let Scratch { grey, rgb, work } = &mut **scratch;
-        for (i, &p) in tile.iter().enumerate() {
-            let pixel = Pixel { grey: &grey[i * padded..][..padded], rgb: &rgb[i * lights.count..][..lights.count] };
-            fits.push((p, trim(&pixel, lights, work)));
-        }
-    })
+    fit_masked(
+        mask,
+        TILE,
+        out,
+        || Box::new(Scratch::default()),
+        |scratch, tile, fits| {
+            gather(images, n, tile, lights, scratch);
+            let padded = lights.padded();
+            let Scratch { grey, rgb, work } = &mut **scratch;
+            for (i, &p) in tile.iter().enumerate() {
+                let pixel = Pixel {
+                    grey: &grey[i * padded..][..padded],
+                    rgb: &rgb[i * lights.count..][..lights.count],
+                };
+                fits.push((p, trim(&pixel, lights, work)));
+            }
+        },
+    )
 }
 
 /// Copies the tile's observations into `scratch`, pixel-major.
-pub(crate) fn gather(images: &[f32], n: usize, tile: &[usize], lights: &Lights, scratch: &mut Scratch) {
+pub(crate) fn gather(
+    images: &[f32],
+    n: usize,
+    tile: &[usize],
+    lights: &Lights,
+    scratch: &mut Scratch,
+) {
     let (count, padded) = (lights.count, lights.padded());
     scratch.grey.clear();
     scratch.grey.resize(tile.len() * padded, 0.0);
     scratch.rgb.resize(tile.len() * count, [0.0; 3]);
     for k in 0..count {
-        let (s, sat) = (lights.scale.each_ref().map(|row| row[k]), lights.saturated_b.each_ref().map(|row| row[k]));
+        let (s, sat) = (
+            lights.scale.each_ref().map(|row| row[k]),
+            lights.saturated_b.each_ref().map(|row| row[k]),
+        );
         let image = &images[k * n * 3..][..n * 3];
         for (i, &pixel) in tile.iter().enumerate() {
             let raw = &image[pixel * 3..pixel * 3 + 3];
             let b = [raw[0] * s[0], raw[1] * s[1], raw[2] * s[2]];
             scratch.rgb[i * count + k] = b;
             let unsaturated = b[0] < sat[0] && b[1] < sat[1] && b[2] < sat[2];
-            scratch.grey[i * padded + k] = if unsaturated { b[0] + b[1] + b[2] } else { SATURATED };
+            scratch.grey[i * padded + k] = if unsaturated {
+                b[0] + b[1] + b[2]
+            } else {
+                SATURATED
+            };
         }
     }
 }
@@ -160,7 +203,11 @@ fn weighted_sums(pixel: &Pixel, lights: &Lights, weight: &[f32]) -> (Mat3, Vec3)
     }
     let sum = |lanes: &[f32; LANES]| lanes.iter().sum::<f32>();
     let g = gram.map(|m| sum(&m));
-    let gram = Mat3::from_cols(Vec3::new(g[0], g[1], g[2]), Vec3::new(g[1], g[3], g[4]), Vec3::new(g[2], g[4], g[5]));
+    let gram = Mat3::from_cols(
+        Vec3::new(g[0], g[1], g[2]),
+        Vec3::new(g[1], g[3], g[4]),
+        Vec3::new(g[2], g[4], g[5]),
+    );
     (gram, Vec3::new(sum(&rhs[0]), sum(&rhs[1]), sum(&rhs[2])))
 }
 
@@ -181,24 +228,42 @@ pub(crate) fn solved(gram: Mat3, rhs: Vec3, count: usize, fewest: usize) -> Opti
 fn well_posed(gram: Mat3) -> bool {
     let a = gram.to_cols_array_2d();
     let trace = a[0][0] + a[1][1] + a[2][2];
-    let minors = a[0][0] * a[1][1] - a[0][1] * a[1][0] + a[0][0] * a[2][2] - a[0][2] * a[2][0] + a[1][1] * a[2][2] - a[1][2] * a[2][1];
+    let minors = a[0][0] * a[1][1] - a[0][1] * a[1][0] + a[0][0] * a[2][2] - a[0][2] * a[2][0]
+        + a[1][1] * a[2][2]
+        - a[1][2] * a[2][1];
     gram.determinant() >= COPLANAR_RATIO * trace * minors && trace > 0.0
 }
 
 /// Normal and albedo of a pixel whose RGB `b` of each light is `rgb`, from its final
 /// `weights`, light by light (Σ w l lᵀ = `gram`).
-pub(crate) fn weighted_fit(rgb: &[[f32; 3]], lights: &Lights, weights: impl IntoIterator<Item = f32>, gram: Mat3, count: usize, fitted: u8) -> PixelFit {
+pub(crate) fn weighted_fit(
+    rgb: &[[f32; 3]],
+    lights: &Lights,
+    weights: impl IntoIterator<Item = f32>,
+    gram: Mat3,
+    count: usize,
+    fitted: u8,
+) -> PixelFit {
     let mut rhs = [Vec3::ZERO; 3];
     for (k, (b, weight)) in rgb.iter().zip(weights).enumerate() {
         // A select, not a branch (which light has weight is unpredictable); an observation
         // without weight adds zeros, whatever its value.
-        let (l, b) = if weight > 0.0 { (lights.direction(k) * weight, *b) } else { (Vec3::ZERO, [0.0; 3]) };
+        let (l, b) = if weight > 0.0 {
+            (lights.direction(k) * weight, *b)
+        } else {
+            (Vec3::ZERO, [0.0; 3])
+        };
         for c in 0..3 {
             rhs[c] += l * b[c];
         }
     }
     match finish(gram, rhs) {
-        Some((normal, albedo)) => PixelFit { normal, albedo, flag: fitted, used: count as u16 },
+        Some((normal, albedo)) => PixelFit {
+            normal,
+            albedo,
+            flag: fitted,
+            used: count as u16,
+        },
         None => PixelFit::dark(count as u16),
     }
 }
@@ -214,7 +279,12 @@ pub(crate) fn full_fit(rgb: &[[f32; 3]], lights: &Lights) -> PixelFit {
         }
     }
     match finish(lights.gram, rhs) {
-        Some((normal, albedo)) => PixelFit { normal, albedo, flag: flag::FULL_FIT, used: lights.count as u16 },
+        Some((normal, albedo)) => PixelFit {
+            normal,
+            albedo,
+            flag: flag::FULL_FIT,
+            used: lights.count as u16,
+        },
         None => PixelFit::dark(lights.count as u16),
     }
 }
@@ -236,7 +306,12 @@ fn trim(pixel: &Pixel, lights: &Lights, work: &mut Work) -> PixelFit {
     let count = lights.count;
     let Work { weight, order, .. } = work;
     order.clear();
-    order.extend(pixel.grey[..count].iter().enumerate().map(|(k, &b)| (u64::from(order_key(b)) << 32) | k as u64));
+    order.extend(
+        pixel.grey[..count]
+            .iter()
+            .enumerate()
+            .map(|(k, &b)| (u64::from(order_key(b)) << 32) | k as u64),
+    );
     let darkest = (TRIM_DARKEST * count as f32).round() as usize;
     let brightest = (TRIM_BRIGHTEST * count as f32).round() as usize;
     // The keys are distinct (the light in the low half), so the middle is the same set
@@ -256,14 +331,31 @@ fn trim(pixel: &Pixel, lights: &Lights, work: &mut Work) -> PixelFit {
     let kept = weight.iter().filter(|&&w| w > 0.0).count();
     let (gram, rhs) = weighted_sums(pixel, lights, weight);
     if solved(gram, rhs, kept, 3).is_some() {
-        return weighted_fit(pixel.rgb, lights, weight.iter().copied(), gram, kept, flag::OK);
+        return weighted_fit(
+            pixel.rgb,
+            lights,
+            weight.iter().copied(),
+            gram,
+            kept,
+            flag::OK,
+        );
     }
     // Too few lights to trim: every unsaturated observation, flagged.
-    weight.iter_mut().zip(pixel.grey).for_each(|(w, &b)| *w = if b < SATURATED { 1.0 } else { 0.0 });
+    weight
+        .iter_mut()
+        .zip(pixel.grey)
+        .for_each(|(w, &b)| *w = if b < SATURATED { 1.0 } else { 0.0 });
     let unsaturated = weight[..count].iter().filter(|&&w| w > 0.0).count();
     let (gram, rhs) = weighted_sums(pixel, lights, weight);
     if solved(gram, rhs, unsaturated, 3).is_some() {
-        return weighted_fit(pixel.rgb, lights, weight.iter().copied(), gram, unsaturated, flag::FULL_FIT);
+        return weighted_fit(
+            pixel.rgb,
+            lights,
+            weight.iter().copied(),
+            gram,
+            unsaturated,
+            flag::FULL_FIT,
+        );
     }
     full_fit(pixel.rgb, lights)
 }

@@ -15,7 +15,9 @@ pub fn mix64(mut x: u64) -> u64 {
 /// Hash of a list of integers.
 #[inline]
 pub fn hash(parts: &[u64]) -> u64 {
-    parts.iter().fold(0x2545_F491_4F6C_DD1D, |h, &p| mix64(h ^ p))
+    parts
+        .iter()
+        .fold(0x2545_F491_4F6C_DD1D, |h, &p| mix64(h ^ p))
 }
 
 /// A uniform float in [0, 1) from the top 24 bits of a hash.
@@ -48,7 +50,12 @@ impl Rng {
 /// 1/φ₄, where φ₄ is the real root of x⁵ = x + 1.
 const R4: [f64; 4] = {
     const PHI4: f64 = 1.167_303_978_261_418_7;
-    [1.0 / PHI4, 1.0 / (PHI4 * PHI4), 1.0 / (PHI4 * PHI4 * PHI4), 1.0 / (PHI4 * PHI4 * PHI4 * PHI4)]
+    [
+        1.0 / PHI4,
+        1.0 / (PHI4 * PHI4),
+        1.0 / (PHI4 * PHI4 * PHI4),
+        1.0 / (PHI4 * PHI4 * PHI4 * PHI4),
+    ]
 };
 
 /// Point `index` of a randomly shifted 4-D low-discrepancy (R4) sequence; every prefix is
@@ -76,7 +83,10 @@ pub fn orthonormal_basis(n: Vec3A) -> (Vec3A, Vec3A) {
     let sign = 1.0f32.copysign(n.z);
     let a = -1.0 / (sign + n.z);
     let b = n.x * n.y * a;
-    (vec3a(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), vec3a(b, sign + n.y * n.y * a, -n.y))
+    (
+        vec3a(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        vec3a(b, sign + n.y * n.y * a, -n.y),
+    )
 }
 
 #[cfg(test)]

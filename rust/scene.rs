@@ -22,7 +22,10 @@ impl Camera {
     /// covers `[i, i+1) × [j, j+1)`.
     pub fn image_to_world(&self, row: f32, col: f32) -> (f32, f32) {
         let s = self.pixel_size;
-        ((col - self.width as f32 / 2.0) * s, (self.height as f32 / 2.0 - row) * s)
+        (
+            (col - self.width as f32 / 2.0) * s,
+            (self.height as f32 / 2.0 - row) * s,
+        )
     }
 
     /// World (x, y) of the centre of pixel (`row`, `col`).
@@ -90,16 +93,29 @@ impl Scene {
     pub fn validate(&self) -> Result<()> {
         let c = &self.camera;
         if c.width == 0 || c.height == 0 {
-            return Err(Error::input("camera", format!("size {}x{} is empty", c.width, c.height)));
+            return Err(Error::input(
+                "camera",
+                format!("size {}x{} is empty", c.width, c.height),
+            ));
         }
         if !(c.pixel_size.is_finite() && c.pixel_size > 0.0) {
-            return Err(Error::input("camera.pixel_size", format!("{} is not a positive number", c.pixel_size)));
+            return Err(Error::input(
+                "camera.pixel_size",
+                format!("{} is not a positive number", c.pixel_size),
+            ));
         }
         let n = c.pixel_count();
         let s = &self.surface;
-        for (field, len) in [("height", s.height.len()), ("mask", s.mask.len()), ("albedo", s.albedo.len())] {
+        for (field, len) in [
+            ("height", s.height.len()),
+            ("mask", s.mask.len()),
+            ("albedo", s.albedo.len()),
+        ] {
             if len != n {
-                return Err(Error::input(field, format!("{len} values for a {}x{} camera", c.width, c.height)));
+                return Err(Error::input(
+                    field,
+                    format!("{len} values for a {}x{} camera", c.width, c.height),
+                ));
             }
         }
         for (p, (&h, rgb)) in s.height.iter().zip(&s.albedo).enumerate() {
@@ -107,7 +123,10 @@ impl Scene {
                 continue;
             }
             if !h.is_finite() {
-                return Err(Error::input("height", format!("non-finite value at pixel {}", describe_pixel(p, c))));
+                return Err(Error::input(
+                    "height",
+                    format!("non-finite value at pixel {}", describe_pixel(p, c)),
+                ));
             }
             check_albedo(&format!("albedo at pixel {}", describe_pixel(p, c)), rgb)?;
         }
@@ -118,14 +137,29 @@ impl Scene {
             check_albedo("floor.albedo", &f.albedo)?;
         }
         if let Some(b) = &self.cornell_box {
-            let finite = b.x.iter().chain(&b.y).chain([&b.z_top]).all(|v| v.is_finite());
+            let finite =
+                b.x.iter()
+                    .chain(&b.y)
+                    .chain([&b.z_top])
+                    .all(|v| v.is_finite());
             if !finite || b.x[0] >= b.x[1] || b.y[0] >= b.y[1] {
-                return Err(Error::input("environment", "box bounds must be finite with x0 < x1 and y0 < y1"));
+                return Err(Error::input(
+                    "environment",
+                    "box bounds must be finite with x0 < x1 and y0 < y1",
+                ));
             }
             if b.z_top <= self.base_height() {
-                return Err(Error::input("environment.z_top", "must lie above the floor"));
+                return Err(Error::input(
+                    "environment.z_top",
+                    "must lie above the floor",
+                ));
             }
-            for (name, rgb) in [("left", &b.left), ("right", &b.right), ("back", &b.back), ("front", &b.front)] {
+            for (name, rgb) in [
+                ("left", &b.left),
+                ("right", &b.right),
+                ("back", &b.back),
+                ("front", &b.front),
+            ] {
                 check_albedo(&format!("environment.albedo.{name}"), rgb)?;
             }
         }
@@ -158,10 +192,24 @@ impl Frame {
     /// (of the base height when no pixel is masked).
     pub fn of(scene: &Scene) -> Frame {
         let s = &scene.surface;
-        let heights = s.height.iter().zip(&s.mask).filter(|(_, &m)| m).map(|(&h, _)| f64::from(h));
-        let (lo, hi) = heights.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), h| (lo.min(h), hi.max(h)));
-        let z_origin = if lo <= hi { 0.5 * (lo + hi) } else { f64::from(scene.base_height()) };
-        Frame { scale: f64::from(scene.camera.pixel_size), z_origin }
+        let heights = s
+            .height
+            .iter()
+            .zip(&s.mask)
+            .filter(|(_, &m)| m)
+            .map(|(&h, _)| f64::from(h));
+        let (lo, hi) = heights.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), h| {
+            (lo.min(h), hi.max(h))
+        });
+        let z_origin = if lo <= hi {
+            0.5 * (lo + hi)
+        } else {
+            f64::from(scene.base_height())
+        };
+        Frame {
+            scale: f64::from(scene.camera.pixel_size),
+            z_origin,
+        }
     }
 
     /// Working-frame coordinate of world x or y `v`.
@@ -182,7 +230,11 @@ impl Frame {
 
     /// The working-frame point of world point `p`.
     pub fn to_local(&self, p: Vec3A) -> Vec3A {
-        Vec3A::new(self.local_xy(p.x) as f32, self.local_xy(p.y) as f32, self.local_z(p.z) as f32)
+        Vec3A::new(
+            self.local_xy(p.x) as f32,
+            self.local_xy(p.y) as f32,
+            self.local_z(p.z) as f32,
+        )
     }
 
     /// The world length of working-frame length `t`.
@@ -198,21 +250,48 @@ impl Frame {
         let mut height = Vec::with_capacity(s.height.len());
         for (p, (&h, &m)) in s.height.iter().zip(&s.mask).enumerate() {
             let z = if m { self.local_z(h) } else { 0.0 };
-            height.push(resolvable("height", z, || format!("at pixel {}", describe_pixel(p, &scene.camera)))?);
+            height.push(resolvable("height", z, || {
+                format!("at pixel {}", describe_pixel(p, &scene.camera))
+            })?);
         }
         let floor = match scene.floor {
-            Some(f) => Some(Floor { height: resolvable("floor.height", self.local_z(f.height), String::new)?, ..f }),
+            Some(f) => Some(Floor {
+                height: resolvable("floor.height", self.local_z(f.height), String::new)?,
+                ..f
+            }),
             None => None,
         };
         let cornell_box = match scene.cornell_box {
             Some(b) => {
-                let xy = |v: [f32; 2]| -> Result<[f32; 2]> { Ok([resolvable("environment", self.local_xy(v[0]), String::new)?, resolvable("environment", self.local_xy(v[1]), String::new)?]) };
-                Some(CornellBox { x: xy(b.x)?, y: xy(b.y)?, z_top: resolvable("environment.z_top", self.local_z(b.z_top), String::new)?, ..b })
+                let xy = |v: [f32; 2]| -> Result<[f32; 2]> {
+                    Ok([
+                        resolvable("environment", self.local_xy(v[0]), String::new)?,
+                        resolvable("environment", self.local_xy(v[1]), String::new)?,
+                    ])
+                };
+                Some(CornellBox {
+                    x: xy(b.x)?,
+                    y: xy(b.y)?,
+                    z_top: resolvable("environment.z_top", self.local_z(b.z_top), String::new)?,
+                    ..b
+                })
             }
             None => None,
         };
-        let camera = Camera { pixel_size: 1.0, ..scene.camera };
-        Ok(Scene { camera, surface: HeightField { height, mask: s.mask.clone(), albedo: s.albedo.clone() }, floor, cornell_box })
+        let camera = Camera {
+            pixel_size: 1.0,
+            ..scene.camera
+        };
+        Ok(Scene {
+            camera,
+            surface: HeightField {
+                height,
+                mask: s.mask.clone(),
+                albedo: s.albedo.clone(),
+            },
+            floor,
+            cornell_box,
+        })
     }
 }
 
@@ -223,7 +302,11 @@ fn resolvable(field: &str, v: f64, place: impl FnOnce() -> String) -> Result<f32
         return Ok(v as f32);
     }
     let place = place();
-    let at = if place.is_empty() { String::new() } else { format!(" {place}") };
+    let at = if place.is_empty() {
+        String::new()
+    } else {
+        format!(" {place}")
+    };
     Err(Error::input(field, format!("lies{at} {:.3e} pixel sizes from the object: the core's float32 geometry resolves at most {MAX_FRAME_EXTENT:e}", v.abs())))
 }
 
@@ -239,7 +322,10 @@ pub fn validate_lights(lights: &[Light]) -> Result<()> {
             ));
         }
         if light.irradiance.iter().any(|e| !e.is_finite() || *e < 0.0) {
-            return Err(Error::input(&format!("lights[{k}].irradiance"), "must be finite and non-negative"));
+            return Err(Error::input(
+                &format!("lights[{k}].irradiance"),
+                "must be finite and non-negative",
+            ));
         }
     }
     Ok(())

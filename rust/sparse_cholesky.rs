@@ -9,8 +9,8 @@
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{LltError, LltRegularization};
 use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky};
-use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::sparse::FaerError;
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 
 use crate::error::{Error, Result};
@@ -22,7 +22,10 @@ use crate::memory::{check_available, dense_kernel_workspace_bytes, try_vec};
 /// Checked before every call, so that a thread that already holds it is refused slightly
 /// early rather than a new one aborting the process.
 fn check_dense_kernel_workspace(name: &str) -> Result<()> {
-    check_available(&format!("{name}: the workspace of the dense matrix kernels"), dense_kernel_workspace_bytes())
+    check_available(
+        &format!("{name}: the workspace of the dense matrix kernels"),
+        dense_kernel_workspace_bytes(),
+    )
 }
 
 /// The `L Lᵀ` factorisation of a sparse symmetric positive definite matrix.
@@ -40,22 +43,44 @@ impl SparseCholesky {
     /// symmetric. A symmetric matrix's CSR arrays are also its CSC arrays, so either may
     /// be given. `name` is the input named in errors: malformed arrays, or a matrix that
     /// is not positive definite.
-    pub fn factor(name: &str, n: usize, indptr: &[usize], indices: &[usize], data: &[f64]) -> Result<Self> {
+    pub fn factor(
+        name: &str,
+        n: usize,
+        indptr: &[usize],
+        indices: &[usize],
+        data: &[f64],
+    ) -> Result<Self> {
         check_compressed(name, n, indptr, indices, data)?;
         let structure = SymbolicSparseColMatRef::new_checked(n, n, indptr, None, indices);
         let matrix = SparseColMatRef::new(structure, data);
-        let symbolic = factorize_symbolic_cholesky(structure, Side::Upper, Default::default(), Default::default())
-            .map_err(|e| match e {
-                FaerError::OutOfMemory => Error::memory_of_unknown_size(format!("{name}: the symbolic Cholesky analysis of a {n}x{n} matrix")),
-                e => Error::input(name, format!("symbolic Cholesky analysis failed: {e:?}")),
-            })?;
-        let mut values = try_vec(&format!("{name}: a Cholesky factor of {} values", symbolic.len_val()), symbolic.len_val(), 0.0)?;
+        let symbolic = factorize_symbolic_cholesky(
+            structure,
+            Side::Upper,
+            Default::default(),
+            Default::default(),
+        )
+        .map_err(|e| match e {
+            FaerError::OutOfMemory => Error::memory_of_unknown_size(format!(
+                "{name}: the symbolic Cholesky analysis of a {n}x{n} matrix"
+            )),
+            e => Error::input(name, format!("symbolic Cholesky analysis failed: {e:?}")),
+        })?;
+        let mut values = try_vec(
+            &format!("{name}: a Cholesky factor of {} values", symbolic.len_val()),
+            symbolic.len_val(),
+            0.0,
+        )?;
         // On the calling thread only: each thread that runs a dense kernel takes a workspace
         // of its own (see `check_dense_kernel_workspace`), and the supernodes of an
         // integration's Laplacian are too small for threads to pay.
         let par = Par::Seq;
         let workspace = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
-        let mut scratch = MemBuffer::try_new(workspace).map_err(|_| Error::memory(format!("{name}: the Cholesky factorisation's workspace"), workspace.size_bytes()))?;
+        let mut scratch = MemBuffer::try_new(workspace).map_err(|_| {
+            Error::memory(
+                format!("{name}: the Cholesky factorisation's workspace"),
+                workspace.size_bytes(),
+            )
+        })?;
         check_dense_kernel_workspace(name)?;
         symbolic
             .factorize_numeric_llt(&mut values, matrix, Side::Upper, LltRegularization::default(), par, MemStack::new(&mut scratch), Default::default())
@@ -81,45 +106,91 @@ impl SparseCholesky {
     pub fn solve_in_place(&self, name: &str, rhs: &mut [f64], columns: usize) -> Result<()> {
         let n = self.dim();
         if rhs.len() != n * columns {
-            return Err(Error::input(name, format!("{} values for {columns} right-hand sides of length {n}", rhs.len())));
+            return Err(Error::input(
+                name,
+                format!(
+                    "{} values for {columns} right-hand sides of length {n}",
+                    rhs.len()
+                ),
+            ));
         }
         let par = Par::Seq;
         if let Some(value) = rhs.iter().find(|v| !v.is_finite()) {
             return Err(Error::input(name, format!("non-finite value {value}")));
         }
         let workspace = self.symbolic.solve_in_place_scratch::<f64>(columns, par);
-        let mut scratch = MemBuffer::try_new(workspace).map_err(|_| Error::memory(format!("{name}: the solve's workspace"), workspace.size_bytes()))?;
+        let mut scratch = MemBuffer::try_new(workspace).map_err(|_| {
+            Error::memory(
+                format!("{name}: the solve's workspace"),
+                workspace.size_bytes(),
+            )
+        })?;
         check_dense_kernel_workspace(name)?;
         let target = MatMut::from_column_major_slice_mut(rhs, n, columns);
-        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(Conj::No, target, par, MemStack::new(&mut scratch));
+        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
+            Conj::No,
+            target,
+            par,
+            MemStack::new(&mut scratch),
+        );
         Ok(())
     }
 }
 
 /// Checks compressed sparse column arrays, so that faer's own checks (which panic) pass.
-fn check_compressed(name: &str, n: usize, indptr: &[usize], indices: &[usize], data: &[f64]) -> Result<()> {
+fn check_compressed(
+    name: &str,
+    n: usize,
+    indptr: &[usize],
+    indices: &[usize],
+    data: &[f64],
+) -> Result<()> {
     if n == 0 {
         return Err(Error::input(name, "a 0x0 matrix has nothing to factor"));
     }
     if indptr.len() != n + 1 {
-        return Err(Error::input(name, format!("indptr has {} entries for {n} columns (expected {})", indptr.len(), n + 1)));
+        return Err(Error::input(
+            name,
+            format!(
+                "indptr has {} entries for {n} columns (expected {})",
+                indptr.len(),
+                n + 1
+            ),
+        ));
     }
     if indptr[0] != 0 || indptr[n] != indices.len() {
-        return Err(Error::input(name, format!("indptr must run from 0 to the {} stored entries", indices.len())));
+        return Err(Error::input(
+            name,
+            format!(
+                "indptr must run from 0 to the {} stored entries",
+                indices.len()
+            ),
+        ));
     }
     if data.len() != indices.len() {
-        return Err(Error::input(name, format!("{} values for {} indices", data.len(), indices.len())));
+        return Err(Error::input(
+            name,
+            format!("{} values for {} indices", data.len(), indices.len()),
+        ));
     }
     if let Some(value) = data.iter().find(|v| !v.is_finite()) {
         return Err(Error::input(name, format!("non-finite value {value}")));
     }
     for (column, bounds) in indptr.windows(2).enumerate() {
         if bounds[0] > bounds[1] || bounds[1] > indices.len() {
-            return Err(Error::input(name, format!("indptr decreases at column {column}")));
+            return Err(Error::input(
+                name,
+                format!("indptr decreases at column {column}"),
+            ));
         }
         let rows = &indices[bounds[0]..bounds[1]];
-        if rows.windows(2).any(|pair| pair[0] >= pair[1]) || rows.last().is_some_and(|&row| row >= n) {
-            return Err(Error::input(name, format!("column {column}: row indices must be increasing and below {n}")));
+        if rows.windows(2).any(|pair| pair[0] >= pair[1])
+            || rows.last().is_some_and(|&row| row >= n)
+        {
+            return Err(Error::input(
+                name,
+                format!("column {column}: row indices must be increasing and below {n}"),
+            ));
         }
     }
     Ok(())
@@ -172,22 +243,37 @@ mod tests {
     #[test]
     fn an_indefinite_matrix_is_an_error_naming_the_input() {
         let (indptr, indices, data) = tridiagonal(10, 1.0);
-        let err = SparseCholesky::factor("normal_matrix", 10, &indptr, &indices, &data).unwrap_err();
-        assert!(err.to_string().starts_with("normal_matrix: matrix is not positive definite"), "{err}");
+        let err =
+            SparseCholesky::factor("normal_matrix", 10, &indptr, &indices, &data).unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("normal_matrix: matrix is not positive definite"),
+            "{err}"
+        );
     }
 
     #[test]
     fn malformed_arrays_are_errors_not_panics() {
         let (indptr, indices, data) = tridiagonal(4, 3.0);
-        assert!(SparseCholesky::factor("a", 5, &indptr, &indices, &data).unwrap_err().to_string().contains("indptr"));
+        assert!(SparseCholesky::factor("a", 5, &indptr, &indices, &data)
+            .unwrap_err()
+            .to_string()
+            .contains("indptr"));
         let mut unsorted = indices.clone();
         unsorted.swap(0, 1);
-        assert!(SparseCholesky::factor("a", 4, &indptr, &unsorted, &data).unwrap_err().to_string().contains("increasing"));
+        assert!(SparseCholesky::factor("a", 4, &indptr, &unsorted, &data)
+            .unwrap_err()
+            .to_string()
+            .contains("increasing"));
         let mut outside = indices.clone();
         *outside.last_mut().unwrap() = 9;
         assert!(SparseCholesky::factor("a", 4, &indptr, &outside, &data).is_err());
         assert!(SparseCholesky::factor("a", 4, &indptr, &indices, &data[1..]).is_err());
         let factor = SparseCholesky::factor("a", 4, &indptr, &indices, &data).unwrap();
-        assert!(factor.solve_in_place("b", &mut [1.0; 3], 1).unwrap_err().to_string().starts_with("b:"));
+        assert!(factor
+            .solve_in_place("b", &mut [1.0; 3], 1)
+            .unwrap_err()
+            .to_string()
+            .starts_with("b:"));
     }
 }

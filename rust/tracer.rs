@@ -57,12 +57,27 @@ impl Tracer {
     /// Builds the acceleration structures (the BVH in parallel on rayon's pool).
     pub fn new(mesh: &Mesh) -> Tracer {
         let height_field = HeightFieldAccel::new(mesh);
-        let on_grid = |t: usize| height_field.is_some() && matches!(mesh.kinds[t], SurfaceKind::Object | SurfaceKind::Skirt);
-        let mut panels: Vec<PanelShape> = (0..mesh.panels.len()).filter_map(|id| PanelShape::new(mesh, id)).collect();
+        let on_grid = |t: usize| {
+            height_field.is_some()
+                && matches!(mesh.kinds[t], SurfaceKind::Object | SurfaceKind::Skirt)
+        };
+        let mut panels: Vec<PanelShape> = (0..mesh.panels.len())
+            .filter_map(|id| PanelShape::new(mesh, id))
+            .collect();
         panels.sort_by_key(|p| p.axis.unwrap_or(3));
-        let axis_ends = [0, 1, 2].map(|k| panels.iter().filter(|p| p.axis.is_some_and(|a| a <= k)).count());
-        let on_panel = |t: usize| mesh.panel_of[t] != NO_PANEL && panels.iter().any(|p| p.id == mesh.panel_of[t]);
-        let in_bvh: Vec<u32> = (0..mesh.triangles.len()).filter(|&t| !on_grid(t) && !on_panel(t)).map(|t| t as u32).collect();
+        let axis_ends = [0, 1, 2].map(|k| {
+            panels
+                .iter()
+                .filter(|p| p.axis.is_some_and(|a| a <= k))
+                .count()
+        });
+        let on_panel = |t: usize| {
+            mesh.panel_of[t] != NO_PANEL && panels.iter().any(|p| p.id == mesh.panel_of[t])
+        };
+        let in_bvh: Vec<u32> = (0..mesh.triangles.len())
+            .filter(|&t| !on_grid(t) && !on_panel(t))
+            .map(|t| t as u32)
+            .collect();
         let mut tris: Vec<Triangle> = in_bvh
             .iter()
             .map(|&t| {
@@ -71,31 +86,81 @@ impl Tracer {
             })
             .collect();
         let triangle_count = mesh.triangles.len();
-        let field_box = height_field.as_ref().map(HeightFieldAccel::bounds).filter(|&(lo, hi)| {
-            panels.iter().all(|p| {
-                let (a, b) = p.bounds();
-                // Separated along some axis (touching a face is allowed).
-                (0..3).any(|k| b[k] <= lo[k] || a[k] >= hi[k])
-            })
-        });
+        let field_box = height_field
+            .as_ref()
+            .map(HeightFieldAccel::bounds)
+            .filter(|&(lo, hi)| {
+                panels.iter().all(|p| {
+                    let (a, b) = p.bounds();
+                    // Separated along some axis (touching a face is allowed).
+                    (0..3).any(|k| b[k] <= lo[k] || a[k] >= hi[k])
+                })
+            });
         if tris.is_empty() {
-            return Tracer { field_box, height_field, panels, axis_ends, bvh: CwBvh::default(), triangles: Vec::new(), mesh_index: Vec::new(), triangle_count, bounds_guard: usize::MAX, avx2: avx2_available() };
+            return Tracer {
+                field_box,
+                height_field,
+                panels,
+                axis_ends,
+                bvh: CwBvh::default(),
+                triangles: Vec::new(),
+                mesh_index: Vec::new(),
+                triangle_count,
+                bounds_guard: usize::MAX,
+                avx2: avx2_available(),
+            };
         }
         // obvhs's Morton code wraps a coordinate lying exactly on the build bounds' maximum
         // to 0 (e.g. the skirt on the +x and +y sides), which spoils the BVH (2x the nodes
         // visited). A degenerate point beyond the maximum keeps every real triangle inside;
         // traversal skips it.
-        let (lo, hi) = tris.iter().fold((Vec3A::INFINITY, Vec3A::NEG_INFINITY), |(lo, hi), t| {
-            (lo.min(t.v0).min(t.v1).min(t.v2), hi.max(t.v0).max(t.v1).max(t.v2))
-        });
+        let (lo, hi) = tris
+            .iter()
+            .fold((Vec3A::INFINITY, Vec3A::NEG_INFINITY), |(lo, hi), t| {
+                (
+                    lo.min(t.v0).min(t.v1).min(t.v2),
+                    hi.max(t.v0).max(t.v1).max(t.v2),
+                )
+            });
         let guard = hi + (hi - lo).max(Vec3A::ONE) * 0.01;
         let guard_index = tris.len() as u32;
-        tris.push(Triangle { v0: guard, v1: guard, v2: guard });
-        let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::very_fast_build(), &mut Duration::default());
-        let bounds_guard = bvh.primitive_indices.iter().position(|&i| i == guard_index).expect("the guard is in the BVH");
-        let mesh_index = bvh.primitive_indices.iter().map(|&i| in_bvh.get(i as usize).copied().unwrap_or(u32::MAX)).collect();
-        let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&tris[i as usize])).collect();
-        Tracer { field_box, height_field, panels, axis_ends, bvh, triangles, mesh_index, triangle_count, bounds_guard, avx2: avx2_available() }
+        tris.push(Triangle {
+            v0: guard,
+            v1: guard,
+            v2: guard,
+        });
+        let bvh = build_cwbvh_from_tris(
+            &tris,
+            BvhBuildParams::very_fast_build(),
+            &mut Duration::default(),
+        );
+        let bounds_guard = bvh
+            .primitive_indices
+            .iter()
+            .position(|&i| i == guard_index)
+            .expect("the guard is in the BVH");
+        let mesh_index = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| in_bvh.get(i as usize).copied().unwrap_or(u32::MAX))
+            .collect();
+        let triangles = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| RtTriangle::from(&tris[i as usize]))
+            .collect();
+        Tracer {
+            field_box,
+            height_field,
+            panels,
+            axis_ends,
+            bvh,
+            triangles,
+            mesh_index,
+            triangle_count,
+            bounds_guard,
+            avx2: avx2_available(),
+        }
     }
 
     /// Distance to BVH primitive `id` along `ray` (infinite for the bounds guard).
@@ -122,7 +187,11 @@ impl Tracer {
     #[inline(always)]
     fn panel_hit(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
         let inverse = direction.recip();
-        let mut best = PanelHit { hit: None, t: t_max, id: 0 };
+        let mut best = PanelHit {
+            hit: None,
+            t: t_max,
+            id: 0,
+        };
         let [x_end, y_end, z_end] = self.axis_ends;
         // Along an axis, the plane's distance is one product with the direction's inverse.
         for (k, group) in [(0, 0..x_end), (1, x_end..y_end), (2, y_end..z_end)] {
@@ -132,7 +201,12 @@ impl Tracer {
             }
         }
         for panel in &self.panels[z_end..] {
-            panel.consider((panel.origin - origin).dot(panel.normal) / direction.dot(panel.normal), origin, direction, &mut best);
+            panel.consider(
+                (panel.origin - origin).dot(panel.normal) / direction.dot(panel.normal),
+                origin,
+                direction,
+                &mut best,
+            );
         }
         best.hit
     }
@@ -152,7 +226,12 @@ impl Tracer {
     /// handed to `each` in order. The same hits as [`Tracer::closest_hit`] ray by ray, with
     /// the CPU's features checked once for the batch and the tracer's set-up shared.
     #[inline]
-    pub fn closest_hits(&self, rays: impl Iterator<Item = (Vec3A, Vec3A)>, t_max: f32, mut each: impl FnMut(Option<Hit>)) {
+    pub fn closest_hits(
+        &self,
+        rays: impl Iterator<Item = (Vec3A, Vec3A)>,
+        t_max: f32,
+        mut each: impl FnMut(Option<Hit>),
+    ) {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
             // SAFETY: as in `closest_hit`.
@@ -188,13 +267,26 @@ impl Tracer {
 
     /// The closest hit; with `FUSED`, the height-field walk uses fused multiply-adds.
     #[inline(always)]
-    fn closest_hit_with<const FUSED: bool>(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
+    fn closest_hit_with<const FUSED: bool>(
+        &self,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+    ) -> Option<Hit> {
         let mut best = None;
         let mut t_limit = t_max;
-        if let Some(hit) = self.height_field.as_ref().and_then(|h| h.closest_hit::<FUSED>(origin, direction, t_max)) {
+        if let Some(hit) = self
+            .height_field
+            .as_ref()
+            .and_then(|h| h.closest_hit::<FUSED>(origin, direction, t_max))
+        {
             t_limit = hit.t;
             best = Some(hit);
-            if self.triangles.is_empty() && self.field_box.is_some_and(|(lo, hi)| origin.cmpge(lo).all() && origin.cmple(hi).all()) {
+            if self.triangles.is_empty()
+                && self
+                    .field_box
+                    .is_some_and(|(lo, hi)| origin.cmpge(lo).all() && origin.cmple(hi).all())
+            {
                 return best;
             }
         }
@@ -202,7 +294,12 @@ impl Tracer {
             let ray = make_ray(origin, direction, t_limit);
             if let Some((id, t)) = self.closest_portable(ray) {
                 let uv = self.triangles[id].compute_barycentric(&ray);
-                best = Some(Hit { triangle: self.mesh_index[id] as usize, t, u: uv.x, v: uv.y });
+                best = Some(Hit {
+                    triangle: self.mesh_index[id] as usize,
+                    t,
+                    u: uv.x,
+                    v: uv.y,
+                });
                 t_limit = t;
             }
         }
@@ -211,11 +308,20 @@ impl Tracer {
 
     /// Whether anything lies along the ray (`FUSED` as in [`Tracer::closest_hit_with`]).
     #[inline(always)]
-    fn occluded_with<const FUSED: bool>(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
+    fn occluded_with<const FUSED: bool>(
+        &self,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+    ) -> bool {
         if self.panel_hit(origin, direction, t_max).is_some() {
             return true;
         }
-        if self.height_field.as_ref().is_some_and(|h| h.occluded::<FUSED>(origin, direction, t_max)) {
+        if self
+            .height_field
+            .as_ref()
+            .is_some_and(|h| h.occluded::<FUSED>(origin, direction, t_max))
+        {
             return true;
         }
         !self.triangles.is_empty() && self.any_portable(make_ray(origin, direction, t_max))
@@ -231,7 +337,12 @@ impl Tracer {
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn closest_hits_avx2(&self, rays: impl Iterator<Item = (Vec3A, Vec3A)>, t_max: f32, each: &mut impl FnMut(Option<Hit>)) {
+    unsafe fn closest_hits_avx2(
+        &self,
+        rays: impl Iterator<Item = (Vec3A, Vec3A)>,
+        t_max: f32,
+        each: &mut impl FnMut(Option<Hit>),
+    ) {
         for (origin, direction) in rays {
             each(self.closest_hit_with::<true>(origin, direction, t_max));
         }
@@ -249,14 +360,20 @@ impl Tracer {
         let mut state = self.bvh.new_traversal(ray.direction);
         let mut node;
         let mut best = None;
-        obvhs::traverse!(self.bvh, node, state, node.intersect_ray(&traverse_ray, state.oct_inv4), {
-            let id = state.primitive_id as usize;
-            let t = self.intersect(&traverse_ray, id);
-            if t < traverse_ray.tmax {
-                best = Some(id);
-                traverse_ray.tmax = t;
+        obvhs::traverse!(
+            self.bvh,
+            node,
+            state,
+            node.intersect_ray(&traverse_ray, state.oct_inv4),
+            {
+                let id = state.primitive_id as usize;
+                let t = self.intersect(&traverse_ray, id);
+                if t < traverse_ray.tmax {
+                    best = Some(id);
+                    traverse_ray.tmax = t;
+                }
             }
-        });
+        );
         best.map(|id| (id, traverse_ray.tmax))
     }
 
@@ -266,12 +383,18 @@ impl Tracer {
         let mut node;
         let mut hit = false;
         'search: {
-            obvhs::traverse!(self.bvh, node, state, node.intersect_ray(&ray, state.oct_inv4), {
-                if self.intersect(&ray, state.primitive_id as usize) < ray.tmax {
-                    hit = true;
-                    break 'search;
+            obvhs::traverse!(
+                self.bvh,
+                node,
+                state,
+                node.intersect_ray(&ray, state.oct_inv4),
+                {
+                    if self.intersect(&ray, state.primitive_id as usize) < ray.tmax {
+                        hit = true;
+                        break 'search;
+                    }
                 }
-            });
+            );
         }
         hit
     }
@@ -316,7 +439,10 @@ impl PanelShape {
         let first_triangle = mesh.panel_of.iter().position(|&p| p == id as u32)?;
         let (u, v, o) = (panel.edge_u, panel.edge_v, panel.origin);
         let expected = [[o, o + u, o + u + v], [o, o + u + v, o + v]];
-        let laid_out = (0..2).all(|k| mesh.panel_of.get(first_triangle + k) == Some(&(id as u32)) && mesh.corners(first_triangle + k) == expected[k]);
+        let laid_out = (0..2).all(|k| {
+            mesh.panel_of.get(first_triangle + k) == Some(&(id as u32))
+                && mesh.corners(first_triangle + k) == expected[k]
+        });
         let rectangle = u.dot(v).abs() <= 1e-6 * u.length() * v.length();
         let axis = (0..3).find(|&k| panel.normal[k].abs() == 1.0);
         (laid_out && rectangle).then(|| PanelShape {
@@ -339,10 +465,21 @@ impl PanelShape {
         if self.unbounded {
             let far = Vec3A::splat(f32::INFINITY);
             let flat = self.normal.abs().cmpgt(Vec3A::splat(0.999));
-            return (Vec3A::select(flat, self.origin, -far), Vec3A::select(flat, self.origin, far));
+            return (
+                Vec3A::select(flat, self.origin, -far),
+                Vec3A::select(flat, self.origin, far),
+            );
         }
-        let corners = [self.origin, self.origin + self.edge_u, self.origin + self.edge_v, self.origin + self.edge_u + self.edge_v];
-        (corners.iter().fold(Vec3A::INFINITY, |a, &c| a.min(c)), corners.iter().fold(Vec3A::NEG_INFINITY, |a, &c| a.max(c)))
+        let corners = [
+            self.origin,
+            self.origin + self.edge_u,
+            self.origin + self.edge_v,
+            self.origin + self.edge_u + self.edge_v,
+        ];
+        (
+            corners.iter().fold(Vec3A::INFINITY, |a, &c| a.min(c)),
+            corners.iter().fold(Vec3A::NEG_INFINITY, |a, &c| a.max(c)),
+        )
     }
 
     /// Makes the ray's crossing of the panel's plane at distance `t` the `best` hit if it is
@@ -355,7 +492,12 @@ impl PanelShape {
             return;
         }
         let hit = if self.unbounded {
-            Hit { triangle: self.first_triangle, t, u: 0.0, v: 0.0 }
+            Hit {
+                triangle: self.first_triangle,
+                t,
+                u: 0.0,
+                v: 0.0,
+            }
         } else {
             let offset = origin + direction * t - self.origin;
             let (s, r) = (offset.dot(self.dual_u), offset.dot(self.dual_v));
@@ -364,12 +506,26 @@ impl PanelShape {
             }
             // Weights of corners 1 and 2 of the triangle holding (s, r).
             if s >= r {
-                Hit { triangle: self.first_triangle, t, u: s - r, v: r }
+                Hit {
+                    triangle: self.first_triangle,
+                    t,
+                    u: s - r,
+                    v: r,
+                }
             } else {
-                Hit { triangle: self.first_triangle + 1, t, u: s, v: r - s }
+                Hit {
+                    triangle: self.first_triangle + 1,
+                    t,
+                    u: s,
+                    v: r - s,
+                }
             }
         };
-        *best = PanelHit { hit: Some(hit), t, id: self.id };
+        *best = PanelHit {
+            hit: Some(hit),
+            t,
+            id: self.id,
+        };
     }
 }
 
@@ -406,7 +562,11 @@ mod tests {
 
     fn one_triangle() -> Mesh {
         Mesh {
-            positions: vec![vec3a(0.0, 0.0, 0.0), vec3a(2.0, 0.0, 0.0), vec3a(0.0, 2.0, 0.0)],
+            positions: vec![
+                vec3a(0.0, 0.0, 0.0),
+                vec3a(2.0, 0.0, 0.0),
+                vec3a(0.0, 2.0, 0.0),
+            ],
             albedo: vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
             triangles: vec![[0, 1, 2]],
             normals: vec![Vec3A::Z],
@@ -421,7 +581,9 @@ mod tests {
         let mesh = one_triangle();
         let tracer = Tracer::new(&mesh);
         let origin = vec3a(0.5, 0.25, 3.0);
-        let hit = tracer.closest_hit(origin, -Vec3A::Z, f32::INFINITY).expect("hit");
+        let hit = tracer
+            .closest_hit(origin, -Vec3A::Z, f32::INFINITY)
+            .expect("hit");
         assert!((hit.t - 3.0).abs() < 1e-6);
         let [a, b, c] = mesh.corners(0);
         let p = a * (1.0 - hit.u - hit.v) + b * hit.u + c * hit.v;
@@ -436,32 +598,57 @@ mod tests {
         // The guard lies just beyond the maximum corner (2, 2, 0) of the triangle's bounds.
         let origin = vec3a(-1.0, -1.0, -1.0);
         let toward_guard = (vec3a(2.03, 2.03, 0.01) - origin).normalize();
-        assert!(tracer.closest_hit(origin, toward_guard, f32::INFINITY).is_none());
+        assert!(tracer
+            .closest_hit(origin, toward_guard, f32::INFINITY)
+            .is_none());
         assert!(!tracer.occluded(origin, toward_guard, f32::INFINITY));
     }
 
     #[test]
     fn the_avx2_traversal_agrees_with_the_portable_one() {
         let scene = crate::scene::Scene {
-            camera: crate::scene::Camera { width: 24, height: 24, pixel_size: 1.0 },
+            camera: crate::scene::Camera {
+                width: 24,
+                height: 24,
+                pixel_size: 1.0,
+            },
             surface: crate::scene::HeightField {
-                height: (0..576).map(|p| ((p % 24) as f32 * 0.7).sin() * 3.0 + 5.0).collect(),
+                height: (0..576)
+                    .map(|p| ((p % 24) as f32 * 0.7).sin() * 3.0 + 5.0)
+                    .collect(),
                 mask: vec![true; 576],
                 albedo: vec![[0.5; 3]; 576],
             },
-            floor: Some(crate::scene::Floor { height: 0.0, albedo: [0.5; 3] }),
+            floor: Some(crate::scene::Floor {
+                height: 0.0,
+                albedo: [0.5; 3],
+            }),
             cornell_box: None,
         };
         // Through the height-field grid, and with the grid dropped, through the BVH.
         let mesh = Mesh::from_scene(&scene);
-        let without_grid = Mesh { grid: None, ..mesh.clone() };
+        let without_grid = Mesh {
+            grid: None,
+            ..mesh.clone()
+        };
         for tracer in [Tracer::new(&mesh), Tracer::new(&without_grid)] {
             let mut rng = crate::sampler::Rng::new(9);
             for _ in 0..2000 {
-                let origin = vec3a(rng.next_f32() * 24.0 - 12.0, rng.next_f32() * 24.0 - 12.0, 9.0);
-                let direction = vec3a(rng.next_f32() - 0.5, rng.next_f32() - 0.5, -rng.next_f32()).normalize();
-                assert_eq!(tracer.closest_hit(origin, direction, f32::INFINITY), tracer.closest_hit_portable(origin, direction, f32::INFINITY));
-                assert_eq!(tracer.occluded(origin, direction, f32::INFINITY), tracer.occluded_portable(origin, direction, f32::INFINITY));
+                let origin = vec3a(
+                    rng.next_f32() * 24.0 - 12.0,
+                    rng.next_f32() * 24.0 - 12.0,
+                    9.0,
+                );
+                let direction =
+                    vec3a(rng.next_f32() - 0.5, rng.next_f32() - 0.5, -rng.next_f32()).normalize();
+                assert_eq!(
+                    tracer.closest_hit(origin, direction, f32::INFINITY),
+                    tracer.closest_hit_portable(origin, direction, f32::INFINITY)
+                );
+                assert_eq!(
+                    tracer.occluded(origin, direction, f32::INFINITY),
+                    tracer.occluded_portable(origin, direction, f32::INFINITY)
+                );
             }
         }
     }
@@ -469,25 +656,62 @@ mod tests {
     #[test]
     fn a_batch_gets_the_same_hits_as_one_ray_at_a_time() {
         let scene = crate::scene::Scene {
-            camera: crate::scene::Camera { width: 20, height: 16, pixel_size: 0.5 },
+            camera: crate::scene::Camera {
+                width: 20,
+                height: 16,
+                pixel_size: 0.5,
+            },
             surface: crate::scene::HeightField {
-                height: (0..320).map(|p| ((p % 20) as f32 * 0.5).cos() * 2.0 + (p / 20) as f32 * 0.2).collect(),
+                height: (0..320)
+                    .map(|p| ((p % 20) as f32 * 0.5).cos() * 2.0 + (p / 20) as f32 * 0.2)
+                    .collect(),
                 mask: (0..320).map(|p| p % 7 != 3).collect(),
                 albedo: vec![[0.5; 3]; 320],
             },
-            floor: Some(crate::scene::Floor { height: -1.0, albedo: [0.5; 3] }),
-            cornell_box: Some(crate::scene::CornellBox { x: [-8.0, 8.0], y: [-7.0, 7.0], z_top: 9.0, left: [0.5; 3], right: [0.5; 3], back: [0.5; 3], front: [0.5; 3] }),
+            floor: Some(crate::scene::Floor {
+                height: -1.0,
+                albedo: [0.5; 3],
+            }),
+            cornell_box: Some(crate::scene::CornellBox {
+                x: [-8.0, 8.0],
+                y: [-7.0, 7.0],
+                z_top: 9.0,
+                left: [0.5; 3],
+                right: [0.5; 3],
+                back: [0.5; 3],
+                front: [0.5; 3],
+            }),
         };
         let tracer = Tracer::new(&Mesh::from_scene(&scene));
         let mut rng = crate::sampler::Rng::new(3);
         let rays: Vec<(Vec3A, Vec3A)> = (0..3000)
-            .map(|_| (vec3a(rng.next_f32() * 12.0 - 6.0, rng.next_f32() * 10.0 - 5.0, rng.next_f32() * 8.0 - 1.0), vec3a(rng.next_f32() - 0.5, rng.next_f32() - 0.5, rng.next_f32() - 0.5).normalize()))
+            .map(|_| {
+                (
+                    vec3a(
+                        rng.next_f32() * 12.0 - 6.0,
+                        rng.next_f32() * 10.0 - 5.0,
+                        rng.next_f32() * 8.0 - 1.0,
+                    ),
+                    vec3a(
+                        rng.next_f32() - 0.5,
+                        rng.next_f32() - 0.5,
+                        rng.next_f32() - 0.5,
+                    )
+                    .normalize(),
+                )
+            })
             .collect();
         let mut batch = Vec::new();
         tracer.closest_hits(rays.iter().copied(), 20.0, |hit| batch.push(hit));
-        let one_by_one: Vec<Option<Hit>> = rays.iter().map(|&(o, d)| tracer.closest_hit(o, d, 20.0)).collect();
+        let one_by_one: Vec<Option<Hit>> = rays
+            .iter()
+            .map(|&(o, d)| tracer.closest_hit(o, d, 20.0))
+            .collect();
         assert_eq!(batch, one_by_one);
-        assert!(batch.iter().filter(|h| h.is_some()).count() > 1500 && batch.iter().any(|h| h.is_none()));
+        assert!(
+            batch.iter().filter(|h| h.is_some()).count() > 1500
+                && batch.iter().any(|h| h.is_none())
+        );
     }
 
     #[test]
@@ -497,6 +721,8 @@ mod tests {
         assert!(tracer.occluded(origin, -Vec3A::Z, 2.0));
         assert!(!tracer.occluded(origin, -Vec3A::Z, 0.5));
         assert!(!tracer.occluded(origin, Vec3A::Z, f32::INFINITY));
-        assert!(tracer.closest_hit(vec3a(3.0, 3.0, 1.0), -Vec3A::Z, f32::INFINITY).is_none());
+        assert!(tracer
+            .closest_hit(vec3a(3.0, 3.0, 1.0), -Vec3A::Z, f32::INFINITY)
+            .is_none());
     }
 }

@@ -71,20 +71,49 @@ const STAGE_GAP: usize = 16;
 
 /// Fits the pixels where `mask` is true from `images` laid out `(K, pixels, 3)` into `out`,
 /// in the widest registers the CPU has (the same results in each).
-pub(crate) fn fit_pixels(images: &[f32], mask: &[bool], lights: &Lights, shadow_fraction: f32, out: &mut PsOutput) -> Result<()> {
-    let source = Source { images, n: mask.len(), lights, shadow_fraction };
+pub(crate) fn fit_pixels(
+    images: &[f32],
+    mask: &[bool],
+    lights: &Lights,
+    shadow_fraction: f32,
+    out: &mut PsOutput,
+) -> Result<()> {
+    let source = Source {
+        images,
+        n: mask.len(),
+        lights,
+        shadow_fraction,
+    };
     #[cfg(target_arch = "x86_64")]
     {
         if let Some(avx512) = crate::lanes::Avx512::detect() {
             // SAFETY: `detect` found AVX-512F, AVX2 and FMA.
-            return fit_masked(mask, CHUNK, out, || Box::new(Machine::new(lights)), |machine, chunk, fits| unsafe { machine.run_avx512(avx512, &source, chunk, fits) });
+            return fit_masked(
+                mask,
+                CHUNK,
+                out,
+                || Box::new(Machine::new(lights)),
+                |machine, chunk, fits| unsafe { machine.run_avx512(avx512, &source, chunk, fits) },
+            );
         }
         if let Some(avx2) = crate::lanes::Avx2::detect() {
             // SAFETY: `detect` found AVX2 and FMA.
-            return fit_masked(mask, CHUNK, out, || Box::new(Machine::new(lights)), |machine, chunk, fits| unsafe { machine.run_avx2(avx2, &source, chunk, fits) });
+            return fit_masked(
+                mask,
+                CHUNK,
+                out,
+                || Box::new(Machine::new(lights)),
+                |machine, chunk, fits| unsafe { machine.run_avx2(avx2, &source, chunk, fits) },
+            );
         }
     }
-    fit_masked(mask, CHUNK, out, || Box::new(Machine::<8>::new(lights)), |machine, chunk, fits| machine.run_in(Portable, Portable, &source, chunk, fits))
+    fit_masked(
+        mask,
+        CHUNK,
+        out,
+        || Box::new(Machine::<8>::new(lights)),
+        |machine, chunk, fits| machine.run_in(Portable, Portable, &source, chunk, fits),
+    )
 }
 
 /// Where the pixels' observations come from.
@@ -152,7 +181,17 @@ struct Machine<const W: usize> {
 impl<const W: usize> Machine<W> {
     fn new(source: &Lights) -> Machine<W> {
         let lights = source.count;
-        let light = (0..lights).map(|k| std::array::from_fn(|i| if i < 3 { source.direction[i][k] } else { source.outer[i - 3][k] })).collect();
+        let light = (0..lights)
+            .map(|k| {
+                std::array::from_fn(|i| {
+                    if i < 3 {
+                        source.direction[i][k]
+                    } else {
+                        source.outer[i - 3][k]
+                    }
+                })
+            })
+            .collect();
         Machine {
             lights,
             light,
@@ -181,7 +220,14 @@ impl<const W: usize> Machine<W> {
     /// Fits every pixel of `chunk`, appending to `fits`: the lanes in the registers of
     /// `isa`, each pixel's lights side by side in those of `light`.
     #[inline(always)]
-    fn run_in<V: Isa<W>, E: Isa<LANES>>(&mut self, isa: V, light: E, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
+    fn run_in<V: Isa<W>, E: Isa<LANES>>(
+        &mut self,
+        isa: V,
+        light: E,
+        source: &Source,
+        chunk: &[usize],
+        fits: &mut Vec<(usize, PixelFit)>,
+    ) {
         self.stage(source, chunk);
         let mut queue = chunk.iter().copied().enumerate();
         for lane in 0..W {
@@ -194,19 +240,28 @@ impl<const W: usize> Machine<W> {
             let mut accept = [false; W];
             let mut finished = [false; W];
             for lane in (0..W).filter(|&lane| self.occupied[lane]) {
-                let next = if too_few_lit[lane] { None } else { solved(grams[lane], rhs[lane], counts[lane], TUKEY_MIN) };
+                let next = if too_few_lit[lane] {
+                    None
+                } else {
+                    solved(grams[lane], rhs[lane], counts[lane], TUKEY_MIN)
+                };
                 let Some(next) = next else {
                     finished[lane] = true;
                     continue;
                 };
                 self.iterations[lane] += 1;
-                let settled = (next - self.g[lane]).length() <= TUKEY_SETTLED * self.g[lane].length();
+                let settled =
+                    (next - self.g[lane]).length() <= TUKEY_SETTLED * self.g[lane].length();
                 finished[lane] = settled || self.iterations[lane] == TUKEY_ITERATIONS;
-                (self.g[lane], self.gram[lane], self.count[lane]) = (next, grams[lane], counts[lane]);
+                (self.g[lane], self.gram[lane], self.count[lane]) =
+                    (next, grams[lane], counts[lane]);
                 accept[lane] = true;
             }
             for lane in (0..W).filter(|&lane| finished[lane]) {
-                fits.push((self.pixel[lane], self.lane_fit(light, lane, accept[lane], source.lights)));
+                fits.push((
+                    self.pixel[lane],
+                    self.lane_fit(light, lane, accept[lane], source.lights),
+                ));
                 self.load(light, source, lane, &mut queue, fits);
             }
         }
@@ -224,17 +279,36 @@ impl<const W: usize> Machine<W> {
     /// its threshold fit as the fit kept; a pixel without one gets the full fit (in `fits`)
     /// and the next is tried. Empties the lane when `queue` is.
     #[inline(always)]
-    fn load<E: Isa<LANES>>(&mut self, light: E, source: &Source, lane: usize, queue: &mut impl Iterator<Item = (usize, usize)>, fits: &mut Vec<(usize, PixelFit)>) {
+    fn load<E: Isa<LANES>>(
+        &mut self,
+        light: E,
+        source: &Source,
+        lane: usize,
+        queue: &mut impl Iterator<Item = (usize, usize)>,
+        fits: &mut Vec<(usize, PixelFit)>,
+    ) {
         for (position, pixel) in queue {
             let level = source.shadow_fraction * self.gather(light, source.lights, lane, position);
             let (gram, rhs, count) = threshold_sums(light, &self.own, level, source.lights);
             if let Some(g) = solved(gram, rhs, count, 3) {
-                (self.g[lane], self.gram[lane], self.count[lane], self.level[lane]) = (g, gram, count, level);
-                (self.occupied[lane], self.pixel[lane], self.iterations[lane], self.bracket[lane]) = (true, pixel, 0, BRACKET);
+                (
+                    self.g[lane],
+                    self.gram[lane],
+                    self.count[lane],
+                    self.level[lane],
+                ) = (g, gram, count, level);
+                (
+                    self.occupied[lane],
+                    self.pixel[lane],
+                    self.iterations[lane],
+                    self.bracket[lane],
+                ) = (true, pixel, 0, BRACKET);
                 return;
             }
             let (red, green, blue) = self.lane_channels(lane);
-            let rgb: Vec<[f32; 3]> = (0..self.lights).map(|k| [red[k], green[k], blue[k]]).collect();
+            let rgb: Vec<[f32; 3]> = (0..self.lights)
+                .map(|k| [red[k], green[k], blue[k]])
+                .collect();
             fits.push((pixel, full_fit(&rgb, source.lights)));
         }
         self.occupied[lane] = false;
@@ -256,10 +330,15 @@ impl<const W: usize> Machine<W> {
                 _ => runs.push((pixel, 1)),
             }
         }
-        for (image, row) in source.images.chunks_exact(source.n * 3).zip(self.staged.chunks_exact_mut(self.staged_stride)) {
+        for (image, row) in source
+            .images
+            .chunks_exact(source.n * 3)
+            .zip(self.staged.chunks_exact_mut(self.staged_stride))
+        {
             let mut at = 0;
             for &(first, length) in &runs {
-                row[at * 3..(at + length) * 3].copy_from_slice(&image[first * 3..(first + length) * 3]);
+                row[at * 3..(at + length) * 3]
+                    .copy_from_slice(&image[first * 3..(first + length) * 3]);
                 at += length;
             }
         }
@@ -270,11 +349,23 @@ impl<const W: usize> Machine<W> {
     /// copied light by light from `staged`, then scaled, tested for saturation and summed
     /// over the lights side by side.
     #[inline(always)]
-    fn gather<E: Isa<LANES>>(&mut self, light: E, lights: &Lights, lane: usize, position: usize) -> f32 {
+    fn gather<E: Isa<LANES>>(
+        &mut self,
+        light: E,
+        lights: &Lights,
+        lane: usize,
+        position: usize,
+    ) -> f32 {
         let rows = &mut self.channel[lane * 3 * self.padded..][..3 * self.padded];
         let (red, rest) = rows.split_at_mut(self.padded);
         let (green, blue) = rest.split_at_mut(self.padded);
-        for (((image, red), green), blue) in self.staged.chunks_exact(self.staged_stride).zip(&mut *red).zip(&mut *green).zip(&mut *blue) {
+        for (((image, red), green), blue) in self
+            .staged
+            .chunks_exact(self.staged_stride)
+            .zip(&mut *red)
+            .zip(&mut *green)
+            .zip(&mut *blue)
+        {
             let raw = &image[position * 3..position * 3 + 3];
             (*red, *green, *blue) = (raw[0], raw[1], raw[2]);
         }
@@ -282,15 +373,22 @@ impl<const W: usize> Machine<W> {
         let mut brightest = light.splat(0.0);
         for at in (0..self.padded).step_by(LANES) {
             let mut b = [light.splat(0.0); 3];
-            for ((b, row), scale) in b.iter_mut().zip([&mut *red, &mut *green, &mut *blue]).zip(&lights.scale) {
+            for ((b, row), scale) in b
+                .iter_mut()
+                .zip([&mut *red, &mut *green, &mut *blue])
+                .zip(&lights.scale)
+            {
                 *b = light.floats(eight(row, at)) * light.floats(eight(scale, at));
                 row[at..at + LANES].copy_from_slice(&b.to_array());
             }
             let [r, g, b] = b;
             let [red_level, green_level, blue_level] = &lights.saturated_b;
-            let unsaturated = r.simd_lt(light.floats(eight(red_level, at))) & g.simd_lt(light.floats(eight(green_level, at))) & b.simd_lt(light.floats(eight(blue_level, at)));
+            let unsaturated = r.simd_lt(light.floats(eight(red_level, at)))
+                & g.simd_lt(light.floats(eight(green_level, at)))
+                & b.simd_lt(light.floats(eight(blue_level, at)));
             let sum = r + g + b;
-            self.own[at..at + LANES].copy_from_slice(&blend(unsaturated, sum, saturated).to_array());
+            self.own[at..at + LANES]
+                .copy_from_slice(&blend(unsaturated, sum, saturated).to_array());
             brightest = blend(unsaturated & sum.simd_gt(brightest), sum, brightest);
         }
         for (grey, &own) in self.grey.iter_mut().zip(&self.own) {
@@ -305,25 +403,45 @@ impl<const W: usize> Machine<W> {
     /// albedo the weighted least-squares scale along it, Σ w (n·l) b / Σ w (n·l)², summed
     /// over the lights side by side.
     #[inline(always)]
-    fn lane_fit<E: Isa<LANES>>(&mut self, light: E, lane: usize, took_last: bool, lights: &Lights) -> PixelFit {
+    fn lane_fit<E: Isa<LANES>>(
+        &mut self,
+        light: E,
+        lane: usize,
+        took_last: bool,
+        lights: &Lights,
+    ) -> PixelFit {
         let (g, gram, count) = (self.g[lane], self.gram[lane], self.count[lane]);
         if self.iterations[lane] == 0 {
             let level = self.level[lane];
             for (weight, grey) in self.finishing.iter_mut().zip(&self.grey) {
-                *weight = if grey[lane] > level && grey[lane] < SATURATED { 1.0 } else { 0.0 };
+                *weight = if grey[lane] > level && grey[lane] < SATURATED {
+                    1.0
+                } else {
+                    0.0
+                };
             }
         } else {
-            let kept = if took_last { &self.candidate } else { &self.previous };
+            let kept = if took_last {
+                &self.candidate
+            } else {
+                &self.previous
+            };
             for (weight, kept) in self.finishing.iter_mut().zip(kept) {
                 *weight = kept[lane];
             }
         }
         let normal = g.normalize();
-        let (nx, ny, nz) = (light.splat(normal.x), light.splat(normal.y), light.splat(normal.z));
+        let (nx, ny, nz) = (
+            light.splat(normal.x),
+            light.splat(normal.y),
+            light.splat(normal.z),
+        );
         let mut sums = [light.splat(0.0); 3];
         let (red, green, blue) = self.lane_channels(lane);
         for at in (0..self.padded).step_by(LANES) {
-            let shading = nx * light.floats(eight(&lights.direction[0], at)) + ny * light.floats(eight(&lights.direction[1], at)) + nz * light.floats(eight(&lights.direction[2], at));
+            let shading = nx * light.floats(eight(&lights.direction[0], at))
+                + ny * light.floats(eight(&lights.direction[1], at))
+                + nz * light.floats(eight(&lights.direction[2], at));
             let weighted = light.floats(eight(&self.finishing, at)) * shading;
             for (sum, channel) in sums.iter_mut().zip([red, green, blue]) {
                 *sum += weighted * light.floats(eight(channel, at));
@@ -331,7 +449,12 @@ impl<const W: usize> Machine<W> {
         }
         let denominator = normal.dot(gram * normal);
         let sums = lanes_of(sums).map(total);
-        PixelFit { normal: normal.to_array(), albedo: sums.map(|sum| (sum / denominator).max(0.0)), flag: flag::OK, used: count as u16 }
+        PixelFit {
+            normal: normal.to_array(),
+            albedo: sums.map(|sum| (sum / denominator).max(0.0)),
+            flag: flag::OK,
+            used: count as u16,
+        }
     }
 
     /// The residuals of the lanes' fits and the Tukey scale of the re-weighting lanes' (1 /
@@ -340,8 +463,17 @@ impl<const W: usize> Machine<W> {
     #[inline(always)]
     fn residuals<V: Isa<W>>(&mut self, isa: V) -> ([f32; W], [bool; W]) {
         let g = self.g;
-        let (gx, gy, gz) = (isa.floats(g.map(|g| g.x)), isa.floats(g.map(|g| g.y)), isa.floats(g.map(|g| g.z)));
-        let (zero, saturated, magnitude, unlit) = (isa.splat(0.0), isa.splat(SATURATED), isa.splat_int(0x7fff_ffff), isa.splat_int(UNLIT));
+        let (gx, gy, gz) = (
+            isa.floats(g.map(|g| g.x)),
+            isa.floats(g.map(|g| g.y)),
+            isa.floats(g.map(|g| g.z)),
+        );
+        let (zero, saturated, magnitude, unlit) = (
+            isa.splat(0.0),
+            isa.splat(SATURATED),
+            isa.splat_int(0x7fff_ffff),
+            isa.splat_int(UNLIT),
+        );
         let mut lit = isa.splat_int(0);
         for ((grey, key), l) in self.grey.iter().zip(&mut self.key).zip(&self.light) {
             let grey = isa.floats(*grey);
@@ -352,14 +484,18 @@ impl<const W: usize> Machine<W> {
         }
         let lit = lit.to_array();
         let too_few_lit: [bool; W] = std::array::from_fn(|lane| lit[lane] < TUKEY_MIN as i32);
-        let active: [bool; W] = std::array::from_fn(|lane| self.occupied[lane] && !too_few_lit[lane]);
+        let active: [bool; W] =
+            std::array::from_fn(|lane| self.occupied[lane] && !too_few_lit[lane]);
         let median = median_keys(isa, &self.key, lit, self.median_key, self.bracket, active);
         let mut inverse = [0.0f32; W];
         for lane in (0..W).filter(|&lane| active[lane]) {
-            let moved = median[lane].abs_diff(self.median_key[lane]).min(BRACKET as u32) as i32;
+            let moved = median[lane]
+                .abs_diff(self.median_key[lane])
+                .min(BRACKET as u32) as i32;
             self.bracket[lane] = (2 * moved).clamp(BRACKET_MIN, BRACKET);
             self.median_key[lane] = median[lane];
-            let scale = (MAD_TO_SIGMA * f32::from_bits(median[lane] as u32)).max(SCALE_FLOOR * g[lane].length());
+            let scale = (MAD_TO_SIGMA * f32::from_bits(median[lane] as u32))
+                .max(SCALE_FLOOR * g[lane].length());
             inverse[lane] = 1.0 / (TUKEY_SCALES * scale);
         }
         (inverse, too_few_lit)
@@ -369,14 +505,24 @@ impl<const W: usize> Machine<W> {
     /// [`Machine::residuals`]; meaningless in the lanes where it is 0) and returns, for every
     /// lane, Σ w l lᵀ, Σ w l b (channel sum) and the number of observations with weight.
     #[inline(always)]
-    fn candidate_sums<V: Isa<W>>(&mut self, isa: V, inverse: [f32; W]) -> ([Mat3; W], [Vec3; W], [usize; W]) {
+    fn candidate_sums<V: Isa<W>>(
+        &mut self,
+        isa: V,
+        inverse: [f32; W],
+    ) -> ([Mat3; W], [Vec3; W], [usize; W]) {
         // One pass: its ten sums stay in registers, and as each takes one fused multiply-add
         // a light, none waits on its last.
         let (inverse, zero) = (isa.floats(inverse), isa.splat(0.0));
         let mut rhs = [zero; 3];
         let mut gram = [zero; 6];
         let mut count = isa.splat_int(0);
-        for (((candidate, grey), key), l) in self.candidate.iter_mut().zip(&self.grey).zip(&self.key).zip(&self.light) {
+        for (((candidate, grey), key), l) in self
+            .candidate
+            .iter_mut()
+            .zip(&self.grey)
+            .zip(&self.key)
+            .zip(&self.light)
+        {
             let weight = tukey_weight(isa, inverse, *key);
             *candidate = weight.to_array();
             let weighted = weight * isa.floats(*grey);
@@ -390,7 +536,11 @@ impl<const W: usize> Machine<W> {
         }
         let (gram, rhs, count) = (lanes_of(gram), lanes_of(rhs), count.to_array());
         let grams = std::array::from_fn(|lane| symmetric(gram.map(|m| m[lane])));
-        (grams, std::array::from_fn(|lane| Vec3::new(rhs[0][lane], rhs[1][lane], rhs[2][lane])), count.map(|c| c as usize))
+        (
+            grams,
+            std::array::from_fn(|lane| Vec3::new(rhs[0][lane], rhs[1][lane], rhs[2][lane])),
+            count.map(|c| c as usize),
+        )
     }
 }
 
@@ -398,7 +548,13 @@ impl<const W: usize> Machine<W> {
 impl Machine<8> {
     /// [`Machine::run_in`] in AVX2 registers, compiled for AVX2 and FMA.
     #[target_feature(enable = "avx2,fma")]
-    fn run_avx2(&mut self, isa: crate::lanes::Avx2, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
+    fn run_avx2(
+        &mut self,
+        isa: crate::lanes::Avx2,
+        source: &Source,
+        chunk: &[usize],
+        fits: &mut Vec<(usize, PixelFit)>,
+    ) {
         self.run_in(isa, isa, source, chunk, fits);
     }
 }
@@ -408,7 +564,13 @@ impl Machine<16> {
     /// [`Machine::run_in`] with sixteen lanes in AVX-512 registers (each pixel's lights
     /// eight at a time in AVX2 registers, as in [`Machine::run_avx2`]), compiled for them.
     #[target_feature(enable = "avx512f,avx2,fma")]
-    fn run_avx512(&mut self, isa: crate::lanes::Avx512, source: &Source, chunk: &[usize], fits: &mut Vec<(usize, PixelFit)>) {
+    fn run_avx512(
+        &mut self,
+        isa: crate::lanes::Avx512,
+        source: &Source,
+        chunk: &[usize],
+        fits: &mut Vec<(usize, PixelFit)>,
+    ) {
         self.run_in(isa, isa.avx2(), source, chunk, fits);
     }
 }
@@ -423,7 +585,12 @@ fn blend<T: Copy + BitXor<Output = T> + BitAnd<Output = T>>(mask: T, if_true: T,
 /// Σ w l lᵀ, Σ w l b and Σ w of the threshold fit of a pixel whose channel-summed `b` are
 /// `grey` (padded like `lights`): weight 1 above `level` and below [`SATURATED`], else 0.
 #[inline(always)]
-fn threshold_sums<E: Isa<LANES>>(light: E, grey: &[f32], level: f32, lights: &Lights) -> (Mat3, Vec3, usize) {
+fn threshold_sums<E: Isa<LANES>>(
+    light: E,
+    grey: &[f32],
+    level: f32,
+    lights: &Lights,
+) -> (Mat3, Vec3, usize) {
     let (level, saturated, one) = (light.splat(level), light.splat(SATURATED), light.splat(1.0));
     let mut gram = [light.splat(0.0); 6];
     let mut rhs = [light.splat(0.0); 3];
@@ -439,13 +606,19 @@ fn threshold_sums<E: Isa<LANES>>(light: E, grey: &[f32], level: f32, lights: &Li
         }
         count -= lit.to_bits();
     }
-    (symmetric(lanes_of(gram).map(total)), Vec3::from_array(lanes_of(rhs).map(total)), count.to_array().iter().sum::<i32>() as usize)
+    (
+        symmetric(lanes_of(gram).map(total)),
+        Vec3::from_array(lanes_of(rhs).map(total)),
+        count.to_array().iter().sum::<i32>() as usize,
+    )
 }
 
 /// The eight values of `values` from `at`.
 #[inline(always)]
 fn eight(values: &[f32], at: usize) -> [f32; LANES] {
-    values[at..at + LANES].try_into().expect("padded to whole lanes")
+    values[at..at + LANES]
+        .try_into()
+        .expect("padded to whole lanes")
 }
 
 /// The lanes of each of `sums`. (A loop, not a closure: a closure would not be compiled for
@@ -479,7 +652,11 @@ fn total(lanes: [f32; LANES]) -> f32 {
 
 /// The symmetric matrix of xx, xy, xz, yy, yz, zz.
 fn symmetric(m: [f32; 6]) -> Mat3 {
-    Mat3::from_cols(Vec3::new(m[0], m[1], m[2]), Vec3::new(m[1], m[3], m[4]), Vec3::new(m[2], m[4], m[5]))
+    Mat3::from_cols(
+        Vec3::new(m[0], m[1], m[2]),
+        Vec3::new(m[1], m[3], m[4]),
+        Vec3::new(m[2], m[4], m[5]),
+    )
 }
 
 /// For each `active` lane, the `lit / 2`-th smallest (from 0) of its `keys` below
@@ -490,7 +667,14 @@ fn symmetric(m: [f32; 6]) -> Mat3 {
 /// ±`bracket` around it, then 4, 16, 64... times as far on the side where the median lies,
 /// until one holds it.
 #[inline(always)]
-fn median_keys<V: Isa<W>, const W: usize>(isa: V, keys: &[[i32; W]], lit: [i32; W], guess: [i32; W], bracket: [i32; W], active: [bool; W]) -> [i32; W] {
+fn median_keys<V: Isa<W>, const W: usize>(
+    isa: V,
+    keys: &[[i32; W]],
+    lit: [i32; W],
+    guess: [i32; W],
+    bracket: [i32; W],
+    active: [bool; W],
+) -> [i32; W] {
     let rank = lit.map(|lit| lit / 2);
     // Invariant for each active lane: below(lo) ≤ rank < below(hi).
     let (mut lo, mut below_lo) = ([0i32; W], [0i32; W]);
@@ -498,26 +682,49 @@ fn median_keys<V: Isa<W>, const W: usize>(isa: V, keys: &[[i32; W]], lit: [i32; 
     // How far from the guess the next threshold of a lane still bracketing lies: below it
     // when negative, above it when positive, 0 once the lane bisects.
     let mut reach = [0i32; W];
-    let near_lo: [i32; W] = std::array::from_fn(|lane| guess[lane].saturating_sub(bracket[lane]).max(0));
+    let near_lo: [i32; W] =
+        std::array::from_fn(|lane| guess[lane].saturating_sub(bracket[lane]).max(0));
     let near_hi: [i32; W] = std::array::from_fn(|lane| guess[lane].saturating_add(bracket[lane]));
-    let (count_lo, count_hi) = (count_below(isa, keys, isa.ints(near_lo)).to_array(), count_below(isa, keys, isa.ints(near_hi)).to_array());
+    let (count_lo, count_hi) = (
+        count_below(isa, keys, isa.ints(near_lo)).to_array(),
+        count_below(isa, keys, isa.ints(near_hi)).to_array(),
+    );
     for lane in 0..W {
         if !active[lane] {
             (hi[lane], below_hi[lane]) = (0, 0);
         } else if guess[lane] <= 0 {
             continue;
         } else if count_lo[lane] > rank[lane] {
-            (hi[lane], below_hi[lane], reach[lane]) = (near_lo[lane], count_lo[lane], -4 * bracket[lane]);
+            (hi[lane], below_hi[lane], reach[lane]) =
+                (near_lo[lane], count_lo[lane], -4 * bracket[lane]);
         } else if count_hi[lane] <= rank[lane] {
-            (lo[lane], below_lo[lane], reach[lane]) = (near_hi[lane], count_hi[lane], 4 * bracket[lane]);
+            (lo[lane], below_lo[lane], reach[lane]) =
+                (near_hi[lane], count_hi[lane], 4 * bracket[lane]);
         } else {
-            (lo[lane], below_lo[lane], hi[lane], below_hi[lane]) = (near_lo[lane], count_lo[lane], near_hi[lane], count_hi[lane]);
+            (lo[lane], below_lo[lane], hi[lane], below_hi[lane]) =
+                (near_lo[lane], count_lo[lane], near_hi[lane], count_hi[lane]);
         }
     }
     // The bisection, every lane's bounds side by side (no branch on a lane's count).
-    let (zero, none, select, one) = (isa.splat_int(0), isa.splat_int(-1), isa.splat_int(SELECT as i32), isa.splat_int(1));
-    let (rank, guess, farthest, unbounded) = (isa.ints(rank), isa.ints(guess), isa.splat_int(REACH_MAX), isa.splat_int(i32::MAX));
-    let (mut lo, mut below_lo, mut hi, mut below_hi, mut reach) = (isa.ints(lo), isa.ints(below_lo), isa.ints(hi), isa.ints(below_hi), isa.ints(reach));
+    let (zero, none, select, one) = (
+        isa.splat_int(0),
+        isa.splat_int(-1),
+        isa.splat_int(SELECT as i32),
+        isa.splat_int(1),
+    );
+    let (rank, guess, farthest, unbounded) = (
+        isa.ints(rank),
+        isa.ints(guess),
+        isa.splat_int(REACH_MAX),
+        isa.splat_int(i32::MAX),
+    );
+    let (mut lo, mut below_lo, mut hi, mut below_hi, mut reach) = (
+        isa.ints(lo),
+        isa.ints(below_lo),
+        isa.ints(hi),
+        isa.ints(below_hi),
+        isa.ints(reach),
+    );
     loop {
         // Lanes still bracketing try `guess + reach` within [lo, hi] (computed so that it
         // cannot overflow); bisecting lanes the middle of a bracket that holds more than
@@ -536,14 +743,24 @@ fn median_keys<V: Isa<W>, const W: usize>(isa: V, keys: &[[i32; W]], lit: [i32; 
         let counted = threshold.simd_lt(zero) ^ none;
         let holds = rank.simd_lt(below);
         let (lowers_hi, raises_lo) = (counted & holds, counted & (holds ^ none));
-        (hi, below_hi) = (blend(lowers_hi, threshold, hi), blend(lowers_hi, below, below_hi));
-        (lo, below_lo) = (blend(raises_lo, threshold, lo), blend(raises_lo, below, below_lo));
+        (hi, below_hi) = (
+            blend(lowers_hi, threshold, hi),
+            blend(lowers_hi, below, below_hi),
+        );
+        (lo, below_lo) = (
+            blend(raises_lo, threshold, lo),
+            blend(raises_lo, below, below_lo),
+        );
         // Still not bracketed (the median below a threshold below the guess, or above one
         // above it): four times as far next.
         let unbracketed = ((holds ^ reach.simd_lt(zero)) ^ none) & (bisecting ^ none);
         let capped = reach.min(farthest).max(zero - farthest);
         let quadrupled = (capped + capped) + (capped + capped);
-        let grown = blend(farthest.simd_lt(reach), unbounded, blend(reach.simd_lt(zero - farthest), zero - unbounded, quadrupled));
+        let grown = blend(
+            farthest.simd_lt(reach),
+            unbounded,
+            blend(reach.simd_lt(zero - farthest), zero - unbounded, quadrupled),
+        );
         reach = grown & (unbracketed & counted);
     }
     // At most SELECT keys, or one value, are left in [lo, hi): the keys go down a cascade
@@ -563,7 +780,11 @@ fn median_keys<V: Isa<W>, const W: usize>(isa: V, keys: &[[i32; W]], lit: [i32; 
     }
     let (lo, below_lo, rank) = (lo.to_array(), below_lo.to_array(), rank.to_array());
     // More keys than SELECT are left only when they all have the value lo.
-    std::array::from_fn(|lane| sorted.get((rank[lane] - below_lo[lane]) as usize).map_or(lo[lane], |keys| keys[lane]))
+    std::array::from_fn(|lane| {
+        sorted
+            .get((rank[lane] - below_lo[lane]) as usize)
+            .map_or(lo[lane], |keys| keys[lane])
+    })
 }
 
 /// How many of each lane's `keys` are below its `threshold`.
@@ -629,7 +850,11 @@ mod tests {
     /// The fits of `pixels` pixels of random normals and albedos under `count` lights, with
     /// soft shadows, highlights and saturated observations among them, in `registers`, and
     /// each pixel's true normal and albedo.
-    fn fits_of_noisy_pixels(pixels: usize, count: usize, registers: Registers) -> (Vec<(usize, PixelFit)>, Vec<Truth>) {
+    fn fits_of_noisy_pixels(
+        pixels: usize,
+        count: usize,
+        registers: Registers,
+    ) -> (Vec<(usize, PixelFit)>, Vec<Truth>) {
         let mut state = 99u32;
         let mut uniform = || {
             state ^= state << 13;
@@ -637,9 +862,25 @@ mod tests {
             state ^= state << 5;
             state as f32 / u32::MAX as f32
         };
-        let directions: Vec<Vec3> = (0..count).map(|k| Vec3::new((k as f32 * 2.4).cos(), (k as f32 * 2.4).sin(), 1.0 + k as f32 / 20.0).normalize()).collect();
-        let gram = directions.iter().fold(Mat3::ZERO, |m, &l| m + crate::ps::outer(l));
-        let lights = Lights::new(&directions, &vec![[1.0; 3]; count], &vec![[1.5; 3]; count], gram);
+        let directions: Vec<Vec3> = (0..count)
+            .map(|k| {
+                Vec3::new(
+                    (k as f32 * 2.4).cos(),
+                    (k as f32 * 2.4).sin(),
+                    1.0 + k as f32 / 20.0,
+                )
+                .normalize()
+            })
+            .collect();
+        let gram = directions
+            .iter()
+            .fold(Mat3::ZERO, |m, &l| m + crate::ps::outer(l));
+        let lights = Lights::new(
+            &directions,
+            &vec![[1.0; 3]; count],
+            &vec![[1.5; 3]; count],
+            gram,
+        );
         let mut images = vec![0.0f32; count * pixels * 3];
         let mut truth = Vec::with_capacity(pixels);
         for p in 0..pixels {
@@ -658,16 +899,37 @@ mod tests {
         }
         let mask = vec![true; pixels];
         let pixels: Vec<usize> = (0..pixels).collect();
-        let source = Source { images: &images, n: mask.len(), lights: &lights, shadow_fraction: 0.05 };
+        let source = Source {
+            images: &images,
+            n: mask.len(),
+            lights: &lights,
+            shadow_fraction: 0.05,
+        };
         let mut fits = Vec::new();
         match registers {
-            Registers::Portable => Machine::<8>::new(&lights).run_in(Portable, Portable, &source, &pixels, &mut fits),
+            Registers::Portable => {
+                Machine::<8>::new(&lights).run_in(Portable, Portable, &source, &pixels, &mut fits)
+            }
             // SAFETY: `wider_registers` found the instructions.
             #[cfg(target_arch = "x86_64")]
-            Registers::Avx2 => unsafe { Machine::new(&lights).run_avx2(crate::lanes::Avx2::detect().expect("AVX2"), &source, &pixels, &mut fits) },
+            Registers::Avx2 => unsafe {
+                Machine::new(&lights).run_avx2(
+                    crate::lanes::Avx2::detect().expect("AVX2"),
+                    &source,
+                    &pixels,
+                    &mut fits,
+                )
+            },
             // SAFETY: as above.
             #[cfg(target_arch = "x86_64")]
-            Registers::Avx512 => unsafe { Machine::new(&lights).run_avx512(crate::lanes::Avx512::detect().expect("AVX-512"), &source, &pixels, &mut fits) },
+            Registers::Avx512 => unsafe {
+                Machine::new(&lights).run_avx512(
+                    crate::lanes::Avx512::detect().expect("AVX-512"),
+                    &source,
+                    &pixels,
+                    &mut fits,
+                )
+            },
         }
         (fits, truth)
     }
@@ -681,10 +943,18 @@ mod tests {
             let (mut angle_deg, mut albedo_error) = (0.0, 0.0);
             for (pixel, fit) in &portable {
                 let (normal, albedo) = truth[*pixel];
-                angle_deg += Vec3::from(fit.normal).dot(normal).clamp(-1.0, 1.0).acos().to_degrees() / 300.0;
+                angle_deg += Vec3::from(fit.normal)
+                    .dot(normal)
+                    .clamp(-1.0, 1.0)
+                    .acos()
+                    .to_degrees()
+                    / 300.0;
                 albedo_error += fit.albedo.iter().map(|a| (a - albedo).abs()).sum::<f32>() / 900.0;
             }
-            assert!(angle_deg < 0.5 && albedo_error < 0.005, "{count} lights: mean error {angle_deg}°, albedo {albedo_error}");
+            assert!(
+                angle_deg < 0.5 && albedo_error < 0.005,
+                "{count} lights: mean error {angle_deg}°, albedo {albedo_error}"
+            );
             // Sixteen lanes finish the pixels in another order: compare them pixel by pixel.
             let by_pixel = |mut fits: Vec<(usize, PixelFit)>| {
                 fits.sort_by_key(|&(pixel, _)| pixel);
@@ -692,7 +962,11 @@ mod tests {
             };
             let portable = by_pixel(portable);
             for registers in wider_registers() {
-                assert_eq!(by_pixel(fits_of_noisy_pixels(300, count, registers).0), portable, "{count} lights, {registers:?}");
+                assert_eq!(
+                    by_pixel(fits_of_noisy_pixels(300, count, registers).0),
+                    portable,
+                    "{count} lights, {registers:?}"
+                );
             }
         }
     }
@@ -714,19 +988,34 @@ mod tests {
                     *lane = match roll {
                         0 => UNLIT,
                         1 => 0x3c00_0000, // ties
-                        _ => (next() % 0x4000_0000) as i32 + if trial % 2 == 0 { 0x3000_0000 } else { 0 },
+                        _ => {
+                            (next() % 0x4000_0000) as i32
+                                + if trial % 2 == 0 { 0x3000_0000 } else { 0 }
+                        }
                     };
                 }
             }
-            let lit: [i32; W] = std::array::from_fn(|lane| keys.iter().filter(|k| k[lane] != UNLIT).count() as i32);
-            let guess: [i32; W] = std::array::from_fn(|lane| [0, 0x3c00_0000, 0x3400_0000, 0x7000_0000][(lane + trial) % 4]);
+            let lit: [i32; W] =
+                std::array::from_fn(|lane| keys.iter().filter(|k| k[lane] != UNLIT).count() as i32);
+            let guess: [i32; W] = std::array::from_fn(|lane| {
+                [0, 0x3c00_0000, 0x3400_0000, 0x7000_0000][(lane + trial) % 4]
+            });
             let active: [bool; W] = std::array::from_fn(|lane| lit[lane] > 0);
-            let bracket: [i32; W] = std::array::from_fn(|lane| [BRACKET, BRACKET_MIN, 1 << 16][(lane + trial) % 3]);
+            let bracket: [i32; W] =
+                std::array::from_fn(|lane| [BRACKET, BRACKET_MIN, 1 << 16][(lane + trial) % 3]);
             let median = median_keys(isa, &keys, lit, guess, bracket, active);
             for lane in (0..W).filter(|&lane| active[lane]) {
-                let mut sorted: Vec<i32> = keys.iter().map(|k| k[lane]).filter(|&k| k != UNLIT).collect();
+                let mut sorted: Vec<i32> = keys
+                    .iter()
+                    .map(|k| k[lane])
+                    .filter(|&k| k != UNLIT)
+                    .collect();
                 sorted.sort_unstable();
-                assert_eq!(median[lane], sorted[lit[lane] as usize / 2], "trial {trial} lane {lane}");
+                assert_eq!(
+                    median[lane],
+                    sorted[lit[lane] as usize / 2],
+                    "trial {trial} lane {lane}"
+                );
             }
         }
     }
