@@ -16,8 +16,8 @@ import scipy.io
 
 from irtps.data import Dataset, GroundTruth
 from irtps._checks import check_finite
-from irtps.errors import DatasetError
-from irtps.guarded import read_text
+from irtps.errors import ArgumentError, DatasetError
+from irtps.guarded import parse_float, read_text
 from irtps.image_selection import ImageSelection, select_images
 from irtps.imageio import check_stack_memory, format_size, png_saturation, read_images, read_mask
 from irtps.paths import check_file, check_folder, optional_file
@@ -199,8 +199,8 @@ def _read_table(path: Path) -> tuple[np.ndarray, list[int]]:
     for number, line in _read_lines(path):
         fields = line.replace(",", " ").split()
         try:
-            row = [float(field) for field in fields]
-        except ValueError:
+            row = [parse_float(field, "field") for field in fields]
+        except ArgumentError:
             raise DatasetError(f"{path}: line {number}: expected 3 numbers, got {line!r}") from None
         if len(row) != 3:
             raise DatasetError(f"{path}: line {number}: expected 3 numbers, got {len(row)}")
