@@ -170,6 +170,10 @@ MALFORMED = {
         lambda f: _edit_line(f / "light_directions.txt", 1, "0 0 \u0661"),
         "light_directions.txt: line 1: expected 3 numbers, got '0 0 \u0661'",
     ),
+    "an image listed twice": (
+        lambda f: _edit_line(f / "filenames.txt", 3, "./" + _lines(f / "filenames.txt")[0]),
+        "filenames.txt: line 3 lists './008.png' again (line 1 lists it): each image goes with one light",
+    ),
     "two numbers": (
         lambda f: _edit_line(f / "light_intensities.txt", 6, "1 1"),
         "light_intensities.txt: line 6: expected 3 numbers, got 2",

@@ -8,6 +8,7 @@ evaluation, ``Normal_gt.mat`` (variable ``Normal_gt``, (H, W, 3)).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import NamedTuple
 
@@ -62,7 +63,7 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
     DatasetError
         Naming the file (and line) and the problem: a missing file or one that is
         not a readable regular file (a directory, a FIFO, a symlink loop), line counts
-        that disagree, a direction that is not a unit vector (beyond 1e-2) or
+        that disagree, an image listed twice, a direction that is not a unit vector (beyond 1e-2) or
         has z <= 0, a negative intensity or one out of range
         (`irtps.scene.irradiance_problem`), fewer than 3 lights, images of
         different sizes or with non-finite values.
@@ -189,7 +190,14 @@ def _read_lines(path: Path) -> list[tuple[int, str]]:
 
 
 def _read_filenames(path: Path) -> tuple[list[str], list[int]]:
+    """The image names listed, each once (one image under two lights is a slip, not data),
+    and their line numbers."""
     lines = _read_lines(path)
+    first: dict[str, int] = {}
+    for number, name in lines:
+        seen = first.setdefault(os.path.normpath(name), number)
+        if seen != number:
+            raise DatasetError(f"{path}: line {number} lists {name!r} again (line {seen} lists it): each image goes with one light")
     return [name for _, name in lines], [number for number, _ in lines]
 
 
