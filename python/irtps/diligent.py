@@ -22,7 +22,7 @@ from irtps.guarded import parse_float, read_text
 from irtps.image_selection import ImageSelection, select_images
 from irtps.imageio import check_stack_memory, format_size, png_saturation, read_images, read_mask
 from irtps.paths import check_file, check_folder, optional_file
-from irtps.scene import MIN_LIGHTS, Camera, Light, Scene, irradiance_problem
+from irtps.scene import MIN_LIGHTS, Camera, Light, Scene, irradiance_problem, upward_problem
 
 FILENAMES_FILE = "filenames.txt"
 DIRECTIONS_FILE = "light_directions.txt"
@@ -224,11 +224,9 @@ def _unit_directions(path: Path, directions: np.ndarray, lines: list[int]) -> np
     for direction, norm, line in zip(directions, norms, lines, strict=True):
         if abs(norm - 1.0) > UNIT_TOLERANCE:
             raise DatasetError(f"{path}: line {line}: light direction is not a unit vector (norm {norm:.6g})")
-        if direction[2] <= 0.0:
-            raise DatasetError(
-                f"{path}: line {line}: light direction must point toward the camera side (z > 0), "
-                f"got z = {direction[2]:g}"
-            )
+        upward = upward_problem(direction[2])
+        if upward is not None:
+            raise DatasetError(f"{path}: line {line}: light direction {upward}")
     return directions / norms[:, None]
 
 

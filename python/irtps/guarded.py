@@ -24,7 +24,7 @@ from typing import Any
 from irtps.errors import ArgumentError, DatasetError, IrtpsError
 from irtps.paths import MISSING, file_problem
 
-__all__ = ["MAX_DEPTH", "MAX_DIGITS", "MAX_TEXT_BYTES", "parse_float", "parse_int", "parse_json", "read_json", "read_text"]
+__all__ = ["MAX_DEPTH", "MAX_DIGITS", "MAX_TEXT_BYTES", "parse_float", "parse_int", "parse_json", "read_json", "read_text", "shown"]
 
 #: The largest text file read: far above any scene, record or light list (96 lights take
 #: 4 kB), far below what would exhaust memory.
@@ -211,7 +211,7 @@ def parse_int(text: str, name: str) -> int:
     """
     stripped = text.strip()
     if not re.fullmatch(r"[+-]?[0-9]+", stripped, flags=re.ASCII):
-        raise ArgumentError(name, f"expected an integer, got {_shown(stripped)}")
+        raise ArgumentError(name, f"expected an integer, got {shown(stripped)}")
     digits = len(stripped.lstrip("+-"))
     if digits > MAX_DIGITS:
         raise ArgumentError(name, f"an integer with {digits} digits; at most {MAX_DIGITS} are accepted")
@@ -249,7 +249,7 @@ def parse_float(text: str, name: str) -> float:
     """
     stripped = text.strip()
     if not _FLOAT.fullmatch(stripped):
-        raise ArgumentError(name, f"expected a number, got {_shown(stripped)}")
+        raise ArgumentError(name, f"expected a number, got {shown(stripped)}")
     digits = len(_NUMBER_DIGITS.findall(stripped.split("e")[0].split("E")[0]))
     if digits > MAX_DIGITS:
         raise ArgumentError(name, f"a number with {digits} digits; at most {MAX_DIGITS} are accepted")
@@ -290,6 +290,18 @@ def _place(text: str, literal: str | None) -> str:
     return f"line {line}, column {column}: "
 
 
-def _shown(text: str) -> str:
-    """A value for a message: at most 40 characters of it."""
-    return repr(text if len(text) <= 40 else text[:37] + "...")
+def shown(value: object, limit: int = 40) -> str:
+    """A value read from a file or the command line, for a message: its `repr`, of a text at
+    most `limit` characters of it (a field of a JSON file may be megabytes long).
+
+    Examples
+    --------
+    >>> shown("x" * 100)
+    "'xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx...'"
+    >>> shown([0] * 100, limit=12)
+    '[0, 0, 0,...'
+    """
+    if isinstance(value, str):
+        return repr(value if len(value) <= limit else value[: limit - 3] + "...")
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
