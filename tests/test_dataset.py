@@ -160,6 +160,13 @@ def test_dataset_rejects_arrays_that_disagree_with_the_scene():
         Dataset(scene=dataset.scene, images=dataset.images, mask=dataset.mask, gt=GroundTruth(height=np.zeros((3, 3))))
 
 
+def test_a_scene_json_with_a_byte_order_mark_loads_the_same(folder):
+    original = load_dataset(folder)
+    scene = folder / "scene.json"
+    scene.write_bytes(b"\xef\xbb\xbf" + scene.read_bytes())
+    assert load_dataset(folder).scene == original.scene
+
+
 def test_missing_mask_means_every_pixel(folder):
     (folder / "mask.png").unlink()
     assert load_dataset(folder).mask.all()

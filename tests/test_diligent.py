@@ -104,6 +104,17 @@ def test_nearly_unit_directions_are_renormalised(ball):
     np.testing.assert_allclose(np.linalg.norm(directions, axis=1), 1.0, atol=1e-12)
 
 
+def test_text_files_from_windows_editors_load_the_same(ball):
+    """A byte-order mark and CRLF line ends, as Notepad writes them, change nothing."""
+    original = load_diligent(ball)
+    for name in ("filenames.txt", "light_directions.txt", "light_intensities.txt"):
+        path = ball / name
+        path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes().replace(b"\n", b"\r\n"))
+    edited = load_diligent(ball)
+    assert edited.image_names == original.image_names
+    assert edited.scene == original.scene
+
+
 def test_saved_in_the_irtps_layout_it_loads_back_the_same(ball, tmp_path):
     dataset = load_diligent(ball)
     save_dataset(dataset, tmp_path / "converted")
@@ -150,6 +161,18 @@ MALFORMED = {
     "text instead of numbers": (
         lambda f: _edit_line(f / "light_directions.txt", 4, "0 zero 1"),
         "light_directions.txt: line 4: expected 3 numbers, got '0 zero 1'",
+    ),
+    "a number with an underscore": (
+        lambda f: _edit_line(f / "light_intensities.txt", 2, "1_2.5 1 1"),
+        "light_intensities.txt: line 2: expected 3 numbers, got '1_2.5 1 1'",
+    ),
+    "digits of another script": (
+        lambda f: _edit_line(f / "light_directions.txt", 1, "0 0 \u0661"),
+        "light_directions.txt: line 1: expected 3 numbers, got '0 0 \u0661'",
+    ),
+    "an image listed twice": (
+        lambda f: _edit_line(f / "filenames.txt", 3, "./" + _lines(f / "filenames.txt")[0]),
+        "filenames.txt: line 3 lists './008.png' again (line 1 lists it): each image goes with one light",
     ),
     "two numbers": (
         lambda f: _edit_line(f / "light_intensities.txt", 6, "1 1"),

@@ -309,6 +309,21 @@ CASES = {
         [],
         ["{data}/scene.json: lights[2].direction must point toward the camera side (z > 0)"],
     ),
+    # z > 0 as a float64 but 0 as the core's float32 (the core refused it without the file)
+    "light grazing below float32": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _edit_scene(f, lambda s: s["lights"][0].update(direction=[1.0, 0.0, 1e-50])),
+        [],
+        ["{data}/scene.json: lights[0].direction must point toward the camera side (z > 0), got z = 1e-50, which is 0 in float32"],
+    ),
+    "DiLiGenT light grazing below float32": (
+        "reconstruct",
+        "ball",
+        lambda f: _replace_line(f / "light_directions.txt", 3, "0 1 1e-300"),
+        [],
+        ["{data}/light_directions.txt: line 3: light direction must point toward the camera side (z > 0), got z = 1e-300, which is 0"],
+    ),
     # empty mask
     "empty mask": (
         "reconstruct",
@@ -367,6 +382,21 @@ CASES = {
         lambda f: _edit_scene(f, lambda s: s.update(lights={"0": s["lights"][0]})),
         [],
         ["{data}/scene.json: lights must be an array, got an object"],
+    ),
+    # a string field of megabytes, shown in part: still one short line
+    "scene format of 10 million characters": (
+        "reconstruct",
+        "mitsuba",
+        lambda f: _edit_scene(f, lambda s: s.update(format="x" * 10_000_000)),
+        [],
+        ["{data}/scene.json: format is 'xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx...': unknown format"],
+    ),
+    "unknown field of a million characters": (
+        "render",
+        "mitsuba",
+        lambda f: _edit_scene(f, lambda s: s["camera"].update({"y" * 1_000_000: 1})),
+        [],
+        ["{data}/scene.json: camera has an unknown field 'yyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyy...'"],
     ),
     "scene.json not JSON": (
         "reconstruct",
@@ -558,6 +588,7 @@ def test_malformed_input_is_a_clear_error_with_no_output(name, tmp_path, reconst
     captured = capsys.readouterr()
     assert captured.out == ""
     assert captured.err.startswith("irtps: error: ") and captured.err.count("\n") == 1, captured.err
+    assert len(captured.err) < 1000, captured.err[:1000]
     for part in CASES[name][4]:
         assert part.format(data=data, tmp=tmp_path) in captured.err, captured.err
     assert "Traceback" not in captured.err

@@ -142,6 +142,9 @@ def test_the_command_line_reaches_every_reconstruction_option(tmp_path):
         (["reconstruct", str(BALL), "--out", "o", "--iterations", "9" * 5000], "argument --iterations: '999999999999999999999999999999999999... is not an integer"),
         (["demo", "--size", "9" * 5000], "argument --size: '999999999999999999999999999999999999...: an integer with 5000 digits; at most 40 are accepted"),
         (["reconstruct", str(BALL), "--out", "o", "--base-height", "high"], "argument --base-height: 'high' is not a finite number, auto or boundary"),
+        # Python's float() reads these as 10 and 0.5; a number on the command line is ASCII decimal
+        (["reconstruct", str(BALL), "--out", "o", "--saturation", "1_0"], "argument --saturation: '1_0' is not a finite number above 0"),
+        (["reconstruct", str(BALL), "--out", "o", "--saturation", "\u0660.\u0665"], "argument --saturation: '\u0660.\u0665' is not a finite number above 0"),
         (["reconstruct", str(BALL), "--out", "o", "--method", "mitsuba"], "argument --method: invalid choice: 'mitsuba'"),
         (["table", str(BALL), "--bounces"], "argument --bounces: expected at least one argument"),
     ],

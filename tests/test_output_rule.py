@@ -9,8 +9,11 @@ input (as the system resolves them, or as the name that would be replaced) are r
 """
 
 import json
+import os
 import random
 import shutil
+import socket
+import stat
 from pathlib import Path
 
 import pytest
@@ -155,6 +158,20 @@ def test_a_symlink_loop_as_out_is_named(tmp_path, capsys):
     for out in (tmp_path / "loop", tmp_path / "loop" / "deeper"):
         err = _refused(["reconstruct", str(BALL), "--out", str(out), "--quiet"], capsys)
         assert f"--out {out}: is, or goes through, a symbolic-link loop" in err
+
+
+@pytest.mark.parametrize("kind", ["fifo", "socket"])
+def test_a_fifo_or_socket_as_out_is_never_replaced_even_with_force(kind, tmp_path, capsys):
+    out = tmp_path / kind
+    if kind == "fifo":
+        os.mkfifo(out)
+    else:
+        listening = socket.socket(socket.AF_UNIX)
+        listening.bind(str(out))
+    for force in ([], ["--force"]):
+        err = _refused(["reconstruct", str(BALL), "--out", str(out), "--quiet", *force], capsys)
+        assert f"--out {out}: is a {'FIFO (named pipe)' if kind == 'fifo' else 'socket'}, not a folder" in err
+        assert not stat.S_ISDIR(os.lstat(out).st_mode) and os.listdir(tmp_path) == [kind]
 
 
 def test_a_newline_in_out_stays_on_one_line(tmp_path, capsys):

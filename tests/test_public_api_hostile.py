@@ -56,6 +56,8 @@ CASES = [
     ("photometric_stereo", lambda f: f(IMAGES, LIGHTS, np.full_like(IRRADIANCE, 1e308)), irtps.ArgumentError, "light_irradiance[0]: "),
     ("photometric_stereo", lambda f: f(IMAGES, LIGHTS[:3], IRRADIANCE[:3]), irtps.ArgumentError, "light_directions: "),
     ("photometric_stereo", lambda f: f(IMAGES, LIGHTS, IRRADIANCE, mask="all"), irtps.ArgumentError, "mask: "),
+    # numpy.ma hides masked values, which np.asarray would hand over as data
+    ("photometric_stereo", lambda f: f(np.ma.masked_greater(IMAGES + np.arange(4)[:, None, None, None], 2), LIGHTS, IRRADIANCE), irtps.ArgumentError, "images: a masked array"),
     # lobe_share
     ("lobe_share", lambda f: f(IMAGES, LIGHTS, IRRADIANCE, shadow_fraction="0.1"), irtps.ArgumentError, "shadow_fraction: "),
     ("lobe_share", lambda f: f(np.full_like(IMAGES, NAN), LIGHTS, IRRADIANCE), irtps.ArgumentError, "images[0]: "),
@@ -118,6 +120,7 @@ CASES = [
     ("load_scene", lambda f: f(["scene.json"]), irtps.ArgumentError, "path: "),
     ("save_dataset", lambda f: f({"images": IMAGES}, "unused"), irtps.ArgumentError, "dataset: "),
     ("save_dataset", lambda f: f(_dataset(), 3), irtps.ArgumentError, "path: "),
+    ("load_dataset", lambda f: f(type("Odd", (), {"__fspath__": lambda self: 3})()), irtps.ArgumentError, "path: "),
 ]
 
 

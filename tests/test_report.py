@@ -126,6 +126,17 @@ def test_a_moved_source_data_set_is_reported_and_truth_can_be_given(run_copy, tm
     assert report.metrics.pixels > 0
 
 
+@pytest.mark.parametrize("source", ["the run itself", "/", "a name too long for the system"])
+def test_a_recorded_source_that_is_no_data_set_leaves_the_report_without_truth(source, run_copy, tmp_path):
+    record = json.loads((run_copy / "run.json").read_text())
+    record["source"] = {"the run itself": str(run_copy), "/": "/", "a name too long for the system": "z" * 100_000}[source]
+    (run_copy / "run.json").write_text(json.dumps(record))
+    out = tmp_path / "report"
+    assert main(["report", str(run_copy), "--out", str(out), "--quiet"]) == 0
+    expected = "is not there" if source.startswith("a name") else "is not a data set"
+    assert expected in build_report(run_copy).ground_truth and len(build_report(run_copy).ground_truth) < 400
+
+
 def test_truth_without_ground_truth_is_an_error_naming_it(run_copy, tmp_path):
     bare = tmp_path / "bare"
     shutil.copytree(SMALL, bare, ignore=shutil.ignore_patterns("gt"))

@@ -30,7 +30,8 @@ def check_array(
     """`value` as an array of `shape` (None: any length on that axis), converted to `dtype`
     (None: kept as it is; a float type: refused unless `value` holds real numbers); a copy
     unless `copy` is False and `value` is already of `dtype`. With `nonempty`, no axis may
-    have length 0.
+    have length 0. A `numpy.ma` array with masked entries is refused (numpy's conversion
+    would use their hidden values); one without is taken as its data.
 
     Examples
     --------
@@ -47,6 +48,8 @@ def check_array(
     """
     if isinstance(value, (str, bytes)):
         raise ArgumentError(name, f"expected an array of shape {_shape_text(shape)}, got {type(value).__name__} {value!r:.40}")
+    if np.ma.is_masked(value):
+        raise ArgumentError(name, "a masked array with masked entries: their values would be used as they are; fill them, or leave pixels out with the mask argument")
     array = np.asarray(value)
     if array.ndim != len(shape) or any(want is not None and have != want for have, want in zip(array.shape, shape)):
         expected = _shape_text(shape)
@@ -244,7 +247,10 @@ def check_path(name: str, value) -> Path:
     irtps.errors.ArgumentError: path: expected a path (str, bytes or os.PathLike), got int 3
     """
     if isinstance(value, (str, bytes, os.PathLike)):
-        text = os.fsdecode(value)
+        try:
+            text = os.fsdecode(value)
+        except TypeError:  # an os.PathLike whose __fspath__ gives neither str nor bytes
+            text = ""
         if text:
             return Path(text)
     raise ArgumentError(name, f"expected a path (str, bytes or os.PathLike), got {type(value).__name__} {value!r:.60}")

@@ -22,7 +22,7 @@ from irtps.diligent import diligent_ground_truth_inputs, diligent_image_names, d
 from irtps.errors import ArgumentError, DatasetError
 from irtps.image_selection import ImageSelection, parse_image_list, select_images
 from irtps.imageio import check_stack_memory, clip_negative, format_size, png_saturation, read_exr, read_image, read_images, read_mask, write_exr, write_png
-from irtps.paths import check_file, check_folder, exists, optional_file, optional_folder
+from irtps.paths import check_file, check_folder, exists, folder_problem, optional_file, optional_folder
 from irtps.records import RENDERING, stamp
 from irtps.scene import Scene, load_scene, write_scene
 
@@ -281,6 +281,18 @@ def ground_truth_inputs(path: str | Path) -> list[Path]:
         return diligent_ground_truth_inputs(folder)
     _, truth = _ground_truth_files(folder)
     return [folder, folder / SCENE_FILE, *([] if truth is None else truth.paths())]
+
+
+def is_data_set(path: str | Path) -> bool:
+    """Whether `path` is a folder that holds a data set's marker file (``scene.json``, or
+    DiLiGenT's ``light_directions.txt``); what it holds is not read.
+
+    Examples
+    --------
+    >>> is_data_set("/")
+    False
+    """
+    return folder_problem(path) is None and (exists(Path(path) / SCENE_FILE) or exists(Path(path) / DILIGENT_MARKER))
 
 
 def _layout(folder: Path) -> str:

@@ -8,6 +8,7 @@ evaluation, ``Normal_gt.mat`` (variable ``Normal_gt``, (H, W, 3)).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import NamedTuple
 
@@ -16,12 +17,12 @@ import scipy.io
 
 from irtps.data import Dataset, GroundTruth
 from irtps._checks import check_finite
-from irtps.errors import DatasetError
-from irtps.guarded import read_text
+from irtps.errors import ArgumentError, DatasetError
+from irtps.guarded import parse_float, read_text
 from irtps.image_selection import ImageSelection, select_images
 from irtps.imageio import check_stack_memory, format_size, png_saturation, read_images, read_mask
 from irtps.paths import check_file, check_folder, optional_file
-from irtps.scene import MIN_LIGHTS, Camera, Light, Scene, irradiance_problem
+from irtps.scene import MIN_LIGHTS, Camera, Light, Scene, irradiance_problem, upward_problem
 
 FILENAMES_FILE = "filenames.txt"
 DIRECTIONS_FILE = "light_directions.txt"
@@ -62,7 +63,7 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
     DatasetError
         Naming the file (and line) and the problem: a missing file or one that is
         not a readable regular file (a directory, a FIFO, a symlink loop), line counts
-        that disagree, a direction that is not a unit vector (beyond 1e-2) or
+        that disagree, an image listed twice, a direction that is not a unit vector (beyond 1e-2) or
         has z <= 0, a negative intensity or one out of range
         (`irtps.scene.irradiance_problem`), fewer than 3 lights, images of
         different sizes or with non-finite values.
@@ -189,7 +190,14 @@ def _read_lines(path: Path) -> list[tuple[int, str]]:
 
 
 def _read_filenames(path: Path) -> tuple[list[str], list[int]]:
+    """The image names listed, each once (one image under two lights is a slip, not data),
+    and their line numbers."""
     lines = _read_lines(path)
+    first: dict[str, int] = {}
+    for number, name in lines:
+        seen = first.setdefault(os.path.normpath(name), number)
+        if seen != number:
+            raise DatasetError(f"{path}: line {number} lists {name!r} again (line {seen} lists it): each image goes with one light")
     return [name for _, name in lines], [number for number, _ in lines]
 
 
@@ -199,8 +207,8 @@ def _read_table(path: Path) -> tuple[np.ndarray, list[int]]:
     for number, line in _read_lines(path):
         fields = line.replace(",", " ").split()
         try:
-            row = [float(field) for field in fields]
-        except ValueError:
+            row = [parse_float(field, "field") for field in fields]
+        except ArgumentError:
             raise DatasetError(f"{path}: line {number}: expected 3 numbers, got {line!r}") from None
         if len(row) != 3:
             raise DatasetError(f"{path}: line {number}: expected 3 numbers, got {len(row)}")
@@ -216,11 +224,9 @@ def _unit_directions(path: Path, directions: np.ndarray, lines: list[int]) -> np
     for direction, norm, line in zip(directions, norms, lines, strict=True):
         if abs(norm - 1.0) > UNIT_TOLERANCE:
             raise DatasetError(f"{path}: line {line}: light direction is not a unit vector (norm {norm:.6g})")
-        if direction[2] <= 0.0:
-            raise DatasetError(
-                f"{path}: line {line}: light direction must point toward the camera side (z > 0), "
-                f"got z = {direction[2]:g}"
-            )
+        upward = upward_problem(direction[2])
+        if upward is not None:
+            raise DatasetError(f"{path}: line {line}: light direction {upward}")
     return directions / norms[:, None]
 
 

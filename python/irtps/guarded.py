@@ -9,7 +9,9 @@ file (and the line and column) or the option.
 
 `read_json` reads ``scene.json``, ``run.json``, ``table.json``, ``batch.json`` and
 ``gt/rendering.json``; `read_text` the DiLiGenT text files; `parse_int` every integer given on
-the command line or in a list of images.
+the command line or in a list of images; `parse_float` every other number given on the command
+line or in a DiLiGenT text file. Numbers are written in ASCII decimal digits: Python's own
+``float()`` and ``int()`` also take ``1_000`` (as 1000) and digits of other scripts (``٣``).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from typing import Any
 from irtps.errors import ArgumentError, DatasetError, IrtpsError
 from irtps.paths import MISSING, file_problem
 
-__all__ = ["MAX_DEPTH", "MAX_DIGITS", "MAX_TEXT_BYTES", "parse_int", "parse_json", "read_json", "read_text"]
+__all__ = ["MAX_DEPTH", "MAX_DIGITS", "MAX_TEXT_BYTES", "parse_float", "parse_int", "parse_json", "read_json", "read_text", "shown"]
 
 #: The largest text file read: far above any scene, record or light list (96 lights take
 #: 4 kB), far below what would exhaust memory.
@@ -33,6 +35,7 @@ MAX_DEPTH = 64
 #: digits and no count irtps uses needs more than 20.
 MAX_DIGITS = 40
 
+_FLOAT = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)", flags=re.ASCII | re.IGNORECASE)
 _STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
 _NUMBER_DIGITS = re.compile(r"\d")
 _BRACKETS = re.compile(r"[\[\]{}]")
@@ -40,6 +43,8 @@ _BRACKETS = re.compile(r"[\[\]{}]")
 
 def read_text(path: str | Path, *, error: type[IrtpsError] = DatasetError, max_bytes: int = MAX_TEXT_BYTES) -> str:
     """The UTF-8 text of a file, read only if it is a regular file of at most `max_bytes`.
+
+    A byte-order mark at its start (as Windows editors write) is not part of the text.
 
     Parameters
     ----------
@@ -78,7 +83,7 @@ def read_text(path: str | Path, *, error: type[IrtpsError] = DatasetError, max_b
     if len(data) > max_bytes:
         raise error(f"{path}: larger than {max_bytes // (1024 * 1024)} MiB: not a file irtps reads")
     try:
-        return data.decode("utf-8")
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError as failure:
         raise error(f"{path}: not UTF-8 text (byte {failure.start})") from None
 
@@ -206,11 +211,49 @@ def parse_int(text: str, name: str) -> int:
     """
     stripped = text.strip()
     if not re.fullmatch(r"[+-]?[0-9]+", stripped, flags=re.ASCII):
-        raise ArgumentError(name, f"expected an integer, got {_shown(stripped)}")
+        raise ArgumentError(name, f"expected an integer, got {shown(stripped)}")
     digits = len(stripped.lstrip("+-"))
     if digits > MAX_DIGITS:
         raise ArgumentError(name, f"an integer with {digits} digits; at most {MAX_DIGITS} are accepted")
     return int(stripped)
+
+
+def parse_float(text: str, name: str) -> float:
+    """A number written in decimal digits (``-1.5e-3``, ``.5``, ``inf``, ``nan``), bounded.
+
+    Parameters
+    ----------
+    text : str
+    name : str
+        What the text is (an option's name), the start of every message.
+
+    Returns
+    -------
+    float
+        Possibly ``inf`` or ``nan``: the caller says whether those are allowed.
+
+    Raises
+    ------
+    ArgumentError
+        ``"NAME: PROBLEM"`` for anything else (``1_000``, ``0x10``, ``٣``), or a number of more
+        than `MAX_DIGITS` digits before its exponent.
+
+    Examples
+    --------
+    >>> parse_float(" -1.5e-3 ", "saturation")
+    -0.0015
+    >>> parse_float("1_0", "saturation")
+    Traceback (most recent call last):
+    ...
+    irtps.errors.ArgumentError: saturation: expected a number, got '1_0'
+    """
+    stripped = text.strip()
+    if not _FLOAT.fullmatch(stripped):
+        raise ArgumentError(name, f"expected a number, got {shown(stripped)}")
+    digits = len(_NUMBER_DIGITS.findall(stripped.split("e")[0].split("E")[0]))
+    if digits > MAX_DIGITS:
+        raise ArgumentError(name, f"a number with {digits} digits; at most {MAX_DIGITS} are accepted")
+    return float(stripped)
 
 
 class _Refused(Exception):
@@ -247,6 +290,18 @@ def _place(text: str, literal: str | None) -> str:
     return f"line {line}, column {column}: "
 
 
-def _shown(text: str) -> str:
-    """A value for a message: at most 40 characters of it."""
-    return repr(text if len(text) <= 40 else text[:37] + "...")
+def shown(value: object, limit: int = 40) -> str:
+    """A value read from a file or the command line, for a message: its `repr`, of a text at
+    most `limit` characters of it (a field of a JSON file may be megabytes long).
+
+    Examples
+    --------
+    >>> shown("x" * 100)
+    "'xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx...'"
+    >>> shown([0] * 100, limit=12)
+    '[0, 0, 0,...'
+    """
+    if isinstance(value, str):
+        return repr(value if len(value) <= limit else value[: limit - 3] + "...")
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -24,7 +24,7 @@ from typing import Any, ClassVar, TypeVar
 import numpy as np
 
 from irtps.errors import ArgumentError
-from irtps.guarded import parse_int
+from irtps.guarded import parse_float, parse_int
 from irtps.imageio import MAX_IMAGE_PIXELS
 from irtps.integrate import METHODS as INTEGRATION_METHODS
 from irtps.ps import ROBUST_CHOICES, ROBUST_MODES
@@ -431,14 +431,15 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
 
 def _converter(spec: _Spec):
     """The command-line converter of a number option: one of its words, or its kind (an
-    integer read by `irtps.guarded.parse_int`, bounded)."""
+    integer read by `irtps.guarded.parse_int`, a float by `irtps.guarded.parse_float`: ASCII
+    decimal digits, bounded)."""
 
     def convert(text: str) -> Any:
         if text in spec.words:
             return text
         try:
-            return int_argument(text) if spec.kind is int else spec.kind(text)
-        except (ValueError, argparse.ArgumentTypeError):
+            return int_argument(text) if spec.kind is int else parse_float(text, "value")
+        except (ArgumentError, argparse.ArgumentTypeError):
             raise argparse.ArgumentTypeError(f"{_value_text(text)} is not {dataclasses.replace(spec, optional=False).describe()}") from None
 
     return convert

@@ -20,6 +20,10 @@ from irtps.records import written_by_irtps
 
 __all__ = ["OutputError", "check_output", "escaped"]
 
+#: What is at an output path that is never replaced, even with ``--force``: a program may be
+#: reading or listening there, and a device is the system's (as `_kind` names them).
+_NEVER_REPLACED = ("a FIFO", "a socket", "a device")
+
 
 class OutputError(IrtpsError, ValueError):
     """An output path that would destroy an input or something else of the user's."""
@@ -43,8 +47,8 @@ def check_output(out: str | Path, inputs: Iterable[str | Path], *, force: bool =
     ------
     OutputError
         Naming the option and the path: `out` is a symbolic-link loop; it is, holds or lies
-        inside an input; it is an existing file (without `force`) or something else that is
-        not a folder; it is a folder with content that is not `irtps.records.written_by_irtps` (without
+        inside an input; it is a FIFO, a socket or a device (even with `force`); it is an
+        existing file (without `force`) or something else that is not a folder; it is a folder with content that is not `irtps.records.written_by_irtps` (without
         `force`).
 
     Examples
@@ -72,6 +76,8 @@ def check_output(out: str | Path, inputs: Iterable[str | Path], *, force: bool =
                         f"{option} {shown}: {relation} the input {escaped(source)}; writing there would "
                         f"{'delete' if relation != 'lies inside' else 'change'} it: choose a folder outside the input"
                     )
+    if kind is not None and kind.startswith(_NEVER_REPLACED):
+        raise OutputError(f"{option} {shown}: is {kind}, not a folder: choose another path (--force never replaces one)")
     if kind is None or force:
         return
     if kind == "file":

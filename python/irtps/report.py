@@ -25,14 +25,16 @@ from pathlib import Path
 import numpy as np
 
 from irtps.atomic import atomic_output_dir
-from irtps.dataset import GroundTruth, ground_truth_inputs, load_ground_truth
+from irtps.dataset import GroundTruth, ground_truth_inputs, is_data_set, load_ground_truth
 from irtps.display import albedo_to_rgb, hillshade, normal_to_rgb, object_window, radiance_to_rgb
 from irtps.errors import IrtpsError
 from irtps.evaluate import ErrorMaps, Metrics, error_maps, evaluate
 from irtps.figures import agreement_png, convergence_png, error_map_png, image_png
 from irtps.image_agreement import ImageAgreement
 from irtps.imageio import read_exr
+from irtps.guarded import shown
 from irtps.output_rule import check_output
+from irtps.paths import folder_problem
 from irtps.reconstruct import RECONSTRUCTION_FILES, load_reconstruction, load_run_record
 from irtps.report_page import recorded_agreement, report_html
 
@@ -297,13 +299,25 @@ def report_inputs(run_dir: str | Path, truth: str | Path | None = None) -> list[
     inputs = [folder / name for name in RECONSTRUCTION_FILES]
     if truth is None:
         try:
-            source = load_run_record(folder)["source"]
+            truth = _recorded_source(load_run_record(folder))[0]
         except IrtpsError:
             return inputs  # the report itself says what is wrong with run.json
-        if source is None or not Path(source).is_dir():
+        if truth is None:
             return inputs  # no ground truth is read
-        truth = source
     return [*inputs, *ground_truth_inputs(truth)]
+
+
+def _recorded_source(record: dict) -> tuple[str | None, str]:
+    """The source data set that ``run.json`` records, when it is a data set to compare with;
+    else None, and why not (a recorded path may be anything: gone, the run itself, ``/``)."""
+    source = record["source"]
+    if source is None:
+        return None, "run.json names no source data set"
+    if folder_problem(source) is not None:
+        return None, f"the source data set {shown(source, 200)} is not there"
+    if not is_data_set(source):
+        return None, f"the recorded source {shown(source, 200)} is not a data set"
+    return source, ""
 
 
 def _ground_truth(record: dict, truth: str | Path | None, size: tuple[int, int]) -> tuple[GroundTruth | None, str]:
@@ -313,11 +327,9 @@ def _ground_truth(record: dict, truth: str | Path | None, size: tuple[int, int])
         if gt is None:
             raise IrtpsError(f"{truth}: has no ground truth (gt/ or Normal_gt.mat)")
         return gt, f"from {truth}."
-    source = record["source"]
+    source, why_not = _recorded_source(record)
     if source is None:
-        return None, f"none, so no error maps: run.json names no source data set ({NO_TRUTH_HINT})."
-    if not Path(source).is_dir():
-        return None, f"none, so no error maps: the source data set {source} is not there ({NO_TRUTH_HINT})."
+        return None, f"none, so no error maps: {why_not} ({NO_TRUTH_HINT})."
     gt = load_ground_truth(source, size)
     if gt is None:
         return None, f"none, so no error maps: the source data set {source} has none ({NO_TRUTH_HINT})."

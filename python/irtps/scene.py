@@ -19,7 +19,7 @@ from irtps._checks import check_path
 from irtps.atomic import atomic_write_text
 from irtps.errors import DatasetError
 from irtps.imageio import MAX_IMAGE_PIXELS
-from irtps.guarded import read_json
+from irtps.guarded import read_json, shown
 from irtps.paths import exists
 
 FORMAT = "irtps.scene/1"
@@ -198,11 +198,11 @@ def parse_scene(obj: object, source: str = "scene.json") -> Scene:
     fields = _Fields(source)
     scene_format = fields.mapping(obj, "", required=("format",), optional=(*_SCENE_KEYS, "irradiance"))["format"]
     if scene_format != FORMAT:
-        fields.fail("format", f"is {scene_format!r}: unknown format (expected {FORMAT!r})")
+        fields.fail("format", f"is {shown(scene_format)}: unknown format (expected {FORMAT!r})")
     root = fields.mapping(obj, "", required=_SCENE_KEYS, optional=("irradiance",))
     irradiance = root.get("irradiance", "absolute")
     if irradiance not in IRRADIANCE_KINDS:
-        fields.fail("irradiance", f"is {irradiance!r}: expected one of {', '.join(map(repr, IRRADIANCE_KINDS))}")
+        fields.fail("irradiance", f"is {shown(irradiance)}: expected one of {', '.join(map(repr, IRRADIANCE_KINDS))}")
     camera = _parse_camera(fields, root["camera"])
     lights = _parse_lights(fields, root["lights"])
     floor = None if root["floor"] is None else _parse_floor(fields, root["floor"])
@@ -300,6 +300,23 @@ MIN_PIXEL_SIZE, MAX_PIXEL_SIZE = 1e-9, 1e9
 MIN_IRRADIANCE, MAX_IRRADIANCE = 1e-9, 1e9
 
 
+def upward_problem(z: float) -> str | None:
+    """Why a light direction whose z component is `z` does not point toward the camera side,
+    or None: z must be above 0 as the core holds it, in float32.
+
+    Examples
+    --------
+    >>> upward_problem(0.5) is None
+    True
+    >>> upward_problem(1e-50)
+    'must point toward the camera side (z > 0), got z = 1e-50, which is 0 in float32'
+    """
+    if np.float32(z) > 0.0:
+        return None
+    zero = ", which is 0 in float32" if z > 0.0 else ""
+    return f"must point toward the camera side (z > 0), got z = {z:g}{zero}"
+
+
 def irradiance_problem(irradiance) -> str | None:
     """What makes an RGB irradiance unusable, or None: a negative channel, or a positive one
     outside [`MIN_IRRADIANCE`, `MAX_IRRADIANCE`].
@@ -323,7 +340,7 @@ def irradiance_problem(irradiance) -> str | None:
 def _parse_camera(fields: _Fields, value: object) -> Camera:
     camera = fields.mapping(value, "camera", required=("projection", "width", "height", "pixel_size"))
     if camera["projection"] != "orthographic":
-        fields.fail("camera.projection", f"is {camera['projection']!r}: only 'orthographic' is supported")
+        fields.fail("camera.projection", f"is {shown(camera['projection'])}: only 'orthographic' is supported")
     width = fields.positive_int(camera["width"], "camera.width")
     height = fields.positive_int(camera["height"], "camera.height")
     if width * height > MAX_IMAGE_PIXELS:
@@ -346,8 +363,9 @@ def _parse_lights(fields: _Fields, value: object) -> tuple[Light, ...]:
         norm = math.hypot(*direction)
         if abs(norm - 1.0) > UNIT_TOLERANCE:
             fields.fail(f"{where}.direction", f"is not a unit vector (norm {norm:.6g})")
-        if direction[2] <= 0.0:
-            fields.fail(f"{where}.direction", f"must point toward the camera side (z > 0), got z = {direction[2]:g}")
+        upward = upward_problem(direction[2])
+        if upward is not None:
+            fields.fail(f"{where}.direction", upward)
         irradiance = fields.vector3(light["irradiance"], f"{where}.irradiance")
         problem = irradiance_problem(irradiance)
         if problem is not None:
@@ -370,7 +388,7 @@ def _parse_environment(fields: _Fields, value: object, floor_height: float) -> C
         fields.mapping(value, "environment", required=("type",))
         return None
     if kind != "cornell_box":
-        fields.fail("environment.type", f"is {kind!r}: expected 'none' or 'cornell_box'")
+        fields.fail("environment.type", f"is {shown(kind)}: expected 'none' or 'cornell_box'")
     box = fields.mapping(value, "environment", required=_BOX_KEYS)
     x = fields.interval(box["x"], "environment.x")
     y = fields.interval(box["y"], "environment.y")
@@ -406,7 +424,7 @@ def _json_type(value: object) -> str:
     if isinstance(value, numbers.Number):
         return f"the number {value!r}"
     if isinstance(value, str):
-        return f"the string {value!r}"
+        return f"the string {shown(value)}"
     if isinstance(value, (list, tuple)):
         return "an array"
     if isinstance(value, dict):
@@ -436,7 +454,7 @@ class _Fields:
                 self.fail(_join(field, key), "is missing")
         for key in value:
             if key not in required and key not in optional:
-                self.fail(where, f"has an unknown field {key!r}")
+                self.fail(where, f"has an unknown field {shown(key)}")
         return value
 
     def array(self, value: object, field: str) -> list:
