@@ -90,7 +90,10 @@ def test_scene_json_carries_relative_irradiance_and_refuses_other_words():
 def test_irtps_under_relative_irradiance_does_as_well_as_under_absolute():
     truth, _ = synthesize("cavity", size=40, lights=8, bounces=3, samples=64, environment="cornell", base=12.0, seed=4)
     data = _relative(truth, 0.25)
-    error = lambda result: irtps.evaluate(mask=data.mask, normals=result.normals, gt=data.gt).normal_mean_angular_deg
+
+    def error(result):
+        return irtps.evaluate(mask=data.mask, normals=result.normals, gt=data.gt).normal_mean_angular_deg
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         relative, absolute, classic = irtps.reconstruct(data, "irtps"), irtps.reconstruct(truth, "irtps"), irtps.reconstruct(data)
