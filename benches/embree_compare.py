@@ -48,11 +48,17 @@ def relief(n: int) -> np.ndarray:
     i, j = np.meshgrid(np.arange(n, dtype=np.float64), np.arange(n, dtype=np.float64), indexing="ij")
     u, v = j / n, i / n
     tau = 2.0 * np.pi
-    waves = 6.0 * np.sin(tau * 3.0 * u) * np.cos(tau * 2.0 * v) + 4.0 * np.sin(tau * (5.0 * u + 4.0 * v)) + 3.0 * np.cos(tau * 7.0 * v)
+    waves = (
+        6.0 * np.sin(tau * 3.0 * u) * np.cos(tau * 2.0 * v)
+        + 4.0 * np.sin(tau * (5.0 * u + 4.0 * v))
+        + 3.0 * np.cos(tau * 7.0 * v)
+    )
     dx, dy = j + 0.5 - n / 2.0, i + 0.5 - n / 2.0
     r2 = dx * dx + dy * dy
     sphere, cap = 200.0 * scale, 150.0 * scale
-    bump = np.where(r2 < cap * cap, np.sqrt(np.maximum(sphere * sphere - r2, 0.0)) - np.sqrt(sphere * sphere - cap * cap), 0.0)
+    bump = np.where(
+        r2 < cap * cap, np.sqrt(np.maximum(sphere * sphere - r2, 0.0)) - np.sqrt(sphere * sphere - cap * cap), 0.0
+    )
     return ((40.0 + waves) * scale + bump).astype(np.float32)
 
 
@@ -68,9 +74,14 @@ def build_renderer(n: int) -> tuple[_core.Renderer, np.ndarray]:
     grey = (0.7, 0.7, 0.7)
     box = CornellBox((-half, half), (-half, half), 0.5 * n, (0.8, 0.1, 0.1), (0.1, 0.8, 0.1), grey, grey)
     renderer = _core.Renderer(
-        height, mask, albedo, 1.0,
-        np.array([[0.0, 0.0, 1.0]], dtype=np.float32), np.ones((1, 3), dtype=np.float32),
-        floor=Floor(0.0, (0.8, 0.8, 0.8)), cornell_box=box,
+        height,
+        mask,
+        albedo,
+        1.0,
+        np.array([[0.0, 0.0, 1.0]], dtype=np.float32),
+        np.ones((1, 3), dtype=np.float32),
+        floor=Floor(0.0, (0.8, 0.8, 0.8)),
+        cornell_box=box,
     )
     return renderer, height
 
@@ -88,7 +99,9 @@ def vertex_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.where(length > 0, acc / np.where(length > 0, length, 1.0), [0.0, 0.0, 1.0])
 
 
-def cosine_rays(positions: np.ndarray, normals: np.ndarray, pixels: int, count: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def cosine_rays(
+    positions: np.ndarray, normals: np.ndarray, pixels: int, count: int, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cosine-distributed directions around the normals of random height-field vertices:
     origins (N, 3), directions (N, 3) float32 and the index of each origin's vertex."""
     rng = np.random.default_rng(seed)
@@ -102,7 +115,11 @@ def cosine_rays(positions: np.ndarray, normals: np.ndarray, pixels: int, count: 
     bb = n[:, 0] * n[:, 1] * a
     t = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * bb, -sign * n[:, 0]], axis=1)
     b = np.stack([bb, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
-    d = t * (r * np.cos(phi))[:, None] + b * (r * np.sin(phi))[:, None] + n * np.sqrt(np.maximum(1.0 - u1, 0.0))[:, None]
+    d = (
+        t * (r * np.cos(phi))[:, None]
+        + b * (r * np.sin(phi))[:, None]
+        + n * np.sqrt(np.maximum(1.0 - u1, 0.0))[:, None]
+    )
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     origins = positions[vertex].astype(np.float64) + OFFSET * n
     return np.ascontiguousarray(origins, dtype=np.float32), np.ascontiguousarray(d, dtype=np.float32), vertex
@@ -125,10 +142,26 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--size", type=int, default=512, help="height-field side in pixels (default 512)")
     ap.add_argument("--rays", type=int, default=1_000_000, help="rays per timed run (default 1e6)")
-    ap.add_argument("--repeats", type=int, default=5, help="timed runs of each tracer; medians are reported (default 5)")
-    ap.add_argument("--threads", type=int, default=1, help="irtps threads (default 1: per-thread comparison; embreex is single-threaded)")
-    ap.add_argument("--order", choices=["random", "pixel", "both"], default="both", help="ray order: as drawn, sorted by origin pixel, or both (default)")
-    ap.add_argument("--embree-fast", action="store_true", help="build the Embree scene without RTC_SCENE_FLAG_ROBUST (embreex's default is robust)")
+    ap.add_argument(
+        "--repeats", type=int, default=5, help="timed runs of each tracer; medians are reported (default 5)"
+    )
+    ap.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="irtps threads (default 1: per-thread comparison; embreex is single-threaded)",
+    )
+    ap.add_argument(
+        "--order",
+        choices=["random", "pixel", "both"],
+        default="both",
+        help="ray order: as drawn, sorted by origin pixel, or both (default)",
+    )
+    ap.add_argument(
+        "--embree-fast",
+        action="store_true",
+        help="build the Embree scene without RTC_SCENE_FLAG_ROBUST (embreex's default is robust)",
+    )
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = ap.parse_args(argv)
@@ -154,11 +187,17 @@ def main(argv: list[str] | None = None) -> int:
     scene.run(origins[:1], directions[:1], output=1)  # commits the scene: builds Embree's BVH
     embree_build = time.perf_counter() - t0
 
-    print(f"scene: {n}x{n} height field in a Cornell box with a floor, {len(triangles):,} triangles, {len(positions):,} vertices")
+    print(
+        f"scene: {n}x{n} height field in a Cornell box with a floor, {len(triangles):,} triangles, {len(positions):,} vertices"
+    )
     print(f"rays: {args.rays:,} cosine-distributed from random height-field pixels; medians of {args.repeats} runs")
-    print("  order 'random': as drawn (incoherent); 'pixel': sorted by origin pixel, row-major (as a render traces them)")
+    print(
+        "  order 'random': as drawn (incoherent); 'pixel': sorted by origin pixel, row-major (as a render traces them)"
+    )
     print(f"Embree: {mode}, embreex's single-threaded loop over rtcIntersect1")
-    print(f"setup: irtps Renderer {irtps_setup:.2f} s (mesh, BVH, light cache); Embree mesh upload {embree_load:.2f} s, BVH commit {embree_build:.2f} s")
+    print(
+        f"setup: irtps Renderer {irtps_setup:.2f} s (mesh, BVH, light cache); Embree mesh upload {embree_load:.2f} s, BVH commit {embree_build:.2f} s"
+    )
 
     ok = True
     results = {}
@@ -190,26 +229,56 @@ def main(argv: list[str] | None = None) -> int:
         rate_i, rate_e = args.rays / med_i, args.rays / med_e
         per_thread_i = rate_i / args.threads
         ratio = per_thread_i / rate_e
-        print(f"order {order}: {hit_i.mean():.1%} hit; agreement: hit/miss {agree:.4%}, "
-              f"distance within 1e-3 rel. {within:.4%} of common hits, same triangle {same_triangle:.4%}")
-        rows.append((order, "irtps (pyramid walk)", args.threads, med_i, rate_i, per_thread_i, statistics.median(c_i) / med_i, ratio))
+        print(
+            f"order {order}: {hit_i.mean():.1%} hit; agreement: hit/miss {agree:.4%}, "
+            f"distance within 1e-3 rel. {within:.4%} of common hits, same triangle {same_triangle:.4%}"
+        )
+        rows.append(
+            (
+                order,
+                "irtps (pyramid walk)",
+                args.threads,
+                med_i,
+                rate_i,
+                per_thread_i,
+                statistics.median(c_i) / med_i,
+                ratio,
+            )
+        )
         rows.append((order, "Embree (embreex)", 1, med_e, rate_e, rate_e, statistics.median(c_e) / med_e, None))
         results[order] = {
             "hit_fraction": float(hit_i.mean()),
-            "irtps": {"threads": args.threads, "median_s": med_i, "rays_per_s": rate_i, "rays_per_s_per_thread": per_thread_i, "times_s": w_i},
-            "embree": {"threads": 1, "median_s": med_e, "rays_per_s": rate_e, "rays_per_s_per_thread": rate_e, "times_s": w_e},
+            "irtps": {
+                "threads": args.threads,
+                "median_s": med_i,
+                "rays_per_s": rate_i,
+                "rays_per_s_per_thread": per_thread_i,
+                "times_s": w_i,
+            },
+            "embree": {
+                "threads": 1,
+                "median_s": med_e,
+                "rays_per_s": rate_e,
+                "rays_per_s_per_thread": rate_e,
+                "times_s": w_e,
+            },
             "ratio_irtps_over_embree_per_thread": ratio,
             "agreement": {"hit_miss": agree, "distance_within_1e-3": within, "same_triangle": same_triangle},
         }
 
     print()
-    print(f"{'order':<8}{'tracer':<22}{'threads':>8}{'median s':>10}{'rays/s':>13}{'rays/s/thread':>15}{'cpu/wall':>9}{'irtps/Embree':>14}")
+    print(
+        f"{'order':<8}{'tracer':<22}{'threads':>8}{'median s':>10}{'rays/s':>13}{'rays/s/thread':>15}{'cpu/wall':>9}{'irtps/Embree':>14}"
+    )
     for order, name, threads, med, rate, per_thread, cpu, ratio in rows:
         r = f"{ratio:.2f}" if ratio is not None else ""
         print(f"{order:<8}{name:<22}{threads:>8}{med:>10.3f}{rate:>13,.0f}{per_thread:>15,.0f}{cpu:>9.2f}{r:>14}")
 
     if not ok:
-        print("WARNING: irtps and Embree disagree beyond the tolerance (hit/miss > 99.9%, distances within 1e-3 relative)", file=sys.stderr)
+        print(
+            "WARNING: irtps and Embree disagree beyond the tolerance (hit/miss > 99.9%, distances within 1e-3 relative)",
+            file=sys.stderr,
+        )
 
     if args.json:
         figures = {
@@ -219,8 +288,17 @@ def main(argv: list[str] | None = None) -> int:
             "repeats": args.repeats,
             "embree_mode": "robust" if robust else "fast",
             "orders": results,
-            "setup_s": {"irtps_renderer": irtps_setup, "embree_mesh_upload": embree_load, "embree_commit": embree_build},
-            "machine": {"platform": platform.platform(), "processor": platform.processor(), "cpus": os.cpu_count(), "python": platform.python_version()},
+            "setup_s": {
+                "irtps_renderer": irtps_setup,
+                "embree_mesh_upload": embree_load,
+                "embree_commit": embree_build,
+            },
+            "machine": {
+                "platform": platform.platform(),
+                "processor": platform.processor(),
+                "cpus": os.cpu_count(),
+                "python": platform.python_version(),
+            },
         }
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(figures, indent=2) + "\n")

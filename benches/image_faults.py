@@ -51,7 +51,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--only", nargs="+", help="data set names (default: every one under ../shared/data)")
     args = parser.parse_args()
-    folders = sorted(path for path in SHARED.glob("*/*") if path.is_dir() and ((path / "scene.json").exists() or (path / "light_directions.txt").exists()))
+    folders = sorted(
+        path
+        for path in SHARED.glob("*/*")
+        if path.is_dir() and ((path / "scene.json").exists() or (path / "light_directions.txt").exists())
+    )
     if args.only:
         folders = [path for path in folders if path.name in args.only]
     if not folders:
@@ -75,7 +79,9 @@ def main() -> None:
             agreement = irtps.reconstruct(faulty).image_agreement
             bad = np.zeros(len(dataset.names), bool)
             bad[list(images)] = True
-            left_out = irtps.reconstruct(irtps.exclude_images(faulty, ",".join(dataset.names[k] for k in np.flatnonzero(bad))))
+            left_out = irtps.reconstruct(
+                irtps.exclude_images(faulty, ",".join(dataset.names[k] for k in np.flatnonzero(bad)))
+            )
             corrected = irtps.reconstruct(faulty, correct_brightness=True)
             print(
                 f"{folder.name:18s} {label:13s} brightness sound {spread(agreement.brightness[~bad])}, faulty {spread(agreement.brightness[bad])}  "

@@ -137,7 +137,10 @@ def compare_solvers(n, runs, passes=6):
             x_cg, iterations, _ = integ._pcg(a, b, amg, np.zeros(b.size), 1e-5)
             cg_s.append(time.perf_counter() - t)
             del amg
-        m = {k: statistics.median(v) for k, v in (("factor", factor_s), ("solve", solve_s), ("setup", setup_s), ("cg", cg_s))}
+        m = {
+            k: statistics.median(v)
+            for k, v in (("factor", factor_s), ("solve", solve_s), ("setup", setup_s), ("cg", cg_s))
+        }
         span = float(np.ptp(x_direct)) or 1.0
         rows.append(
             {
@@ -201,7 +204,9 @@ def main(argv=None):
         for n in args.solver_sizes:
             solver_rows += compare_solvers(n, args.runs)
         print_solver_rows(solver_rows)
-    print(f"{'size':>9} {'method':>10} {'outliers':>8} {'pixels':>8} {'median s':>9} {'runs s':>22} {'target s':>8} {'rel. RMSE':>10}")
+    print(
+        f"{'size':>9} {'method':>10} {'outliers':>8} {'pixels':>8} {'median s':>9} {'runs s':>22} {'target s':>8} {'rel. RMSE':>10}"
+    )
     for n in [] if args.skip_methods else args.sizes:
         for method, outliers in cases:
             normals, mask, truth, s = field(n, outliers)
@@ -237,7 +242,10 @@ def main(argv=None):
         for n in args.sizes:
             normals, mask, _, s = field(n)
             profiles[n] = profile_ls(normals, mask, s)
-            print(f"ls {n}x{n} phases: " + ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in profiles[n].items()))
+            print(
+                f"ls {n}x{n} phases: "
+                + ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in profiles[n].items())
+            )
     load = os.getloadavg() if hasattr(os, "getloadavg") else None
     print(f"cores: {os.cpu_count()}, load average after the runs: {load}")
     if args.json:
@@ -247,7 +255,12 @@ def main(argv=None):
         report = {
             "benchmark": "normal integration (irtps.integrate.integrate_normals)",
             "machine": {"cores": os.cpu_count(), "platform": platform.platform(), "load_average": load},
-            "versions": {"python": sys.version.split()[0], "numpy": np.__version__, "scipy": scipy.__version__, "pyamg": pyamg.__version__},
+            "versions": {
+                "python": sys.version.split()[0],
+                "numpy": np.__version__,
+                "scipy": scipy.__version__,
+                "pyamg": pyamg.__version__,
+            },
             "results": results,
             "profiles": {str(k): v for k, v in profiles.items()},
             "solvers": solver_rows,

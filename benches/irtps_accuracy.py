@@ -80,12 +80,20 @@ def measure(path: Path, passes: int | None, settings: dict) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--shared", type=Path, default=SHARED, help="the shared data folder (default: ../shared/data)")
     parser.add_argument("--only", nargs="+", help="data set names to run (default: all)")
-    parser.add_argument("--passes", type=int, help="also run this many passes without the early stop, and at most 5 (data sets with direct-only images)")
+    parser.add_argument(
+        "--passes",
+        type=int,
+        help="also run this many passes without the early stop, and at most 5 (data sets with direct-only images)",
+    )
     parser.add_argument("--samples", type=int, help="camera paths per pixel of IRT-PS's estimates (default: irtps's)")
-    parser.add_argument("--no-denoise", action="store_true", help="IRT-PS without the filter of its estimates (irtps.denoise)")
+    parser.add_argument(
+        "--no-denoise", action="store_true", help="IRT-PS without the filter of its estimates (irtps.denoise)"
+    )
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
     paths = sorted(p for group in ("mitsuba", "diligent") for p in (args.shared / group).glob("*") if p.is_dir())
@@ -98,15 +106,23 @@ def main(argv: list[str] | None = None) -> int:
     print("| data | classic PS | IRT-PS | floor | gap closed | passes (chosen) | placement | seconds |")
     print("|---|---|---|---|---|---|---|---|")
     for path in paths:
-        settings = ({} if args.samples is None else {"samples": args.samples}) | ({"denoise": False} if args.no_denoise else {})
+        settings = ({} if args.samples is None else {"samples": args.samples}) | (
+            {"denoise": False} if args.no_denoise else {}
+        )
         row = measure(path, args.passes, settings)
         rows.append(row)
         floor = "n/a" if row["floor_deg"] is None else f"{row['floor_deg']:.2f}°"
         closed = "n/a" if row["gap_closed"] is None else f"{100 * row['gap_closed']:.1f} %"
         placement = f"{row['placement']['base_height']:.2f} ({row['placement']['source']})"
-        print(f"| {row['data']} | {row['classic_deg']:.3f}° | {row['irtps_deg']:.3f}° | {floor} | {closed} | {row['passes']} ({row['chosen_pass']}) | {placement} | {row['seconds']:.1f} |", flush=True)
+        print(
+            f"| {row['data']} | {row['classic_deg']:.3f}° | {row['irtps_deg']:.3f}° | {floor} | {closed} | {row['passes']} ({row['chosen_pass']}) | {placement} | {row['seconds']:.1f} |",
+            flush=True,
+        )
         if f"error_{args.passes}_passes_deg" in row:
-            print(f"|   | {args.passes} passes: {row[f'error_{args.passes}_passes_deg']:.3f}° | at most 5: {row['error_at_most_5_passes_deg']:.3f}° | | | | | |", flush=True)
+            print(
+                f"|   | {args.passes} passes: {row[f'error_{args.passes}_passes_deg']:.3f}° | at most 5: {row['error_at_most_5_passes_deg']:.3f}° | | | | | |",
+                flush=True,
+            )
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))
     return 0

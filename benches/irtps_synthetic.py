@@ -43,7 +43,10 @@ from irtps.scene import Light
 CASES = [
     ("pedestal, textured, Cornell", {"shape": "pedestal", "albedo": "textured", "environment": "cornell"}),
     ("cavity, textured, Cornell", {"shape": "cavity", "albedo": "textured", "environment": "cornell"}),
-    ("relief, textured, Cornell, base 10", {"shape": "relief", "albedo": "textured", "environment": "cornell", "base": 10.0}),
+    (
+        "relief, textured, Cornell, base 10",
+        {"shape": "relief", "albedo": "textured", "environment": "cornell", "base": 10.0},
+    ),
     ("cap, Cornell, base 12", {"shape": "cap", "environment": "cornell", "base": 12.0}),
     ("grooves, textured, no floor", {"shape": "grooves", "albedo": "textured", "environment": "none"}),
     ("pedestal, floor only, base 16", {"shape": "pedestal", "environment": "none", "floor": True, "base": 16.0}),
@@ -63,17 +66,35 @@ DIRECT_TOLERANCE = 0.03
 MITSUBA_VARIATIONS = [
     ("grooves, Cornell", {"shape": "grooves", "environment": "cornell"}, {}),
     ("cavity, albedo 0.3, Cornell", {"shape": "cavity", "environment": "cornell"}, {"albedo": (0.3, 0.3, 0.3)}),
-    ("cap, albedo 0.95, Cornell, base 6", {"shape": "cap", "environment": "cornell", "base": 6.0}, {"albedo": (0.95, 0.95, 0.95)}),
+    (
+        "cap, albedo 0.95, Cornell, base 6",
+        {"shape": "cap", "environment": "cornell", "base": 6.0},
+        {"albedo": (0.95, 0.95, 0.95)},
+    ),
     ("relief, red, Cornell", {"shape": "relief", "environment": "cornell"}, {"albedo": (0.85, 0.25, 0.15)}),
-    ("pedestal, blue and yellow walls", {"shape": "pedestal", "environment": "cornell"}, {"walls": ((0.1, 0.2, 0.7), (0.8, 0.7, 0.1), (0.7, 0.7, 0.7), (0.7, 0.7, 0.7))}),
-    ("cavity, textured, 24 lights 5–60°", {"shape": "cavity", "environment": "cornell", "albedo": "textured"}, {"lights": 24, "zenith_deg": (5.0, 60.0)}),
-    ("grooves, textured, 6 lights, no floor", {"shape": "grooves", "environment": "none", "albedo": "textured"}, {"lights": 6}),
+    (
+        "pedestal, blue and yellow walls",
+        {"shape": "pedestal", "environment": "cornell"},
+        {"walls": ((0.1, 0.2, 0.7), (0.8, 0.7, 0.1), (0.7, 0.7, 0.7), (0.7, 0.7, 0.7))},
+    ),
+    (
+        "cavity, textured, 24 lights 5–60°",
+        {"shape": "cavity", "environment": "cornell", "albedo": "textured"},
+        {"lights": 24, "zenith_deg": (5.0, 60.0)},
+    ),
+    (
+        "grooves, textured, 6 lights, no floor",
+        {"shape": "grooves", "environment": "none", "albedo": "textured"},
+        {"lights": 6},
+    ),
     ("cap, no floor", {"shape": "cap", "environment": "none"}, {}),
     ("relief, floor only", {"shape": "relief", "environment": "none", "floor": True}, {}),
 ]
 
 
-def random_lights(count: int, rng: np.random.Generator, zenith_deg: tuple[float, float] = (10.0, 45.0)) -> tuple[Light, ...]:
+def random_lights(
+    count: int, rng: np.random.Generator, zenith_deg: tuple[float, float] = (10.0, 45.0)
+) -> tuple[Light, ...]:
     """`count` lights of irradiance π, uniform over the cap `zenith_deg` from the camera axis."""
     cos_z = rng.uniform(np.cos(np.radians(zenith_deg[1])), np.cos(np.radians(zenith_deg[0])), count)
     azimuth = rng.uniform(0, 2 * np.pi, count)
@@ -92,10 +113,18 @@ def mitsuba_dataset(mi, variant: str, keywords: dict, seed: int, changes: dict |
     changes = changes or {}
     geometry, _ = irtps.synthesize(size=80, lights=12, bounces=0, samples=1, **keywords)
     gt, mask = geometry.gt, geometry.mask
-    lights = random_lights(changes.get("lights", 12), np.random.default_rng(seed), changes.get("zenith_deg", (10.0, 45.0)))
+    lights = random_lights(
+        changes.get("lights", 12), np.random.default_rng(seed), changes.get("zenith_deg", (10.0, 45.0))
+    )
     scene = replace(geometry.scene, lights=lights)
     if "walls" in changes:
-        scene = replace(scene, environment=replace(scene.environment, **dict(zip(("albedo_left", "albedo_right", "albedo_back", "albedo_front"), changes["walls"]))))
+        scene = replace(
+            scene,
+            environment=replace(
+                scene.environment,
+                **dict(zip(("albedo_left", "albedo_right", "albedo_back", "albedo_front"), changes["walls"])),
+            ),
+        )
     albedo = gt.albedo
     if "albedo" in changes:
         albedo = np.where(mask[..., None], np.asarray(changes["albedo"], dtype=np.float32), 0.0).astype(np.float32)
@@ -103,18 +132,38 @@ def mitsuba_dataset(mi, variant: str, keywords: dict, seed: int, changes: dict |
     mitsuba = MitsubaScene(mi, variant, renderer, scene, MITSUBA_BOUNCES, "independent")
     count = len(scene.lights)
     images = np.stack([mitsuba.render(k, MITSUBA_SAMPLES, seed + k)[0] for k in range(count)])
-    direct = np.stack([mitsuba.render(k, MITSUBA_DIRECT_SAMPLES, seed + count + k, direct_only=True)[0] for k in range(count)])
-    ours = render(scene, gt.height, albedo, mask, bounces=0, samples=MITSUBA_DIRECT_SAMPLES, direct_samples=MITSUBA_DIRECT_SAMPLES, seed=seed).direct
+    direct = np.stack(
+        [mitsuba.render(k, MITSUBA_DIRECT_SAMPLES, seed + count + k, direct_only=True)[0] for k in range(count)]
+    )
+    ours = render(
+        scene,
+        gt.height,
+        albedo,
+        mask,
+        bounces=0,
+        samples=MITSUBA_DIRECT_SAMPLES,
+        direct_samples=MITSUBA_DIRECT_SAMPLES,
+        seed=seed,
+    ).direct
     difference = float(np.abs(direct - ours).mean() / ours.mean())
     if difference > DIRECT_TOLERANCE:
-        sys.exit(f"Mitsuba's direct images differ from irtps's by {100 * difference:.1f} % of their mean: not the same scene")
+        sys.exit(
+            f"Mitsuba's direct images differ from irtps's by {100 * difference:.1f} % of their mean: not the same scene"
+        )
     truth = GroundTruth(height=gt.height, normal=gt.normal, albedo=albedo, direct=direct)
     return Dataset(scene=scene, images=images, mask=mask, gt=truth, source=f"mitsuba:{geometry.source}")
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--renderer", choices=["irtps", "mitsuba"], default="irtps", help="which renderer makes the images (default: irtps)")
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--renderer",
+        choices=["irtps", "mitsuba"],
+        default="irtps",
+        help="which renderer makes the images (default: irtps)",
+    )
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
     if args.renderer == "mitsuba":
@@ -141,7 +190,9 @@ def main(argv: list[str] | None = None) -> int:
         corrected = angular_error(dataset, result.normals)
         floor = floor_error(dataset)
         closed = (classic - corrected) / (classic - floor)
-        rows.append({"case": label, "classic_deg": classic, "irtps_deg": corrected, "floor_deg": floor, "gap_closed": closed})
+        rows.append(
+            {"case": label, "classic_deg": classic, "irtps_deg": corrected, "floor_deg": floor, "gap_closed": closed}
+        )
         print(f"| {label} | {classic:.2f}° | {corrected:.2f}° | {floor:.2f}° | {100 * closed:.1f} % |", flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))

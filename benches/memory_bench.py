@@ -41,7 +41,18 @@ def default_data() -> Path:
 
 def run_once(data: Path, method: str, out: Path) -> tuple[float, float]:
     """(wall seconds, peak resident MiB) of one ``irtps reconstruct`` in a child process."""
-    command = [sys.executable, "-m", "irtps.cli", "reconstruct", str(data), "--out", str(out), "--method", method, "--quiet"]
+    command = [
+        sys.executable,
+        "-m",
+        "irtps.cli",
+        "reconstruct",
+        str(data),
+        "--out",
+        str(out),
+        "--method",
+        method,
+        "--quiet",
+    ]
     start = time.perf_counter()
     child = subprocess.Popen(command, stderr=subprocess.DEVNULL)
     _, status, usage = os.wait4(child.pid, 0)
@@ -54,8 +65,12 @@ def run_once(data: Path, method: str, out: Path) -> tuple[float, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--data", type=Path, default=None, help="data set folder (default: DiLiGenT reading, else ball)")
-    parser.add_argument("--repeats", type=int, default=3, help="runs of each method (default 3); the median time is quoted")
+    parser.add_argument(
+        "--data", type=Path, default=None, help="data set folder (default: DiLiGenT reading, else ball)"
+    )
+    parser.add_argument(
+        "--repeats", type=int, default=3, help="runs of each method (default 3); the median time is quoted"
+    )
     parser.add_argument("--json", type=Path, help="write the figures here")
     args = parser.parse_args()
     data = args.data or default_data()
@@ -72,7 +87,9 @@ def main() -> None:
                 seconds[method].append(wall)
                 peak_mib[method] = max(peak_mib[method], peak)
     median = {method: statistics.median(times) for method, times in seconds.items()}
-    print(f"{data.name}: images {shape} float32 = {decoded_mib:.0f} MiB decoded; median of {args.repeats} runs of each method")
+    print(
+        f"{data.name}: images {shape} float32 = {decoded_mib:.0f} MiB decoded; median of {args.repeats} runs of each method"
+    )
     for method in METHODS:
         ratio = peak_mib[method] / decoded_mib
         print(
@@ -81,7 +98,13 @@ def main() -> None:
         )
     print(f"  IRT-PS / classic PS wall time: {median['irtps'] / median['ps']:.1f}x (target <= {TIME_TARGET:.0f}x)")
     if args.json:
-        figures = {"data": str(data), "decoded_mib": decoded_mib, "seconds": seconds, "median_s": median, "peak_mib": peak_mib}
+        figures = {
+            "data": str(data),
+            "decoded_mib": decoded_mib,
+            "seconds": seconds,
+            "median_s": median,
+            "peak_mib": peak_mib,
+        }
         args.json.write_text(json.dumps(figures, indent=2))
 
 

@@ -82,24 +82,81 @@ def parse_counts(text: str) -> list[int]:
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--shape", default="grooves", help="synthetic shape (irtps synth: cap, cavity, grooves, relief; default grooves)")
-    ap.add_argument("--albedo", default="uniform", choices=["uniform", "textured"], help="albedo pattern (default uniform, 0.8)")
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0],
+        epilog=__doc__.split("\n\n", 1)[1],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    ap.add_argument(
+        "--shape",
+        default="grooves",
+        help="synthetic shape (irtps synth: cap, cavity, grooves, relief; default grooves)",
+    )
+    ap.add_argument(
+        "--albedo", default="uniform", choices=["uniform", "textured"], help="albedo pattern (default uniform, 0.8)"
+    )
     ap.add_argument("--size", type=int, default=128, help="image width and height in pixels (default 128)")
     ap.add_argument("--lights", type=int, default=20, help="number of lights (default 20)")
-    ap.add_argument("--bounces", type=int, default=3, help="inter-reflection bounces r in the indirect component (default 3)")
-    ap.add_argument("--irtps-samples", type=parse_counts, default=parse_counts("4,8,16,32,64,128,256,1024"), help="irtps paths per pixel to time (default 4,8,...,256,1024)")
-    ap.add_argument("--mitsuba-samples", type=parse_counts, default=parse_counts("16,64,256"), help="Mitsuba samples per pixel to time (default 16,64,256: squares, which every sampler takes as they are)")
-    ap.add_argument("--key-samples", type=int, default=256, help="Mitsuba's sample count whose error is the target (default 256; must be in --mitsuba-samples)")
-    ap.add_argument("--reference-samples", type=int, default=1024, help="Mitsuba samples per pixel of the reference, split in two halves (default 1024)")
-    ap.add_argument("--reference-file", type=Path, help="cache the reference here (.npz): loaded when it matches the settings, else rendered and saved")
-    ap.add_argument("--variant", default="auto", choices=["auto", "llvm", "scalar", "both"], help="Mitsuba variant(s) to time: llvm_ad_rgb, scalar_rgb, both, or auto (llvm when it works, else scalar)")
-    ap.add_argument("--sampler", default="multijitter", help="Mitsuba sampler plugin (default multijitter, the lowest error here; also independent, stratified, ldsampler, orthogonal)")
-    ap.add_argument("--mitsuba-lights", type=int, help="time Mitsuba on only this many of the lights (spread evenly) at every count except --key-samples, to save time; default all")
+    ap.add_argument(
+        "--bounces", type=int, default=3, help="inter-reflection bounces r in the indirect component (default 3)"
+    )
+    ap.add_argument(
+        "--irtps-samples",
+        type=parse_counts,
+        default=parse_counts("4,8,16,32,64,128,256,1024"),
+        help="irtps paths per pixel to time (default 4,8,...,256,1024)",
+    )
+    ap.add_argument(
+        "--mitsuba-samples",
+        type=parse_counts,
+        default=parse_counts("16,64,256"),
+        help="Mitsuba samples per pixel to time (default 16,64,256: squares, which every sampler takes as they are)",
+    )
+    ap.add_argument(
+        "--key-samples",
+        type=int,
+        default=256,
+        help="Mitsuba's sample count whose error is the target (default 256; must be in --mitsuba-samples)",
+    )
+    ap.add_argument(
+        "--reference-samples",
+        type=int,
+        default=1024,
+        help="Mitsuba samples per pixel of the reference, split in two halves (default 1024)",
+    )
+    ap.add_argument(
+        "--reference-file",
+        type=Path,
+        help="cache the reference here (.npz): loaded when it matches the settings, else rendered and saved",
+    )
+    ap.add_argument(
+        "--variant",
+        default="auto",
+        choices=["auto", "llvm", "scalar", "both"],
+        help="Mitsuba variant(s) to time: llvm_ad_rgb, scalar_rgb, both, or auto (llvm when it works, else scalar)",
+    )
+    ap.add_argument(
+        "--sampler",
+        default="multijitter",
+        help="Mitsuba sampler plugin (default multijitter, the lowest error here; also independent, stratified, ldsampler, orthogonal)",
+    )
+    ap.add_argument(
+        "--mitsuba-lights",
+        type=int,
+        help="time Mitsuba on only this many of the lights (spread evenly) at every count except --key-samples, to save time; default all",
+    )
     ap.add_argument("--threads", type=int, default=2, help="threads for both renderers (default 2)")
-    ap.add_argument("--repeats", type=int, default=3, help="timed irtps calls per sample count; medians are reported (default 3)")
-    ap.add_argument("--paired-repeats", type=int, default=5, help="turns of the paired timing at equal error (default 5)")
-    ap.add_argument("--iteration-samples", type=parse_counts, help="irtps paths per pixel for the timed IRT-PS iteration (default: irtps's default, 256 and the equal-error count)")
+    ap.add_argument(
+        "--repeats", type=int, default=3, help="timed irtps calls per sample count; medians are reported (default 3)"
+    )
+    ap.add_argument(
+        "--paired-repeats", type=int, default=5, help="turns of the paired timing at equal error (default 5)"
+    )
+    ap.add_argument(
+        "--iteration-samples",
+        type=parse_counts,
+        help="irtps paths per pixel for the timed IRT-PS iteration (default: irtps's default, 256 and the equal-error count)",
+    )
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = ap.parse_args(argv)
@@ -143,7 +200,9 @@ def probe_failure(variant: str) -> str | None:
     process: a libLLVM that Dr.Jit loads but cannot compile every kernel with aborts its
     process (LLVM 15 with Dr.Jit 1.5: "LLVM ERROR: Cannot select: ..." in its first real kernel)."""
     try:
-        child = subprocess.run([sys.executable, "-c", RENDER_PROBE, variant], capture_output=True, text=True, timeout=600)
+        child = subprocess.run(
+            [sys.executable, "-c", RENDER_PROBE, variant], capture_output=True, text=True, timeout=600
+        )
     except subprocess.TimeoutExpired:
         return "a 16x16 test render took over 10 minutes"
     if child.returncode == 0:
@@ -170,12 +229,17 @@ def import_mitsuba(variants: list[str], threads: int):
         try:
             failure = probe_failure(variant) if variant.startswith("llvm") else None
             if failure:
-                raise RuntimeError(f"a test render failed with libLLVM {os.environ.get('DRJIT_LIBLLVM_PATH', '(none found)')}: {failure}")
+                raise RuntimeError(
+                    f"a test render failed with libLLVM {os.environ.get('DRJIT_LIBLLVM_PATH', '(none found)')}: {failure}"
+                )
             mi.set_variant(variant)
             usable.append(variant)
         except Exception as err:  # noqa: BLE001 - any failure means "not usable here"
-            print(f"Mitsuba variant {variant} is not usable here ({type(err).__name__}: {err}); "
-                  "for llvm_ad_rgb install libLLVM (Debian: apt-get install libllvm19) or set DRJIT_LIBLLVM_PATH", file=sys.stderr)
+            print(
+                f"Mitsuba variant {variant} is not usable here ({type(err).__name__}: {err}); "
+                "for llvm_ad_rgb install libLLVM (Debian: apt-get install libllvm19) or set DRJIT_LIBLLVM_PATH",
+                file=sys.stderr,
+            )
     dr.set_thread_count(threads)
     return mi, dr, usable
 
@@ -203,8 +267,12 @@ class MitsubaScene:
         self.mi, self.variant, self.scene, self.bounces = mi, variant, scene, bounces
         positions, triangles, albedo, _ = renderer.mesh_arrays()
         props = mi.Properties()
-        props["bsdf"] = mi.load_dict(bsdf or {"type": "diffuse", "reflectance": {"type": "mesh_attribute", "name": "vertex_color"}})
-        mesh = mi.Mesh("irtps_scene", len(positions), len(triangles), props, has_vertex_normals=False, has_vertex_texcoords=False)
+        props["bsdf"] = mi.load_dict(
+            bsdf or {"type": "diffuse", "reflectance": {"type": "mesh_attribute", "name": "vertex_color"}}
+        )
+        mesh = mi.Mesh(
+            "irtps_scene", len(positions), len(triangles), props, has_vertex_normals=False, has_vertex_texcoords=False
+        )
         params = mi.traverse(mesh)
         floats, ints = type(params["vertex_positions"]), type(params["faces"])
         params["vertex_positions"] = floats(np.ascontiguousarray(positions, dtype=np.float32).ravel())
@@ -218,26 +286,42 @@ class MitsubaScene:
         extent = float(np.ptp(positions, axis=0).max())
         eye = top + extent
         half = cam.width * cam.pixel_size / 2
-        to_world = mi.ScalarTransform4f().look_at(origin=[0, 0, eye], target=[0, 0, eye - 1], up=[0, 1, 0]) @ mi.ScalarTransform4f().scale([half, half, 1])
+        to_world = mi.ScalarTransform4f().look_at(
+            origin=[0, 0, eye], target=[0, 0, eye - 1], up=[0, 1, 0]
+        ) @ mi.ScalarTransform4f().scale([half, half, 1])
         sensor = {
             "type": "orthographic",
             "near_clip": 1e-3 * extent,
             "far_clip": 10 * extent + eye,
             "to_world": to_world,
-            "film": {"type": "hdrfilm", "width": cam.width, "height": cam.height, "rfilter": {"type": "box"},
-                     "pixel_format": "rgb", "component_format": "float32"},
+            "film": {
+                "type": "hdrfilm",
+                "width": cam.width,
+                "height": cam.height,
+                "rfilter": {"type": "box"},
+                "pixel_format": "rgb",
+                "component_format": "float32",
+            },
             "sampler": {"type": sampler, "sample_count": 1},
         }
-        self.scene_mi = mi.load_dict({
-            "type": "scene",
-            "sensor": sensor,
-            "object": mesh,
-            "light": {"type": "directional", "direction": [0.0, 0.0, -1.0], "irradiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}},
-        })
+        self.scene_mi = mi.load_dict(
+            {
+                "type": "scene",
+                "sensor": sensor,
+                "object": mesh,
+                "light": {
+                    "type": "directional",
+                    "direction": [0.0, 0.0, -1.0],
+                    "irradiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
+                },
+            }
+        )
         self.params = mi.traverse(self.scene_mi)
         # max_depth counts path segments: 2 is direct light only, 2 + r adds bounces 1..r.
         # Russian roulette starts only past every rendered depth: it would add noise.
-        self.full = mi.load_dict({"type": "path", "max_depth": bounces + 2, "rr_depth": bounces + 10, "hide_emitters": True})
+        self.full = mi.load_dict(
+            {"type": "path", "max_depth": bounces + 2, "rr_depth": bounces + 10, "hide_emitters": True}
+        )
         self.direct = mi.load_dict({"type": "path", "max_depth": 2, "rr_depth": bounces + 10, "hide_emitters": True})
         self.light = None
         self.triangles = len(triangles)
@@ -261,7 +345,10 @@ class MitsubaScene:
         self.mi.set_variant(self.variant)
         self.set_light(k)
         with Stopwatch() as watch:
-            image = np.array(self.mi.render(self.scene_mi, integrator=self.direct if direct_only else self.full, spp=spp, seed=seed), dtype=np.float32)
+            image = np.array(
+                self.mi.render(self.scene_mi, integrator=self.direct if direct_only else self.full, spp=spp, seed=seed),
+                dtype=np.float32,
+            )
         return image, watch.seconds
 
     def indirect(self, k: int, spp: int, seed: int) -> tuple[np.ndarray, tuple[float, float]]:
@@ -313,8 +400,14 @@ class Curve:
         return None, "not reached"
 
     def to_dict(self) -> dict:
-        return {"samples": self.samples, "wall_seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "relative_rmse": self.error,
-                "relative_rmse_uncorrected": self.raw_error, "details": self.extra}
+        return {
+            "samples": self.samples,
+            "wall_seconds": self.seconds,
+            "cpu_seconds": self.cpu_seconds,
+            "relative_rmse": self.error,
+            "relative_rmse_uncorrected": self.raw_error,
+            "details": self.extra,
+        }
 
 
 class ErrorMeter:
@@ -339,7 +432,9 @@ def timed_irtps(case, spp: int, seed: int, repeats: int):
     times, image = [], None
     for r in range(repeats):
         with Stopwatch() as watch:
-            image = render_indirect(case.scene, case.height, case.albedo, case.mask, bounces=case.bounces, samples=spp, seed=seed + r)
+            image = render_indirect(
+                case.scene, case.height, case.albedo, case.mask, bounces=case.bounces, samples=spp, seed=seed + r
+            )
         times.append(watch.seconds)
     return image, times
 
@@ -358,7 +453,16 @@ def make_case(args) -> Case:
     from irtps.synth import synthesize
 
     # The data set's images (direct + 4 bounces at 64 paths) feed only the IRT-PS iteration.
-    dataset, _ = synthesize(args.shape, size=args.size, lights=args.lights, albedo=args.albedo, environment="cornell", bounces=4, samples=64, seed=args.seed)
+    dataset, _ = synthesize(
+        args.shape,
+        size=args.size,
+        lights=args.lights,
+        albedo=args.albedo,
+        environment="cornell",
+        bounces=4,
+        samples=64,
+        seed=args.seed,
+    )
     gt = dataset.gt
     return Case(dataset.scene, gt.height, gt.albedo, dataset.mask, args.bounces, dataset)
 
@@ -368,7 +472,16 @@ def check_direct(ms: MitsubaScene, case: Case, lights: list[int], seed: int) -> 
     (fewer leave per-pixel errors of several percent where a shadow edge crosses a crease)."""
     from irtps.render import render
 
-    ours = render(case.scene, case.height, case.albedo, case.mask, bounces=0, samples=DIRECT_SAMPLES, direct_samples=DIRECT_SAMPLES, seed=seed).direct
+    ours = render(
+        case.scene,
+        case.height,
+        case.albedo,
+        case.mask,
+        bounces=0,
+        samples=DIRECT_SAMPLES,
+        direct_samples=DIRECT_SAMPLES,
+        seed=seed,
+    ).direct
     result = {}
     for k in lights:
         theirs, _ = ms.render(k, DIRECT_SAMPLES, seed + 17, direct_only=True)
@@ -379,8 +492,15 @@ def check_direct(ms: MitsubaScene, case: Case, lights: list[int], seed: int) -> 
 
 def reference(args, ms: MitsubaScene, case: Case) -> tuple[np.ndarray, np.ndarray, float]:
     """Two independent halves of Mitsuba's indirect at --reference-samples, (K, H, W, 3) each."""
-    key = {"shape": args.shape, "albedo": args.albedo, "size": args.size, "lights": args.lights, "bounces": args.bounces,
-           "samples": args.reference_samples, "seed": args.seed}
+    key = {
+        "shape": args.shape,
+        "albedo": args.albedo,
+        "size": args.size,
+        "lights": args.lights,
+        "bounces": args.bounces,
+        "samples": args.reference_samples,
+        "seed": args.seed,
+    }
     if args.reference_file and args.reference_file.exists():
         cached = np.load(args.reference_file)
         if json.loads(str(cached["key"])) == key:
@@ -396,14 +516,20 @@ def reference(args, ms: MitsubaScene, case: Case) -> tuple[np.ndarray, np.ndarra
         if sys.stderr.isatty():
             print(f"\rreference: light {k + 1}/{len(case.scene.lights)}", end="", file=sys.stderr, flush=True)
     seconds = time.perf_counter() - start
-    print(f"{chr(13) if sys.stderr.isatty() else ''}reference: {ms.variant}, {args.reference_samples} samples per pixel in two halves, rendered in {seconds:.0f} s")
+    print(
+        f"{chr(13) if sys.stderr.isatty() else ''}reference: {ms.variant}, {args.reference_samples} samples per pixel in two halves, rendered in {seconds:.0f} s"
+    )
     if args.reference_file:
         np.savez_compressed(args.reference_file, a=halves[0], b=halves[1], seconds=seconds, key=json.dumps(key))
     return halves[0], halves[1], seconds
 
 
 def spread(count: int, total: int) -> list[int]:
-    return sorted({round(i * (total - 1) / max(count - 1, 1)) for i in range(count)}) if count < total else list(range(total))
+    return (
+        sorted({round(i * (total - 1) / max(count - 1, 1)) for i in range(count)})
+        if count < total
+        else list(range(total))
+    )
 
 
 def time_iteration(case: Case, samples: int, repeats: int, seed: int) -> dict:
@@ -417,9 +543,13 @@ def time_iteration(case: Case, samples: int, repeats: int, seed: int) -> dict:
         # Only the pass's time counts here: whether one pass (or the 1-path warm-up) explains
         # the images better than classic photometric stereo is the accuracy benchmarks' job.
         warnings.simplefilter("ignore", IrtpsWarning)
-        remove_interreflections(case.dataset, bounces=case.bounces, iterations=1, samples=1, seed=seed)  # warm-up (imports, caches)
+        remove_interreflections(
+            case.dataset, bounces=case.bounces, iterations=1, samples=1, seed=seed
+        )  # warm-up (imports, caches)
         for r in range(repeats):
-            result = remove_interreflections(case.dataset, bounces=case.bounces, iterations=1, samples=samples, seed=seed + r, base_height="boundary")
+            result = remove_interreflections(
+                case.dataset, bounces=case.bounces, iterations=1, samples=samples, seed=seed + r, base_height="boundary"
+            )
             timings = result.history[0].timings
             totals.append(sum(timings.values()))
             stages.append(timings)
@@ -435,7 +565,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     # Both renderers get the same number of threads; rayon reads this when its pool starts.
     os.environ["RAYON_NUM_THREADS"] = str(args.threads)
-    wanted = {"auto": ["llvm_ad_rgb", "scalar_rgb"], "llvm": ["llvm_ad_rgb"], "scalar": ["scalar_rgb"], "both": ["llvm_ad_rgb", "scalar_rgb"]}[args.variant]
+    wanted = {
+        "auto": ["llvm_ad_rgb", "scalar_rgb"],
+        "llvm": ["llvm_ad_rgb"],
+        "scalar": ["scalar_rgb"],
+        "both": ["llvm_ad_rgb", "scalar_rgb"],
+    }[args.variant]
     mi, dr, usable = import_mitsuba(wanted, args.threads)
     if args.variant == "auto":
         usable = usable[:1]
@@ -454,10 +589,14 @@ def main(argv: list[str] | None = None) -> int:
         scenes[variant] = MitsubaScene(mi, variant, renderer, case.scene, args.bounces, args.sampler)
         scenes[variant].load_seconds = time.perf_counter() - start
     first = scenes[usable[0]]
-    print(f"scene: synth {args.shape} ({args.albedo} albedo) in a Cornell box, {args.size}x{args.size}, {k_count} lights, "
-          f"r = {args.bounces}, {first.triangles:,} triangles, {int(case.mask.sum()):,} object pixels")
-    print(f"threads: {args.threads} for both (RAYON_NUM_THREADS, drjit.set_thread_count); Mitsuba {mi.__version__}, "
-          f"variants {', '.join(usable)}, sampler {args.sampler}; irtps {irtps_version}")
+    print(
+        f"scene: synth {args.shape} ({args.albedo} albedo) in a Cornell box, {args.size}x{args.size}, {k_count} lights, "
+        f"r = {args.bounces}, {first.triangles:,} triangles, {int(case.mask.sum()):,} object pixels"
+    )
+    print(
+        f"threads: {args.threads} for both (RAYON_NUM_THREADS, drjit.set_thread_count); Mitsuba {mi.__version__}, "
+        f"variants {', '.join(usable)}, sampler {args.sampler}; irtps {irtps_version}"
+    )
     if any(v.startswith("llvm") for v in usable):
         print(f"libLLVM: {os.environ.get('DRJIT_LIBLLVM_PATH')}")
 
@@ -467,17 +606,23 @@ def main(argv: list[str] | None = None) -> int:
         checked = check_direct(ms, case, spread(3, k_count), args.seed)
         figures["direct_check"][variant] = checked
         worst = max(checked.values())
-        print(f"direct-light check ({variant}, lights {list(checked)}): mean |Mitsuba - irtps| / mean = "
-              + ", ".join(f"{v:.2%}" for v in checked.values()))
+        print(
+            f"direct-light check ({variant}, lights {list(checked)}): mean |Mitsuba - irtps| / mean = "
+            + ", ".join(f"{v:.2%}" for v in checked.values())
+        )
         if worst > DIRECT_TOLERANCE:
-            sys.exit(f"Mitsuba's direct image differs from irtps's by {worst:.1%} of the mean (limit {DIRECT_TOLERANCE:.0%}): "
-                     "the two do not render the same scene; nothing was timed")
+            sys.exit(
+                f"Mitsuba's direct image differs from irtps's by {worst:.1%} of the mean (limit {DIRECT_TOLERANCE:.0%}): "
+                "the two do not render the same scene; nothing was timed"
+            )
 
     # 2. Reference.
     half_a, half_b, ref_seconds = reference(args, first, case)
     meter = ErrorMeter(half_a, half_b, case.mask)
     ref_noise = math.sqrt(meter.reference_noise) / meter.scale
-    print(f"reference: mean indirect on the object {meter.scale:.4f}; its own noise (relative RMSE) {ref_noise:.4f}, removed from every error below")
+    print(
+        f"reference: mean indirect on the object {meter.scale:.4f}; its own noise (relative RMSE) {ref_noise:.4f}, removed from every error below"
+    )
 
     # 3. Sweeps, taking turns so that load from other processes affects both alike.
     from irtps.render import render_indirect
@@ -492,12 +637,19 @@ def main(argv: list[str] | None = None) -> int:
             image, times = timed_irtps(case, spp, seed=100 * (level + 1), repeats=args.repeats)
             wall, cpu = (statistics.median(t[i] for t in times) for i in (0, 1))
             irtps_curve.add(spp, (wall, cpu), meter(image), runs=times)
-            print(f"irtps        {spp:5d} paths/px: {wall:8.3f} s wall, {cpu:8.3f} s CPU for all {k_count} lights; "
-                  f"relative RMSE {irtps_curve.error[-1]:.4f}", flush=True)
+            print(
+                f"irtps        {spp:5d} paths/px: {wall:8.3f} s wall, {cpu:8.3f} s CPU for all {k_count} lights; "
+                f"relative RMSE {irtps_curve.error[-1]:.4f}",
+                flush=True,
+            )
         if level < len(args.mitsuba_samples):
             spp = args.mitsuba_samples[level]
             for variant, ms in scenes.items():
-                subset = list(range(k_count)) if spp == args.key_samples or not args.mitsuba_lights else spread(args.mitsuba_lights, k_count)
+                subset = (
+                    list(range(k_count))
+                    if spp == args.key_samples or not args.mitsuba_lights
+                    else spread(args.mitsuba_lights, k_count)
+                )
                 if variant.startswith("llvm"):
                     ms.render(subset[0], spp, seed=7)  # compile this sample count's kernel first
                 images = np.zeros((k_count, args.size, args.size, 3), dtype=np.float32)
@@ -507,30 +659,53 @@ def main(argv: list[str] | None = None) -> int:
                     per_light.append(seconds)
                 sub_meter = meter if len(subset) == k_count else ErrorMeter(half_a[subset], half_b[subset], case.mask)
                 wall, cpu = (statistics.median(t[i] for t in per_light) for i in (0, 1))
-                mitsuba_curves[variant].add(spp, (k_count * wall, k_count * cpu), sub_meter(images[subset]),
-                                            per_light_median=(wall, cpu), per_light=per_light, lights_timed=subset)
-                print(f"{variant:<12} {spp:5d} spp:      {k_count * wall:8.3f} s wall, {k_count * cpu:8.3f} s CPU for {k_count} lights "
-                      f"({wall:.3f} s wall per light, median of {len(subset)}); relative RMSE {mitsuba_curves[variant].error[-1]:.4f}", flush=True)
+                mitsuba_curves[variant].add(
+                    spp,
+                    (k_count * wall, k_count * cpu),
+                    sub_meter(images[subset]),
+                    per_light_median=(wall, cpu),
+                    per_light=per_light,
+                    lights_timed=subset,
+                )
+                print(
+                    f"{variant:<12} {spp:5d} spp:      {k_count * wall:8.3f} s wall, {k_count * cpu:8.3f} s CPU for {k_count} lights "
+                    f"({wall:.3f} s wall per light, median of {len(subset)}); relative RMSE {mitsuba_curves[variant].error[-1]:.4f}",
+                    flush=True,
+                )
 
     # 4. Equal error: the count irtps needs to match Mitsuba's error at --key-samples, then
     # paired timings (irtps at that count, Mitsuba at the key count, taking turns) so that both
     # meet the same load from other jobs.
     print()
-    print(f"irtps at {irtps_curve.samples[-1]} paths/px: relative RMSE {irtps_curve.error[-1]:.4f} "
-          "(mostly its bias against the exact image)")
+    print(
+        f"irtps at {irtps_curve.samples[-1]} paths/px: relative RMSE {irtps_curve.error[-1]:.4f} "
+        "(mostly its bias against the exact image)"
+    )
     results = {}
     for variant, curve in mitsuba_curves.items():
         key = curve.samples.index(args.key_samples)
         target = curve.error[key]
         spp_equal, note = irtps_curve.at(target, irtps_curve.samples)
-        entry = {"target_relative_rmse": target, "mitsuba_samples": args.key_samples, "irtps_equivalent_samples": spp_equal, "irtps_note": note}
+        entry = {
+            "target_relative_rmse": target,
+            "mitsuba_samples": args.key_samples,
+            "irtps_equivalent_samples": spp_equal,
+            "irtps_note": note,
+        }
         if spp_equal is None:
-            print(f"{variant}: Mitsuba at {args.key_samples} spp reaches {target:.4f}, which irtps does not reach (best {min(irtps_curve.error):.4f})")
+            print(
+                f"{variant}: Mitsuba at {args.key_samples} spp reaches {target:.4f}, which irtps does not reach (best {min(irtps_curve.error):.4f})"
+            )
         else:
             entry["irtps_samples_timed"] = max(1, round(spp_equal))
-            print(f"{variant} at {args.key_samples} spp has relative RMSE {target:.4f}; irtps reaches it at about {spp_equal:.0f} paths/px"
-                  f"{' (' + note + ')' if note else ''}")
-            for label, values, theirs in (("wall", irtps_curve.seconds, curve.seconds[key]), ("cpu", irtps_curve.cpu_seconds, curve.cpu_seconds[key])):
+            print(
+                f"{variant} at {args.key_samples} spp has relative RMSE {target:.4f}; irtps reaches it at about {spp_equal:.0f} paths/px"
+                f"{' (' + note + ')' if note else ''}"
+            )
+            for label, values, theirs in (
+                ("wall", irtps_curve.seconds, curve.seconds[key]),
+                ("cpu", irtps_curve.cpu_seconds, curve.cpu_seconds[key]),
+            ):
                 ours, _ = irtps_curve.at(target, values)
                 entry[f"sweep_{label}"] = {"mitsuba_seconds": theirs, "irtps_seconds": ours, "ratio": theirs / ours}
         results[variant] = entry
@@ -538,7 +713,9 @@ def main(argv: list[str] | None = None) -> int:
     if counts:
         paired_irtps = {n: [] for n in counts}
         paired_mitsuba = {v: [] for v in results if "irtps_samples_timed" in results[v]}
-        for r, k in enumerate(spread(args.paired_repeats, k_count) if args.paired_repeats < k_count else list(range(args.paired_repeats))):
+        for r, k in enumerate(
+            spread(args.paired_repeats, k_count) if args.paired_repeats < k_count else list(range(args.paired_repeats))
+        ):
             for n in counts:
                 _, times = timed_irtps(case, n, seed=500 + r, repeats=1)
                 paired_irtps[n].append(times[0])
@@ -553,11 +730,19 @@ def main(argv: list[str] | None = None) -> int:
             for i, label in enumerate(("wall", "cpu")):
                 theirs = k_count * statistics.median(t[i] for t in per_light)
                 ours = statistics.median(t[i] for t in paired_irtps[n])
-                entry[label] = {"mitsuba_seconds": theirs, "mitsuba_seconds_per_light": theirs / k_count, "irtps_seconds": ours, "ratio": theirs / ours,
-                                "mitsuba_runs": [t[i] for t in per_light], "irtps_runs": [t[i] for t in paired_irtps[n]]}
-                print(f"  {variant:<12} {label:<4}: Mitsuba {args.key_samples} spp {theirs / k_count:6.3f} s per light, {theirs:7.2f} s for {k_count}; "
-                      f"irtps {n} paths/px {ours:6.3f} s -> Mitsuba / irtps = {bound}{theirs / ours:.1f}x at equal error "
-                      f"(sweep: {entry[f'sweep_{label}']['ratio']:.1f}x)")
+                entry[label] = {
+                    "mitsuba_seconds": theirs,
+                    "mitsuba_seconds_per_light": theirs / k_count,
+                    "irtps_seconds": ours,
+                    "ratio": theirs / ours,
+                    "mitsuba_runs": [t[i] for t in per_light],
+                    "irtps_runs": [t[i] for t in paired_irtps[n]],
+                }
+                print(
+                    f"  {variant:<12} {label:<4}: Mitsuba {args.key_samples} spp {theirs / k_count:6.3f} s per light, {theirs:7.2f} s for {k_count}; "
+                    f"irtps {n} paths/px {ours:6.3f} s -> Mitsuba / irtps = {bound}{theirs / ours:.1f}x at equal error "
+                    f"(sweep: {entry[f'sweep_{label}']['ratio']:.1f}x)"
+                )
     figures.update(equal_error=results)
 
     # 5. One IRT-PS iteration.
@@ -565,29 +750,46 @@ def main(argv: list[str] | None = None) -> int:
     if counts is None:
         from irtps.options import ReconstructOptions
 
-        counts = sorted({ReconstructOptions().samples, 256} | {e["irtps_samples_timed"] for e in results.values() if "irtps_samples_timed" in e})
+        counts = sorted(
+            {ReconstructOptions().samples, 256}
+            | {e["irtps_samples_timed"] for e in results.values() if "irtps_samples_timed" in e}
+        )
     iterations = []
     for spp in counts:
         it = time_iteration(case, spp, args.repeats, args.seed)
         iterations.append(it)
         verdict = "meets" if it["seconds"] < 2.0 else "misses"
         stages = ", ".join(f"{name} {s:.3f} s" for name, s in it["stages"].items())
-        print(f"one IRT-PS iteration, {k_count} lights, {args.size}x{args.size}, r = {args.bounces}, {spp} paths/px: "
-              f"{it['seconds']:.3f} s (median of {args.repeats}; {stages}): {verdict} the 2 s target")
+        print(
+            f"one IRT-PS iteration, {k_count} lights, {args.size}x{args.size}, r = {args.bounces}, {spp} paths/px: "
+            f"{it['seconds']:.3f} s (median of {args.repeats}; {stages}): {verdict} the 2 s target"
+        )
 
     if args.json:
         figures.update(
             settings={k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
             triangles=first.triangles,
             object_pixels=int(case.mask.sum()),
-            reference={"variant": first.variant, "samples": args.reference_samples, "seconds": ref_seconds,
-                       "mean_indirect": meter.scale, "own_relative_noise": ref_noise},
+            reference={
+                "variant": first.variant,
+                "samples": args.reference_samples,
+                "seconds": ref_seconds,
+                "mean_indirect": meter.scale,
+                "own_relative_noise": ref_noise,
+            },
             irtps=irtps_curve.to_dict(),
             mitsuba={v: c.to_dict() for v, c in mitsuba_curves.items()},
             mitsuba_scene_load_seconds={v: ms.load_seconds for v, ms in scenes.items()},
             iteration=iterations,
-            machine={"platform": platform.platform(), "processor": platform.processor(), "cpus": os.cpu_count(),
-                     "python": platform.python_version(), "mitsuba": mi.__version__, "drjit": dr.__version__, "irtps": irtps_version},
+            machine={
+                "platform": platform.platform(),
+                "processor": platform.processor(),
+                "cpus": os.cpu_count(),
+                "python": platform.python_version(),
+                "mitsuba": mi.__version__,
+                "drjit": dr.__version__,
+                "irtps": irtps_version,
+            },
         )
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(figures, indent=1))

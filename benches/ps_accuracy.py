@@ -32,7 +32,16 @@ from irtps.ps import ROBUST_MODES, choose_robust, lobe_share, photometric_stereo
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 #: (Blinn-Phong exponent, highlight strength, share of observations in soft cast shadow)
-GLOSSY_CASES = [(5, 0.3, 0.0), (10, 0.3, 0.0), (10, 0.3, 0.3), (50, 0.3, 0.0), (50, 0.3, 0.3), (200, 0.5, 0.0), (200, 0.5, 0.3), (1, 0.0, 0.5)]
+GLOSSY_CASES = [
+    (5, 0.3, 0.0),
+    (10, 0.3, 0.0),
+    (10, 0.3, 0.3),
+    (50, 0.3, 0.0),
+    (50, 0.3, 0.3),
+    (200, 0.5, 0.0),
+    (200, 0.5, 0.3),
+    (1, 0.0, 0.5),
+]
 #: (name, GGX roughness α, Fresnel reflectance at normal incidence, diffuse albedo)
 MICROFACET_CASES = [
     ("GGX plastic, α 0.1", 0.1, 0.04, 0.5),
@@ -49,7 +58,9 @@ def lights(count: int = 96) -> np.ndarray:
     """Unit directions on a spiral between 20° and 85° of elevation."""
     k = np.arange(count)
     azimuth, elevation = k * 2.4, np.radians(20 + 65 * (k + 0.5) / count)
-    return np.stack([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)], axis=1)
+    return np.stack(
+        [np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)], axis=1
+    )
 
 
 def hemisphere_normals(count: int, rng: np.random.Generator) -> np.ndarray:
@@ -71,7 +82,9 @@ def as_images(shading: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.repeat((shading.T / np.pi)[:, :, None, None], 3, axis=3).astype(np.float32)
 
 
-def glossy_pixels(directions: np.ndarray, exponent: float, strength: float, shadowed: float, count: int = 20000, seed: int = 0):
+def glossy_pixels(
+    directions: np.ndarray, exponent: float, strength: float, shadowed: float, count: int = 20000, seed: int = 0
+):
     """(K, count, 1, 3) images and (count, 1, 3) true normals of synthetic glossy pixels."""
     rng = np.random.default_rng(seed)
     normals = hemisphere_normals(count, rng)
@@ -83,7 +96,9 @@ def glossy_pixels(directions: np.ndarray, exponent: float, strength: float, shad
     return as_images(shading * shadow, rng), normals[:, None, :]
 
 
-def microfacet_pixels(directions: np.ndarray, alpha: float, fresnel0: float, diffuse: float, count: int = 20000, seed: int = 0):
+def microfacet_pixels(
+    directions: np.ndarray, alpha: float, fresnel0: float, diffuse: float, count: int = 20000, seed: int = 0
+):
     """Images and true normals of pixels with a Lambertian term plus a GGX microfacet lobe.
 
     The lobe is Cook-Torrance's ``D G F / (4 (n·l)(n·v))`` with the GGX distribution of
@@ -130,7 +145,14 @@ def rough_matte_pixels(directions: np.ndarray, sigma: float, albedo: float = 0.6
 COLUMNS = (*ROBUST_MODES, "auto")
 
 
-def mode_errors(images: np.ndarray, directions: np.ndarray, irradiance: np.ndarray, mask: np.ndarray, truth: np.ndarray, saturation: float | None = None) -> tuple[dict[str, float], float]:
+def mode_errors(
+    images: np.ndarray,
+    directions: np.ndarray,
+    irradiance: np.ndarray,
+    mask: np.ndarray,
+    truth: np.ndarray,
+    saturation: float | None = None,
+) -> tuple[dict[str, float], float]:
     """The mean angular error of each of `COLUMNS` (``"auto"``: the mode `choose_robust`
     picks from the `lobe_share`, as ``irtps reconstruct`` does), and the lobe share."""
     errors = {}
@@ -142,7 +164,9 @@ def mode_errors(images: np.ndarray, directions: np.ndarray, irradiance: np.ndarr
     return errors, share
 
 
-def synthetic_row(name: str, images: np.ndarray, truth: np.ndarray, directions: np.ndarray, irradiance: np.ndarray) -> str:
+def synthetic_row(
+    name: str, images: np.ndarray, truth: np.ndarray, directions: np.ndarray, irradiance: np.ndarray
+) -> str:
     """The table row of every column's mean angular error on synthetic pixels."""
     errors, _ = mode_errors(images, directions, irradiance, np.ones(truth.shape[:2], bool), truth)
     return _row(name, [errors[column] for column in COLUMNS])
@@ -159,7 +183,14 @@ def shared_rows(shared: Path) -> list[tuple[str, list[float]]]:
         data = irtps.load_dataset(folder)
         sets = [("", data.images)] + ([(" gt/direct", data.gt.direct)] if data.gt.direct is not None else [])
         for suffix, images in sets:
-            errors, _ = mode_errors(images, data.scene.light_directions, data.scene.light_irradiance, data.mask, data.gt.normal, data.saturation)
+            errors, _ = mode_errors(
+                images,
+                data.scene.light_directions,
+                data.scene.light_irradiance,
+                data.mask,
+                data.gt.normal,
+                data.saturation,
+            )
             rows.append((folder.name + suffix, [errors[column] for column in COLUMNS]))
             print(_row(*rows[-1]), flush=True)
     return rows
@@ -172,7 +203,9 @@ def _row(name: str, errors: list[float]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--shared", type=Path, default=SHARED, help="the shared data folder (default: ../shared/data)")
     parser.add_argument("--synthetic-only", action="store_true", help="skip the shared data sets")
     args = parser.parse_args(argv)
@@ -184,11 +217,27 @@ def main(argv: list[str] | None = None) -> int:
     irradiance = np.full((len(directions), 3), np.pi, dtype=np.float32)
     for exponent, strength, shadowed in GLOSSY_CASES:
         name = f"synthetic: exponent {exponent}, highlight {strength}, {100 * shadowed:.0f} % soft shadows"
-        print(synthetic_row(name, *glossy_pixels(directions, exponent, strength, shadowed), directions, irradiance), flush=True)
+        print(
+            synthetic_row(name, *glossy_pixels(directions, exponent, strength, shadowed), directions, irradiance),
+            flush=True,
+        )
     for name, alpha, fresnel0, diffuse in MICROFACET_CASES:
-        print(synthetic_row(f"synthetic: {name}", *microfacet_pixels(directions, alpha, fresnel0, diffuse), directions, irradiance), flush=True)
+        print(
+            synthetic_row(
+                f"synthetic: {name}", *microfacet_pixels(directions, alpha, fresnel0, diffuse), directions, irradiance
+            ),
+            flush=True,
+        )
     for sigma in ROUGH_MATTE_SIGMAS:
-        print(synthetic_row(f"synthetic: Oren-Nayar rough matte, σ {sigma}", *rough_matte_pixels(directions, sigma), directions, irradiance), flush=True)
+        print(
+            synthetic_row(
+                f"synthetic: Oren-Nayar rough matte, σ {sigma}",
+                *rough_matte_pixels(directions, sigma),
+                directions,
+                irradiance,
+            ),
+            flush=True,
+        )
     return 0
 
 

@@ -45,11 +45,17 @@ def numpy_ps(images: np.ndarray, directions: np.ndarray, irradiance: np.ndarray)
 
 def load_inputs() -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, str]]:
     """(images, mask, directions, irradiance, name) of each input."""
-    objects = [SHARED / name for name in ("ballPNG", "readingPNG") if (SHARED / name / "light_directions.txt").is_file()]
+    objects = [
+        SHARED / name for name in ("ballPNG", "readingPNG") if (SHARED / name / "light_directions.txt").is_file()
+    ]
     if objects:
         from irtps import load_dataset
 
-        return [(data.images, data.mask, data.scene.light_directions, data.scene.light_irradiance, f"DiLiGenT {path.name}") for path in objects for data in [load_dataset(path)]]
+        return [
+            (data.images, data.mask, data.scene.light_directions, data.scene.light_irradiance, f"DiLiGenT {path.name}")
+            for path in objects
+            for data in [load_dataset(path)]
+        ]
     rng = np.random.default_rng(0)
     directions = rng.normal(size=(96, 3))
     directions[:, 2] = np.abs(directions[:, 2]) + 1.0
@@ -113,16 +119,30 @@ def main() -> None:
     args = parser.parse_args()
     results = []
     for images, mask, directions, irradiance, name in load_inputs():
-        figures = measure(np.ascontiguousarray(images, dtype=np.float32), mask, directions.astype(np.float32), irradiance.astype(np.float32), args.repeats)
-        figures["input"] = f"{name}: {images.shape[0]} lights, {images.shape[2]}x{images.shape[1]} RGB float32, {int(mask.sum())} object pixels"
+        figures = measure(
+            np.ascontiguousarray(images, dtype=np.float32),
+            mask,
+            directions.astype(np.float32),
+            irradiance.astype(np.float32),
+            args.repeats,
+        )
+        figures["input"] = (
+            f"{name}: {images.shape[0]} lights, {images.shape[2]}x{images.shape[1]} RGB float32, {int(mask.sum())} object pixels"
+        )
         print(f"{figures['input']} (median of {args.repeats})")
         numpy_all, numpy_object = figures["numpy_plain_all_s"], figures["numpy_plain_object_s"]
-        print(f"  every pixel:  numpy pinv(L) @ images {numpy_all:.3f} s   irtps none {figures['irtps_plain_all_s']:.3f} s   {figures['irtps_plain_all_x']:.1f}x numpy")
+        print(
+            f"  every pixel:  numpy pinv(L) @ images {numpy_all:.3f} s   irtps none {figures['irtps_plain_all_s']:.3f} s   {figures['irtps_plain_all_x']:.1f}x numpy"
+        )
         print(f"  object only:  numpy pinv(L) @ images {numpy_object:.3f} s")
         for mode in (*ROBUST_MODES, "lobe_share", "auto"):
             elapsed = figures[f"irtps_{mode}_object_s"]
             ratio = figures[f"irtps_{mode}_object_x"]
-            speed = f"{ratio:.1f}x numpy plain" if ratio >= 1 else f"{ratio:.2f}x numpy plain ({1 / ratio:.1f} times slower)"
+            speed = (
+                f"{ratio:.1f}x numpy plain"
+                if ratio >= 1
+                else f"{ratio:.2f}x numpy plain ({1 / ratio:.1f} times slower)"
+            )
             print(f"                irtps {mode:<10} {elapsed:.3f} s   {speed}")
         results.append(figures)
     if args.json:

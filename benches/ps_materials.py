@@ -55,9 +55,33 @@ BASE = 0.6
 #: (name, Mitsuba BSDF)
 MATERIALS = [
     ("Lambertian 0.6", {"type": "diffuse", "reflectance": {"type": "rgb", "value": BASE}}),
-    ("rough plastic α 0.1, diffuse 0.6", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.1, "diffuse_reflectance": {"type": "rgb", "value": BASE}}),
-    ("rough plastic α 0.3, diffuse 0.6", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.3, "diffuse_reflectance": {"type": "rgb", "value": BASE}}),
-    ("rough plastic α 0.2, diffuse 0.1", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.2, "diffuse_reflectance": {"type": "rgb", "value": 0.1}}),
+    (
+        "rough plastic α 0.1, diffuse 0.6",
+        {
+            "type": "roughplastic",
+            "distribution": "ggx",
+            "alpha": 0.1,
+            "diffuse_reflectance": {"type": "rgb", "value": BASE},
+        },
+    ),
+    (
+        "rough plastic α 0.3, diffuse 0.6",
+        {
+            "type": "roughplastic",
+            "distribution": "ggx",
+            "alpha": 0.3,
+            "diffuse_reflectance": {"type": "rgb", "value": BASE},
+        },
+    ),
+    (
+        "rough plastic α 0.2, diffuse 0.1",
+        {
+            "type": "roughplastic",
+            "distribution": "ggx",
+            "alpha": 0.2,
+            "diffuse_reflectance": {"type": "rgb", "value": 0.1},
+        },
+    ),
     ("rough aluminium α 0.2", {"type": "roughconductor", "material": "Al", "distribution": "ggx", "alpha": 0.2}),
     ("rough copper α 0.4", {"type": "roughconductor", "material": "Cu", "distribution": "ggx", "alpha": 0.4}),
 ]
@@ -101,7 +125,9 @@ def shape_scene(height: np.ndarray, mask: np.ndarray, directions: np.ndarray):
     return scene, make_renderer(scene, height, albedo, mask)
 
 
-def render_material(mi, variant: str, scene, renderer, bsdf: dict, samples: int, cache: Path | None = None) -> np.ndarray:
+def render_material(
+    mi, variant: str, scene, renderer, bsdf: dict, samples: int, cache: Path | None = None
+) -> np.ndarray:
     """(K, H, W, 3) images of the shape in `bsdf` under each light, 4 bounces; with `cache`,
     read from there when an earlier run rendered the same (the renders are seeded), else
     written there."""
@@ -143,30 +169,56 @@ def positive_int(text: str) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument(
-        "--objects", nargs="+", default=["ballPNG", "readingPNG"], help=f"DiLiGenT objects, or shapes of irtps synth ({', '.join(SHAPES)}), to render (default: ballPNG readingPNG)"
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--size", type=positive_int, default=160, help="side of a synthetic shape's image, pixels (default: 160)")
-    parser.add_argument("--downsample", type=positive_int, default=2, help="block size of the shape's pixels (default: 2)")
+    parser.add_argument(
+        "--objects",
+        nargs="+",
+        default=["ballPNG", "readingPNG"],
+        help=f"DiLiGenT objects, or shapes of irtps synth ({', '.join(SHAPES)}), to render (default: ballPNG readingPNG)",
+    )
+    parser.add_argument(
+        "--size", type=positive_int, default=160, help="side of a synthetic shape's image, pixels (default: 160)"
+    )
+    parser.add_argument(
+        "--downsample", type=positive_int, default=2, help="block size of the shape's pixels (default: 2)"
+    )
     parser.add_argument("--samples", type=positive_int, default=32, help="Mitsuba samples per pixel (default: 32)")
-    parser.add_argument("--irtps", action="store_true", help="also reconstruct each render with IRT-PS (irtps.reconstruct), beside its pass 0, classic photometric stereo")
+    parser.add_argument(
+        "--irtps",
+        action="store_true",
+        help="also reconstruct each render with IRT-PS (irtps.reconstruct), beside its pass 0, classic photometric stereo",
+    )
     parser.add_argument("--json", type=Path, help="write the rows here")
-    parser.add_argument("--cache", type=Path, help="keep the renders in this folder and take them from there when run again (after a change to irtps's fits, not to the renders)")
+    parser.add_argument(
+        "--cache",
+        type=Path,
+        help="keep the renders in this folder and take them from there when run again (after a change to irtps's fits, not to the renders)",
+    )
     args = parser.parse_args(argv)
     missing = [name for name in [*args.objects, "ballPNG"] if name not in SHAPES and not (DILIGENT / name).is_dir()]
     if missing:
-        sys.exit(f"ps_materials.py needs the DiLiGenT objects in {DILIGENT}: {', '.join(sorted(set(missing)))} not found")
+        sys.exit(
+            f"ps_materials.py needs the DiLiGenT objects in {DILIGENT}: {', '.join(sorted(set(missing)))} not found"
+        )
     mi, _, usable = import_mitsuba(["llvm_ad_rgb", "scalar_rgb"], threads=2)
     if not usable:
         sys.exit("no usable Mitsuba variant")
     print(f"Mitsuba {mi.__version__} ({usable[0]}), {args.samples} samples per pixel, 4 bounces, 96 DiLiGenT lights")
     reconstructions = ("classic", "IRT-PS") if args.irtps else ()
-    print("| shape | material | " + " | ".join(f"`{column}`" for column in COLUMNS) + " | `auto` against `none` | lobe share |" + "".join(f" {name} |" for name in reconstructions))
+    print(
+        "| shape | material | "
+        + " | ".join(f"`{column}`" for column in COLUMNS)
+        + " | `auto` against `none` | lobe share |"
+        + "".join(f" {name} |" for name in reconstructions)
+    )
     print("|---|---|" + "---|" * (len(COLUMNS) + 2 + len(reconstructions)))
     rows = []
     for name in args.objects:
-        height, mask, directions = synthetic_shape(name, args.size) if name in SHAPES else diligent_shape(DILIGENT / name, args.downsample)
+        height, mask, directions = (
+            synthetic_shape(name, args.size) if name in SHAPES else diligent_shape(DILIGENT / name, args.downsample)
+        )
         truth = height_to_normals(height, mask)
         irradiance = np.full((len(directions), 3), np.pi, dtype=np.float32)
         scene, renderer = shape_scene(height, mask, directions)
@@ -176,12 +228,24 @@ def main(argv: list[str] | None = None) -> int:
             errors, share = mode_errors(images, directions, irradiance, mask, truth)
             change = errors["auto"] / errors["none"] - 1
             label = f"{name} ({mask.shape[1]}×{mask.shape[0]}, {int(mask.sum())} px)"
-            row = {"shape": name, "material": material, "errors_deg": errors, "auto_vs_none": change, "lobe_share": share}
+            row = {
+                "shape": name,
+                "material": material,
+                "errors_deg": errors,
+                "auto_vs_none": change,
+                "lobe_share": share,
+            }
             if args.irtps:
-                row["reconstruct_deg"] = reconstruction_errors(irtps.Dataset(scene=scene, images=images, mask=mask, gt=irtps.GroundTruth(height=height, normal=truth)))
+                row["reconstruct_deg"] = reconstruction_errors(
+                    irtps.Dataset(
+                        scene=scene, images=images, mask=mask, gt=irtps.GroundTruth(height=height, normal=truth)
+                    )
+                )
             rows.append({**row, "seconds": time.perf_counter() - start})
             print(
-                f"| {label} | {material} | " + " | ".join(f"{errors[column]:.2f}°" for column in COLUMNS) + f" | {100 * change:+.0f} % | {100 * share:.0f} % |"
+                f"| {label} | {material} | "
+                + " | ".join(f"{errors[column]:.2f}°" for column in COLUMNS)
+                + f" | {100 * change:+.0f} % | {100 * share:.0f} % |"
                 + "".join(f" {row['reconstruct_deg'][method]:.2f}° |" for method in ("ps", "irtps") if args.irtps),
                 flush=True,
             )

@@ -91,7 +91,9 @@ def _tiny_irtps(folder: Path) -> None:
         _core.write_exr(str(path), _crop(_core.read_exr(str(path)), MITSUBA_CORNER))
     mask, _ = _core.read_png(str(folder / "mask.png"))
     _core.write_png(str(folder / "mask.png"), _crop(mask, MITSUBA_CORNER), 8)
-    scene = (folder / "scene.json").read_text().replace('"width": 96', '"width": 7').replace('"height": 96', '"height": 6')
+    scene = (
+        (folder / "scene.json").read_text().replace('"width": 96', '"width": 7').replace('"height": 96', '"height": 6')
+    )
     (folder / "scene.json").write_text(scene)
 
 

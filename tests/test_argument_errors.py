@@ -84,17 +84,34 @@ CASES = {
         "mask: ",
     ),
     "irtps.residual.render_with_residual": (
-        lambda f: f(_scene(), np.zeros((8, 8)), np.full((8, 8, 3), 0.5), np.ones((8, 8), bool), np.zeros((3, 8, 8, 3)), bounces=1, samples=0),
+        lambda f: f(
+            _scene(),
+            np.zeros((8, 8)),
+            np.full((8, 8, 3), 0.5),
+            np.ones((8, 8), bool),
+            np.zeros((3, 8, 8, 3)),
+            bounces=1,
+            samples=0,
+        ),
         "samples: ",
     ),
     "irtps.surface.height_to_normals": (lambda f: f(HEIGHT, WRONG), "mask: "),
     "irtps.surface.footprint_normals": (lambda f: f(HEIGHT, MASK, pixel_size=-1.0), "pixel_size: "),
     "irtps.surface.surface_albedo": (lambda f: f(ALBEDO[:, :2], HEIGHT, MASK), "albedo_ps: "),
-    "irtps.ps.photometric_stereo": (lambda f: f(np.zeros((3, 4, 4, 3)), LIGHTS, np.ones((3, 3)), robust="huber"), "robust: "),
+    "irtps.ps.photometric_stereo": (
+        lambda f: f(np.zeros((3, 4, 4, 3)), LIGHTS, np.ones((3, 3)), robust="huber"),
+        "robust: ",
+    ),
     "irtps.ps.lobe_share": (lambda f: f(np.zeros((3, 4, 4, 3)), LIGHTS, np.ones((3, 3)), sample=0), "sample: "),
     "irtps.ps.choose_robust": (lambda f: f(1.5), "share: "),
-    "irtps.render.render": (lambda f: f(_scene(), np.zeros((8, 8)), np.full((8, 8, 3), 0.5), WRONG, bounces=1, samples=4), "mask: "),
-    "irtps.render.render_indirect": (lambda f: f(_scene(), np.zeros((8, 9)), np.full((8, 8, 3), 0.5), np.ones((8, 8), bool), stride=0), "stride: "),
+    "irtps.render.render": (
+        lambda f: f(_scene(), np.zeros((8, 8)), np.full((8, 8, 3), 0.5), WRONG, bounces=1, samples=4),
+        "mask: ",
+    ),
+    "irtps.render.render_indirect": (
+        lambda f: f(_scene(), np.zeros((8, 9)), np.full((8, 8, 3), 0.5), np.ones((8, 8), bool), stride=0),
+        "stride: ",
+    ),
     "irtps.reconstruct.reconstruct": (lambda f: f(_dataset(), method="magic"), "method: "),
     "irtps.reconstruct.save_reconstruction": (lambda f: f(_dataset(), "unused"), "result: "),
     "irtps.synth.synthesize": (lambda f: f("cube"), "shape: "),
@@ -133,5 +150,10 @@ def test_the_core_raises_argument_errors_itself():
 def test_argument_errors_keep_the_argument_through_pickling():
     for error in (ArgumentError("mask", "empty"), OptionError("samples", "0 is out of range")):
         copy = pickle.loads(pickle.dumps(error))
-        assert (type(copy), str(copy), copy.argument, copy.problem) == (type(error), str(error), error.argument, error.problem)
+        assert (type(copy), str(copy), copy.argument, copy.problem) == (
+            type(error),
+            str(error),
+            error.argument,
+            error.problem,
+        )
     assert pickle.loads(pickle.dumps(OptionError("seed", "-1"))).option == "seed"

@@ -57,7 +57,9 @@ def test_outputs_match_a_direct_reconstruction_and_a_failure_stops_nothing(clust
         np.testing.assert_array_equal(normals, direct.normals)
         np.testing.assert_array_equal(albedo, direct.albedo)
         np.testing.assert_array_equal(height, direct.height)
-        expected = evaluate(mask=direct.mask, normals=direct.normals, albedo=direct.albedo, height=direct.height, gt=dataset.gt)
+        expected = evaluate(
+            mask=direct.mask, normals=direct.normals, albedo=direct.albedo, height=direct.height, gt=dataset.gt
+        )
         assert result.mean_angular_error == pytest.approx(expected.normal_mean_angular_deg)
         assert result.source == str(folder) and result.seconds > 0
         assert result.robust_used == direct.robust_used == "tukey"  # auto's choice, recorded
@@ -109,16 +111,33 @@ def test_command_runs_on_a_scheduler_and_writes_the_summary(cluster, three_sets,
     cap, ball, broken = three_sets
     twin = shutil.copytree(cap, tmp_path / "elsewhere" / "cap")  # same base name as `cap`
     out = tmp_path / "out"
-    argv = ["batch", str(cap), str(twin), str(ball), str(broken), "--out", str(out), "--scheduler", cluster.scheduler.address]
+    argv = [
+        "batch",
+        str(cap),
+        str(twin),
+        str(ball),
+        str(broken),
+        "--out",
+        str(out),
+        "--scheduler",
+        cluster.scheduler.address,
+    ]
     argv += ["--method", "irtps", "--iterations", "1", "--samples", "16", "--quiet"]
     assert main(argv) == 2
     printed = capsys.readouterr()
     # No progress bar; the glossy ball's warning that IRT-PS kept classic PS, then the failure.
     warning, error = printed.err.splitlines()
-    assert warning.startswith("irtps: warning: ball: IRT-PS: no pass explained the images better than classic photometric stereo")
+    assert warning.startswith(
+        "irtps: warning: ball: IRT-PS: no pass explained the images better than classic photometric stereo"
+    )
     assert error == f"irtps: error: 1 of 4 data sets failed (see {out / 'batch.md'})"
     summary = json.loads((out / "batch.json").read_text())
-    assert [(s["name"], s["status"]) for s in summary["datasets"]] == [("cap", "ok"), ("cap-2", "ok"), ("ball", "ok"), ("broken", "failed")]
+    assert [(s["name"], s["status"]) for s in summary["datasets"]] == [
+        ("cap", "ok"),
+        ("cap-2", "ok"),
+        ("ball", "ok"),
+        ("broken", "failed"),
+    ]
     assert (summary["succeeded"], summary["failed"], summary["settings"]["samples"]) == (3, 1, 16)
     assert printed.out == (out / "batch.md").read_text()
     assert "| broken | failed |" in printed.out and "001.exr" in printed.out
@@ -145,7 +164,9 @@ def test_resume_keeps_complete_outputs_untouched_and_redoes_the_others(cluster, 
     for name in ("batch.json", "batch.md"):  # as if the batch had been stopped before its summary
         (out / name).unlink()
     kept = sorted(out.glob("cap/**/*")) + [out / "cap"]
-    before = {path: (path.stat().st_ino, path.stat().st_mtime_ns, path.is_file() and path.read_bytes()) for path in kept}
+    before = {
+        path: (path.stat().st_ino, path.stat().st_mtime_ns, path.is_file() and path.read_bytes()) for path in kept
+    }
     capsys.readouterr()
     assert main([*argv, "--resume"]) == 0
     printed = capsys.readouterr().out
@@ -153,10 +174,18 @@ def test_resume_keeps_complete_outputs_untouched_and_redoes_the_others(cluster, 
     assert [(s["name"], s["status"]) for s in summary["datasets"]] == [("cap", "reused"), ("ball", "ok")]
     assert (summary["succeeded"], summary["reused"], summary["failed"]) == (2, 1, 0)
     assert summary["datasets"][0]["metrics"] == first["datasets"][0]["metrics"]  # evaluated again from the kept files
-    assert summary["datasets"][0]["robust_used"] == first["datasets"][0]["robust_used"] == "tukey"  # read back from run.json
-    assert {path: (path.stat().st_ino, path.stat().st_mtime_ns, path.is_file() and path.read_bytes()) for path in kept} == before
+    assert (
+        summary["datasets"][0]["robust_used"] == first["datasets"][0]["robust_used"] == "tukey"
+    )  # read back from run.json
+    assert {
+        path: (path.stat().st_ino, path.stat().st_mtime_ns, path.is_file() and path.read_bytes()) for path in kept
+    } == before
     assert (out / "ball" / "mesh.obj").stat().st_size > 0
-    assert "| cap | reused |" in printed and "1 data sets reconstructed into" in printed and "(1 complete from an earlier run, kept)" in printed
+    assert (
+        "| cap | reused |" in printed
+        and "1 data sets reconstructed into" in printed
+        and "(1 complete from an earlier run, kept)" in printed
+    )
     # Other options: no output is theirs, both are redone.
     assert main([*argv, "--resume", "--shadow-fraction", "0.1", "--quiet"]) == 0
     assert [s["status"] for s in json.loads((out / "batch.json").read_text())["datasets"]] == ["ok", "ok"]
@@ -166,8 +195,13 @@ def test_resume_keeps_complete_outputs_untouched_and_redoes_the_others(cluster, 
 @pytest.mark.parametrize(
     "damage",
     [
-        lambda text: '{"format": "irtps.run/1", "x": ' + "[" * 50_000 + "]" * 50_000 + "}",  # deeper than Python's recursion limit
-        lambda text: text.replace('"pixel_size": ', '"pixel_size": ' + "9" * 5000 + ', "was": '),  # past int()'s digit limit
+        lambda text: '{"format": "irtps.run/1", "x": '
+        + "[" * 50_000
+        + "]" * 50_000
+        + "}",  # deeper than Python's recursion limit
+        lambda text: text.replace(
+            '"pixel_size": ', '"pixel_size": ' + "9" * 5000 + ', "was": '
+        ),  # past int()'s digit limit
     ],
     ids=["nested", "huge integer"],
 )
@@ -184,14 +218,25 @@ def test_resume_redoes_an_output_whose_run_json_is_past_the_parser_bounds(cluste
 
 
 def test_local_cluster_options_are_refused_with_a_scheduler(three_sets, tmp_path, capsys):
-    argv = ["batch", str(three_sets[0]), "--out", str(tmp_path / "out"), "--scheduler", "tcp://head-node:8786", "--workers", "2"]
+    argv = [
+        "batch",
+        str(three_sets[0]),
+        "--out",
+        str(tmp_path / "out"),
+        "--scheduler",
+        "tcp://head-node:8786",
+        "--workers",
+        "2",
+    ]
     assert main(argv) == 2
     assert "--workers" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
 
 
 def test_a_bad_scheduler_address_is_named(three_sets, tmp_path, capsys):
-    assert main(["batch", str(three_sets[0]), "--out", str(tmp_path / "out"), "--scheduler", "nonsense://head-node"]) == 2
+    assert (
+        main(["batch", str(three_sets[0]), "--out", str(tmp_path / "out"), "--scheduler", "nonsense://head-node"]) == 2
+    )
     assert "nonsense://head-node: cannot reach a Dask scheduler" in capsys.readouterr().err
 
 
@@ -207,7 +252,10 @@ def test_warnings_of_a_task_are_printed_with_the_data_set_name_and_recorded(clus
     out = tmp_path / "out"
     saturated = f"{ball}: 216 observations in 6 images are saturated (a channel at or above 1); left out of the fit"
     for run in (1, 2):  # the same warning again in the same worker thread: printed again
-        assert main(["batch", str(ball), str(cap), "--out", str(out), "--scheduler", cluster.scheduler.address, "--quiet"]) == 0
+        assert (
+            main(["batch", str(ball), str(cap), "--out", str(out), "--scheduler", cluster.scheduler.address, "--quiet"])
+            == 0
+        )
         assert capsys.readouterr().err == f"irtps: warning: ball: {saturated}\n", run
     summary = json.loads((out / "batch.json").read_text())
     assert [(s["name"], s["warnings"]) for s in summary["datasets"]] == [("ball", [saturated]), ("cap", [])]
@@ -229,9 +277,20 @@ def test_warnings_are_kept_once_and_other_categories_keep_theirs(cluster, three_
         warnings.simplefilter("always")
         results = reconstruct_many([cap, ball], tmp_path / "out", client=cluster)
     assert [r.status for r in results] == ["ok", "ok"]
-    assert results[0].warnings == (f"{cap}: odd", "RuntimeWarning: invalid value encountered in divide", "numpy.exceptions.VisibleDeprecationWarning: old option")
+    assert results[0].warnings == (
+        f"{cap}: odd",
+        "RuntimeWarning: invalid value encountered in divide",
+        "numpy.exceptions.VisibleDeprecationWarning: old option",
+    )
     reissued = sorted((w.category.__name__, str(w.message)) for w in shown)
-    expected = [[("IrtpsWarning", f"{name}: {folder}: odd"), ("RuntimeWarning", f"{name}: invalid value encountered in divide"), ("VisibleDeprecationWarning", f"{name}: old option")] for name, folder in (("cap", cap), ("ball", ball))]
+    expected = [
+        [
+            ("IrtpsWarning", f"{name}: {folder}: odd"),
+            ("RuntimeWarning", f"{name}: invalid value encountered in divide"),
+            ("VisibleDeprecationWarning", f"{name}: old option"),
+        ]
+        for name, folder in (("cap", cap), ("ball", ball))
+    ]
     assert reissued == sorted(expected[0] + expected[1])
 
 
@@ -291,7 +350,9 @@ def test_recording_leaves_other_threads_warnings_and_their_catch_warnings_alone(
 def test_a_stopping_worker_finishes_the_write_under_way_then_exits_and_starts_no_other(monkeypatch, request):
     tasks, exits, events = irtps.batch._Tasks(), [], []
     monkeypatch.setattr(irtps.batch.os, "_exit", exits.append)
-    request.addfinalizer(functools.partial(logging.disable, logging.root.manager.disable))  # exit_after_writes silences logging
+    request.addfinalizer(
+        functools.partial(logging.disable, logging.root.manager.disable)
+    )  # exit_after_writes silences logging
     writing, release = threading.Event(), threading.Event()
 
     def write():
@@ -319,7 +380,9 @@ def test_images_left_out_per_data_set_and_a_resume_that_asks_for_others(cluster,
     cap, ball, _ = three_sets
     out = tmp_path / "out"
     argv = ["batch", str(cap), str(ball), "--out", str(out), "--scheduler", cluster.scheduler.address, "--quiet"]
-    assert main([*argv, "--exclude-images", "ball=8-9", "--exclude-images", "096.png"]) == 2  # cap has no 096.png: it fails alone
+    assert (
+        main([*argv, "--exclude-images", "ball=8-9", "--exclude-images", "096.png"]) == 2
+    )  # cap has no 096.png: it fails alone
     summary = json.loads((out / "batch.json").read_text())
     assert [(s["name"], s["status"]) for s in summary["datasets"]] == [("cap", "failed"), ("ball", "ok")]
     assert summary["datasets"][0]["error"].startswith(f"exclude_images: {cap} has no image named '096.png'")

@@ -47,9 +47,19 @@ class _Command:
 
     def __init__(self, *args):
         command = [sys.executable, "-m", "irtps.cli", *map(str, args)]
-        self.process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0, start_new_session=True, preexec_fn=interruptible)
+        self.process = subprocess.Popen(
+            command,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            bufsize=0,
+            start_new_session=True,
+            preexec_fn=interruptible,
+        )
         self._err, self._out, self._lock = [], [], threading.Lock()
-        self._readers = [threading.Thread(target=self._read, args=(stream, chunks), daemon=True) for stream, chunks in ((self.process.stderr, self._err), (self.process.stdout, self._out))]
+        self._readers = [
+            threading.Thread(target=self._read, args=(stream, chunks), daemon=True)
+            for stream, chunks in ((self.process.stderr, self._err), (self.process.stdout, self._out))
+        ]
         for reader in self._readers:
             reader.start()
 
@@ -113,10 +123,22 @@ def _messages(err: str) -> list[str]:
 
 @pytest.mark.parametrize(
     "signum, whole_group, status",
-    [(signal.SIGINT, True, 130), (signal.SIGINT, False, 130), (signal.SIGTERM, False, 143), (signal.SIGTERM, True, 143)],
-    ids=["ctrl-c (whole process group)", "SIGINT to the command", "SIGTERM to the command", "SIGTERM to the whole process group"],
+    [
+        (signal.SIGINT, True, 130),
+        (signal.SIGINT, False, 130),
+        (signal.SIGTERM, False, 143),
+        (signal.SIGTERM, True, 143),
+    ],
+    ids=[
+        "ctrl-c (whole process group)",
+        "SIGINT to the command",
+        "SIGTERM to the command",
+        "SIGTERM to the whole process group",
+    ],
 )
-def test_an_interrupted_batch_prints_one_line_and_leaves_no_worker_and_no_partial_output(datasets, tmp_path, signum, whole_group, status):
+def test_an_interrupted_batch_prints_one_line_and_leaves_no_worker_and_no_partial_output(
+    datasets, tmp_path, signum, whole_group, status
+):
     inputs = tmp_path / "in"
     shutil.copytree(datasets / "tiny", inputs / "tiny")
     for name in ("slow", "slow-b", "slow-c"):
@@ -144,14 +166,18 @@ def test_an_interrupted_batch_prints_one_line_and_leaves_no_worker_and_no_partia
     # complete output folders only: the tiny one, written before the interrupt, and no temporary
     assert sorted(path.name for path in out.iterdir()) == ["tiny"]
     written = sorted(path.name for path in (out / "tiny").iterdir())
-    assert {"normal.exr", "albedo.exr", "height.exr", "mask.png", "run.json"} <= set(written) and not any(name.startswith(".") for name in written)
+    assert {"normal.exr", "albedo.exr", "height.exr", "mask.png", "run.json"} <= set(written) and not any(
+        name.startswith(".") for name in written
+    )
 
 
 def test_a_ctrl_c_while_the_workers_start_is_one_line_too(datasets, tmp_path):
     inputs = tmp_path / "in"
     shutil.copytree(datasets / "slow", inputs / "slow")
     out = tmp_path / "out"
-    command = _Command("batch", inputs / "slow", "--out", out, "--method", "irtps", "--samples", "2048", "--workers", "2")
+    command = _Command(
+        "batch", inputs / "slow", "--out", out, "--method", "irtps", "--samples", "2048", "--workers", "2"
+    )
     # the worker processes exist and are importing (a second or more) before they set themselves up
     deadline = time.monotonic() + 300
     while sum("spawn_main" in line for line in _session_processes(command.process.pid)) < 2:
@@ -172,6 +198,9 @@ def test_the_warnings_of_worker_processes_are_printed_like_a_local_runs(tmp_path
     command = _Command("batch", data, "--out", out, "--workers", "1", "--quiet")
     returncode, printed, err = command.finish()
     assert returncode == 0, err
-    assert err == f"irtps: warning: ball: {data}: 216 observations in 6 images are saturated (a channel at or above 1); left out of the fit\n"
+    assert (
+        err
+        == f"irtps: warning: ball: {data}: 216 observations in 6 images are saturated (a channel at or above 1); left out of the fit\n"
+    )
     assert "| ball | ok |" in printed
     assert command.live_processes() == []

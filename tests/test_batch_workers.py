@@ -62,7 +62,11 @@ def flags(tmp_path, monkeypatch):
     folder.mkdir()
     monkeypatch.setenv(FLAGS, str(folder))
     real = distributed.LocalCluster
-    monkeypatch.setattr(distributed, "LocalCluster", lambda *args, preload=(), **kwargs: real(*args, preload=[*preload, __file__], **kwargs))
+    monkeypatch.setattr(
+        distributed,
+        "LocalCluster",
+        lambda *args, preload=(), **kwargs: real(*args, preload=[*preload, __file__], **kwargs),
+    )
     return folder
 
 
@@ -134,18 +138,32 @@ def test_a_worker_killed_in_the_middle_of_a_data_set_loses_nothing(data, flags, 
 
     controller = _in_background(kill_the_first_holder_then_release)
     out = tmp_path / "out"
-    status = main(["batch", str(data / "cap"), str(data / "ball"), str(data / "held"), "--out", str(out), "--workers", "2"])
+    status = main(
+        ["batch", str(data / "cap"), str(data / "ball"), str(data / "held"), "--out", str(out), "--workers", "2"]
+    )
     controller.join()
     printed = capsys.readouterr().out
     assert status == 0 and len(killed) == 1
     summary = _summary(out)
-    assert {name: (entry["status"], entry["lost_workers"]) for name, entry in summary.items()} == {"cap": ("ok", 0), "held": ("ok", 1), "ball": ("ok", 0)}
-    assert summary["held"]["metrics"] == summary["cap"]["metrics"] == summary["ball"]["metrics"]  # the same data set thrice
+    assert {name: (entry["status"], entry["lost_workers"]) for name, entry in summary.items()} == {
+        "cap": ("ok", 0),
+        "held": ("ok", 1),
+        "ball": ("ok", 0),
+    }
+    assert (
+        summary["held"]["metrics"] == summary["cap"]["metrics"] == summary["ball"]["metrics"]
+    )  # the same data set thrice
     assert summary["held"]["metrics"]["normal_mean_angular_deg"] < 20
     held_by = sorted(int(path.name.removeprefix("held-by-")) for path in flags.glob("held-by-*"))
     assert len(held_by) == 2 and killed[0] in held_by  # ran twice, in two processes
     assert "| held | ok (1 worker lost) |" in printed and "3 data sets reconstructed" in printed
-    assert sorted(path.name for path in out.iterdir()) == ["ball", "batch.json", "batch.md", "cap", "held"]  # no leftover of the killed task
+    assert sorted(path.name for path in out.iterdir()) == [
+        "ball",
+        "batch.json",
+        "batch.md",
+        "cap",
+        "held",
+    ]  # no leftover of the killed task
     assert json.loads((out / "held" / "run.json").read_text())["source"] == str(data / "held")
 
 
@@ -160,11 +178,27 @@ def test_a_data_set_that_kills_every_worker_fails_alone(data, flags, received, t
     out = tmp_path / "out"
     # One worker, which starts the data sets in the order given: the poison waits for cap
     # and ball, then kills the worker each time it runs.
-    status = main(["batch", str(data / "cap"), str(data / "ball"), str(data / "poison"), "--out", str(out), "--workers", "1", "--quiet"])
+    status = main(
+        [
+            "batch",
+            str(data / "cap"),
+            str(data / "ball"),
+            str(data / "poison"),
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+            "--quiet",
+        ]
+    )
     controller.join()
     assert status == 2
     summary = _summary(out)
-    assert {name: (entry["status"], entry["lost_workers"]) for name, entry in summary.items()} == {"cap": ("ok", 0), "ball": ("ok", 0), "poison": ("failed", 4)}
+    assert {name: (entry["status"], entry["lost_workers"]) for name, entry in summary.items()} == {
+        "cap": ("ok", 0),
+        "ball": ("ok", 0),
+        "poison": ("failed", 4),
+    }
     assert summary["poison"]["error"] == (
         "KilledWorker: each of the 4 workers that ran it died (killed, e.g. out of memory); Dask gave up on it (distributed.scheduler.allowed-failures = 3)"
     )
@@ -178,8 +212,22 @@ def test_data_sets_waiting_for_a_worker_are_not_charged_with_its_deaths(data, fl
     # More data sets than twice the worker threads: the scheduler holds back those that wait
     # (but cap, sent to the worker with the poison before there were three, may be charged
     # with the first death; with Dask's default worker saturation, it was charged with all four).
-    status = main(["batch", str(data / "poison"), str(data / "cap"), str(data / "ball"), "--out", str(out), "--workers", "1", "--quiet"])
+    status = main(
+        [
+            "batch",
+            str(data / "poison"),
+            str(data / "cap"),
+            str(data / "ball"),
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+            "--quiet",
+        ]
+    )
     assert status == 2
     summary = _summary(out)
     assert {name: entry["status"] for name, entry in summary.items()} == {"poison": "failed", "cap": "ok", "ball": "ok"}
-    assert (summary["poison"]["lost_workers"], summary["ball"]["lost_workers"]) == (4, 0) and summary["cap"]["lost_workers"] <= 1
+    assert (summary["poison"]["lost_workers"], summary["ball"]["lost_workers"]) == (4, 0) and summary["cap"][
+        "lost_workers"
+    ] <= 1

@@ -33,7 +33,25 @@ def test_render_writes_a_complete_data_set(tmp_path):
 @pytest.mark.parametrize("shape", ["cap", "cavity", "grooves", "relief"])
 def test_synth_shapes_write_loadable_data_sets(tmp_path, shape):
     out = tmp_path / shape
-    code = main(["synth", shape, "--out", str(out), "--size", "24", "--lights", "4", "--bounces", "1", "--samples", "4", "--albedo", "textured", "--quiet"])
+    code = main(
+        [
+            "synth",
+            shape,
+            "--out",
+            str(out),
+            "--size",
+            "24",
+            "--lights",
+            "4",
+            "--bounces",
+            "1",
+            "--samples",
+            "4",
+            "--albedo",
+            "textured",
+            "--quiet",
+        ]
+    )
     assert code == 0
     data = load_dataset(out)
     assert data.images.shape == (4, 24, 24, 3)
@@ -80,7 +98,9 @@ def test_reconstruct_and_evaluate_a_diligent_capture(tmp_path, capsys):
     for name in ["normal.exr", "albedo.exr", "height.exr", "mask.png", "mesh.ply", "mesh.obj", "run.json"]:
         assert (out / name).is_file(), name
     run = json.loads((out / "run.json").read_text())
-    assert run["parameters"]["method"] == "ps" and run["parameters"]["robust"] == "auto" and run["robust_used"] == "tukey"
+    assert (
+        run["parameters"]["method"] == "ps" and run["parameters"]["robust"] == "auto" and run["robust_used"] == "tukey"
+    )
     assert set(run["timings_s"]) >= {"load", "photometric_stereo", "integration"}
     assert main(["evaluate", str(out), "--gt", str(BALL), "--json"]) == 0
     metrics = json.loads(capsys.readouterr().out)
@@ -90,7 +110,26 @@ def test_reconstruct_and_evaluate_a_diligent_capture(tmp_path, capsys):
 
 def test_reconstruct_places_a_synthetic_object_on_its_floor(tmp_path, capsys):
     data = tmp_path / "cap"
-    assert main(["synth", "cap", "--out", str(data), "--size", "32", "--lights", "8", "--bounces", "0", "--environment", "none", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "synth",
+                "cap",
+                "--out",
+                str(data),
+                "--size",
+                "32",
+                "--lights",
+                "8",
+                "--bounces",
+                "0",
+                "--environment",
+                "none",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     out = tmp_path / "cap_ps"
     assert main(["reconstruct", str(data), "--out", str(out), "--integration", "mestimator", "--quiet"]) == 0
     assert main(["evaluate", str(out), "--gt", str(data), "--json"]) == 0
@@ -107,7 +146,26 @@ def test_evaluate_rejects_a_folder_that_is_not_a_reconstruction(tmp_path, capsys
 
 def test_evaluate_reads_only_the_ground_truth(tmp_path, capsys):
     data = tmp_path / "cap"
-    assert main(["synth", "cap", "--out", str(data), "--size", "24", "--lights", "6", "--bounces", "0", "--environment", "none", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "synth",
+                "cap",
+                "--out",
+                str(data),
+                "--size",
+                "24",
+                "--lights",
+                "6",
+                "--bounces",
+                "0",
+                "--environment",
+                "none",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     out = tmp_path / "cap_ps"
     assert main(["reconstruct", str(data), "--out", str(out), "--quiet"]) == 0
     shutil.rmtree(data / "images")  # evaluation must not need the images
@@ -119,7 +177,26 @@ def test_evaluate_reads_only_the_ground_truth(tmp_path, capsys):
 def test_evaluate_rejects_ground_truth_of_another_size(tmp_path, capsys):
     small, large = tmp_path / "small", tmp_path / "large"
     for folder, size in ((small, "16"), (large, "20")):
-        assert main(["synth", "cap", "--out", str(folder), "--size", size, "--lights", "4", "--bounces", "0", "--environment", "none", "--quiet"]) == 0
+        assert (
+            main(
+                [
+                    "synth",
+                    "cap",
+                    "--out",
+                    str(folder),
+                    "--size",
+                    size,
+                    "--lights",
+                    "4",
+                    "--bounces",
+                    "0",
+                    "--environment",
+                    "none",
+                    "--quiet",
+                ]
+            )
+            == 0
+        )
     out = tmp_path / "small_ps"
     assert main(["reconstruct", str(small), "--out", str(out), "--quiet"]) == 0
     assert main(["evaluate", str(out), "--gt", str(large)]) == 2

@@ -44,7 +44,9 @@ def _ps(images=IMAGES, mask=MASK, directions=LIGHTS, irradiance=IRRADIANCE, **se
 
 
 def _check(images=IMAGES, mask=MASK, check=(0,), rounds=5, shadow_fraction=0.05, saturation=None):
-    return lambda: _core.tukey_with_lobe_check(images, mask, list(check), LIGHTS, IRRADIANCE, shadow_fraction, saturation, rounds)
+    return lambda: _core.tukey_with_lobe_check(
+        images, mask, list(check), LIGHTS, IRRADIANCE, shadow_fraction, saturation, rounds
+    )
 
 
 def _compare(direct=None, halves=None, counts=(1,), observed=None, keep=None, first=0):
@@ -61,7 +63,9 @@ def _denoise(indirect=None, noise_energy=None, mask=MASK, height_px=HEIGHT, albe
     return lambda: _core.denoise_indirect(indirect, noise_energy, mask, height_px, albedo)
 
 
-def _renderer_with(height=HEIGHT, mask=MASK, albedo=ALBEDO, pixel_size=1.0, directions=LIGHTS, irradiance=IRRADIANCE, floor=None):
+def _renderer_with(
+    height=HEIGHT, mask=MASK, albedo=ALBEDO, pixel_size=1.0, directions=LIGHTS, irradiance=IRRADIANCE, floor=None
+):
     return lambda: _core.Renderer(height, mask, albedo, pixel_size, directions, irradiance, floor)
 
 
@@ -108,8 +112,16 @@ CASES = [
     ("lights-(4,0)", lambda: _core.check_lights(np.zeros((4, 0), F32), IRRADIANCE), "light_directions"),
     ("lights-float64", lambda: _core.check_lights(LIGHTS.astype(np.float64), IRRADIANCE), "light_directions"),
     # Renderer
-    ("renderer-height-0", _renderer_with(np.zeros((0, W), F32), np.ones((0, W), bool), np.zeros((0, W, 3), F32)), "height"),
-    ("renderer-width-0", _renderer_with(np.zeros((H, 0), F32), np.ones((H, 0), bool), np.zeros((H, 0, 3), F32)), "height"),
+    (
+        "renderer-height-0",
+        _renderer_with(np.zeros((0, W), F32), np.ones((0, W), bool), np.zeros((0, W, 3), F32)),
+        "height",
+    ),
+    (
+        "renderer-width-0",
+        _renderer_with(np.zeros((H, 0), F32), np.ones((H, 0), bool), np.zeros((H, 0, 3), F32)),
+        "height",
+    ),
     ("renderer-nan-height", _renderer_with(height=_nan((H, W))), "height"),
     ("renderer-nan-albedo", _renderer_with(albedo=_nan((H, W, 3))), "albedo"),
     ("renderer-nan-pixel-size", _renderer_with(pixel_size=float("nan")), "pixel_size"),
@@ -131,8 +143,16 @@ CASES = [
     ("render-pixels-negative", lambda: _renderer().render_pixels([-1], 1, 1, 1, 0), "pixels"),
     ("render-pixels-no-sample", lambda: _renderer().render_pixels([0], 0, 1, 0, 0), "direct_samples"),
     ("intersect-nan-origin", lambda: _renderer().intersect(_nan((2, 3)), np.ones((2, 3), F32)), "origins"),
-    ("intersect-inf-direction", lambda: _renderer().intersect(np.ones((2, 3), F32), np.full((2, 3), np.inf, F32)), "directions"),
-    ("intersect-zero-direction", lambda: _renderer().intersect(np.ones((2, 3), F32), np.zeros((2, 3), F32)), "directions"),
+    (
+        "intersect-inf-direction",
+        lambda: _renderer().intersect(np.ones((2, 3), F32), np.full((2, 3), np.inf, F32)),
+        "directions",
+    ),
+    (
+        "intersect-zero-direction",
+        lambda: _renderer().intersect(np.ones((2, 3), F32), np.zeros((2, 3), F32)),
+        "directions",
+    ),
     ("intersect-(2,0)", lambda: _renderer().intersect(np.zeros((2, 0), F32), np.zeros((2, 0), F32)), "origins"),
     ("intersect-threads-0", lambda: _renderer().intersect(np.ones((2, 3), F32), np.ones((2, 3), F32), 0), "threads"),
     ("intersect-float64", lambda: _renderer().intersect(np.ones((2, 3)), np.ones((2, 3), F32)), "origins"),
@@ -148,7 +168,11 @@ CASES = [
     ("compare-keep-shape", _compare(keep=np.ones((4, 2), bool)), "keep"),
     ("compare-float64", _compare(direct=np.zeros((4, 2, 3))), "direct"),
     # denoise_indirect
-    ("denoise-height-0", _denoise(mask=np.ones((0, W), bool), height_px=np.zeros((0, W), F32), albedo=np.zeros((0, W, 3), F32)), "mask"),
+    (
+        "denoise-height-0",
+        _denoise(mask=np.ones((0, W), bool), height_px=np.zeros((0, W), F32), albedo=np.zeros((0, W, 3), F32)),
+        "mask",
+    ),
     ("denoise-nan-indirect", _denoise(indirect=_nan((2, H * W, 3))), "indirect"),
     ("denoise-nan-energy", _denoise(noise_energy=_nan((H * W,), np.float64)), "noise_energy"),
     ("denoise-nan-height", _denoise(height_px=_nan((H, W))), "height_px"),
@@ -212,7 +236,11 @@ def _arrays_to_write():
 @pytest.mark.parametrize("writer", ["exr", "png"])
 def test_writing_an_array_without_a_pixel_is_refused(writer, name, array, tmp_path):
     path = tmp_path / f"out.{writer}"
-    call = (lambda: _core.write_exr(str(path), array)) if writer == "exr" else (lambda: _core.write_png(str(path), array, 8))
+    call = (
+        (lambda: _core.write_exr(str(path), array))
+        if writer == "exr"
+        else (lambda: _core.write_png(str(path), array, 8))
+    )
     _assert_clean(call, "array")
     assert not path.exists()
 

@@ -6,7 +6,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from irtps import ArgumentError, Camera, Dataset, DatasetError, GroundTruth, Light, Scene, _core, load_dataset, save_dataset
+from irtps import (
+    ArgumentError,
+    Camera,
+    Dataset,
+    DatasetError,
+    GroundTruth,
+    Light,
+    Scene,
+    _core,
+    load_dataset,
+    save_dataset,
+)
 from irtps.imageio import read_exr, read_image, read_images, read_mask, read_png, write_exr, write_png
 from irtps.scene import scene_to_dict
 
@@ -445,4 +456,6 @@ def test_an_exr_data_window_is_placed_in_its_display_window(tmp_path):
     np.testing.assert_array_equal(read[:, :2], 0)
     np.testing.assert_array_equal(read[:, 2:], image[:, :2])
     _shift_exr_data_window(path, -3)  # one column left of the display window
-    np.testing.assert_array_equal(read_exr(path), np.concatenate([image[:, 1:], np.zeros((3, 1, 3), np.float32)], axis=1))
+    np.testing.assert_array_equal(
+        read_exr(path), np.concatenate([image[:, 1:], np.zeros((3, 1, 3), np.float32)], axis=1)
+    )

@@ -60,7 +60,11 @@ def _with_mask(tmp_path, fixture, shape):
     mask = (image[..., 0] if image.ndim == 3 else image) > 0.5
     new = shape(mask)
     values = new.astype(np.float32)
-    _core.write_png(str(folder / "mask.png"), np.repeat(values[..., None], image.shape[2], axis=2) if image.ndim == 3 else values, bits)
+    _core.write_png(
+        str(folder / "mask.png"),
+        np.repeat(values[..., None], image.shape[2], axis=2) if image.ndim == 3 else values,
+        bits,
+    )
     return folder
 
 
@@ -89,7 +93,9 @@ def test_classic_ps_fits_one_pixel_as_its_true_normal(tmp_path, fixture, error_d
 @pytest.mark.parametrize("shape", DEGENERATE)
 def test_irtps_refuses_a_mask_with_no_2x2_block_naming_it(tmp_path, capsys, fixture, shape):
     folder = _with_mask(tmp_path, fixture, DEGENERATE[shape])
-    error = refused(["reconstruct", str(folder), "--out", str(tmp_path / "out"), "--method", "irtps", "--quiet"], capsys)
+    error = refused(
+        ["reconstruct", str(folder), "--out", str(tmp_path / "out"), "--method", "irtps", "--quiet"], capsys
+    )
     assert error.startswith(f"irtps: error: {folder / 'mask.png'}: no 2x2 block of object pixels: ")
     assert "--method ps" in error
     assert not (tmp_path / "out").exists()
@@ -107,7 +113,11 @@ def test_a_data_set_in_memory_names_its_mask_field():
 
 
 def test_a_pixel_no_triangle_touches_keeps_its_light():
-    scene = irtps.Scene(irtps.Camera(10, 10, 1.0), [irtps.Light(direction=[0, 0, 1], irradiance=(np.pi,) * 3)], floor=irtps.Floor(height=0.0, albedo=(1.0, 1.0, 1.0)))
+    scene = irtps.Scene(
+        irtps.Camera(10, 10, 1.0),
+        [irtps.Light(direction=[0, 0, 1], irradiance=(np.pi,) * 3)],
+        floor=irtps.Floor(height=0.0, albedo=(1.0, 1.0, 1.0)),
+    )
     mask = np.zeros((10, 10), bool)
     mask[3:7, 3:7] = True
     mask[9, 9] = True  # a stray pixel, the last in row-major order: the floor fills its footprint in the reconstruction

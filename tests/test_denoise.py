@@ -12,11 +12,15 @@ from irtps.residual import render_with_residual
 
 @pytest.mark.parametrize("albedo", ["uniform", "textured"])
 def test_the_filtered_estimate_of_few_paths_is_closer_to_the_converged_light(albedo):
-    data, _ = irtps.synthesize("grooves", size=32, lights=4, environment="cornell", albedo=albedo, bounces=2, samples=8, seed=2)
+    data, _ = irtps.synthesize(
+        "grooves", size=32, lights=4, environment="cornell", albedo=albedo, bounces=2, samples=8, seed=2
+    )
     height, albedo_map, mask = data.gt.height, data.gt.albedo, data.mask
     converged = render_indirect(data.scene, height, albedo_map, mask, bounces=2, samples=2048, seed=9)[:, mask]
     rough = render_with_residual(data.scene, height, albedo_map, mask, data.images, bounces=2, samples=16, seed=1)
-    filtered, energy = denoise_indirect(rough.indirect, rough.noise_energy, height, albedo_map, mask, data.scene.camera.pixel_size)
+    filtered, energy = denoise_indirect(
+        rough.indirect, rough.noise_energy, height, albedo_map, mask, data.scene.camera.pixel_size
+    )
 
     def error(estimate):
         return float(np.sqrt(np.mean((estimate - converged) ** 2)))

@@ -12,7 +12,9 @@ def _srgb(value):
 
 
 def test_normal_encoding_of_known_normals():
-    normals = np.array([[[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]], [[0.6, 0.0, 0.8], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]]])
+    normals = np.array(
+        [[[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]], [[0.6, 0.0, 0.8], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]]]
+    )
     mask = np.array([[True, True, True], [True, True, False]])
     rgb = normal_to_rgb(normals, mask)
     np.testing.assert_allclose(rgb[0, 0], [0.5, 0.5, 1.0])  # facing the camera: light blue
@@ -88,11 +90,23 @@ def test_object_window_is_the_box_with_a_margin_inside_the_image():
 @pytest.mark.parametrize(
     ("call", "message"),
     [
-        (lambda: normal_to_rgb(np.zeros((2, 3, 3)), np.ones((2, 2), bool)), "normals: shape (2, 3, 3), expected (2, 2, 3) to match the mask"),
-        (lambda: albedo_to_rgb(np.full((2, 2, 3), np.nan), np.ones((2, 2), bool)), "albedo: non-finite value nan at row 0, column 0"),
+        (
+            lambda: normal_to_rgb(np.zeros((2, 3, 3)), np.ones((2, 2), bool)),
+            "normals: shape (2, 3, 3), expected (2, 2, 3) to match the mask",
+        ),
+        (
+            lambda: albedo_to_rgb(np.full((2, 2, 3), np.nan), np.ones((2, 2), bool)),
+            "albedo: non-finite value nan at row 0, column 0",
+        ),
         (lambda: radiance_to_rgb(np.zeros((2, 2, 3)), np.zeros((2, 2), bool)), "mask: empty"),
-        (lambda: hillshade(np.zeros((2, 2)), np.ones((2, 2), bool), pixel_size=0), "pixel_size: expected a positive finite number, got 0"),
-        (lambda: hillshade(np.zeros((3, 2)), np.ones((2, 2), bool)), "height: shape (3, 2), expected (2, 2) to match the mask"),
+        (
+            lambda: hillshade(np.zeros((2, 2)), np.ones((2, 2), bool), pixel_size=0),
+            "pixel_size: expected a positive finite number, got 0",
+        ),
+        (
+            lambda: hillshade(np.zeros((3, 2)), np.ones((2, 2), bool)),
+            "height: shape (3, 2), expected (2, 2) to match the mask",
+        ),
     ],
 )
 def test_bad_input_names_the_argument(call, message):

@@ -20,7 +20,10 @@ MODULES = sorted(module.name for module in pkgutil.walk_packages(irtps.__path__,
 def _has_examples(path: Path) -> bool:
     """Whether a docstring of the module at `path` holds a ``>>>`` example."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
-    nodes = [tree, *(node for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)))]
+    nodes = [
+        tree,
+        *(node for node in ast.walk(tree) if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef))),
+    ]
     return any(">>>" in (ast.get_docstring(node) or "") for node in nodes)
 
 
@@ -41,7 +44,11 @@ def test_docstring_examples(name):
 
 @pytest.mark.parametrize(
     ("function", "argument", "choices"),
-    [(integrate_normals, "method", METHODS), (integrate_normals, "robust_weight", ROBUST_WEIGHTS), (photometric_stereo, "robust", ROBUST_CHOICES)],
+    [
+        (integrate_normals, "method", METHODS),
+        (integrate_normals, "robust_weight", ROBUST_WEIGHTS),
+        (photometric_stereo, "robust", ROBUST_CHOICES),
+    ],
 )
 def test_documented_choices_are_the_code_s(function, argument, choices):
     documented = {"{" + ", ".join(f'"{choice}"' for choice in choices) + "}"}

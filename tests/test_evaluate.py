@@ -172,8 +172,14 @@ def test_missing_pieces_give_none():
     gt = GroundTruth(normal=np.dstack([np.zeros(size), np.zeros(size), np.ones(size)]))
     m = evaluate(mask=mask, normals=gt.normal, albedo=np.zeros((*size, 3)), height=np.zeros(size), gt=gt)
     assert m.normal_mean_angular_deg == pytest.approx(0.0, abs=1e-3) and m.normal_component_error == 0.0
-    for name in ("albedo_error", "albedo_error_rgb", "height_error", "height_error_aligned",
-                 "height_rmse_aligned", "height_offset"):
+    for name in (
+        "albedo_error",
+        "albedo_error_rgb",
+        "height_error",
+        "height_error_aligned",
+        "height_rmse_aligned",
+        "height_offset",
+    ):
         assert getattr(m, name) is None, name
     no_normals = evaluate(mask=mask, height=np.zeros(size), gt=gt)
     assert no_normals.normal_mean_angular_deg is None and no_normals.normal_component_error is None
@@ -234,8 +240,15 @@ def test_to_dict_is_json_ready_and_format_metrics_reads_well():
     assert data["albedo_error_rgb"] == pytest.approx([0.25, 0.25, 0.25])
     assert data["height_error"] == pytest.approx(0.25)
     assert set(data) >= {
-        "normal_mean_angular_deg", "normal_median_angular_deg", "normal_component_error", "albedo_error",
-        "albedo_error_rgb", "height_error", "height_error_aligned", "height_rmse_aligned", "pixels",
+        "normal_mean_angular_deg",
+        "normal_median_angular_deg",
+        "normal_component_error",
+        "albedo_error",
+        "albedo_error_rgb",
+        "height_error",
+        "height_error_aligned",
+        "height_rmse_aligned",
+        "pixels",
     }
     text = format_metrics(m)
     lines = text.splitlines()

@@ -278,7 +278,9 @@ CASES = {
         "ball",
         lambda f: _replace_line(f / "light_intensities.txt", 2, "1e308 1e308 1e308"),
         [],
-        ["{data}/light_intensities.txt: line 2: light intensity has channel 0 = 1e+308, out of range: expected 0 or a number from 1e-09 to 1e+09"],
+        [
+            "{data}/light_intensities.txt: line 2: light intensity has channel 0 = 1e+308, out of range: expected 0 or a number from 1e-09 to 1e+09"
+        ],
     ),
     "vanishing DiLiGenT intensity": (
         "reconstruct",
@@ -315,14 +317,18 @@ CASES = {
         "mitsuba",
         lambda f: _edit_scene(f, lambda s: s["lights"][0].update(direction=[1.0, 0.0, 1e-50])),
         [],
-        ["{data}/scene.json: lights[0].direction must point toward the camera side (z > 0), got z = 1e-50, which is 0 in float32"],
+        [
+            "{data}/scene.json: lights[0].direction must point toward the camera side (z > 0), got z = 1e-50, which is 0 in float32"
+        ],
     ),
     "DiLiGenT light grazing below float32": (
         "reconstruct",
         "ball",
         lambda f: _replace_line(f / "light_directions.txt", 3, "0 1 1e-300"),
         [],
-        ["{data}/light_directions.txt: line 3: light direction must point toward the camera side (z > 0), got z = 1e-300, which is 0"],
+        [
+            "{data}/light_directions.txt: line 3: light direction must point toward the camera side (z > 0), got z = 1e-300, which is 0"
+        ],
     ),
     # empty mask
     "empty mask": (
@@ -512,8 +518,20 @@ CASES = {
         ["--base-height", "1e308"],
         ["--base-height: 1e+308 is out of range for this data set: expected at most 1e+06 pixel sizes"],
     ),
-    "absurd synthetic size": ("synth", None, None, ["cap", "--size", "1000000"], ["--size: 1000000 is out of range: expected an integer from 8 to 11585"]),
-    "no samples": ("render", "mitsuba", None, ["--samples", "0"], ["--samples: 0 is out of range: expected an integer from 1 to 1048576"]),
+    "absurd synthetic size": (
+        "synth",
+        None,
+        None,
+        ["cap", "--size", "1000000"],
+        ["--size: 1000000 is out of range: expected an integer from 8 to 11585"],
+    ),
+    "no samples": (
+        "render",
+        "mitsuba",
+        None,
+        ["--samples", "0"],
+        ["--samples: 0 is out of range: expected an integer from 1 to 1048576"],
+    ),
     "saturation not a number": (
         "reconstruct",
         "mitsuba",
@@ -661,7 +679,9 @@ def test_saturated_png_pixels_are_reported_when_not_robust(tmp_path, capsys):
     shutil.copytree(BALL, data)
     saturate(data)
     assert main(["reconstruct", str(data), "--out", str(tmp_path / "out"), "--robust", "none", "--quiet"]) == 0
-    assert capsys.readouterr().err.endswith("are saturated (a channel at or above 1); used as they are (robust mode none)\n")
+    assert capsys.readouterr().err.endswith(
+        "are saturated (a channel at or above 1); used as they are (robust mode none)\n"
+    )
 
 
 # Interrupted runs -------------------------------------------------------------------
@@ -701,7 +721,9 @@ def test_ctrl_c_while_writing_leaves_the_previous_output(tmp_path, previous_outp
 
 
 def test_a_full_disk_while_writing_leaves_the_previous_output(tmp_path, previous_output, monkeypatch, capsys):
-    full = DatasetError("out/normal.exr: could not write OpenEXR (No space left on device (os error 28))")  # as the core says it
+    full = DatasetError(
+        "out/normal.exr: could not write OpenEXR (No space left on device (os error 28))"
+    )  # as the core says it
     calls = _fail_on_third_exr(monkeypatch, full)
     assert main(["reconstruct", str(BALL), "--out", str(previous_output), "--quiet"]) == 2
     assert len(calls) == 3
@@ -711,7 +733,17 @@ def test_a_full_disk_while_writing_leaves_the_previous_output(tmp_path, previous
 
 @pytest.mark.parametrize("signum, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_killed_process_leaves_the_previous_output(tmp_path, previous_output, signum, status):
-    command = [sys.executable, "-m", "irtps.cli", "render", str(MITSUBA), "--out", str(previous_output), "--samples", "8192"]
+    command = [
+        sys.executable,
+        "-m",
+        "irtps.cli",
+        "render",
+        str(MITSUBA),
+        "--out",
+        str(previous_output),
+        "--samples",
+        "8192",
+    ]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=interruptible)
     assert process.stderr.read(1)  # the progress bar has started: rendering is under way
     process.send_signal(signum)

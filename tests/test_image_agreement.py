@@ -24,7 +24,12 @@ def cap():
 def _agreement(data, images=None, mask=None):
     scene = data.scene
     return image_agreement(
-        data.images if images is None else images, scene.light_directions, scene.light_irradiance, data.gt.normal, data.gt.albedo, data.mask if mask is None else mask
+        data.images if images is None else images,
+        scene.light_directions,
+        scene.light_irradiance,
+        data.gt.normal,
+        data.gt.albedo,
+        data.mask if mask is None else mask,
     )
 
 
@@ -61,17 +66,23 @@ def test_an_image_that_lights_too_few_pixels_well_has_no_figures(cap):
     mask[24, 24 : 24 + MIN_PIXELS - 1] = True  # fewer pixels than any image needs
     agreement = _agreement(cap, mask=mask)
     assert np.isnan(agreement.brightness).all() and np.isnan(agreement.spread).all()
-    assert format_image_agreement(cap.names, agreement) == ["images' agreement with the fit: no image has enough well-lit pixels"]
+    assert format_image_agreement(cap.names, agreement) == [
+        "images' agreement with the fit: no image has enough well-lit pixels"
+    ]
 
 
 def test_bad_arguments_are_named(cap):
     scene = cap.scene
     with pytest.raises(ArgumentError, match="^albedo: "):
-        image_agreement(cap.images, scene.light_directions, scene.light_irradiance, cap.gt.normal, cap.gt.albedo[:, :3], cap.mask)
+        image_agreement(
+            cap.images, scene.light_directions, scene.light_irradiance, cap.gt.normal, cap.gt.albedo[:, :3], cap.mask
+        )
     with pytest.raises(ArgumentError, match="^mask: empty"):
         _agreement(cap, mask=np.zeros_like(cap.mask))
     with pytest.raises(ArgumentError, match="^sample: 0 is not a positive integer$"):
-        image_agreement(cap.images, scene.light_directions, scene.light_irradiance, cap.gt.normal, cap.gt.albedo, cap.mask, sample=0)
+        image_agreement(
+            cap.images, scene.light_directions, scene.light_irradiance, cap.gt.normal, cap.gt.albedo, cap.mask, sample=0
+        )
 
 
 @pytest.mark.filterwarnings("ignore:.*saturated")
@@ -132,7 +143,12 @@ def test_a_recorded_agreement_reads_back_and_a_malformed_one_is_refused():
     assert record == {"brightness": [1.0, None], "spread": [0.02, None]}
     back = ImageAgreement.from_dict(record)
     np.testing.assert_array_equal(back.brightness, agreement.brightness)
-    for bad in ({"brightness": [1.0]}, {"brightness": [1.0], "spread": [0.1, 0.2]}, {"brightness": "x", "spread": "y"}, [1.0]):
+    for bad in (
+        {"brightness": [1.0]},
+        {"brightness": [1.0], "spread": [0.1, 0.2]},
+        {"brightness": "x", "spread": "y"},
+        [1.0],
+    ):
         with pytest.raises(ArgumentError, match="^image_agreement: "):
             ImageAgreement.from_dict(bad)
 
@@ -163,7 +179,9 @@ def test_correcting_the_brightness_takes_a_wrong_irradiance_out_of_the_fit():
 
     sound, kept, corrected = reconstruct(data), reconstruct(faulty), reconstruct(faulty, correct_brightness=True)
     assert sound.irradiance_factors is None and kept.irradiance_factors is None
-    assert 1.4 < corrected.irradiance_factors[3] < 1.6 and np.all(np.abs(np.delete(corrected.irradiance_factors, 3) - 1) < 0.05)
+    assert 1.4 < corrected.irradiance_factors[3] < 1.6 and np.all(
+        np.abs(np.delete(corrected.irradiance_factors, 3) - 1) < 0.05
+    )
     assert np.all(np.abs(corrected.image_agreement.brightness - 1) < 0.01), corrected.image_agreement.brightness
     assert error(corrected) < error(sound) + 0.25 < error(kept), (error(sound), error(kept), error(corrected))
     assert "brightness_correction" in corrected.timings and "brightness_correction" not in kept.timings
@@ -177,7 +195,10 @@ def test_a_sound_render_needs_no_correction(cap):
 def test_the_command_prints_and_records_the_correction(tmp_path, capsys):
     assert main(["reconstruct", str(FIXTURE), "--out", str(tmp_path / "out"), "--correct-brightness"]) == 0
     printed = capsys.readouterr().out
-    assert "  irradiance scaled by each image's brightness against a first fit: 0.97 to 1.02 (--correct-brightness)\n" in printed
+    assert (
+        "  irradiance scaled by each image's brightness against a first fit: 0.97 to 1.02 (--correct-brightness)\n"
+        in printed
+    )
     run = json.loads((tmp_path / "out" / "run.json").read_text())
     assert run["parameters"]["correct_brightness"] is True and len(run["irradiance_factors"]) == 8
     assert main(["reconstruct", str(FIXTURE), "--out", str(tmp_path / "plain"), "--quiet"]) == 0

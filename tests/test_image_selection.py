@@ -9,7 +9,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cli_helpers import refused
-from irtps import ArgumentError, Dataset, DatasetError, Reconstruction, exclude_images, load_dataset, reconstruct, save_dataset, save_reconstruction
+from irtps import (
+    ArgumentError,
+    Dataset,
+    DatasetError,
+    Reconstruction,
+    exclude_images,
+    load_dataset,
+    reconstruct,
+    save_dataset,
+    save_reconstruction,
+)
 from irtps.batch import _complete_indirect
 from irtps.cli import main
 from irtps.evaluate import angular_error_deg
@@ -75,11 +85,17 @@ def test_only_a_data_set_has_images_to_leave_out():
 
 
 def test_a_list_must_name_images_of_the_data_set_and_leave_three():
-    with pytest.raises(ArgumentError, match=r"^exclude_images: ball has no image numbered 1 to 5 \(the images: 008.png, 009.png, 021.png, ... 096.png\)$"):
+    with pytest.raises(
+        ArgumentError,
+        match=r"^exclude_images: ball has no image numbered 1 to 5 \(the images: 008.png, 009.png, 021.png, ... 096.png\)$",
+    ):
         excluded_indices(NAMES, "1-5", where="ball")
     with pytest.raises(ArgumentError, match="^exclude_images: ball has no image named 'missing.png'"):
         excluded_indices(NAMES, "8,missing.png", where="ball")
-    with pytest.raises(ArgumentError, match="^exclude_images: leaving out 6 of the 8 images of ball leaves 2; photometric stereo needs at least 3"):
+    with pytest.raises(
+        ArgumentError,
+        match="^exclude_images: leaving out 6 of the 8 images of ball leaves 2; photometric stereo needs at least 3",
+    ):
         excluded_indices(NAMES, "8-52", where="ball")
     with pytest.raises(ArgumentError, match="^exclude_images: an integer with 5000 digits; at most 40 are accepted"):
         excluded_indices(NAMES, "1-" + "9" * 5000, where="ball")
@@ -112,7 +128,11 @@ def test_the_irtps_layout_leaves_out_lights_and_their_direct_images(tmp_path):
     data, _ = synthesize("cap", size=16, lights=7, bounces=0, environment="none")
     save_dataset(data, tmp_path / "cap")
     read = load_dataset(tmp_path / "cap", exclude_images="000.exr,3-4")
-    assert read.names == ("001.exr", "002.exr", "005.exr", "006.exr") and read.excluded_images == ("000.exr", "003.exr", "004.exr")
+    assert read.names == ("001.exr", "002.exr", "005.exr", "006.exr") and read.excluded_images == (
+        "000.exr",
+        "003.exr",
+        "004.exr",
+    )
     kept = [1, 2, 5, 6]
     np.testing.assert_allclose(read.images, data.images[kept], rtol=1e-6)
     np.testing.assert_allclose(read.gt.direct, data.gt.direct[kept], rtol=1e-6)
@@ -132,12 +152,23 @@ def test_a_faulty_image_left_out_no_longer_bends_the_normals():
     the normals toward its light; without it, the fit of the other images is that of a
     data set that never had it."""
     data = load_dataset(FIXTURE)
-    faulty = Dataset(scene=data.scene, images=data.images.copy(), mask=data.mask, gt=data.gt, source="faulty", saturation=None, image_names=data.names)
+    faulty = Dataset(
+        scene=data.scene,
+        images=data.images.copy(),
+        mask=data.mask,
+        gt=data.gt,
+        source="faulty",
+        saturation=None,
+        image_names=data.names,
+    )
     faulty.images[3] *= 3
     clean = reconstruct(exclude_images(data, "41"), robust="tukey", saturation=None)
     bent = reconstruct(faulty, robust="tukey", saturation=None)
     fixed = reconstruct(exclude_images(faulty, "041.png"), robust="tukey", saturation=None)
-    error = {name: np.nanmean(angular_error_deg(result.normals, data.gt.normal, data.mask)) for name, result in (("bent", bent), ("fixed", fixed), ("clean", clean))}
+    error = {
+        name: np.nanmean(angular_error_deg(result.normals, data.gt.normal, data.mask))
+        for name, result in (("bent", bent), ("fixed", fixed), ("clean", clean))
+    }
     assert error["bent"] > error["fixed"] + 1.0, error
     np.testing.assert_array_equal(fixed.normals, clean.normals)
     assert fixed.excluded_images == ("041.png",) and len(fixed.image_names) == 7
@@ -166,7 +197,9 @@ def test_the_command_records_and_prints_the_images_left_out(ball, tmp_path, caps
 )
 def test_the_command_refuses_a_bad_list_and_writes_nothing(ball, tmp_path, capsys, images, message):
     out = tmp_path / "out"
-    assert refused(["reconstruct", str(ball), "--out", str(out), "--exclude-images", images], capsys).startswith(f"irtps: error: {message.format(ball=ball)}")
+    assert refused(["reconstruct", str(ball), "--out", str(out), "--exclude-images", images], capsys).startswith(
+        f"irtps: error: {message.format(ball=ball)}"
+    )
     assert not out.exists()
 
 
@@ -176,8 +209,14 @@ def _with_indirect(data, names):
     indirect = np.stack([np.full((pixels, 3), k + 1, np.float32) for k in range(len(names))])
     zeros = np.zeros(data.mask.shape, np.float32)
     return Reconstruction(
-        normals=np.dstack([zeros, zeros, zeros + 1]), albedo=np.dstack([zeros + 0.5] * 3), height=zeros, mask=data.mask,
-        flags=np.zeros(data.mask.shape, np.uint8), pixel_size=1.0, object_indirect=indirect, image_names=tuple(names),
+        normals=np.dstack([zeros, zeros, zeros + 1]),
+        albedo=np.dstack([zeros + 0.5] * 3),
+        height=zeros,
+        mask=data.mask,
+        flags=np.zeros(data.mask.shape, np.uint8),
+        pixel_size=1.0,
+        object_indirect=indirect,
+        image_names=tuple(names),
     )
 
 
@@ -202,9 +241,19 @@ def test_indirect_estimates_are_numbered_where_names_would_not_do(tmp_path):
 def test_lists_for_many_data_sets_go_to_every_one_or_to_the_one_named():
     names = ["ballPNG", "bearPNG", "rig", "rig=old"]
     assert exclusions_by_name([], names) == dict.fromkeys(names)
-    assert exclusions_by_name(["96", "bearPNG=1-20", "bearPNG=37"], names) == {"ballPNG": "96", "bearPNG": "96,1-20,37", "rig": "96", "rig=old": "96"}
+    assert exclusions_by_name(["96", "bearPNG=1-20", "bearPNG=37"], names) == {
+        "ballPNG": "96",
+        "bearPNG": "96,1-20,37",
+        "rig": "96",
+        "rig=old": "96",
+    }
     # A name with "=" in it: the longest name the entry starts with.
-    assert exclusions_by_name(["rig=old=3", "rig=4"], names) == {"ballPNG": None, "bearPNG": None, "rig": "4", "rig=old": "3"}
+    assert exclusions_by_name(["rig=old=3", "rig=4"], names) == {
+        "ballPNG": None,
+        "bearPNG": None,
+        "rig": "4",
+        "rig=old": "3",
+    }
 
 
 @pytest.mark.parametrize(
@@ -224,12 +273,29 @@ def test_a_list_for_a_data_set_that_is_not_there_or_malformed_is_refused(entry, 
 def test_table_leaves_out_the_images_named_for_each_data_set(ball, tmp_path, capsys):
     other = shutil.copytree(ball, tmp_path / "other")
     out = tmp_path / "table"
-    argv = ["table", str(ball), str(other), "--out", str(out), "--bounces", "1", "--iterations", "1", "--samples", "4", "--no-paper", "--quiet"]
+    argv = [
+        "table",
+        str(ball),
+        str(other),
+        "--out",
+        str(out),
+        "--bounces",
+        "1",
+        "--iterations",
+        "1",
+        "--samples",
+        "4",
+        "--no-paper",
+        "--quiet",
+    ]
     assert main([*argv, "--exclude-images", "96", "--exclude-images", "other=8-9"]) == 0
     printed = capsys.readouterr().out
     table = json.loads((out / "table.json").read_text())
     assert table["excluded_images"] == {"ball": ["096.png"], "other": ["008.png", "009.png", "096.png"]}
-    assert "ball: 7 of 8 images fitted; left out 096.png\nother: 5 of 8 images fitted; left out 008.png, 009.png, 096.png\n" in printed
+    assert (
+        "ball: 7 of 8 images fitted; left out 096.png\nother: 5 of 8 images fitted; left out 008.png, 009.png, 096.png\n"
+        in printed
+    )
     assert (out / "table.md").read_text() in printed
     # Each column is the reconstruction of the data set without those images.
     expected = reconstruct(load_dataset(other, exclude_images="8-9,96"), method="ps")

@@ -22,7 +22,14 @@ import scipy.io
 from irtps import _core, guarded
 from irtps.batch import local_cluster
 from irtps.cli import main
-from irtps.dataset import dataset_inputs, ground_truth_inputs, load_dataset, load_ground_truth, load_scene_object, scene_object_inputs
+from irtps.dataset import (
+    dataset_inputs,
+    ground_truth_inputs,
+    load_dataset,
+    load_ground_truth,
+    load_scene_object,
+    scene_object_inputs,
+)
 
 from cli_helpers import refused, tree as _tree
 
@@ -104,7 +111,9 @@ CASES = [(command, kind) for command, kinds in READS.items() for kind in kinds]
 
 
 @pytest.mark.parametrize(("command", "kind"), CASES)
-def test_out_naming_a_folder_read_from_outside_is_refused_even_with_force(command, kind, tmp_path, scheduler, runs, capsys):
+def test_out_naming_a_folder_read_from_outside_is_refused_even_with_force(
+    command, kind, tmp_path, scheduler, runs, capsys
+):
     data, outside = LAYOUTS[kind](tmp_path)
     if command in ("render", "report"):
         outside = [folder for folder in outside if folder.name == "truth"]  # they read the ground truth, no image
@@ -137,8 +146,12 @@ def test_out_around_the_inputs_never_changes_what_is_read(command, kind, tmp_pat
         listed = {"render": scene_object_inputs, "report": ground_truth_inputs}.get(command, dataset_inputs)(data)
         inputs = [Path(path) for path in _resolved(listed)]
         before = _tree(root)
-        read = {key for key in before if any(Path(os.path.realpath(root / key)).is_relative_to(path) for path in inputs)}
-        status = main([*_argv(command, data, root / relative, scheduler, runs.get(kind)), *(["--force"] if force else [])])
+        read = {
+            key for key in before if any(Path(os.path.realpath(root / key)).is_relative_to(path) for path in inputs)
+        }
+        status = main(
+            [*_argv(command, data, root / relative, scheduler, runs.get(kind)), *(["--force"] if force else [])]
+        )
         err = capsys.readouterr().err
         after = _tree(root)
         assert {key: before[key] for key in read}.items() <= after.items(), (relative, force, err)
@@ -225,7 +238,9 @@ DECOYS = {
 
 @pytest.mark.parametrize("command", ["reconstruct", "synth", "demo", "table", "report", "batch", "render"])
 @pytest.mark.parametrize("decoy", list(DECOYS))
-def test_a_folder_with_a_record_name_but_not_our_record_is_not_replaced(command, decoy, tmp_path, scheduler, runs, capsys):
+def test_a_folder_with_a_record_name_but_not_our_record_is_not_replaced(
+    command, decoy, tmp_path, scheduler, runs, capsys
+):
     record, text, other = DECOYS[decoy]
     out = tmp_path / "mine"
     (out / record).parent.mkdir(parents=True)
@@ -233,8 +248,36 @@ def test_a_folder_with_a_record_name_but_not_our_record_is_not_replaced(command,
     (out / other).write_bytes(b"the user's work")
     source = MITSUBA if command == "render" else BALL
     argv = {
-        "synth": ["synth", "cap", "--out", str(out), "--size", "8", "--lights", "3", "--bounces", "0", "--samples", "1", "--quiet"],
-        "demo": ["demo", "--out", str(out), "--size", "8", "--bounces", "1", "--iterations", "0", "--samples", "1", "--no-paper", "--quiet"],
+        "synth": [
+            "synth",
+            "cap",
+            "--out",
+            str(out),
+            "--size",
+            "8",
+            "--lights",
+            "3",
+            "--bounces",
+            "0",
+            "--samples",
+            "1",
+            "--quiet",
+        ],
+        "demo": [
+            "demo",
+            "--out",
+            str(out),
+            "--size",
+            "8",
+            "--bounces",
+            "1",
+            "--iterations",
+            "0",
+            "--samples",
+            "1",
+            "--no-paper",
+            "--quiet",
+        ],
         "report": ["report", str(runs["listed"]), "--out", str(out), "--quiet"],
     }.get(command) or _argv(command, source, out, scheduler, None)
     before = _tree(tmp_path)
@@ -249,10 +292,29 @@ def test_each_output_carries_its_record_and_is_replaced_without_force(tmp_path, 
         "run.json": ["reconstruct", str(BALL), "--out", str(tmp_path / "run"), "--quiet"],
         "table.json": ["table", str(BALL), "--out", str(tmp_path / "table"), *quick],
         "batch.json": ["batch", str(BALL), "--out", str(tmp_path / "batch"), "--scheduler", scheduler, "--quiet"],
-        "gt/rendering.json": ["synth", "cap", "--out", str(tmp_path / "synth"), "--size", "8", "--lights", "3", "--bounces", "0", "--samples", "1", "--quiet"],
+        "gt/rendering.json": [
+            "synth",
+            "cap",
+            "--out",
+            str(tmp_path / "synth"),
+            "--size",
+            "8",
+            "--lights",
+            "3",
+            "--bounces",
+            "0",
+            "--samples",
+            "1",
+            "--quiet",
+        ],
         "index.html": ["report", str(tmp_path / "run"), "--out", str(tmp_path / "report"), "--quiet"],
     }
-    formats = {"run.json": "irtps.run/1", "table.json": "irtps.table/1", "batch.json": "irtps.batch/1", "gt/rendering.json": "irtps.rendering/1"}
+    formats = {
+        "run.json": "irtps.run/1",
+        "table.json": "irtps.table/1",
+        "batch.json": "irtps.batch/1",
+        "gt/rendering.json": "irtps.rendering/1",
+    }
     from irtps import __version__
 
     for record, argv in commands.items():

@@ -1,6 +1,5 @@
 """Normal integration: analytic surfaces with exact normals, the frame, robustness, errors."""
 
-
 import numpy as np
 import pytest
 import scipy.ndimage
@@ -429,7 +428,9 @@ def test_sparse_cholesky_errors_name_the_input():
 
     indefinite = scipy.sparse.diags([-np.ones(9), np.ones(10), -np.ones(9)], [-1, 0, 1]).tocsr()
     with pytest.raises(ArgumentError, match="^normal_matrix: matrix is not positive definite"):
-        SparseCholesky(indefinite.indptr.astype(np.int64), indefinite.indices.astype(np.int64), indefinite.data, "normal_matrix")
+        SparseCholesky(
+            indefinite.indptr.astype(np.int64), indefinite.indices.astype(np.int64), indefinite.data, "normal_matrix"
+        )
     with pytest.raises(ArgumentError, match="^a: indptr"):
         SparseCholesky(np.array([0, 5], np.int64), np.array([0], np.int64), np.array([1.0]), "a")
     factor = SparseCholesky(np.array([0, 1], np.int64), np.array([0], np.int64), np.array([4.0]))

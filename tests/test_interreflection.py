@@ -22,7 +22,13 @@ def _error(result):
 
 
 def test_irtps_removes_most_of_the_inter_reflection_error(grooves):
-    floor = irtps.evaluate(mask=grooves.mask, normals=irtps.photometric_stereo(grooves.gt.direct, grooves.scene.light_directions, grooves.scene.light_irradiance, grooves.mask).normals, gt=grooves.gt).normal_mean_angular_deg
+    floor = irtps.evaluate(
+        mask=grooves.mask,
+        normals=irtps.photometric_stereo(
+            grooves.gt.direct, grooves.scene.light_directions, grooves.scene.light_irradiance, grooves.mask
+        ).normals,
+        gt=grooves.gt,
+    ).normal_mean_angular_deg
     result = remove_interreflections(grooves, bounces=3, iterations=4, samples=128)
     classic = result.history[0].metrics["normal_mean_angular_deg"]
     assert classic > floor + 2.0  # the scene has strong inter-reflection
@@ -44,15 +50,37 @@ def test_reconstruct_cli_writes_indirect_images_and_history(tmp_path, grooves):
     data = tmp_path / "grooves"
     irtps.save_dataset(grooves, data)
     out = tmp_path / "out"
-    assert main(["reconstruct", str(data), "--out", str(out), "--method", "irtps", "--iterations", "2", "--samples", "32", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(data),
+                "--out",
+                str(out),
+                "--method",
+                "irtps",
+                "--iterations",
+                "2",
+                "--samples",
+                "32",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert sorted(p.name for p in (out / "indirect").iterdir()) == [f"{k:03d}.exr" for k in range(10)]
     run = json.loads((out / "run.json").read_text())
     assert run["parameters"]["method"] == "irtps" and run["parameters"]["integration"] == "footprint"
     assert [step["index"] for step in run["history"]] == [0, 1, 2]
-    assert run["history"][0]["metrics"]["normal_mean_angular_deg"] > run["history"][-1]["metrics"]["normal_mean_angular_deg"]
+    assert (
+        run["history"][0]["metrics"]["normal_mean_angular_deg"]
+        > run["history"][-1]["metrics"]["normal_mean_angular_deg"]
+    )
 
 
-@pytest.mark.parametrize("argument, value", [("bounces", 0), ("relaxation", 2.0), ("update", "sideways"), ("iterations", -1)])
+@pytest.mark.parametrize(
+    "argument, value", [("bounces", 0), ("relaxation", 2.0), ("update", "sideways"), ("iterations", -1)]
+)
 def test_bad_settings_are_named(grooves, argument, value):
     with pytest.raises(IrtpsError, match=argument):
         remove_interreflections(grooves, **{argument: value})
@@ -67,7 +95,9 @@ def test_footprint_normals_of_a_plane_are_its_normal():
 
 
 def test_surface_albedo_undoes_the_crease_bias_of_photometric_stereo(grooves):
-    fit = irtps.photometric_stereo(grooves.gt.direct, grooves.scene.light_directions, grooves.scene.light_irradiance, grooves.mask)
+    fit = irtps.photometric_stereo(
+        grooves.gt.direct, grooves.scene.light_directions, grooves.scene.light_irradiance, grooves.mask
+    )
     mask, truth = grooves.mask, grooves.gt.albedo
     inner = mask & ~np.isnan(fit.albedo[..., 0])
     fitted_bias = np.mean(fit.albedo[inner] - truth[inner])

@@ -14,7 +14,9 @@ def flat_renderer(n: int = 16, height: float = 2.0, floor: float = 0.0) -> _core
     mask = np.ones((n, n), dtype=bool)
     albedo = np.full((n, n, 3), 0.5, dtype=np.float32)
     lights = np.array([[0.0, 0.0, 1.0]], dtype=np.float32)
-    return _core.Renderer(z, mask, albedo, 1.0, lights, np.ones((1, 3), dtype=np.float32), floor=Floor(floor, (0.5, 0.5, 0.5)))
+    return _core.Renderer(
+        z, mask, albedo, 1.0, lights, np.ones((1, 3), dtype=np.float32), floor=Floor(floor, (0.5, 0.5, 0.5))
+    )
 
 
 def test_rays_down_onto_a_plane_hit_at_its_height_and_rays_up_miss():
@@ -43,7 +45,9 @@ def test_one_thread_and_all_threads_give_the_same_hits():
     renderer = flat_renderer(n=24, height=1.5)
     rng = np.random.default_rng(1)
     count = 20_000  # several parallel tasks
-    origins = np.column_stack([rng.uniform(-14, 14, size=(count, 2)), rng.uniform(0.5, 6.0, size=count)]).astype(np.float32)
+    origins = np.column_stack([rng.uniform(-14, 14, size=(count, 2)), rng.uniform(0.5, 6.0, size=count)]).astype(
+        np.float32
+    )
     directions = rng.normal(size=(count, 3))
     directions = (directions / np.linalg.norm(directions, axis=1, keepdims=True)).astype(np.float32)
     t1, id1 = renderer.intersect(origins, directions, threads=1)

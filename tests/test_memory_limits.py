@@ -72,7 +72,11 @@ def test_a_data_set_whose_images_do_not_fit_is_refused_before_decoding(command, 
     data = shutil.copytree(MITSUBA, tmp_path / "data")
     before = _snapshot(tmp_path)
     memory(300_000)  # the 3 images of 96x96 float32 RGB take 331 776 bytes
-    argv = ["table", str(data), "--quiet"] if command == "table" else [command, str(data), "--out", str(tmp_path / "out"), "--quiet"]
+    argv = (
+        ["table", str(data), "--quiet"]
+        if command == "table"
+        else [command, str(data), "--out", str(tmp_path / "out"), "--quiet"]
+    )
     err = refused(argv, capsys)
     assert err == (
         f"irtps: error: {data / 'images'}: 3 images of 96x96 decoded as float32 RGB need 331.8 kB, more than the 300.0 kB available\n"
@@ -85,7 +89,10 @@ def test_a_diligent_data_set_whose_images_do_not_fit_is_refused_before_decoding(
     before = _snapshot(tmp_path)
     memory(200_000)  # 8 images of 48x44: 202 752 bytes
     err = refused(["reconstruct", str(data), "--out", str(tmp_path / "out"), "--quiet"], capsys)
-    assert err == f"irtps: error: {data / 'filenames.txt'}: 8 images of 48x44 decoded as float32 RGB need 202.8 kB, more than the 200.0 kB available\n"
+    assert (
+        err
+        == f"irtps: error: {data / 'filenames.txt'}: 8 images of 48x44 decoded as float32 RGB need 202.8 kB, more than the 200.0 kB available\n"
+    )
     assert _snapshot(tmp_path) == before
 
 
@@ -147,7 +154,11 @@ def _limit_address_space():
 @pytest.mark.parametrize(
     "lights, size, message",
     [
-        ("100000000", "96", "irtps: error: --lights: 100000000 is out of range: expected an integer from 3 to 100000\n"),
+        (
+            "100000000",
+            "96",
+            "irtps: error: --lights: 100000000 is out of range: expected an integer from 3 to 100000\n",
+        ),
         ("100000", "1024", "irtps: error: lights: 100000 lights of 1024x1024 images"),
     ],
 )
@@ -155,7 +166,12 @@ def test_synth_with_absurdly_many_lights_is_refused_with_little_memory(lights, s
     out = tmp_path / "s"
     argv = ["synth", "cap", "--out", str(out), "--lights", lights, "--size", size]
     result = subprocess.run(
-        [sys.executable, "-c", _CHILD, *argv], capture_output=True, text=True, timeout=300, preexec_fn=_limit_address_space, check=False
+        [sys.executable, "-c", _CHILD, *argv],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        preexec_fn=_limit_address_space,
+        check=False,
     )
     assert result.returncode == 2, result.stderr
     assert result.stderr.startswith(message), result.stderr
@@ -171,7 +187,14 @@ def test_synth_with_absurdly_many_lights_is_refused_with_little_memory(lights, s
 def test_available_memory_is_known_on_linux():
     available = available_memory_bytes()
     if sys.platform == "linux":
-        total = int(next(line for line in Path("/proc/meminfo").read_text().splitlines() if line.startswith("MemTotal")).split()[1]) * 1024
+        total = (
+            int(
+                next(
+                    line for line in Path("/proc/meminfo").read_text().splitlines() if line.startswith("MemTotal")
+                ).split()[1]
+            )
+            * 1024
+        )
         assert 0 < available <= total
 
 
@@ -187,12 +210,19 @@ def test_check_memory_names_the_field(monkeypatch):
 
 def test_format_bytes():
     assert [format_bytes(n) for n in (0, 999, 1000, 331_776, 999_960, 2.5e12, 7.74e13)] == [
-        "0 B", "999 B", "1.0 kB", "331.8 kB", "1.0 MB", "2.5 TB", "77.4 TB",
+        "0 B",
+        "999 B",
+        "1.0 kB",
+        "331.8 kB",
+        "1.0 MB",
+        "2.5 TB",
+        "77.4 TB",
     ]
 
 
-
-@pytest.mark.skipif(not (sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc"), reason="mallopt is glibc's")
+@pytest.mark.skipif(
+    not (sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc"), reason="mallopt is glibc's"
+)
 def test_the_command_fixes_glibcs_mmap_threshold():
     # Its effect on a run's peak is measured by benches/memory_bench.py (1.52x -> 1.40x the
     # decoded images on DiLiGenT reading); here, that glibc takes the setting.
@@ -225,7 +255,11 @@ def _run_limited(margin, *argv):
     """Run `argv` (the command's, or ``read_images PATH COUNT``) in a child whose address space
     is limited to what it uses after the imports plus `margin` bytes."""
     return subprocess.run(
-        [sys.executable, "-c", _LIMITED_CHILD, str(margin), *map(str, argv)], capture_output=True, text=True, timeout=300, check=False
+        [sys.executable, "-c", _LIMITED_CHILD, str(margin), *map(str, argv)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
     )
 
 
@@ -275,10 +309,16 @@ def test_a_factorisation_without_room_for_the_dense_kernels_workspace_is_a_memor
     # the L3 cache (at least 4 MiB) that cannot fail gracefully: the process aborted there
     # (or, factoring on rayon's threads, panicked when they could not be started).
     result = subprocess.run(
-        [sys.executable, "-c", _CHOLESKY_CHILD, "24", str(3 << 20)], capture_output=True, text=True, timeout=300, check=False
+        [sys.executable, "-c", _CHOLESKY_CHILD, "24", str(3 << 20)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
     )
     assert result.returncode == 3, (result.returncode, result.stderr)
-    assert re.fullmatch(r"laplacian: the workspace of the dense matrix kernels: could not allocate \d+ bytes\n", result.stderr), result.stderr
+    assert re.fullmatch(
+        r"laplacian: the workspace of the dense matrix kernels: could not allocate \d+ bytes\n", result.stderr
+    ), result.stderr
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="address-space limit and /proc/self/status, Linux")
@@ -287,7 +327,20 @@ def test_irtps_with_little_address_space_left_succeeds_or_says_so(margin_mib, tm
     # On a machine with 32 MiB of L3, 64 MiB left is refused at the integration's
     # factorisation (its dense kernels' workspace), which aborted the process before.
     out = tmp_path / "out"
-    result = _run_limited(margin_mib << 20, "reconstruct", BALL, "--out", out, "--method", "irtps", "--iterations", "1", "--samples", "8", "--quiet")
+    result = _run_limited(
+        margin_mib << 20,
+        "reconstruct",
+        BALL,
+        "--out",
+        out,
+        "--method",
+        "irtps",
+        "--iterations",
+        "1",
+        "--samples",
+        "8",
+        "--quiet",
+    )
     errors = [line for line in result.stderr.splitlines() if not line.startswith("irtps: warning:")]
     if result.returncode == 0:
         assert errors == [] and (out / "normal.exr").is_file()

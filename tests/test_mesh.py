@@ -1,6 +1,5 @@
 """Height-field meshes: the contract's triangulation, orientation, and PLY/OBJ files read back."""
 
-
 import numpy as np
 import pytest
 from irtps import IrtpsError
@@ -122,8 +121,9 @@ def test_a_random_mask_matches_the_reference_triangulation():
 
 def test_no_block_gives_an_empty_mesh():
     mask = np.eye(4, dtype=bool)
-    vertices, faces, colors, normals = height_field_mesh(np.ones((4, 4)), mask, albedo=np.ones((4, 4, 3)),
-                                                         normals=np.ones((4, 4, 3)))
+    vertices, faces, colors, normals = height_field_mesh(
+        np.ones((4, 4)), mask, albedo=np.ones((4, 4, 3)), normals=np.ones((4, 4, 3))
+    )
     assert vertices.shape == (0, 3) and faces.shape == (0, 3) and colors.shape == (0, 3) and normals.shape == (0, 3)
 
 
@@ -147,8 +147,9 @@ def test_colours_and_normals_per_vertex():
     albedo[2, 1] = [1.0, 0.5, 0.0]
     normals = np.zeros((*L_MASK.shape, 3))
     normals[..., 2] = 2.0
-    _vertices, _, colors, vertex_normals = height_field_mesh(np.zeros(L_MASK.shape), L_MASK, albedo=albedo,
-                                                            normals=normals)
+    _vertices, _, colors, vertex_normals = height_field_mesh(
+        np.zeros(L_MASK.shape), L_MASK, albedo=albedo, normals=normals
+    )
     assert colors.dtype == np.uint8 and colors.shape == (8, 3)
     assert colors[0].tolist() == [0, 51, 255]  # pixel (0, 0), clipped to [0, 1]
     assert colors[7].tolist() == [255, 128, 0]  # pixel (2, 1), the last vertex

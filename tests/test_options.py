@@ -44,7 +44,12 @@ def _snapshot(folder):
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-CASES = [(command, option, value) for command, (_, options, _) in COMMANDS.items() for option in options for value in ABSURD_INTEGERS]
+CASES = [
+    (command, option, value)
+    for command, (_, options, _) in COMMANDS.items()
+    for option in options
+    for value in ABSURD_INTEGERS
+]
 
 
 @pytest.mark.parametrize("command, option, value", CASES)
@@ -56,7 +61,10 @@ def test_an_integer_out_of_range_is_one_named_error_with_its_range(command, opti
     before = _snapshot(tmp_path)
     assert main(_argv(command, data, option, value, tmp_path / "out")) == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"irtps: error: {option}: {value} is out of range: expected an integer from ") and err.count("\n") == 1, err
+    assert (
+        err.startswith(f"irtps: error: {option}: {value} is out of range: expected an integer from ")
+        and err.count("\n") == 1
+    ), err
     assert "Traceback" not in err
     assert _snapshot(tmp_path) == before  # nothing written, the input as it was
 
@@ -64,14 +72,35 @@ def test_an_integer_out_of_range_is_one_named_error_with_its_range(command, opti
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["reconstruct", str(BALL), "--shadow-fraction", "1"], "--shadow-fraction: 1.0 is out of range: expected a finite number in [0, 1)"),
-        (["reconstruct", str(BALL), "--relaxation", "0"], "--relaxation: 0.0 is out of range: expected a finite number in (0, 2) or auto"),
-        (["reconstruct", str(BALL), "--base-height", "inf"], "--base-height: inf is not a finite number, auto or boundary"),
-        (["reconstruct", str(BALL), "--base-height", "1e308"], "--base-height: 1e+308 is out of range for this data set"),
-        (["reconstruct", str(BALL), "--base-height", "nan"], "--base-height: nan is not a finite number, auto or boundary"),
-        (["reconstruct", str(BALL), "--estimator", "paper", "--bounces", "4"], "--bounces: the paper's estimator takes 1, 2 or 3 reflections, not 4"),
+        (
+            ["reconstruct", str(BALL), "--shadow-fraction", "1"],
+            "--shadow-fraction: 1.0 is out of range: expected a finite number in [0, 1)",
+        ),
+        (
+            ["reconstruct", str(BALL), "--relaxation", "0"],
+            "--relaxation: 0.0 is out of range: expected a finite number in (0, 2) or auto",
+        ),
+        (
+            ["reconstruct", str(BALL), "--base-height", "inf"],
+            "--base-height: inf is not a finite number, auto or boundary",
+        ),
+        (
+            ["reconstruct", str(BALL), "--base-height", "1e308"],
+            "--base-height: 1e+308 is out of range for this data set",
+        ),
+        (
+            ["reconstruct", str(BALL), "--base-height", "nan"],
+            "--base-height: nan is not a finite number, auto or boundary",
+        ),
+        (
+            ["reconstruct", str(BALL), "--estimator", "paper", "--bounces", "4"],
+            "--bounces: the paper's estimator takes 1, 2 or 3 reflections, not 4",
+        ),
         (["table", str(BALL), "--bounces", "1", "0"], "--bounces: 0 is out of range: expected an integer from 1 to 64"),
-        (["batch", str(BALL), "--workers", "2", "--scheduler", "tcp://nowhere:1"], "--scheduler: --workers and --threads-per-worker set up the local cluster"),
+        (
+            ["batch", str(BALL), "--workers", "2", "--scheduler", "tcp://nowhere:1"],
+            "--scheduler: --workers and --threads-per-worker set up the local cluster",
+        ),
     ],
 )
 def test_other_values_out_of_range_name_the_option(argv, message, tmp_path, capsys):
@@ -116,7 +145,13 @@ def test_reconstruct_records_the_options_it_used_with_defaults_resolved():
 def test_options_pickle_and_every_field_is_on_the_command_line(cls):
     options = cls()
     assert pickle.loads(pickle.dumps(options)) == options
-    commands = {ReconstructOptions: "reconstruct", RenderOptions: "render", SynthOptions: "synth", TableOptions: "table", ClusterOptions: "batch"}
+    commands = {
+        ReconstructOptions: "reconstruct",
+        RenderOptions: "render",
+        SynthOptions: "synth",
+        TableOptions: "table",
+        ClusterOptions: "batch",
+    }
     help_text = _help(commands[cls])
     for item in dataclasses.fields(cls):
         assert "--" + item.name.replace("_", "-") in help_text, item.name
@@ -129,7 +164,22 @@ def _help(command):
 
 
 def test_the_command_line_reaches_every_reconstruction_option(tmp_path):
-    args = build_parser().parse_args(["reconstruct", str(BALL), "--out", str(tmp_path), "--relaxation", "0.5", "--base-height", "boundary", "--method", "irtps", "--robust", "trim"])
+    args = build_parser().parse_args(
+        [
+            "reconstruct",
+            str(BALL),
+            "--out",
+            str(tmp_path),
+            "--relaxation",
+            "0.5",
+            "--base-height",
+            "boundary",
+            "--method",
+            "irtps",
+            "--robust",
+            "trim",
+        ]
+    )
     options = irtps.options.from_arguments(ReconstructOptions, args)
     assert options == ReconstructOptions(method="irtps", relaxation=0.5, base_height="boundary", robust="trim")
 
@@ -137,15 +187,39 @@ def test_the_command_line_reaches_every_reconstruction_option(tmp_path):
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["reconstruct", str(BALL), "--out", "o", "--samples", "1.5"], "argument --samples: '1.5' is not an integer from 1 to 1048576"),
-        (["render", str(MITSUBA), "--out", "o", "--seed", "abc"], "argument --seed: 'abc' is not an integer from 0 to 2^63 - 1"),
-        (["reconstruct", str(BALL), "--out", "o", "--iterations", "9" * 5000], "argument --iterations: '999999999999999999999999999999999999... is not an integer"),
-        (["demo", "--size", "9" * 5000], "argument --size: '999999999999999999999999999999999999...: an integer with 5000 digits; at most 40 are accepted"),
-        (["reconstruct", str(BALL), "--out", "o", "--base-height", "high"], "argument --base-height: 'high' is not a finite number, auto or boundary"),
+        (
+            ["reconstruct", str(BALL), "--out", "o", "--samples", "1.5"],
+            "argument --samples: '1.5' is not an integer from 1 to 1048576",
+        ),
+        (
+            ["render", str(MITSUBA), "--out", "o", "--seed", "abc"],
+            "argument --seed: 'abc' is not an integer from 0 to 2^63 - 1",
+        ),
+        (
+            ["reconstruct", str(BALL), "--out", "o", "--iterations", "9" * 5000],
+            "argument --iterations: '999999999999999999999999999999999999... is not an integer",
+        ),
+        (
+            ["demo", "--size", "9" * 5000],
+            "argument --size: '999999999999999999999999999999999999...: an integer with 5000 digits; at most 40 are accepted",
+        ),
+        (
+            ["reconstruct", str(BALL), "--out", "o", "--base-height", "high"],
+            "argument --base-height: 'high' is not a finite number, auto or boundary",
+        ),
         # Python's float() reads these as 10 and 0.5; a number on the command line is ASCII decimal
-        (["reconstruct", str(BALL), "--out", "o", "--saturation", "1_0"], "argument --saturation: '1_0' is not a finite number above 0"),
-        (["reconstruct", str(BALL), "--out", "o", "--saturation", "\u0660.\u0665"], "argument --saturation: '\u0660.\u0665' is not a finite number above 0"),
-        (["reconstruct", str(BALL), "--out", "o", "--method", "mitsuba"], "argument --method: invalid choice: 'mitsuba'"),
+        (
+            ["reconstruct", str(BALL), "--out", "o", "--saturation", "1_0"],
+            "argument --saturation: '1_0' is not a finite number above 0",
+        ),
+        (
+            ["reconstruct", str(BALL), "--out", "o", "--saturation", "\u0660.\u0665"],
+            "argument --saturation: '\u0660.\u0665' is not a finite number above 0",
+        ),
+        (
+            ["reconstruct", str(BALL), "--out", "o", "--method", "mitsuba"],
+            "argument --method: invalid choice: 'mitsuba'",
+        ),
         (["table", str(BALL), "--bounces"], "argument --bounces: expected at least one argument"),
     ],
 )

@@ -48,7 +48,20 @@ def _argv(command, data, out, scheduler, run):
     return {
         "reconstruct": ["reconstruct", str(data), "--out", str(out)],
         "render": ["render", str(data), "--out", str(out), "--bounces", "0", "--samples", "1"],
-        "synth": ["synth", "cap", "--out", str(out), "--size", "8", "--lights", "3", "--bounces", "0", "--samples", "1"],
+        "synth": [
+            "synth",
+            "cap",
+            "--out",
+            str(out),
+            "--size",
+            "8",
+            "--lights",
+            "3",
+            "--bounces",
+            "0",
+            "--samples",
+            "1",
+        ],
         "table": ["table", str(data), "--out", str(out), *quick_table],
         "report": ["report", str(run), "--truth", str(data), "--out", str(out)],
         "batch": ["batch", str(data), "--out", str(out), "--scheduler", scheduler],
@@ -57,7 +70,15 @@ def _argv(command, data, out, scheduler, run):
 
 
 #: The data set each command reads (None: it reads none).
-SOURCE = {"reconstruct": BALL, "render": MITSUBA, "synth": None, "table": BALL, "report": BALL, "batch": BALL, "demo": None}
+SOURCE = {
+    "reconstruct": BALL,
+    "render": MITSUBA,
+    "synth": None,
+    "table": BALL,
+    "report": BALL,
+    "batch": BALL,
+    "demo": None,
+}
 
 
 def _refused(argv, capsys):
@@ -138,7 +159,22 @@ def test_a_data_set_is_replaced_only_if_irtps_rendered_it(tmp_path, capsys):
     quick = ["--size", "8", "--lights", "3", "--bounces", "1", "--samples", "1", "--quiet"]
     assert main(["synth", "cap", "--out", str(tmp_path / "mine"), *quick]) == 0
     assert main(["synth", "relief", "--out", str(tmp_path / "mine"), *quick]) == 0  # its own output: replaced
-    assert main(["render", str(tmp_path / "mine"), "--out", str(tmp_path / "mine2"), "--bounces", "0", "--samples", "1", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "render",
+                str(tmp_path / "mine"),
+                "--out",
+                str(tmp_path / "mine2"),
+                "--bounces",
+                "0",
+                "--samples",
+                "1",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     record = json.loads((tmp_path / "mine2" / "gt" / "rendering.json").read_text())
     assert record["command"] == "render" and record["source"] == str(tmp_path / "mine") and record["samples"] == 1
     captured = shutil.copytree(BALL, tmp_path / "captured")  # DiLiGenT layout
@@ -228,7 +264,9 @@ def _expected_refusal(root, relative, data, reads_data):
 
 
 @pytest.mark.parametrize("command", list(SOURCE))
-def test_random_out_paths_never_change_the_data_set_and_only_overlaps_are_refused(command, tmp_path, scheduler, run, capsys):
+def test_random_out_paths_never_change_the_data_set_and_only_overlaps_are_refused(
+    command, tmp_path, scheduler, run, capsys
+):
     rng = random.Random(f"out paths for {command}")
     drawn = {path for path in (_draw(rng) for _ in range(200)) if path is not None}
     cases = sorted(drawn)[:: max(1, len(drawn) // 14)]  # about 14 paths, spread over the kinds

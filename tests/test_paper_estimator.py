@@ -13,9 +13,17 @@ from irtps.scene import Camera, CornellBox, Floor, Light, Scene
 def _closed_uniform_box(albedo: float) -> tuple[Scene, np.ndarray, np.ndarray, np.ndarray]:
     size, half = 16, 8.5
     walls = (albedo,) * 3
-    lights = tuple(Light(direction=np.array(d) / np.linalg.norm(d), irradiance=(np.pi,) * 3) for d in ([0, 0, 1], [0.5, 0, 0.8], [0, 0.5, 0.8]))
+    lights = tuple(
+        Light(direction=np.array(d) / np.linalg.norm(d), irradiance=(np.pi,) * 3)
+        for d in ([0, 0, 1], [0.5, 0, 0.8], [0, 0.5, 0.8])
+    )
     # Walls far higher than wide: almost no ray escapes through the open top.
-    scene = Scene(Camera(size, size, 1.0), lights, Floor(0.0, walls), CornellBox((-half, half), (-half, half), 400.0, walls, walls, walls, walls))
+    scene = Scene(
+        Camera(size, size, 1.0),
+        lights,
+        Floor(0.0, walls),
+        CornellBox((-half, half), (-half, half), 400.0, walls, walls, walls, walls),
+    )
     rows, cols = np.mgrid[0:size, 0:size]
     height = 2.0 + 0.5 * np.sin(cols / 3.0)
     return scene, height, np.full((size, size, 3), albedo), np.ones((size, size), bool)

@@ -30,10 +30,14 @@ def _surroundings(environment):
 
 
 @pytest.mark.parametrize("environment", ["cornell", "floor only"])
-@pytest.mark.parametrize("shape, base", [("pedestal", 4.0), ("pedestal", 12.0), ("cap", 1.0), ("cap", 6.0), ("relief", 6.0)])
+@pytest.mark.parametrize(
+    "shape, base", [("pedestal", 4.0), ("pedestal", 12.0), ("cap", 1.0), ("cap", 6.0), ("relief", 6.0)]
+)
 def test_the_estimate_is_the_true_base_for_the_true_shape(shape, base, environment):
     env, floor = _surroundings(environment)
-    data, _ = synthesize(shape, size=48, lights=8, bounces=1, samples=32, base=base, environment=env, floor=floor, seed=2)
+    data, _ = synthesize(
+        shape, size=48, lights=8, bounces=1, samples=32, base=base, environment=env, floor=floor, seed=2
+    )
     true = _boundary_median(data)
     assert true == pytest.approx(base, abs=1e-4)
     relief = np.where(data.mask, data.gt.height - true, 0.0)
@@ -70,7 +74,10 @@ def test_irtps_places_a_raised_object_within_3_percent_of_its_height(shape, base
 
 def test_the_residual_falls_as_the_error_falls():
     data, _ = synthesize("pedestal", size=48, lights=8, bounces=2, samples=32, base=8.0)
-    runs = {base: irtps.reconstruct(data, "irtps", bounces=2, samples=64, iterations=3, base_height=base, early_stop=False) for base in ("auto", "boundary", 16.0)}
+    runs = {
+        base: irtps.reconstruct(data, "irtps", bounces=2, samples=64, iterations=3, base_height=base, early_stop=False)
+        for base in ("auto", "boundary", 16.0)
+    }
     errors = {base: run.history[run.chosen].metrics["normal_mean_angular_deg"] for base, run in runs.items()}
     residuals = {base: run.history[run.chosen].residual["object"] for base, run in runs.items()}
     # A wrong placement (on the floor, or 8 too high) explains the images worse and is worse.
@@ -79,7 +86,10 @@ def test_the_residual_falls_as_the_error_falls():
         assert runs[wrong].history[0].residual["surroundings"] > runs["auto"].history[0].residual["surroundings"]
     history = runs["auto"].history
     assert history[0].residual["object"] > 2 * history[runs["auto"].chosen].residual["object"]
-    assert history[0].metrics["normal_mean_angular_deg"] > history[runs["auto"].chosen].metrics["normal_mean_angular_deg"] + 2
+    assert (
+        history[0].metrics["normal_mean_angular_deg"]
+        > history[runs["auto"].chosen].metrics["normal_mean_angular_deg"] + 2
+    )
 
 
 def test_without_a_floor_the_fallback_is_used_and_recorded(tmp_path):

@@ -12,7 +12,16 @@ from irtps.cli import main
 from irtps.errors import IrtpsError
 from irtps.evaluate import angular_error_deg
 from irtps.interreflection import remove_interreflections
-from irtps.ps import LOBE_CHECK_ROUNDS, LOBE_FIRST, LOBE_FITTED, OUTSIDE_MASK, PsResult, choose_robust, lobe_share, photometric_stereo
+from irtps.ps import (
+    LOBE_CHECK_ROUNDS,
+    LOBE_FIRST,
+    LOBE_FITTED,
+    OUTSIDE_MASK,
+    PsResult,
+    choose_robust,
+    lobe_share,
+    photometric_stereo,
+)
 
 DATA = Path(__file__).parent / "data"
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -20,7 +29,14 @@ needs_shared = pytest.mark.skipif(not SHARED.is_dir(), reason="needs the shared 
 
 
 def _mean_error(data: irtps.Dataset, images: np.ndarray, robust: str) -> float:
-    fit = photometric_stereo(images, data.scene.light_directions, data.scene.light_irradiance, data.mask, robust=robust, saturation=data.saturation)
+    fit = photometric_stereo(
+        images,
+        data.scene.light_directions,
+        data.scene.light_irradiance,
+        data.mask,
+        robust=robust,
+        saturation=data.saturation,
+    )
     return float(np.nanmean(angular_error_deg(fit.normals, data.gt.normal, data.mask)))
 
 
@@ -114,7 +130,9 @@ def test_shape_mismatch_names_images():
         photometric_stereo(np.ones((3, 2, 2)), np.eye(3), np.ones((3, 3)))
 
 
-def _microfacet_plastic(normals: np.ndarray, lights: np.ndarray, alpha: float, diffuse: float = 0.5, fresnel_0: float = 0.04) -> np.ndarray:
+def _microfacet_plastic(
+    normals: np.ndarray, lights: np.ndarray, alpha: float, diffuse: float = 0.5, fresnel_0: float = 0.04
+) -> np.ndarray:
     """(K, P, 1, 3) images of a Lambertian albedo `diffuse` under a GGX lobe (Cook-Torrance:
     Smith-Schlick shadowing, Schlick's Fresnel from `fresnel_0`) for unit irradiance π,
     camera along -z."""
@@ -137,7 +155,9 @@ def _microfacet_errors(modes: tuple[str, ...], **material: float) -> dict[str, f
     normals = np.stack([np.sin(zenith) * np.cos(azimuth), np.sin(zenith) * np.sin(azimuth), np.cos(zenith)], axis=1)
     k = np.arange(24)
     light_zenith = np.radians(10 + 40 * k / 23)
-    lights = np.stack([np.sin(light_zenith) * np.cos(2.4 * k), np.sin(light_zenith) * np.sin(2.4 * k), np.cos(light_zenith)], axis=1)
+    lights = np.stack(
+        [np.sin(light_zenith) * np.cos(2.4 * k), np.sin(light_zenith) * np.sin(2.4 * k), np.cos(light_zenith)], axis=1
+    )
     images = _microfacet_plastic(normals, lights, **material)
     errors = {}
     for mode in modes:
@@ -166,7 +186,9 @@ def test_lobe_mode_fits_a_broad_metallic_highlight():
 def test_lobe_mode_keeps_the_tukey_fit_of_lambertian_pixels():
     # Direct light only on a Lambertian cavity: cast and attached shadows, no highlight.
     data, _ = irtps.synthesize("cavity", size=48, lights=24, bounces=0, environment="none", seed=1)
-    fit = photometric_stereo(data.images, data.scene.light_directions, data.scene.light_irradiance, data.mask, robust="lobe")
+    fit = photometric_stereo(
+        data.images, data.scene.light_directions, data.scene.light_irradiance, data.mask, robust="lobe"
+    )
     # Measured: Tukey 0.783°, lobe 0.783°, 0.55 % of the pixels fitted with a lobe.
     assert (fit.flags[data.mask] == 4).mean() < 0.02
     assert _mean_error(data, data.images, "lobe") == pytest.approx(_mean_error(data, data.images, "tukey"), abs=0.02)
@@ -176,7 +198,13 @@ def _metal_cap() -> irtps.Dataset:
     """A synthesized cap, direct light only, re-shaded as a metal-like GGX surface (α 0.3,
     Fresnel 0.9, dim diffuse base) from its true normals."""
     data, _ = irtps.synthesize("cap", size=40, lights=24, bounces=0, environment="none", seed=2)
-    shading = _microfacet_plastic(data.gt.normal[data.mask].astype(np.float64), data.scene.light_directions.astype(np.float64), alpha=0.3, diffuse=0.05, fresnel_0=0.9)
+    shading = _microfacet_plastic(
+        data.gt.normal[data.mask].astype(np.float64),
+        data.scene.light_directions.astype(np.float64),
+        alpha=0.3,
+        diffuse=0.05,
+        fresnel_0=0.9,
+    )
     images = data.images.copy()
     images[:, data.mask] = shading[:, :, 0] * (data.scene.light_irradiance[:, None, :] / np.pi)
     return dataclasses.replace(data, images=images)
@@ -202,12 +230,21 @@ def test_reconstruct_picks_the_lobe_mode_for_a_metallic_object(tmp_path, capsys)
     assert runs["tukey"]["lobe_share"] > 0.5 and runs["auto"]["lobe_share"] == runs["tukey"]["lobe_share"]
     assert advice == {"tukey": True, "lobe": False, "auto": False}
     assert runs["lobe"]["lobe_share"] is None
-    for mode, said in (("tukey", "robust mode &#x27;lobe&#x27; (--robust lobe) is advised"), ("auto", "fitted with robust mode &#x27;lobe&#x27;")):
+    for mode, said in (
+        ("tukey", "robust mode &#x27;lobe&#x27; (--robust lobe) is advised"),
+        ("auto", "fitted with robust mode &#x27;lobe&#x27;"),
+    ):
         assert main(["report", str(tmp_path / mode), "--quiet"]) == 0
         assert said in (tmp_path / mode / "report" / "index.html").read_text()
 
 
-@pytest.mark.parametrize("make, chosen", [(lambda: irtps.synthesize("cap", size=40, lights=24, bounces=0, environment="none", seed=2)[0], "tukey"), (_metal_cap, "lobe")])
+@pytest.mark.parametrize(
+    "make, chosen",
+    [
+        (lambda: irtps.synthesize("cap", size=40, lights=24, bounces=0, environment="none", seed=2)[0], "tukey"),
+        (_metal_cap, "lobe"),
+    ],
+)
 def test_the_auto_mode_is_the_fit_of_the_mode_the_share_picks(make, chosen):
     data = make()
     args = (data.images, data.scene.light_directions, data.scene.light_irradiance, data.mask)
@@ -236,7 +273,13 @@ def test_the_auto_mode_of_a_share_near_the_line_looks_further_as_lobe_share_does
 
 def test_the_auto_mode_of_an_empty_mask_fits_nothing():
     data = _metal_cap()
-    fit = photometric_stereo(data.images, data.scene.light_directions, data.scene.light_irradiance, np.zeros(data.mask.shape, bool), robust="auto")
+    fit = photometric_stereo(
+        data.images,
+        data.scene.light_directions,
+        data.scene.light_irradiance,
+        np.zeros(data.mask.shape, bool),
+        robust="auto",
+    )
     assert fit.robust_used == "tukey" and fit.lobe_share == 0.0 and (fit.flags == OUTSIDE_MASK).all()
 
 
@@ -294,7 +337,13 @@ def _pixels_fitted(monkeypatch) -> list[int]:
     return calls
 
 
-@pytest.mark.parametrize("make, lobe_pixels", [(lambda: irtps.synthesize("cap", size=40, lights=24, bounces=0, environment="none", seed=2)[0], False), (_metal_cap, True)])
+@pytest.mark.parametrize(
+    "make, lobe_pixels",
+    [
+        (lambda: irtps.synthesize("cap", size=40, lights=24, bounces=0, environment="none", seed=2)[0], False),
+        (_metal_cap, True),
+    ],
+)
 def test_lobe_share_tells_matte_from_metal_on_its_first_pixels(monkeypatch, make, lobe_pixels):
     data = make()
     args = (data.images, data.scene.light_directions, data.scene.light_irradiance, data.mask)
@@ -322,10 +371,22 @@ def test_lobe_share_near_the_line_is_measured_on_every_pixel_as_one_fit(monkeypa
 def _check_fit(data: irtps.Dataset) -> PsResult:
     """The lobe fit of every pixel of `data` as `lobe_share` fits them (`LOBE_CHECK_ROUNDS`)."""
     settings = (data.scene.light_directions.astype(np.float32), data.scene.light_irradiance.astype(np.float32), "lobe")
-    return PsResult(*irtps._core.photometric_stereo(data.images.astype(np.float32), data.mask, *settings, lobe_rounds=LOBE_CHECK_ROUNDS))
+    return PsResult(
+        *irtps._core.photometric_stereo(
+            data.images.astype(np.float32), data.mask, *settings, lobe_rounds=LOBE_CHECK_ROUNDS
+        )
+    )
 
 
-@pytest.mark.parametrize("make", [_metal_cap, _half_metal_cap, lambda: irtps.load_dataset(DATA / "diligent_reading_small"), lambda: irtps.load_dataset(DATA / "diligent_ball_small")])
+@pytest.mark.parametrize(
+    "make",
+    [
+        _metal_cap,
+        _half_metal_cap,
+        lambda: irtps.load_dataset(DATA / "diligent_reading_small"),
+        lambda: irtps.load_dataset(DATA / "diligent_ball_small"),
+    ],
+)
 def test_the_check_takes_objects_to_the_side_of_the_line_the_full_lobe_fit_does(make):
     data = make()
     args = (data.images, data.scene.light_directions, data.scene.light_irradiance, data.mask)

@@ -46,22 +46,67 @@ def _render(function, height=None, albedo=None, mask=None, **settings):
 #: (function, call, expected error type, start of the message); one function may have many.
 CASES = [
     # photometric_stereo
-    ("photometric_stereo", lambda f: f(IMAGES, LIGHTS, IRRADIANCE, shadow_fraction="0.1"), irtps.ArgumentError, "shadow_fraction: "),
-    ("photometric_stereo", lambda f: f(IMAGES, LIGHTS, IRRADIANCE, saturation="1"), irtps.ArgumentError, "saturation: "),
+    (
+        "photometric_stereo",
+        lambda f: f(IMAGES, LIGHTS, IRRADIANCE, shadow_fraction="0.1"),
+        irtps.ArgumentError,
+        "shadow_fraction: ",
+    ),
+    (
+        "photometric_stereo",
+        lambda f: f(IMAGES, LIGHTS, IRRADIANCE, saturation="1"),
+        irtps.ArgumentError,
+        "saturation: ",
+    ),
     ("photometric_stereo", lambda f: f("images", LIGHTS, IRRADIANCE), irtps.ArgumentError, "images: "),
     ("photometric_stereo", lambda f: f(np.zeros((4, 0, 4, 3)), LIGHTS, IRRADIANCE), irtps.ArgumentError, "images: "),
-    ("photometric_stereo", lambda f: f(np.full_like(IMAGES, NAN), LIGHTS, IRRADIANCE), irtps.ArgumentError, "images[0]: "),
-    ("photometric_stereo", lambda f: f(IMAGES, np.full_like(LIGHTS, NAN), IRRADIANCE), irtps.ArgumentError, "light_directions: "),
-    ("photometric_stereo", lambda f: f(IMAGES, LIGHTS, np.full_like(IRRADIANCE, NAN)), irtps.ArgumentError, "light_irradiance: "),
-    ("photometric_stereo", lambda f: f(IMAGES, LIGHTS, np.full_like(IRRADIANCE, 1e308)), irtps.ArgumentError, "light_irradiance[0]: "),
+    (
+        "photometric_stereo",
+        lambda f: f(np.full_like(IMAGES, NAN), LIGHTS, IRRADIANCE),
+        irtps.ArgumentError,
+        "images[0]: ",
+    ),
+    (
+        "photometric_stereo",
+        lambda f: f(IMAGES, np.full_like(LIGHTS, NAN), IRRADIANCE),
+        irtps.ArgumentError,
+        "light_directions: ",
+    ),
+    (
+        "photometric_stereo",
+        lambda f: f(IMAGES, LIGHTS, np.full_like(IRRADIANCE, NAN)),
+        irtps.ArgumentError,
+        "light_irradiance: ",
+    ),
+    (
+        "photometric_stereo",
+        lambda f: f(IMAGES, LIGHTS, np.full_like(IRRADIANCE, 1e308)),
+        irtps.ArgumentError,
+        "light_irradiance[0]: ",
+    ),
     ("photometric_stereo", lambda f: f(IMAGES, LIGHTS[:3], IRRADIANCE[:3]), irtps.ArgumentError, "light_directions: "),
     ("photometric_stereo", lambda f: f(IMAGES, LIGHTS, IRRADIANCE, mask="all"), irtps.ArgumentError, "mask: "),
     # numpy.ma hides masked values, which np.asarray would hand over as data
-    ("photometric_stereo", lambda f: f(np.ma.masked_greater(IMAGES + np.arange(4)[:, None, None, None], 2), LIGHTS, IRRADIANCE), irtps.ArgumentError, "images: a masked array"),
+    (
+        "photometric_stereo",
+        lambda f: f(np.ma.masked_greater(IMAGES + np.arange(4)[:, None, None, None], 2), LIGHTS, IRRADIANCE),
+        irtps.ArgumentError,
+        "images: a masked array",
+    ),
     # lobe_share
-    ("lobe_share", lambda f: f(IMAGES, LIGHTS, IRRADIANCE, shadow_fraction="0.1"), irtps.ArgumentError, "shadow_fraction: "),
+    (
+        "lobe_share",
+        lambda f: f(IMAGES, LIGHTS, IRRADIANCE, shadow_fraction="0.1"),
+        irtps.ArgumentError,
+        "shadow_fraction: ",
+    ),
     ("lobe_share", lambda f: f(np.full_like(IMAGES, NAN), LIGHTS, IRRADIANCE), irtps.ArgumentError, "images[0]: "),
-    ("lobe_share", lambda f: f(IMAGES, LIGHTS, np.full_like(IRRADIANCE, NAN)), irtps.ArgumentError, "light_irradiance: "),
+    (
+        "lobe_share",
+        lambda f: f(IMAGES, LIGHTS, np.full_like(IRRADIANCE, NAN)),
+        irtps.ArgumentError,
+        "light_irradiance: ",
+    ),
     ("lobe_share", lambda f: f(np.zeros((0, 4, 4, 3)), LIGHTS, IRRADIANCE), irtps.ArgumentError, "images: "),
     # choose_robust
     ("choose_robust", lambda f: f("0.5"), irtps.ArgumentError, "share: "),
@@ -85,10 +130,25 @@ CASES = [
     # angular_error_deg
     ("angular_error_deg", lambda f: f(np.full((4, 4, 3), NAN), NORMALS, MASK), irtps.ArgumentError, "normals: "),
     ("angular_error_deg", lambda f: f("up", NORMALS, MASK), irtps.ArgumentError, "normals: "),
-    ("angular_error_deg", lambda f: f(np.zeros((0, 4, 3)), np.zeros((0, 4, 3)), np.zeros((0, 4), bool)), irtps.ArgumentError, "mask: "),
+    (
+        "angular_error_deg",
+        lambda f: f(np.zeros((0, 4, 3)), np.zeros((0, 4, 3)), np.zeros((0, 4), bool)),
+        irtps.ArgumentError,
+        "mask: ",
+    ),
     # evaluate
-    ("evaluate", lambda f: f(mask=MASK, normals=np.full((4, 4, 3), NAN), gt=irtps.GroundTruth(normal=NORMALS)), irtps.ArgumentError, "normals: "),
-    ("evaluate", lambda f: f(mask=MASK, height=HEIGHT, gt=irtps.GroundTruth(height=HEIGHT), base_height="0"), irtps.ArgumentError, "base_height: "),
+    (
+        "evaluate",
+        lambda f: f(mask=MASK, normals=np.full((4, 4, 3), NAN), gt=irtps.GroundTruth(normal=NORMALS)),
+        irtps.ArgumentError,
+        "normals: ",
+    ),
+    (
+        "evaluate",
+        lambda f: f(mask=MASK, height=HEIGHT, gt=irtps.GroundTruth(height=HEIGHT), base_height="0"),
+        irtps.ArgumentError,
+        "base_height: ",
+    ),
     ("evaluate", lambda f: f(mask=MASK, normals=NORMALS, gt={"normal": NORMALS}), irtps.ArgumentError, "gt: "),
     ("evaluate", lambda f: f(mask="all", normals=NORMALS, gt=None), irtps.ArgumentError, "mask: "),
     # render and render_indirect
@@ -132,7 +192,11 @@ def test_every_public_function_has_hostile_cases():
     assert {name for name, *_ in CASES} == _public_functions()
 
 
-@pytest.mark.parametrize(("name", "call", "error", "start"), CASES, ids=[f"{case[0]}-{case[3].rstrip(': ')}-{k}" for k, case in enumerate(CASES)])
+@pytest.mark.parametrize(
+    ("name", "call", "error", "start"),
+    CASES,
+    ids=[f"{case[0]}-{case[3].rstrip(': ')}-{k}" for k, case in enumerate(CASES)],
+)
 def test_a_hostile_argument_is_refused_by_name(name, call, error, start, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     with pytest.raises(error) as caught:

@@ -22,8 +22,12 @@ READING = Path(__file__).parent / "data" / "diligent_reading_small"
 
 def _relative(dataset: irtps.Dataset, recorded: float) -> irtps.Dataset:
     """The data set as an uncalibrated rig records it: irradiance `recorded` times the true one."""
-    lights = tuple(dataclasses.replace(light, irradiance=np.asarray(light.irradiance) * recorded) for light in dataset.scene.lights)
-    return dataclasses.replace(dataset, scene=dataclasses.replace(dataset.scene, lights=lights, relative_irradiance=True))
+    lights = tuple(
+        dataclasses.replace(light, irradiance=np.asarray(light.irradiance) * recorded) for light in dataset.scene.lights
+    )
+    return dataclasses.replace(
+        dataset, scene=dataclasses.replace(dataset.scene, lights=lights, relative_irradiance=True)
+    )
 
 
 @pytest.mark.parametrize("environment", ["cornell", "none"])
@@ -32,7 +36,9 @@ def test_the_factor_of_a_concave_object_is_found_from_its_inter_reflections(envi
     truth, _ = synthesize("cavity", size=40, lights=8, bounces=3, samples=64, environment=environment, seed=4)
     data = _relative(truth, recorded)
     fitted_albedo = truth.gt.albedo / recorded  # what photometric stereo fits under the recorded irradiance
-    usable = compared_observations(data.images, data.scene.light_irradiance, data.mask, robust=True, shadow_fraction=0.05, saturation=None)
+    usable = compared_observations(
+        data.images, data.scene.light_irradiance, data.mask, robust=True, shadow_fraction=0.05, saturation=None
+    )
     scale = estimate_albedo_scale(data.scene, truth.gt.height, fitted_albedo, data.mask, data.images, usable, bounces=3)
     assert scale.source == "images" and scale.reason is None
     assert scale.factor == pytest.approx(recorded, rel=0.1)
@@ -42,7 +48,9 @@ def test_a_convex_object_alone_does_not_fix_the_factor_and_says_so():
     truth, _ = synthesize("cap", size=32, lights=8, bounces=2, samples=32, environment="none")
     data = _relative(truth, 0.5)
     usable = np.ones((*data.images.shape[:3], 1), bool)
-    scale = estimate_albedo_scale(data.scene, truth.gt.height, truth.gt.albedo / 0.5, data.mask, data.images, usable, bounces=2)
+    scale = estimate_albedo_scale(
+        data.scene, truth.gt.height, truth.gt.albedo / 0.5, data.mask, data.images, usable, bounces=2
+    )
     assert scale.factor == 1.0 and "no inter-reflection seen" in scale.reason
 
 
@@ -50,18 +58,43 @@ def test_irtps_on_a_diligent_copy_reports_the_estimated_factor(tmp_path, capsys)
     out = tmp_path / "reading"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        assert main(["reconstruct", str(READING), "--out", str(out), "--method", "irtps", "--iterations", "1", "--samples", "16"]) == 0
+        assert (
+            main(
+                [
+                    "reconstruct",
+                    str(READING),
+                    "--out",
+                    str(out),
+                    "--method",
+                    "irtps",
+                    "--iterations",
+                    "1",
+                    "--samples",
+                    "16",
+                ]
+            )
+            == 0
+        )
     run = json.loads((out / "run.json").read_text())
     scale = run["albedo_scale"]
     # 24 lights on a 4x smaller copy: its folds may show too little inter-reflection to fix it.
-    assert scale["source"] == "images" and (scale["reason"] is not None or scale["low"] <= scale["factor"] <= scale["high"])
+    assert scale["source"] == "images" and (
+        scale["reason"] is not None or scale["low"] <= scale["factor"] <= scale["high"]
+    )
     assert "albedo scale" in capsys.readouterr().out
 
 
 def test_a_given_factor_is_used_and_recorded():
     data = irtps.load_dataset(READING)
     result = irtps.reconstruct(data, "irtps", iterations=1, samples=8, albedo_scale=0.5)
-    assert result.albedo_scale.to_dict() == {"factor": 0.5, "source": "given", "low": None, "high": None, "residual": None, "reason": None}
+    assert result.albedo_scale.to_dict() == {
+        "factor": 0.5,
+        "source": "given",
+        "low": None,
+        "high": None,
+        "residual": None,
+        "reason": None,
+    }
 
 
 @pytest.mark.parametrize("value", ["0", "-1", "bright", "nan"])
@@ -82,7 +115,9 @@ def test_scene_json_carries_relative_irradiance_and_refuses_other_words():
     record = scene_to_dict(scene)
     assert record["irradiance"] == "relative"
     assert parse_scene(record) == scene
-    with pytest.raises(DatasetError, match="scene.json: irradiance is 'calibrated': expected one of 'absolute', 'relative'"):
+    with pytest.raises(
+        DatasetError, match="scene.json: irradiance is 'calibrated': expected one of 'absolute', 'relative'"
+    ):
         parse_scene(record | {"irradiance": "calibrated"})
     assert "irradiance" not in scene_to_dict(dataclasses.replace(scene, relative_irradiance=False))
 
@@ -96,7 +131,11 @@ def test_irtps_under_relative_irradiance_does_as_well_as_under_absolute():
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        relative, absolute, classic = irtps.reconstruct(data, "irtps"), irtps.reconstruct(truth, "irtps"), irtps.reconstruct(data)
+        relative, absolute, classic = (
+            irtps.reconstruct(data, "irtps"),
+            irtps.reconstruct(truth, "irtps"),
+            irtps.reconstruct(data),
+        )
     # The floor is rendered to place the object: classic PS estimates the scale for it too.
     assert classic.albedo_scale.factor == pytest.approx(0.25, rel=0.1)
     assert relative.albedo_scale.factor == pytest.approx(0.25, rel=0.1)

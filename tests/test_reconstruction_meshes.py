@@ -60,8 +60,16 @@ def test_one_vertex_per_used_pixel_at_its_centre_and_height(cap_folder, meshes):
         assert len(mesh.vertices) == used.sum()
         np.testing.assert_allclose(mesh.vertices, expected, rtol=1e-6, atol=1e-6)
         lower, upper = mesh.bounds
-        np.testing.assert_allclose(lower, [(j.min() + 0.5 - cols / 2) * PIXEL_SIZE, (rows / 2 - i.max() - 0.5) * PIXEL_SIZE, height[used].min()], rtol=1e-6)
-        np.testing.assert_allclose(upper, [(j.max() + 0.5 - cols / 2) * PIXEL_SIZE, (rows / 2 - i.min() - 0.5) * PIXEL_SIZE, height[used].max()], rtol=1e-6)
+        np.testing.assert_allclose(
+            lower,
+            [(j.min() + 0.5 - cols / 2) * PIXEL_SIZE, (rows / 2 - i.max() - 0.5) * PIXEL_SIZE, height[used].min()],
+            rtol=1e-6,
+        )
+        np.testing.assert_allclose(
+            upper,
+            [(j.max() + 0.5 - cols / 2) * PIXEL_SIZE, (rows / 2 - i.min() - 0.5) * PIXEL_SIZE, height[used].max()],
+            rtol=1e-6,
+        )
 
 
 def test_faces_face_the_camera_and_agree_with_the_stored_normals(cap_folder, meshes):

@@ -28,7 +28,9 @@ def test_unshadowed_plane_follows_lamberts_law_exactly():
     albedo = np.array([0.9, 0.5, 0.2], np.float32)
     irradiance = (2.0, 3.0, 4.0)
     scene = Scene(Camera(size, size, 1.0), _lights([0, 0, 1], [0.5, 0.3, 0.8], [-0.4, 0.1, 0.9], irradiance=irradiance))
-    out = render(scene, height, np.broadcast_to(albedo, (size, size, 3)), np.ones((size, size), bool), bounces=0, samples=16)
+    out = render(
+        scene, height, np.broadcast_to(albedo, (size, size, 3)), np.ones((size, size), bool), bounces=0, samples=16
+    )
     inner = (slice(1, -1), slice(1, -1))  # border pixels' footprints reach past the object
     for k, light in enumerate(scene.lights):
         expected = albedo * np.asarray(irradiance) * max(0.0, float(normal @ light.direction)) / PI
@@ -56,7 +58,15 @@ def test_one_bounce_matches_a_numerically_integrated_form_factor():
     box = CornellBox((-half, half), (-half, half), top, (rho_wall,) * 3, black, black, black)
     light = _lights([0.5, 0.0, 1.0])
     scene = Scene(Camera(size, size, 1.0), light, floor=None, environment=box)
-    out = render(scene, np.zeros((size, size)), np.full((size, size, 3), rho_plate), np.ones((size, size), bool), bounces=1, samples=4096, seed=3)
+    out = render(
+        scene,
+        np.zeros((size, size)),
+        np.full((size, size, 3), rho_plate),
+        np.ones((size, size), bool),
+        bounces=1,
+        samples=4096,
+        seed=3,
+    )
     wall_radiance = rho_wall * PI * light[0].direction[0] / PI
     xs, ys = scene.camera.pixel_centers()
     for row, col in [(8, 1), (8, 8), (3, 12), (12, 5)]:
@@ -146,7 +156,9 @@ def _scaled(scene, height, factor, lift):
         scene,
         camera=dataclasses.replace(scene.camera, pixel_size=size),
         floor=dataclasses.replace(scene.floor, height=z(scene.floor.height)),
-        environment=dataclasses.replace(box, x=tuple(v * factor for v in box.x), y=tuple(v * factor for v in box.y), z_top=z(box.z_top)),
+        environment=dataclasses.replace(
+            box, x=tuple(v * factor for v in box.x), y=tuple(v * factor for v in box.y), z_top=z(box.z_top)
+        ),
     )
     return moved, z(np.float64(height))
 

@@ -27,7 +27,21 @@ ERROR_FIGURES = ["angular_error", "height_error", "albedo_error"]
 def irtps_run(tmp_path_factory):
     """An IRT-PS reconstruction of the small Cornell-box cap, which has ground truth."""
     out = tmp_path_factory.mktemp("runs") / "cap_irtps"
-    code = main(["reconstruct", str(SMALL), "--out", str(out), "--method", "irtps", "--iterations", "2", "--samples", "8", "--quiet"])
+    code = main(
+        [
+            "reconstruct",
+            str(SMALL),
+            "--out",
+            str(out),
+            "--method",
+            "irtps",
+            "--iterations",
+            "2",
+            "--samples",
+            "8",
+            "--quiet",
+        ]
+    )
     assert code == 0
     return out
 
@@ -69,7 +83,9 @@ def test_irtps_run_gets_every_figure_and_a_self_contained_page(run_copy):
     page = write_report(run_copy)
     assert page == run_copy / "report" / "index.html"
     expected = BASE_FIGURES + ["indirect"] + ERROR_FIGURES + ["convergence", "agreement"]
-    assert sorted(p.name for p in page.parent.iterdir()) == sorted([f"{name}.png" for name in expected] + ["index.html"])
+    assert sorted(p.name for p in page.parent.iterdir()) == sorted(
+        [f"{name}.png" for name in expected] + ["index.html"]
+    )
     parsed = _parse(page)
     assert len(parsed.images) == len(expected)
     for name, source in zip(expected, parsed.images):
@@ -86,7 +102,10 @@ def test_irtps_run_gets_every_figure_and_a_self_contained_page(run_copy):
     assert "<th>estimator</th><td>physical</td>" in text
     assert text.count("<tr><td>") == len(run["history"])  # one row per pass
     # The placement and how it was decided, each pass's residual, and the pass chosen.
-    assert f"Placement: boundary at height {run['placement']['base_height']:.4g}, estimated from the floor around the object" in text
+    assert (
+        f"Placement: boundary at height {run['placement']['base_height']:.4g}, estimated from the floor around the object"
+        in text
+    )
     assert run["albedo_scale"]["source"] == "absolute" and "Albedo scale 1 (the irradiance is absolute)." in text
     chosen = run["chosen_pass"]
     assert f"the result is pass {chosen}" in text
@@ -129,7 +148,9 @@ def test_a_moved_source_data_set_is_reported_and_truth_can_be_given(run_copy, tm
 @pytest.mark.parametrize("source", ["the run itself", "/", "a name too long for the system"])
 def test_a_recorded_source_that_is_no_data_set_leaves_the_report_without_truth(source, run_copy, tmp_path):
     record = json.loads((run_copy / "run.json").read_text())
-    record["source"] = {"the run itself": str(run_copy), "/": "/", "a name too long for the system": "z" * 100_000}[source]
+    record["source"] = {"the run itself": str(run_copy), "/": "/", "a name too long for the system": "z" * 100_000}[
+        source
+    ]
     (run_copy / "run.json").write_text(json.dumps(record))
     out = tmp_path / "report"
     assert main(["report", str(run_copy), "--out", str(out), "--quiet"]) == 0
@@ -184,14 +205,23 @@ def test_a_folder_that_is_not_a_reconstruction_is_named(tmp_path):
     ("change", "message"),
     [
         (lambda text: "{not json", "run.json: invalid JSON at line 1, column 2"),
-        (lambda text: text.replace('"pixel_size": ', '"pixel_size": ' + "9" * 5000 + ", \"x\": "), "run.json: line [0-9]+, column [0-9]+: a number with 5000 digits"),
+        (
+            lambda text: text.replace('"pixel_size": ', '"pixel_size": ' + "9" * 5000 + ', "x": '),
+            "run.json: line [0-9]+, column [0-9]+: a number with 5000 digits",
+        ),
         (lambda text: "[" * 5000 + "]" * 5000, "run.json: arrays and objects nested 5000 deep"),
         (lambda text: "[]", "run.json: the file must be an object"),
-        (lambda text: text.replace('"format": "irtps.run/1"', '"format": "irtps.table/1"'), "run.json: format 'irtps.table/1' is not a reconstruction's"),
+        (
+            lambda text: text.replace('"format": "irtps.run/1"', '"format": "irtps.table/1"'),
+            "run.json: format 'irtps.table/1' is not a reconstruction's",
+        ),
         (lambda text: text.replace('"history": [', '"history": [1, '), r"run.json: history\[0\] must be an object"),
         (lambda text: text.replace('"source": "', '"source": 3, "x": "'), "run.json: source must be a string or null"),
         (lambda text: text.replace('"index": 1', '"index": "one"'), r"run.json: history\[1\].index must be a number"),
-        (lambda text: text.replace('"robust_used": "', '"robust_used": 4, "x": "'), "run.json: robust_used must be a string or null"),
+        (
+            lambda text: text.replace('"robust_used": "', '"robust_used": 4, "x": "'),
+            "run.json: robust_used must be a string or null",
+        ),
     ],
 )
 def test_a_malformed_run_json_names_the_field(run_copy, change, message):

@@ -20,7 +20,10 @@ from irtps.cli import main
 SMALL = Path(__file__).parent / "data" / "mitsuba_small" / "cap_cornell"
 
 CHROMIUM = next(filter(None, map(shutil.which, ("chromium", "chromium-browser", "google-chrome"))), None)
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no Chromium on PATH (Debian: apt-get install chromium), so the report page is not opened in a browser")
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None,
+    reason="no Chromium on PATH (Debian: apt-get install chromium), so the report page is not opened in a browser",
+)
 
 PROBE = """<script>
 window.addEventListener("load", () => {
@@ -61,7 +64,24 @@ def open_in_browser(page_text: str, folder: Path) -> tuple[list[dict], list[str]
 
 def test_the_report_page_shows_every_figure_without_console_errors(tmp_path):
     run = tmp_path / "cap_irtps"
-    assert main(["reconstruct", str(SMALL), "--out", str(run), "--method", "irtps", "--iterations", "2", "--samples", "8", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(SMALL),
+                "--out",
+                str(run),
+                "--method",
+                "irtps",
+                "--iterations",
+                "2",
+                "--samples",
+                "8",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert main(["report", str(run), "--quiet"]) == 0
     page = (run / "report" / "index.html").read_text(encoding="utf-8")
     images, console = open_in_browser(page, tmp_path)

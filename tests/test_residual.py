@@ -53,7 +53,9 @@ def test_the_residual_compares_what_photometric_stereo_fits(robust):
     images = np.ones((4, 1, 2, 3), np.float32)
     images[0] = 2.0  # saturated
     images[3] *= 0.01  # dark
-    kept = compared_observations(images, np.ones((4, 3)), np.array([[True, False]]), robust=robust, shadow_fraction=0.05, saturation=1.5)[..., 0]
+    kept = compared_observations(
+        images, np.ones((4, 3)), np.array([[True, False]]), robust=robust, shadow_fraction=0.05, saturation=1.5
+    )[..., 0]
     assert kept[:, 0, 1].tolist() == [False, True, True, True]  # around the object: not saturated
     assert kept[:, 0, 0].tolist() == [False, True, True, not robust]
 
@@ -75,7 +77,9 @@ def test_the_cores_comparison_matches_numpy_in_any_memory_layout(layout):
     indirect, noise, sums = _core.compare_rendering(direct, [first, second], [3, 5], observed, keep)
     expected = (3 * first + 5 * second) / 8
     np.testing.assert_array_equal(indirect, expected)
-    np.testing.assert_allclose(noise, np.square(first - second, dtype=np.float64).sum(axis=(0, 2)) * 15 / 64, rtol=1e-12)
+    np.testing.assert_allclose(
+        noise, np.square(first - second, dtype=np.float64).sum(axis=(0, 2)) * 15 / 64, rtol=1e-12
+    )
     kept3 = np.broadcast_to(keep[..., None], observed.shape)
     for total, rendered in zip(sums[:1] + sums[2:], (direct + expected, direct + first, direct + second)):
         assert total == pytest.approx(float(np.abs(rendered - observed)[kept3].sum(dtype=np.float64)), rel=1e-9)
@@ -84,6 +88,8 @@ def test_the_cores_comparison_matches_numpy_in_any_memory_layout(layout):
         _core.compare_rendering(direct, [first], [8], observed, keep[:, 1:])
     # The same pixels as a window of a longer list of observations.
     longer, kept_longer = np.concatenate([frame[:, :7], observed], axis=1), np.concatenate([kept[:, :7], keep], axis=1)
-    assert _core.compare_rendering(direct, [first, second], [3, 5], longer, kept_longer, first=7)[2] == pytest.approx(sums, rel=1e-12)
+    assert _core.compare_rendering(direct, [first, second], [3, 5], longer, kept_longer, first=7)[2] == pytest.approx(
+        sums, rel=1e-12
+    )
     with pytest.raises(ValueError, match="observed"):
         _core.compare_rendering(direct, [first], [8], longer, kept_longer, first=8)

@@ -32,7 +32,13 @@ def test_mesh_coverage_counts_the_meshed_quarters_of_each_footprint():
 def test_the_floor_fills_the_unmeshed_part_of_the_edge_footprints(block_mask):
     scene = _block_scene([0, 0, 1])
     height = np.where(block_mask, 10.0, 0.0)
-    light = np.mean([surroundings_light(scene, height, np.full((10, 10, 3), 0.5), block_mask, seed=seed).light[0, :, 0] for seed in range(24)], axis=0)
+    light = np.mean(
+        [
+            surroundings_light(scene, height, np.full((10, 10, 3), 0.5), block_mask, seed=seed).light[0, :, 0]
+            for seed in range(24)
+        ],
+        axis=0,
+    )
     frame = np.zeros((10, 10))
     frame[block_mask] = light
     # White floor under irradiance π facing the light: radiance 1 where it is seen.
@@ -42,7 +48,9 @@ def test_the_floor_fills_the_unmeshed_part_of_the_edge_footprints(block_mask):
 
 
 def test_nothing_is_seen_without_surroundings(block_mask):
-    seen = surroundings_light(_block_scene([0, 0, 1], floor=False), np.where(block_mask, 10.0, 0.0), np.full((10, 10, 3), 0.5), block_mask)
+    seen = surroundings_light(
+        _block_scene([0, 0, 1], floor=False), np.where(block_mask, 10.0, 0.0), np.full((10, 10, 3), 0.5), block_mask
+    )
     assert not seen.light.any() and not seen.corrected.any()
     assert (seen.coverage(block_mask) == 1.0).all()
 

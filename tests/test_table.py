@@ -22,7 +22,25 @@ def two_scenes(tmp_path_factory):
 
 def test_table_has_the_papers_layout_and_marks_the_best(two_scenes, tmp_path, capsys):
     out = tmp_path / "table"
-    assert main(["table", *map(str, two_scenes), "--out", str(out), "--bounces", "1", "3", "--iterations", "2", "--samples", "32", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "table",
+                *map(str, two_scenes),
+                "--out",
+                str(out),
+                "--bounces",
+                "1",
+                "3",
+                "--iterations",
+                "2",
+                "--samples",
+                "32",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "| **cap** | PS | IRTPSr1 | IRTPSr3 | Paper-r1 | Paper-r3 |" in printed
     assert "| **Overall** | PS | IRTPSr1 | IRTPSr3 | Paper-r1 | Paper-r3 |" in printed
@@ -60,7 +78,9 @@ def test_demo_writes_everything_it_announces(tmp_path, capsys):
     assert (out / "table.md").is_file() and (out / "table.json").is_file()
     # The reconstructions name the data set they came from, so a report finds its ground truth.
     assert f"irtps report {out / 'cap_cornell' / 'IRTPSr3'}" in printed
-    assert json.loads((out / "cap_cornell" / "IRTPSr3" / "run.json").read_text())["source"] == str((out / "data").resolve())
+    assert json.loads((out / "cap_cornell" / "IRTPSr3" / "run.json").read_text())["source"] == str(
+        (out / "data").resolve()
+    )
 
 
 def test_table_needs_ground_truth(tmp_path, capsys):
@@ -76,7 +96,19 @@ def test_two_data_sets_of_one_name_both_get_a_block(two_scenes, tmp_path, capsys
     twin.parent.mkdir()
     twin.symlink_to(two_scenes[0])  # the same folder name in another place
     out = tmp_path / "table"
-    argv = ["table", str(two_scenes[0]), str(twin), "--out", str(out), "--bounces", "1", "--iterations", "0", "--no-paper", "--quiet"]
+    argv = [
+        "table",
+        str(two_scenes[0]),
+        str(twin),
+        "--out",
+        str(out),
+        "--bounces",
+        "1",
+        "--iterations",
+        "0",
+        "--no-paper",
+        "--quiet",
+    ]
     assert main(argv) == 0
     printed = capsys.readouterr().out
     assert "| **cap** |" in printed and "| **cap-2** |" in printed

@@ -25,7 +25,14 @@ F = TypeVar("F", bound=Callable)
 
 
 def check_array(
-    name: str, value, shape: tuple[int | None, ...], *, match: str | None = None, dtype: type | None = np.float64, copy: bool = True, nonempty: bool = False
+    name: str,
+    value,
+    shape: tuple[int | None, ...],
+    *,
+    match: str | None = None,
+    dtype: type | None = np.float64,
+    copy: bool = True,
+    nonempty: bool = False,
 ) -> np.ndarray:
     """`value` as an array of `shape` (None: any length on that axis), converted to `dtype`
     (None: kept as it is; a float type: refused unless `value` holds real numbers); a copy
@@ -47,18 +54,29 @@ def check_array(
     irtps.errors.ArgumentError: height: shape (0, 4) is empty: expected (H, W) with every length at least 1
     """
     if isinstance(value, (str, bytes)):
-        raise ArgumentError(name, f"expected an array of shape {_shape_text(shape)}, got {type(value).__name__} {value!r:.40}")
+        raise ArgumentError(
+            name, f"expected an array of shape {_shape_text(shape)}, got {type(value).__name__} {value!r:.40}"
+        )
     if np.ma.is_masked(value):
-        raise ArgumentError(name, "a masked array with masked entries: their values would be used as they are; fill them, or leave pixels out with the mask argument")
+        raise ArgumentError(
+            name,
+            "a masked array with masked entries: their values would be used as they are; fill them, or leave pixels out with the mask argument",
+        )
     array = np.asarray(value)
     if array.ndim != len(shape) or any(want is not None and have != want for have, want in zip(array.shape, shape)):
         expected = _shape_text(shape)
         raise ArgumentError(name, f"shape {array.shape}, expected {expected}" + (f" to match {match}" if match else ""))
     if nonempty and array.size == 0:
-        raise ArgumentError(name, f"shape {array.shape} is empty: expected {_shape_text(shape)} with every length at least 1")
+        raise ArgumentError(
+            name, f"shape {array.shape} is empty: expected {_shape_text(shape)} with every length at least 1"
+        )
     if dtype is None:
         return array
-    if np.issubdtype(dtype, np.floating) and not (np.issubdtype(array.dtype, np.number) or array.dtype == bool) or np.iscomplexobj(array):
+    if (
+        np.issubdtype(dtype, np.floating)
+        and not (np.issubdtype(array.dtype, np.number) or array.dtype == bool)
+        or np.iscomplexobj(array)
+    ):
         raise ArgumentError(name, f"expected real numbers, got dtype {array.dtype}")
     return array.astype(dtype, copy=copy)
 
@@ -71,7 +89,9 @@ def _shape_text(shape: tuple[int | None, ...]) -> str:
     return "(" + ", ".join(parts) + ("," if len(parts) == 1 else "") + ")"
 
 
-def check_mask(mask, shape: tuple[int, int] | None = None, *, match: str | None = None, name: str = "mask", nonempty: bool = False) -> np.ndarray:
+def check_mask(
+    mask, shape: tuple[int, int] | None = None, *, match: str | None = None, name: str = "mask", nonempty: bool = False
+) -> np.ndarray:
     """`mask` as a bool (H, W) array: of `shape` if given (that of the array named by
     `match`; None is then every pixel), with a pixel set if `nonempty`.
 
@@ -86,7 +106,9 @@ def check_mask(mask, shape: tuple[int, int] | None = None, *, match: str | None 
     """
     if mask is None and shape is not None:
         return np.ones(shape, dtype=bool)
-    mask = check_array(name, mask, (None, None) if shape is None else tuple(shape), match=match, dtype=bool, nonempty=True)
+    mask = check_array(
+        name, mask, (None, None) if shape is None else tuple(shape), match=match, dtype=bool, nonempty=True
+    )
     if nonempty and not mask.any():
         raise ArgumentError(name, "empty (no pixel set)")
     return mask
@@ -112,7 +134,14 @@ def check_image(name: str, value, mask: np.ndarray, *, channels: int | None = 3,
     return image
 
 
-def check_finite(name: str | Path, array: np.ndarray, where: np.ndarray | None = None, *, unit: str = "pixel", error: type[IrtpsError] = ArgumentError) -> None:
+def check_finite(
+    name: str | Path,
+    array: np.ndarray,
+    where: np.ndarray | None = None,
+    *,
+    unit: str = "pixel",
+    error: type[IrtpsError] = ArgumentError,
+) -> None:
     """Refuse a NaN or an infinity in `array` (at the pixels `where` is set, if given),
     naming the first: by row and column for an image (``unit="pixel"``), else by its index
     along the first axis (e.g. ``unit="vertex"``).
@@ -292,7 +321,9 @@ def document_choices(**choices: Sequence[str]) -> Callable[[F], F]:
         for name, values in choices.items():
             listed = "{" + ", ".join(f'"{value}"' for value in values) + "}"
             line = rf"^(\s*{re.escape(name)} : ).*$"
-            doc, count = re.subn(line, functools.partial(_replace_value, listed=listed), doc, count=1, flags=re.MULTILINE)
+            doc, count = re.subn(
+                line, functools.partial(_replace_value, listed=listed), doc, count=1, flags=re.MULTILINE
+            )
             if count != 1:
                 raise TypeError(f"{function.__qualname__}: its docstring has no parameter line for {name!r}")
         function.__doc__ = doc

@@ -17,7 +17,21 @@ import numpy.typing as npt
 
 from irtps.scene import CornellBox, Floor
 
-__all__ = ["read_exr", "write_exr", "read_png", "write_png", "read_images", "photometric_stereo", "tukey_with_lobe_check", "check_lights", "compare_rendering", "denoise_indirect", "Renderer", "SparseCholesky", "MAX_IMAGE_PIXELS"]
+__all__ = [
+    "read_exr",
+    "write_exr",
+    "read_png",
+    "write_png",
+    "read_images",
+    "photometric_stereo",
+    "tukey_with_lobe_check",
+    "check_lights",
+    "compare_rendering",
+    "denoise_indirect",
+    "Renderer",
+    "SparseCholesky",
+    "MAX_IMAGE_PIXELS",
+]
 
 _F32 = npt.NDArray[np.float32]
 _Path = str | PathLike[str]
@@ -95,7 +109,6 @@ def denoise_indirect(
     """The inter-reflection estimate (K, N, 3) at the N pixels of `mask` and their noise
     energy (N,), filtered along the surface of heights `height_px` (H, W, in pixels) and
     `albedo` (H, W, 3)."""
-
 @final
 class Renderer:
     """A scene made ready for rendering and ray queries: height-field object, optional floor
@@ -125,13 +138,27 @@ class Renderer:
         """Number of lights."""
 
     def render_rows(
-        self, row_start: int, row_end: int, bounces: int, samples: int, direct_samples: int, seed: int, split_bounces: bool = True
+        self,
+        row_start: int,
+        row_end: int,
+        bounces: int,
+        samples: int,
+        direct_samples: int,
+        seed: int,
+        split_bounces: bool = True,
     ) -> _F32:
         """float32 (P, K, rows, W, 3): the direct image (when `direct_samples` > 0), then each
         bounce (`split_bounces`) or their sum."""
 
     def render_pixels(
-        self, pixels: Sequence[int], bounces: int, samples: int, direct_samples: int, seed: int, split_bounces: bool = True, cached_direct: bool = False
+        self,
+        pixels: Sequence[int],
+        bounces: int,
+        samples: int,
+        direct_samples: int,
+        seed: int,
+        split_bounces: bool = True,
+        cached_direct: bool = False,
     ) -> _F32:
         """float32 (P, K, N, 3) for the listed pixels (row-major indices), planes as in
         `render_rows`; `cached_direct` shades the direct image from the light cache."""
@@ -139,7 +166,9 @@ class Renderer:
     def mesh_arrays(self) -> tuple[_F32, npt.NDArray[np.uint32], _F32, _F32]:
         """(positions (V, 3), triangles (T, 3), vertex albedo (V, 3), facing unit normals (T, 3))."""
 
-    def intersect(self, origins: _F32, directions: _F32, threads: int | None = None) -> tuple[_F32, npt.NDArray[np.int64]]:
+    def intersect(
+        self, origins: _F32, directions: _F32, threads: int | None = None
+    ) -> tuple[_F32, npt.NDArray[np.int64]]:
         """(distance (N,), inf on a miss; triangle (N,), −1 on a miss) of a batch of rays."""
 
 @final
@@ -149,7 +178,11 @@ class SparseCholesky:
     which only the upper triangle is read. `name` is the argument named in errors."""
 
     def __new__(
-        cls, indptr: npt.NDArray[np.int64], indices: npt.NDArray[np.int64], data: npt.NDArray[np.float64], name: str = "matrix"
+        cls,
+        indptr: npt.NDArray[np.int64],
+        indices: npt.NDArray[np.int64],
+        data: npt.NDArray[np.float64],
+        name: str = "matrix",
     ) -> SparseCholesky: ...
     @property
     def dim(self) -> int:

@@ -156,7 +156,9 @@ def _writing(final: Path) -> Iterator[str]:
         except OSError as error:
             lock.unlink(missing_ok=True)
             os.close(descriptor)
-            raise DatasetError(f"{parent}: cannot lock a file in the output folder ({error.strerror or error})") from None
+            raise DatasetError(
+                f"{parent}: cannot lock a file in the output folder ({error.strerror or error})"
+            ) from None
         if held:
             break
         # A cleaner that opened the new file before the flock judged it stale and

@@ -52,9 +52,24 @@ from irtps.image_selection import parse_image_list, select_images
 from irtps.options import ReconstructOptions
 from irtps.paths import resolve_path
 from irtps.records import BATCH, stamp
-from irtps.reconstruct import indirect_file_names, load_and_reconstruct, load_reconstruction, load_run_record, save_reconstruction
+from irtps.reconstruct import (
+    indirect_file_names,
+    load_and_reconstruct,
+    load_reconstruction,
+    load_run_record,
+    save_reconstruction,
+)
 
-__all__ = ["BatchResult", "connect", "local_cluster", "output_names", "reconstruct_many", "reconstruct_to_folder", "summary_table", "write_summary"]
+__all__ = [
+    "BatchResult",
+    "connect",
+    "local_cluster",
+    "output_names",
+    "reconstruct_many",
+    "reconstruct_to_folder",
+    "summary_table",
+    "write_summary",
+]
 
 INSTALL_HINT = "pip install 'irtps[batch]'"
 SUMMARY_JSON = "batch.json"
@@ -148,7 +163,14 @@ def output_names(paths: Sequence[str | Path]) -> list[str]:
     return names
 
 
-def reconstruct_to_folder(source: str, destination: str, options: ReconstructOptions, *, resume: bool = False, exclude_images: str | None = None) -> BatchResult:
+def reconstruct_to_folder(
+    source: str,
+    destination: str,
+    options: ReconstructOptions,
+    *,
+    resume: bool = False,
+    exclude_images: str | None = None,
+) -> BatchResult:
     """Reconstruct one data set folder into an output folder: the task of a batch.
 
     Errors are caught and reported, never raised, so that one bad data set does not
@@ -199,17 +221,29 @@ def reconstruct_to_folder(source: str, destination: str, options: ReconstructOpt
                 dataset, result = load_and_reconstruct(source, options=options, exclude_images=exclude_images)
                 with _TASKS.writing():
                     save_reconstruction(result, destination, source=str(resolve_path(source)))
-                gt, normals, albedo, height, mask = dataset.gt, result.normals, result.albedo, result.height, result.mask
+                gt, normals, albedo, height, mask = (
+                    dataset.gt,
+                    result.normals,
+                    result.albedo,
+                    result.height,
+                    result.mask,
+                )
                 robust_used = result.robust_used
             else:
                 status = "reused"
                 (normals, albedo, height, mask), robust_used = kept
                 gt = load_ground_truth(source, mask.shape)
-            metrics = None if gt is None else evaluate(mask=mask, normals=normals, albedo=albedo, height=height, gt=gt).to_dict()
+            metrics = (
+                None
+                if gt is None
+                else evaluate(mask=mask, normals=normals, albedo=albedo, height=height, gt=gt).to_dict()
+            )
         except Exception as error:  # a batch reports every failure of a data set and goes on
             outcome = BatchResult(name, source, "failed", time.perf_counter() - start, error=_describe(error))
         else:
-            outcome = BatchResult(name, source, status, time.perf_counter() - start, metrics=metrics, robust_used=robust_used)
+            outcome = BatchResult(
+                name, source, status, time.perf_counter() - start, metrics=metrics, robust_used=robust_used
+            )
     return _with_warnings(outcome, recorded)
 
 
@@ -316,12 +350,28 @@ def reconstruct_many(
     exclusions = _exclusions(exclude_images, names)
     with _using(client) as active, _lost_workers(active) as lost:
         pending = {
-            active.submit(reconstruct_to_folder, source, str(folder / name), options, resume=resume, exclude_images=exclusions[name], pure=False, priority=-index): (name, source)
+            active.submit(
+                reconstruct_to_folder,
+                source,
+                str(folder / name),
+                options,
+                resume=resume,
+                exclude_images=exclusions[name],
+                pure=False,
+                priority=-index,
+            ): (name, source)
             for index, (name, source) in enumerate(zip(names, sources, strict=True))
         }
         outcomes = {}
         try:
-            with tqdm(distributed.as_completed(pending, loop=active.loop), total=len(pending), desc="batch", unit="set", disable=not progress, leave=False) as bar:
+            with tqdm(
+                distributed.as_completed(pending, loop=active.loop),
+                total=len(pending),
+                desc="batch",
+                unit="set",
+                disable=not progress,
+                leave=False,
+            ) as bar:
                 for future in bar:
                     name, source = pending.pop(future)
                     outcomes[name] = outcome = _with_lost_workers(_result_of(future, name, source), lost[future.key])
@@ -407,7 +457,12 @@ def local_cluster(workers: int | None = None, threads_per_worker: int = 1, *, pr
         scheduler_options = {"dashboard_address": "localhost:0"}
         with _signals_held(processes), dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):
             cluster = distributed.LocalCluster(
-                n_workers=workers, threads_per_worker=threads_per_worker, processes=processes, dashboard_address=None, scheduler_kwargs=scheduler_options, **worker_options
+                n_workers=workers,
+                threads_per_worker=threads_per_worker,
+                processes=processes,
+                dashboard_address=None,
+                scheduler_kwargs=scheduler_options,
+                **worker_options,
             )
         client = distributed.Client(cluster)
         yield client
@@ -539,7 +594,14 @@ def write_summary(results: Sequence[BatchResult], out: str | Path, *, settings: 
     folder = Path(out)
     failed = sum(result.failed for result in results)
     reused = sum(result.status == "reused" for result in results)
-    summary = {**stamp(BATCH), "settings": settings, "succeeded": len(results) - failed, "reused": reused, "failed": failed, "datasets": [asdict(result) for result in results]}
+    summary = {
+        **stamp(BATCH),
+        "settings": settings,
+        "succeeded": len(results) - failed,
+        "reused": reused,
+        "failed": failed,
+        "datasets": [asdict(result) for result in results],
+    }
     atomic_write_text(folder / SUMMARY_JSON, json.dumps(summary, indent=2))
     atomic_write_text(folder / SUMMARY_MARKDOWN, summary_table(results))
 
@@ -716,12 +778,17 @@ def _with_warnings(outcome: BatchResult, recorded: list[tuple[type[Warning], str
     """The outcome with the recorded warnings, each once."""
     if not recorded:
         return outcome
-    texts = (message if issubclass(category, IrtpsWarning) else f"{_category_name(category)}: {message}" for category, message in recorded)
+    texts = (
+        message if issubclass(category, IrtpsWarning) else f"{_category_name(category)}: {message}"
+        for category, message in recorded
+    )
     return replace(outcome, warnings=tuple(dict.fromkeys(texts)))
 
 
 def _category_name(category: type[Warning]) -> str:
-    return category.__qualname__ if category.__module__ == "builtins" else f"{category.__module__}.{category.__qualname__}"
+    return (
+        category.__qualname__ if category.__module__ == "builtins" else f"{category.__module__}.{category.__qualname__}"
+    )
 
 
 _CATEGORY_PREFIX = re.compile(r"([A-Za-z_][\w.]*): (.*)", re.DOTALL)
@@ -792,7 +859,9 @@ def _lost_workers(client) -> Iterator[Counter]:
         client.unsubscribe_topic("all")
 
 
-def _complete_output(destination: str, source: str, options: ReconstructOptions, exclude_images: str | None) -> tuple | None:
+def _complete_output(
+    destination: str, source: str, options: ReconstructOptions, exclude_images: str | None
+) -> tuple | None:
     """The normals, albedo, height and mask of a complete output folder of `source` made
     with `options`, leaving out the images of `exclude_images` (see `reconstruct_to_folder`),
     and its recorded robust mode, or None."""
@@ -805,7 +874,11 @@ def _complete_output(destination: str, source: str, options: ReconstructOptions,
         excluded = select_images(dataset_image_names(source), exclude_images, where=source).excluded
     except (IrtpsError, OSError):
         return None
-    same_run = record["source"] == str(resolve_path(source)) and _same_options(record["parameters"], options) and tuple(record.get("excluded_images", ())) == excluded
+    same_run = (
+        record["source"] == str(resolve_path(source))
+        and _same_options(record["parameters"], options)
+        and tuple(record.get("excluded_images", ())) == excluded
+    )
     return (maps, record.get("robust_used")) if same_run and meshes and indirect else None
 
 
@@ -826,7 +899,9 @@ def _same_options(recorded: dict, options: ReconstructOptions) -> bool:
     """Whether a ``run.json``'s parameters are `options`; an option left unset (None),
     which the reconstruction resolves for each data set, matches any recorded value."""
     wanted = json.loads(json.dumps(options.to_dict()))
-    return recorded.keys() == wanted.keys() and all(value is None or recorded[key] == value for key, value in wanted.items())
+    return recorded.keys() == wanted.keys() and all(
+        value is None or recorded[key] == value for key, value in wanted.items()
+    )
 
 
 def _exclusions(exclude_images: str | Mapping[str, str | None] | None, names: list[str]) -> dict[str, str | None]:
@@ -837,7 +912,10 @@ def _exclusions(exclude_images: str | Mapping[str, str | None] | None, names: li
             parse_image_list(exclude_images)
         return dict.fromkeys(names, exclude_images)
     if not isinstance(exclude_images, Mapping):
-        raise ArgumentError("exclude_images", f"expected a list of images or a mapping of data set names to lists, got {type(exclude_images).__name__}")
+        raise ArgumentError(
+            "exclude_images",
+            f"expected a list of images or a mapping of data set names to lists, got {type(exclude_images).__name__}",
+        )
     unknown = sorted(set(exclude_images) - set(names), key=str)
     if unknown:
         raise ArgumentError("exclude_images", f"{unknown[0]!r} is none of the data sets ({', '.join(names)})")

@@ -15,13 +15,40 @@ from typing import Any
 import numpy as np
 
 from irtps.atomic import atomic_output_dir
-from irtps.batch import SUMMARY_JSON, SUMMARY_MARKDOWN, connect, local_cluster, output_names, reconstruct_many, summary_table, write_summary
-from irtps.dataset import Dataset, GroundTruth, dataset_inputs, load_dataset, load_scene_object, load_ground_truth, save_dataset, scene_object_inputs
+from irtps.batch import (
+    SUMMARY_JSON,
+    SUMMARY_MARKDOWN,
+    connect,
+    local_cluster,
+    output_names,
+    reconstruct_many,
+    summary_table,
+    write_summary,
+)
+from irtps.dataset import (
+    Dataset,
+    GroundTruth,
+    dataset_inputs,
+    load_dataset,
+    load_scene_object,
+    load_ground_truth,
+    save_dataset,
+    scene_object_inputs,
+)
 from irtps.errors import ArgumentError, IrtpsError, IrtpsWarning
 from irtps.evaluate import evaluate, format_metrics
 from irtps.image_agreement import format_image_agreement
 from irtps.image_selection import exclusions_by_name, format_images_fitted
-from irtps.options import ClusterOptions, ReconstructOptions, int_argument, RenderOptions, SynthOptions, TableOptions, add_arguments, from_arguments
+from irtps.options import (
+    ClusterOptions,
+    ReconstructOptions,
+    int_argument,
+    RenderOptions,
+    SynthOptions,
+    TableOptions,
+    add_arguments,
+    from_arguments,
+)
 from irtps.output_rule import check_output, escaped
 from irtps.paths import check_folder, resolve_path
 from irtps.placement import format_placement
@@ -38,6 +65,7 @@ from irtps.table import comparison_table, format_table, method_names
 #: Argument groups of the reconstruction options.
 RECONSTRUCT_GROUPS = {"IRT-PS": "IRT-PS (--method irtps)"}
 
+
 def _bounce_files(rendering: Rendering) -> dict[str, np.ndarray]:
     """The per-bounce images as extra data-set files ``gt/bounceN/KKK.exr``."""
     files = {}
@@ -52,14 +80,30 @@ def _cmd_render(args: argparse.Namespace) -> None:
     check_output(args.out, scene_object_inputs(args.dataset), force=args.force)
     scene, height, albedo, mask = load_scene_object(args.dataset)
     start = time.perf_counter()
-    rendering = render(scene, height, albedo, mask, bounces=options.bounces, samples=options.samples, seed=options.seed, progress=not args.quiet)
+    rendering = render(
+        scene,
+        height,
+        albedo,
+        mask,
+        bounces=options.bounces,
+        samples=options.samples,
+        seed=options.seed,
+        progress=not args.quiet,
+    )
     seconds = time.perf_counter() - start
-    truth = GroundTruth(height=np.where(mask, height, 0), normal=height_to_normals(height, mask, scene.camera.pixel_size), albedo=albedo, direct=rendering.direct)
+    truth = GroundTruth(
+        height=np.where(mask, height, 0),
+        normal=height_to_normals(height, mask, scene.camera.pixel_size),
+        albedo=albedo,
+        direct=rendering.direct,
+    )
     dataset = Dataset(scene=scene, images=rendering.images, mask=mask, gt=truth)
     record = {"command": "render", "source": str(resolve_path(args.dataset)), **options.to_dict()}
     save_dataset(dataset, args.out, extra=_bounce_files(rendering), rendering=record)
     if not args.quiet:
-        print(f"rendered {len(scene.lights)} lights x {options.bounces} bounces at {options.samples} samples/pixel in {seconds:.1f} s -> {args.out}")
+        print(
+            f"rendered {len(scene.lights)} lights x {options.bounces} bounces at {options.samples} samples/pixel in {seconds:.1f} s -> {args.out}"
+        )
 
 
 def _cmd_synth(args: argparse.Namespace) -> None:
@@ -71,7 +115,9 @@ def _cmd_synth(args: argparse.Namespace) -> None:
     save_dataset(dataset, args.out, extra=_bounce_files(rendering), rendering={"command": "synth", **settings})
     if not args.quiet:
         seconds = time.perf_counter() - start
-        indirect = rendering.indirect[:, dataset.mask].mean() / max(float(dataset.images[:, dataset.mask].mean()), 1e-12)
+        indirect = rendering.indirect[:, dataset.mask].mean() / max(
+            float(dataset.images[:, dataset.mask].mean()), 1e-12
+        )
         print(
             f"synthesized {args.shape} ({scene_options.size}x{scene_options.size}, {scene_options.lights} lights, {scene_options.environment}) "
             f"in {seconds:.1f} s; inter-reflections are {100 * indirect:.1f}% of the object's light -> {args.out}"
@@ -90,7 +136,9 @@ def _robust_line(asked: str, used: str | None, share: float | None) -> str:
 def _cmd_reconstruct(args: argparse.Namespace) -> None:
     options = from_arguments(ReconstructOptions, args)
     check_output(args.out, dataset_inputs(args.data, exclude_images=args.exclude_images), force=args.force)
-    dataset, result = load_and_reconstruct(args.data, options=options, progress=not args.quiet, exclude_images=args.exclude_images)
+    dataset, result = load_and_reconstruct(
+        args.data, options=options, progress=not args.quiet, exclude_images=args.exclude_images
+    )
     save_reconstruction(result, args.out, source=str(resolve_path(args.data)))
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
@@ -100,7 +148,9 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
         print(f"  {_robust_line(options.robust, result.robust_used, result.lobe_share)}")
         if result.irradiance_factors is not None:
             factors = result.irradiance_factors
-            print(f"  irradiance scaled by each image's brightness against a first fit: {factors.min():.2f} to {factors.max():.2f} (--correct-brightness)")
+            print(
+                f"  irradiance scaled by each image's brightness against a first fit: {factors.min():.2f} to {factors.max():.2f} (--correct-brightness)"
+            )
         if result.image_agreement is not None:
             for line in format_image_agreement(result.image_names, result.image_agreement):
                 print(f"  {line}")
@@ -113,11 +163,17 @@ def _cmd_reconstruct(args: argparse.Namespace) -> None:
             if step.residual.get("surroundings") is not None:
                 residual += f" (surroundings {step.residual['surroundings']:.4f})"
             change = "" if step.height_change is None else f"  height change {step.height_change:.4f}"
-            error = "" if step.metrics is None or step.metrics["normal_mean_angular_deg"] is None else f"  normal error {step.metrics['normal_mean_angular_deg']:.2f} deg"
+            error = (
+                ""
+                if step.metrics is None or step.metrics["normal_mean_angular_deg"] is None
+                else f"  normal error {step.metrics['normal_mean_angular_deg']:.2f} deg"
+            )
             chosen = "  <- result" if step.index == result.chosen else ""
             print(f"  pass {step.index}:{residual}{error}{change}{chosen}")
         if dataset.gt is not None:
-            metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=dataset.gt)
+            metrics = evaluate(
+                mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=dataset.gt
+            )
             print(format_metrics(metrics))
 
 
@@ -133,7 +189,15 @@ def _cmd_batch(args: argparse.Namespace) -> None:
     else:
         cluster = connect(cluster_options.scheduler)
     with cluster as client:
-        results = reconstruct_many(args.data, args.out, options, client=client, progress=not args.quiet, resume=args.resume, exclude_images=exclusions)
+        results = reconstruct_many(
+            args.data,
+            args.out,
+            options,
+            client=client,
+            progress=not args.quiet,
+            resume=args.resume,
+            exclude_images=exclusions,
+        )
     write_summary(results, args.out, settings=options.to_dict())
     print(summary_table(results), end="")
     failed = sum(result.failed for result in results)
@@ -142,7 +206,9 @@ def _cmd_batch(args: argparse.Namespace) -> None:
     if not args.quiet:
         reused = sum(result.status == "reused" for result in results)
         kept = f" ({reused} complete from an earlier run, kept)" if reused else ""
-        print(f"{len(results) - reused} data sets reconstructed into {args.out}/{kept}; summary in {args.out / SUMMARY_MARKDOWN} and {args.out / SUMMARY_JSON}")
+        print(
+            f"{len(results) - reused} data sets reconstructed into {args.out}/{kept}; summary in {args.out / SUMMARY_MARKDOWN} and {args.out / SUMMARY_JSON}"
+        )
 
 
 def _batch_inputs(folders: list[Path], exclusions: dict[str, str | None]) -> list[Path]:
@@ -164,7 +230,10 @@ def _holds_batch_outputs(out: Path) -> bool:
         entries = [entry for entry in out.iterdir() if not entry.name.startswith(".")]
     except OSError:  # missing, not a folder: check_output says what is wrong
         return False
-    return all(entry.name in (SUMMARY_JSON, SUMMARY_MARKDOWN) or (entry.is_dir() and written_by_irtps(entry)) for entry in entries)
+    return all(
+        entry.name in (SUMMARY_JSON, SUMMARY_MARKDOWN) or (entry.is_dir() and written_by_irtps(entry))
+        for entry in entries
+    )
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> None:
@@ -189,7 +258,9 @@ def _cmd_report(args: argparse.Namespace) -> None:
         print(f"report of {args.out}: {len(figures)} figures ({', '.join(figures)}) and the page {page}")
 
 
-def _run_table(datasets, options: TableOptions, quiet: bool, out: Path | None, sources: dict[str, str] | None = None) -> str:
+def _run_table(
+    datasets, options: TableOptions, quiet: bool, out: Path | None, sources: dict[str, str] | None = None
+) -> str:
     """Compute the comparison table and write it under `out`; with `sources` (data set name ->
     the path recorded as its source), the reconstructions too."""
     from tqdm import tqdm
@@ -215,9 +286,16 @@ def _cmd_table(args: argparse.Namespace) -> None:
     names = output_names(args.data)
     exclusions = exclusions_by_name(args.exclude_images, names)
     if args.out is not None:
-        inputs = [path for folder, name in zip(args.data, names, strict=True) for path in dataset_inputs(folder, exclude_images=exclusions[name])]
+        inputs = [
+            path
+            for folder, name in zip(args.data, names, strict=True)
+            for path in dataset_inputs(folder, exclude_images=exclusions[name])
+        ]
         check_output(args.out, inputs, force=args.force)
-    datasets = [(name, load_dataset(folder, exclude_images=exclusions[name])) for name, folder in zip(names, args.data, strict=True)]
+    datasets = [
+        (name, load_dataset(folder, exclude_images=exclusions[name]))
+        for name, folder in zip(names, args.data, strict=True)
+    ]
     if args.out is None:
         print(_run_table(datasets, options, args.quiet, None), end="")
         return
@@ -233,12 +311,24 @@ def _cmd_demo(args: argparse.Namespace) -> None:
     size = from_arguments(SynthOptions, args).size  # the demo's only scene option
     check_output(args.out, [], force=args.force)
     start = time.perf_counter()
-    settings: dict[str, Any] = {"shape": "cap", "size": size, "lights": 12, "environment": "cornell", "bounces": 4, "samples": 256, "seed": options.seed}
+    settings: dict[str, Any] = {
+        "shape": "cap",
+        "size": size,
+        "lights": 12,
+        "environment": "cornell",
+        "bounces": 4,
+        "samples": 256,
+        "seed": options.seed,
+    }
     with atomic_output_dir(args.out) as folder:
         dataset, rendering = synthesize(**settings, progress=not args.quiet)
-        save_dataset(dataset, folder / "data", extra=_bounce_files(rendering), rendering={"command": "demo", **settings})
+        save_dataset(
+            dataset, folder / "data", extra=_bounce_files(rendering), rendering={"command": "demo", **settings}
+        )
         # Recorded as the final place of the data set, which `irtps report` reads ground truth from.
-        text = _run_table([("cap_cornell", dataset)], options, args.quiet, folder, {"cap_cornell": str(args.out.resolve() / "data")})
+        text = _run_table(
+            [("cap_cornell", dataset)], options, args.quiet, folder, {"cap_cornell": str(args.out.resolve() / "data")}
+        )
     share = rendering.indirect[:, dataset.mask].mean() / dataset.images[:, dataset.mask].mean()
     print(
         f"A {size}x{size} spherical cap on the floor of a Cornell box (red and green walls), 12 lights; "
@@ -269,7 +359,9 @@ def _add_exclude_images(parser: argparse.ArgumentParser) -> None:
 
 def _add_force(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--force", action="store_true", help="replace OUT even if it is an existing file, or a folder with content that irtps did not write (never an input)"
+        "--force",
+        action="store_true",
+        help="replace OUT even if it is an existing file, or a folder with content that irtps did not write (never an input)",
     )
 
 
@@ -393,7 +485,9 @@ def build_parser() -> argparse.ArgumentParser:
         "  irtps batch scenes/* --out runs --method irtps --bounces 2 --resume   # after an interrupted run",
     )
     p.add_argument("data", type=Path, nargs="+", help="data set folders")
-    p.add_argument("--out", type=Path, required=True, help="folder for one reconstruction folder per data set and the summary")
+    p.add_argument(
+        "--out", type=Path, required=True, help="folder for one reconstruction folder per data set and the summary"
+    )
     _add_exclude_images(p)
     add_arguments(p, ReconstructOptions, groups=RECONSTRUCT_GROUPS)
     add_arguments(p.add_argument_group("cluster"), ClusterOptions)
@@ -434,8 +528,16 @@ def build_parser() -> argparse.ArgumentParser:
         "  irtps report cap_irtps --out cap_irtps_report --quiet",
     )
     p.add_argument("out", metavar="OUT", type=Path, help="reconstruction folder (from irtps reconstruct)")
-    p.add_argument("--truth", metavar="DATASET", type=Path, default=None, help="data set with ground truth (default: the run's own data set, if it has any)")
-    p.add_argument("--out", metavar="DIR", dest="report_out", type=Path, default=None, help="report folder (default OUT/report)")
+    p.add_argument(
+        "--truth",
+        metavar="DATASET",
+        type=Path,
+        default=None,
+        help="data set with ground truth (default: the run's own data set, if it has any)",
+    )
+    p.add_argument(
+        "--out", metavar="DIR", dest="report_out", type=Path, default=None, help="report folder (default OUT/report)"
+    )
     _add_force(p)
     p.add_argument("--quiet", action="store_true", help="print nothing")
     p.set_defaults(run=_cmd_report)
@@ -517,7 +619,10 @@ def main(argv: list[str] | None = None) -> int:
             warnings.showwarning = _show_warning
             args.run(args)
     except ArgumentError as err:
-        print(f"irtps: error: {_argument_name(parser, args.command, err.argument)}: {escaped(err.problem)}", file=sys.stderr)
+        print(
+            f"irtps: error: {_argument_name(parser, args.command, err.argument)}: {escaped(err.problem)}",
+            file=sys.stderr,
+        )
         return 2
     except (IrtpsError, OSError) as err:
         print(f"irtps: error: {escaped(str(err))}", file=sys.stderr)

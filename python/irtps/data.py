@@ -104,7 +104,9 @@ class Dataset:
         _expect_shape("Dataset.images", self.images, (count, *size, 3))
         _expect_shape("Dataset.mask", self.mask, size)
         if self.image_names is not None and len(self.image_names) != count:
-            raise DatasetError(f"Dataset.image_names has {len(self.image_names)} names, expected {count} from the scene")
+            raise DatasetError(
+                f"Dataset.image_names has {len(self.image_names)} names, expected {count} from the scene"
+            )
         if self.gt is not None:
             for name, shape in _gt_shapes(count, size).items():
                 value = getattr(self.gt, name)

@@ -18,10 +18,27 @@ import numpy as np
 from irtps._checks import check_finite, check_instance, check_integer, check_path
 from irtps.atomic import atomic_output_dir
 from irtps.data import Dataset, GroundTruth, image_file_name
-from irtps.diligent import diligent_ground_truth_inputs, diligent_image_names, diligent_inputs, load_diligent, load_diligent_ground_truth
+from irtps.diligent import (
+    diligent_ground_truth_inputs,
+    diligent_image_names,
+    diligent_inputs,
+    load_diligent,
+    load_diligent_ground_truth,
+)
 from irtps.errors import ArgumentError, DatasetError
 from irtps.image_selection import ImageSelection, parse_image_list, select_images
-from irtps.imageio import check_stack_memory, clip_negative, format_size, png_saturation, read_exr, read_image, read_images, read_mask, write_exr, write_png
+from irtps.imageio import (
+    check_stack_memory,
+    clip_negative,
+    format_size,
+    png_saturation,
+    read_exr,
+    read_image,
+    read_images,
+    read_mask,
+    write_exr,
+    write_png,
+)
 from irtps.paths import check_file, check_folder, exists, folder_problem, optional_file, optional_folder
 from irtps.records import RENDERING, stamp
 from irtps.scene import Scene, load_scene, write_scene
@@ -124,7 +141,13 @@ def _not_a_dataset(folder: Path) -> DatasetError:
 RENDERING_RECORD = "gt/rendering.json"
 
 
-def save_dataset(dataset: Dataset, path: str | Path, *, extra: Mapping[str, np.ndarray] | None = None, rendering: Mapping | None = None) -> None:
+def save_dataset(
+    dataset: Dataset,
+    path: str | Path,
+    *,
+    extra: Mapping[str, np.ndarray] | None = None,
+    rendering: Mapping | None = None,
+) -> None:
     """Write a data set folder in the irtps layout, atomically.
 
     Writes ``scene.json``, ``images/000.exr`` ..., ``mask.png`` (8-bit, 0 or 255)
@@ -334,7 +357,14 @@ class _IrtpsFiles(NamedTuple):
     def paths(self) -> list[Path]:
         mask = [] if self.mask is None else [self.mask]
         truth = [] if self.truth is None else self.truth.paths()
-        return [self.scene_file.parent, self.scene_file, self.scene_file.parent / IMAGES_FOLDER, *self.images, *mask, *truth]
+        return [
+            self.scene_file.parent,
+            self.scene_file,
+            self.scene_file.parent / IMAGES_FOLDER,
+            *self.images,
+            *mask,
+            *truth,
+        ]
 
 
 def _irtps_files(folder: Path, ground_truth: bool, exclude_images: str | None) -> _IrtpsFiles:
@@ -370,7 +400,16 @@ def _load_irtps(folder: Path, ground_truth: bool, exclude_images: str | None) ->
     gt = None if files.truth is None else _read_ground_truth(files.truth, size)
     saturation = png_saturation(paths)
     selection = files.selection
-    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=saturation, image_names=selection.names, excluded_images=selection.excluded)
+    return Dataset(
+        scene=scene,
+        images=images,
+        mask=mask,
+        gt=gt,
+        source=str(folder),
+        saturation=saturation,
+        image_names=selection.names,
+        excluded_images=selection.excluded,
+    )
 
 
 def _numbered_images(folder: Path, count: int) -> list[Path]:
@@ -509,7 +548,9 @@ def _check_extra(extra: dict) -> None:
             raise ArgumentError("extra", f"keys must be relative paths (str), got {relative!r}")
         path = PurePosixPath(relative)
         if path.is_absolute() or "\\" in relative or ".." in path.parts or path.suffix != ".exr":
-            raise ArgumentError("extra", f"{relative!r} must be a relative POSIX path inside the data set ending in .exr")
+            raise ArgumentError(
+                "extra", f"{relative!r} must be a relative POSIX path inside the data set ending in .exr"
+            )
         shape = np.shape(array)
         if not (len(shape) == 2 or (len(shape) == 3 and shape[2] == 3)):
             raise ArgumentError("extra", f"{relative!r} has shape {shape}, expected (H, W) or (H, W, 3)")
@@ -571,7 +612,14 @@ class _SceneObjectFiles(NamedTuple):
 
     def paths(self) -> list[Path]:
         folder = self.height.parent.parent
-        return [folder, folder / SCENE_FILE, self.height.parent, self.height, self.albedo, *([] if self.mask is None else [self.mask])]
+        return [
+            folder,
+            folder / SCENE_FILE,
+            self.height.parent,
+            self.height,
+            self.albedo,
+            *([] if self.mask is None else [self.mask]),
+        ]
 
 
 def _scene_object_files(folder: Path) -> _SceneObjectFiles:

@@ -32,7 +32,12 @@ __all__ = ["denoise_indirect"]
 
 
 def denoise_indirect(
-    indirect: np.ndarray, noise_energy: np.ndarray, height: np.ndarray, albedo: np.ndarray, mask: np.ndarray, pixel_size: float
+    indirect: np.ndarray,
+    noise_energy: np.ndarray,
+    height: np.ndarray,
+    albedo: np.ndarray,
+    mask: np.ndarray,
+    pixel_size: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Filter an inter-reflection estimate along the surface it was rendered on.
 
@@ -84,7 +89,11 @@ def denoise_indirect(
     height = check_array("height", height, mask.shape, match="the mask", dtype=np.float32)
     albedo = check_array("albedo", albedo, (*mask.shape, 3), match="the mask", dtype=np.float32)
     count = int(mask.sum())
-    indirect = check_array("indirect", indirect, (None, count, 3), match="the mask's pixels", dtype=np.float32, copy=False)
-    noise_energy = check_array("noise_energy", noise_energy, (count,), match="the mask's pixels", dtype=np.float64, copy=False)
+    indirect = check_array(
+        "indirect", indirect, (None, count, 3), match="the mask's pixels", dtype=np.float32, copy=False
+    )
+    noise_energy = check_array(
+        "noise_energy", noise_energy, (count,), match="the mask's pixels", dtype=np.float64, copy=False
+    )
     height_px = np.ascontiguousarray(height / np.float32(pixel_size))
     return _core.denoise_indirect(indirect, noise_energy, mask, height_px, albedo)

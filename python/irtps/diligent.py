@@ -94,7 +94,16 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
         relative_irradiance=True,  # light_intensities.txt: relative RGB intensities
     )
     saturation = png_saturation(image_paths)
-    return Dataset(scene=scene, images=images, mask=mask, gt=gt, source=str(folder), saturation=saturation, image_names=selection.names, excluded_images=selection.excluded)
+    return Dataset(
+        scene=scene,
+        images=images,
+        mask=mask,
+        gt=gt,
+        source=str(folder),
+        saturation=saturation,
+        image_names=selection.names,
+        excluded_images=selection.excluded,
+    )
 
 
 class _DiligentFiles(NamedTuple):
@@ -197,7 +206,9 @@ def _read_filenames(path: Path) -> tuple[list[str], list[int]]:
     for number, name in lines:
         seen = first.setdefault(os.path.normpath(name), number)
         if seen != number:
-            raise DatasetError(f"{path}: line {number} lists {name!r} again (line {seen} lists it): each image goes with one light")
+            raise DatasetError(
+                f"{path}: line {number} lists {name!r} again (line {seen} lists it): each image goes with one light"
+            )
     return [name for _, name in lines], [number for number, _ in lines]
 
 

@@ -141,7 +141,9 @@ def convergence_png(
     b'\\x89PNG\\r\\n\\x1a\\n'
     """
     if not len(passes) == len(angular_error_deg) == len(residual):
-        raise ArgumentError("passes", f"{len(passes)} passes but {len(angular_error_deg)} errors and {len(residual)} residuals")
+        raise ArgumentError(
+            "passes", f"{len(passes)} passes but {len(angular_error_deg)} errors and {len(residual)} residuals"
+        )
     errors = [(k, e) for k, e in zip(passes, angular_error_deg) if e is not None]
     residuals = [(k, r) for k, r in zip(passes, residual) if r is not None]
     if not residuals:
@@ -150,11 +152,18 @@ def convergence_png(
     panels = figure.subplots(1, 2 if errors else 1, squeeze=False, sharex=True)[0]
     if errors:
         _curve(panels[0], errors, "mean angular error (°)", "Normal error against ground truth", chosen)
-    _curve(panels[-1], residuals, "relative residual on the object", "Rendered reconstruction against the images", chosen)
+    _curve(
+        panels[-1], residuals, "relative residual on the object", "Rendered reconstruction against the images", chosen
+    )
     return _png(figure)
 
 
-def agreement_png(names: Sequence[str], brightness: Sequence[float] | np.ndarray, spread: Sequence[float] | np.ndarray, labelled: int = 3) -> bytes:
+def agreement_png(
+    names: Sequence[str],
+    brightness: Sequence[float] | np.ndarray,
+    spread: Sequence[float] | np.ndarray,
+    labelled: int = 3,
+) -> bytes:
     """How each image agrees with the fit (`irtps.image_agreement`), as PNG bytes.
 
     Left: each image's brightness against the fit, over the median image's (1 drawn as a
@@ -188,14 +197,23 @@ def agreement_png(names: Sequence[str], brightness: Sequence[float] | np.ndarray
     """
     values = [np.asarray(figures, dtype=np.float64) for figures in (brightness, spread)]
     if not len(names) == len(values[0]) == len(values[1]):
-        raise ArgumentError("brightness", f"{len(names)} images but {len(values[0])} brightnesses and {len(values[1])} spreads")
+        raise ArgumentError(
+            "brightness", f"{len(names)} images but {len(values[0])} brightnesses and {len(values[1])} spreads"
+        )
     known = np.flatnonzero(~np.isnan(values[0]) & ~np.isnan(values[1]))
     if known.size == 0:
         raise ArgumentError("brightness", "no image has figures")
     figure = Figure(figsize=(FIGURE_SIZE[0] * 2, FIGURE_SIZE[1] * 0.8), layout="constrained")
     left, right = figure.subplots(1, 2, sharex=True)
     panels = (
-        (left, values[0][known], np.abs(np.log(values[0][known])), "over the median image's", "Brightness against the fit", "{:.2f}"),
+        (
+            left,
+            values[0][known],
+            np.abs(np.log(values[0][known])),
+            "over the median image's",
+            "Brightness against the fit",
+            "{:.2f}",
+        ),
         (right, 100 * values[1][known], values[1][known], "% a pixel", "Spread about the fit", "{:.1f} %"),
     )
     for axes, shown, outness, label, title, text in panels:
@@ -203,9 +221,25 @@ def agreement_png(names: Sequence[str], brightness: Sequence[float] | np.ndarray
         # The images farthest out ringed and listed in a corner: names beside the points of
         # neighbouring images would overprint.
         farthest = np.argsort(-outness, kind="stable")[:labelled]
-        axes.plot(known[farthest] + 1, shown[farthest], marker="o", markersize=9, markerfacecolor="none", color="C3", linestyle="none")
+        axes.plot(
+            known[farthest] + 1,
+            shown[farthest],
+            marker="o",
+            markersize=9,
+            markerfacecolor="none",
+            color="C3",
+            linestyle="none",
+        )
         listed = "\n".join(f"{names[known[k]]} {text.format(shown[k])}" for k in farthest)
-        axes.text(0.02, 0.97, listed, transform=axes.transAxes, fontsize="x-small", va="top", bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "C3"})
+        axes.text(
+            0.02,
+            0.97,
+            listed,
+            transform=axes.transAxes,
+            fontsize="x-small",
+            va="top",
+            bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "C3"},
+        )
         axes.set_xlabel("image (1 = the first fitted)")
         axes.set_ylabel(label)
         axes.set_title(title, fontsize="medium")
@@ -219,7 +253,16 @@ def _curve(axes, points: list[tuple[int, float]], label: str, title: str, chosen
     x, y = zip(*points)
     axes.plot(x, y, marker="o")
     if chosen in x:
-        axes.plot([chosen], [y[x.index(chosen)]], marker="o", markersize=14, markerfacecolor="none", color="C3", linestyle="none", label="result")
+        axes.plot(
+            [chosen],
+            [y[x.index(chosen)]],
+            marker="o",
+            markersize=14,
+            markerfacecolor="none",
+            color="C3",
+            linestyle="none",
+            label="result",
+        )
         axes.legend(fontsize="small")
     axes.set_xlabel("pass (0 = classic photometric stereo)")
     axes.set_ylabel(label)

@@ -24,7 +24,17 @@ from typing import Any
 from irtps.errors import ArgumentError, DatasetError, IrtpsError
 from irtps.paths import MISSING, file_problem
 
-__all__ = ["MAX_DEPTH", "MAX_DIGITS", "MAX_TEXT_BYTES", "parse_float", "parse_int", "parse_json", "read_json", "read_text", "shown"]
+__all__ = [
+    "MAX_DEPTH",
+    "MAX_DIGITS",
+    "MAX_TEXT_BYTES",
+    "parse_float",
+    "parse_int",
+    "parse_json",
+    "read_json",
+    "read_text",
+    "shown",
+]
 
 #: The largest text file read: far above any scene, record or light list (96 lights take
 #: 4 kB), far below what would exhaust memory.
@@ -35,7 +45,9 @@ MAX_DEPTH = 64
 #: digits and no count irtps uses needs more than 20.
 MAX_DIGITS = 40
 
-_FLOAT = re.compile(r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)", flags=re.ASCII | re.IGNORECASE)
+_FLOAT = re.compile(
+    r"[+-]?(?:(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|inf|infinity|nan)", flags=re.ASCII | re.IGNORECASE
+)
 _STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
 _NUMBER_DIGITS = re.compile(r"\d")
 _BRACKETS = re.compile(r"[\[\]{}]")
@@ -173,7 +185,9 @@ def parse_json(text: str, source: str, *, error: type[IrtpsError] = DatasetError
         return obj
 
     try:
-        return json.loads(text, parse_int=number(int), parse_float=number(float), parse_constant=constant, object_pairs_hook=pairs)
+        return json.loads(
+            text, parse_int=number(int), parse_float=number(float), parse_constant=constant, object_pairs_hook=pairs
+        )
     except json.JSONDecodeError as failure:
         raise error(f"{source}: invalid JSON at line {failure.lineno}, column {failure.colno}: {failure.msg}") from None
     except _Refused as refused:

@@ -57,7 +57,10 @@ class ImageAgreement:
 
     def to_dict(self) -> dict[str, list[float | None]]:
         """Each figure as a list, null where not known, for ``run.json``."""
-        return {name: [None if np.isnan(value) else round(float(value), 4) for value in values] for name, values in (("brightness", self.brightness), ("spread", self.spread))}
+        return {
+            name: [None if np.isnan(value) else round(float(value), 4) for value in values]
+            for name, values in (("brightness", self.brightness), ("spread", self.spread))
+        }
 
     @classmethod
     def from_dict(cls, record: object) -> ImageAgreement:
@@ -70,11 +73,16 @@ class ImageAgreement:
             of one length.
         """
         try:
-            figures = [np.array([np.nan if value is None else value for value in record[name]], dtype=np.float64) for name in ("brightness", "spread")]  # type: ignore[index]
+            figures = [
+                np.array([np.nan if value is None else value for value in record[name]], dtype=np.float64)
+                for name in ("brightness", "spread")
+            ]  # type: ignore[index]
         except (KeyError, TypeError, ValueError):
             figures = []
         if len(figures) != 2 or figures[0].shape != figures[1].shape or figures[0].ndim != 1:
-            raise ArgumentError("image_agreement", "expected lists 'brightness' and 'spread' of numbers or nulls, of one length")
+            raise ArgumentError(
+                "image_agreement", "expected lists 'brightness' and 'spread' of numbers or nulls, of one length"
+            )
         return cls(*figures)
 
 

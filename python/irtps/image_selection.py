@@ -23,7 +23,16 @@ from irtps.errors import ArgumentError
 from irtps.guarded import MAX_DIGITS, parse_int
 from irtps.scene import MIN_LIGHTS
 
-__all__ = ["ImageSelection", "exclude_images", "excluded_indices", "exclusions_by_name", "format_image_names", "format_images_fitted", "parse_image_list", "select_images"]
+__all__ = [
+    "ImageSelection",
+    "exclude_images",
+    "excluded_indices",
+    "exclusions_by_name",
+    "format_image_names",
+    "format_images_fitted",
+    "parse_image_list",
+    "select_images",
+]
 
 _NUMBER = re.compile(r"\d+")
 _RANGE = re.compile(r"(\d+)\s*-\s*(\d+)")
@@ -60,11 +69,16 @@ def parse_image_list(images: str) -> tuple[str, ...]:
     irtps.errors.ArgumentError: exclude_images: the range '20-1' runs backwards; write 1-20
     """
     if not isinstance(images, str):
-        raise ArgumentError("exclude_images", f"expected a list of images such as {_EXAMPLE!r}, got {type(images).__name__}")
+        raise ArgumentError(
+            "exclude_images", f"expected a list of images such as {_EXAMPLE!r}, got {type(images).__name__}"
+        )
     items = tuple(item.strip() for item in images.split(","))
     for item in items:
         if not item:
-            raise ArgumentError("exclude_images", f"{images!r} has an empty item; expected items separated by commas, such as {_EXAMPLE!r}")
+            raise ArgumentError(
+                "exclude_images",
+                f"{images!r} has an empty item; expected items separated by commas, such as {_EXAMPLE!r}",
+            )
         span = _numbers(item)
         if span is not None and span[0] > span[1]:
             raise ArgumentError("exclude_images", f"the range {item!r} runs backwards; write {span[1]}-{span[0]}")
@@ -111,14 +125,23 @@ def excluded_indices(names: Sequence[str], images: str, *, where: str) -> list[i
     chosen: set[int] = set()
     for item in items:
         span = _numbers(item)
-        hits = [k for k, (name, stem, number) in enumerate(zip(names, stems, numbers, strict=True)) if item in (name, stem) or _within(number, span)]
+        hits = [
+            k
+            for k, (name, stem, number) in enumerate(zip(names, stems, numbers, strict=True))
+            if item in (name, stem) or _within(number, span)
+        ]
         if not hits:
             what = f"numbered {span[0]} to {span[1]}" if span is not None and span[0] != span[1] else f"named {item!r}"
-            raise ArgumentError("exclude_images", f"{where} has no image {what} (the images: {format_image_names(names)})")
+            raise ArgumentError(
+                "exclude_images", f"{where} has no image {what} (the images: {format_image_names(names)})"
+            )
         chosen.update(hits)
     kept = len(names) - len(chosen)
     if kept < MIN_LIGHTS:
-        raise ArgumentError("exclude_images", f"leaving out {len(chosen)} of the {len(names)} images of {where} leaves {kept}; photometric stereo needs at least {MIN_LIGHTS}")
+        raise ArgumentError(
+            "exclude_images",
+            f"leaving out {len(chosen)} of the {len(names)} images of {where} leaves {kept}; photometric stereo needs at least {MIN_LIGHTS}",
+        )
     return sorted(chosen)
 
 

@@ -348,4 +348,3 @@ def _check_readable(path: str | Path) -> None:
     problem = file_problem(path)
     if problem is not None and problem != MISSING:
         raise DatasetError(f"{path}: {problem}")
-

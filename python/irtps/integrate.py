@@ -29,7 +29,16 @@ import scipy.fft
 import scipy.ndimage
 import scipy.sparse
 
-from irtps._checks import check_array, check_choice, check_finite, check_integer, check_mask, check_number, check_positive, document_choices
+from irtps._checks import (
+    check_array,
+    check_choice,
+    check_finite,
+    check_integer,
+    check_mask,
+    check_number,
+    check_positive,
+    document_choices,
+)
 from irtps.errors import ArgumentError
 from irtps.robust_stats import median_and_sigma
 
@@ -261,7 +270,7 @@ def integrate_normals(
             raise ArgumentError(
                 "mask",
                 f"method {method!r} needs the full rectangle (every pixel masked); "
-                f"{int((~mask).sum())} pixels are unmasked: use method='ls'"
+                f"{int((~mask).sum())} pixels are unmasked: use method='ls'",
             )
         z = _integrate_dct(gc, gr) if method == "dct" else _integrate_fc(gc, gr)
         z -= z.mean()
@@ -506,9 +515,12 @@ class _FootprintSystem:
             target_vals += [np.full(m, 0.5), np.full(m, 0.5)]
             count += m
         weight = np.concatenate(weights)
-        a = scipy.sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(count, n))
+        a = scipy.sparse.csr_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(count, n)
+        )
         targets = scipy.sparse.csr_matrix(
-            (np.concatenate(target_vals), (np.concatenate(target_rows), np.concatenate(target_cols))), shape=(count, 2 * h * w)
+            (np.concatenate(target_vals), (np.concatenate(target_rows), np.concatenate(target_cols))),
+            shape=(count, 2 * h * w),
         )
         labels, self.components = scipy.ndimage.label(mask, structure=_FOUR)
         self.component = labels[mask] - 1
@@ -669,7 +681,9 @@ class _Problem:
         else:
             solver = _cached(
                 ("ls", _mask_key(self.mask)),
-                lambda: _SpdSolver(self.matrix(np.full(self.n_edges, 2.0)), "ls normal matrix", direct=self.n <= _LS_DIRECT_LIMIT),
+                lambda: _SpdSolver(
+                    self.matrix(np.full(self.n_edges, 2.0)), "ls normal matrix", direct=self.n <= _LS_DIRECT_LIMIT
+                ),
             )
         return self._project(solver.solve(b, tolerance))
 
@@ -759,7 +773,9 @@ class _SpdSolver:
         if direct:
             from irtps._core import SparseCholesky
 
-            self.factor = SparseCholesky(matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64), matrix.data, name)
+            self.factor = SparseCholesky(
+                matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64), matrix.data, name
+            )
         else:
             self.amg = _AmgPreconditioner(matrix)
 

@@ -38,7 +38,15 @@ from irtps.errors import ArgumentError, DatasetError, IrtpsWarning
 from irtps.evaluate import evaluate
 from irtps.options import ReconstructOptions
 from irtps.paper_estimator import paper_indirect
-from irtps.pipeline import Pass, choose_dataset_robust, fitted_observations, reconstruction_pass, rendered_as, resolve_options, timed
+from irtps.pipeline import (
+    Pass,
+    choose_dataset_robust,
+    fitted_observations,
+    reconstruction_pass,
+    rendered_as,
+    resolve_options,
+    timed,
+)
 from irtps.placement import Placement
 from irtps.ps import PsResult
 from irtps.radiometry import AlbedoScale
@@ -189,7 +197,9 @@ def remove_interreflections(
     original = dataset.images
     # After pass 0, the loop holds the mask's pixels only: photometric stereo fits nothing else.
     observed = pixel_observations(original, mask)
-    saturated: np.ndarray | None = None if options.saturation is None else np.any(observed >= options.saturation, axis=-1, keepdims=True)
+    saturated: np.ndarray | None = (
+        None if options.saturation is None else np.any(observed >= options.saturation, axis=-1, keepdims=True)
+    )
     usable = fitted_observations(dataset, options)
     images = original
     estimate_used: np.ndarray | None = None
@@ -205,7 +215,9 @@ def remove_interreflections(
     first_fit: PsResult | None = None
     with tqdm(total=options.iterations + 1, desc="IRT-PS", unit="pass", disable=not progress, leave=False) as bar:
         for index in range(options.iterations + 1):
-            current = reconstruction_pass(dataset, images, options, previous=previous, usable=usable, rendered=True, coverage=coverage)
+            current = reconstruction_pass(
+                dataset, images, options, previous=previous, usable=usable, rendered=True, coverage=coverage
+            )
             if index == 0:
                 first_fit = current.fit
             timings = current.timings
@@ -228,8 +240,17 @@ def remove_interreflections(
             change = None if previous is None else float(np.abs(current.height - previous.height)[mask].mean())
             metrics = None
             if dataset.gt is not None:
-                metrics = evaluate(mask=mask, normals=current.fit.normals, albedo=current.albedo, height=current.height, gt=dataset.gt).to_dict()
-            record = Iteration(index=index, height_change=change, residual=residual.to_dict(), base_height=current.placement.base_height, timings=timings, metrics=metrics)
+                metrics = evaluate(
+                    mask=mask, normals=current.fit.normals, albedo=current.albedo, height=current.height, gt=dataset.gt
+                ).to_dict()
+            record = Iteration(
+                index=index,
+                height_change=change,
+                residual=residual.to_dict(),
+                base_height=current.placement.base_height,
+                timings=timings,
+                metrics=metrics,
+            )
             history.append(record)
             improved = best is None or residual.object < best[0].object - SIGNIFICANCE * residual.noise
             stalled = 0 if improved else stalled + 1
@@ -240,12 +261,19 @@ def remove_interreflections(
             if index == options.iterations or (options.early_stop and stalled == PATIENCE):
                 break
             if options.estimator == "paper":
-                estimate, estimate_noise = paper_indirect(render_scene, current.height, render_albedo, mask, reflections=options.bounces, seed=seed)[:, mask], 0.0
+                estimate, estimate_noise = (
+                    paper_indirect(
+                        render_scene, current.height, render_albedo, mask, reflections=options.bounces, seed=seed
+                    )[:, mask],
+                    0.0,
+                )
             else:
                 estimate, noise_energy = rerendering.indirect, rerendering.noise_energy
                 if options.denoise:
                     with timed(timings, "denoise"):
-                        estimate, noise_energy = denoise_indirect(estimate, noise_energy, current.height, render_albedo, mask, scene.camera.pixel_size)
+                        estimate, noise_energy = denoise_indirect(
+                            estimate, noise_energy, current.height, render_albedo, mask, scene.camera.pixel_size
+                        )
                 estimate_noise = float(noise_energy.sum())
             del rerendering
             if options.update == "original":
@@ -384,7 +412,11 @@ class _AdaptiveStep:
         if energy <= noise:
             # The changes are mostly noise: the loop has settled within it, and the step that
             # averages the running and the new estimate best weighs each by its inverse noise.
-            return float(np.clip(self.running_noise / max(self.running_noise + self.new_noise, np.finfo(float).tiny), *STEP_BOUNDS))
+            return float(
+                np.clip(
+                    self.running_noise / max(self.running_noise + self.new_noise, np.finfo(float).tiny), *STEP_BOUNDS
+                )
+            )
         kept = (float(np.vdot(now, before)) - shared) / energy
         if kept >= 1:
             # The change grew: no sign of how the loop contracts.
@@ -392,7 +424,9 @@ class _AdaptiveStep:
         return float(np.clip(self.step / (1 - kept), *STEP_BOUNDS))
 
 
-def _corrected(images: np.ndarray, estimate: np.ndarray, original: np.ndarray, saturated: np.ndarray | None) -> np.ndarray:
+def _corrected(
+    images: np.ndarray, estimate: np.ndarray, original: np.ndarray, saturated: np.ndarray | None
+) -> np.ndarray:
     """``images − estimate``, clipped at 0, with the observations saturated in `original` put
     back as they were; one new array, the rest in place."""
     corrected = images - estimate

@@ -29,7 +29,21 @@ from irtps.imageio import MAX_IMAGE_PIXELS
 from irtps.integrate import METHODS as INTEGRATION_METHODS
 from irtps.ps import ROBUST_CHOICES, ROBUST_MODES
 
-__all__ = ["ESTIMATORS", "METHODS", "ROBUST_CHOICES", "ROBUST_MODES", "UPDATES", "ClusterOptions", "OptionError", "ReconstructOptions", "RenderOptions", "SynthOptions", "TableOptions", "add_arguments", "from_arguments"]
+__all__ = [
+    "ESTIMATORS",
+    "METHODS",
+    "ROBUST_CHOICES",
+    "ROBUST_MODES",
+    "UPDATES",
+    "ClusterOptions",
+    "OptionError",
+    "ReconstructOptions",
+    "RenderOptions",
+    "SynthOptions",
+    "TableOptions",
+    "add_arguments",
+    "from_arguments",
+]
 
 #: Reconstruction methods: classic photometric stereo, and IRT-PS.
 METHODS = ("ps", "irtps")
@@ -121,7 +135,11 @@ class _Spec:
             else:
                 text = noun
         if self.words:
-            text = f"{text}, {', '.join(self.words[:-1])} or {self.words[-1]}" if len(self.words) > 1 else f"{text} or {self.words[0]}"
+            text = (
+                f"{text}, {', '.join(self.words[:-1])} or {self.words[-1]}"
+                if len(self.words) > 1
+                else f"{text} or {self.words[0]}"
+            )
         if self.many:
             text = f"one or more values, each {text}"
         return f"{text}, or none" if self.optional else text
@@ -153,7 +171,6 @@ class _Spec:
         if below or above:
             raise OptionError(name, f"{_value_text(value)} is out of range: expected {self.describe()}")
         return number
-
 
     def _converted(self, value: Any) -> Any:
         """`value` as the option's kind, or None if it is not one (range aside)."""
@@ -220,7 +237,9 @@ class _Options:
 
     def to_dict(self) -> dict:
         """The options as a JSON-ready dict (tuples as lists)."""
-        return {key: list(value) if isinstance(value, tuple) else value for key, value in dataclasses.asdict(self).items()}
+        return {
+            key: list(value) if isinstance(value, tuple) else value for key, value in dataclasses.asdict(self).items()
+        }
 
 
 @dataclass(frozen=True)
@@ -252,10 +271,20 @@ class ReconstructOptions(_Options):
         choices=ROBUST_CHOICES,
     )
     shadow_fraction: float = _option(
-        0.05, "shadow threshold relative to a pixel's brightest observation (threshold mode, and the start of tukey)", float, low=0.0, high=1.0, high_open=True
+        0.05,
+        "shadow threshold relative to a pixel's brightest observation (threshold mode, and the start of tukey)",
+        float,
+        low=0.0,
+        high=1.0,
+        high_open=True,
     )
     saturation: float | None = _option(
-        None, "raw value at or above which an observation is saturated (default: 1 for PNG images, none for EXR)", float, low=0.0, low_open=True, optional=True
+        None,
+        "raw value at or above which an observation is saturated (default: 1 for PNG images, none for EXR)",
+        float,
+        low=0.0,
+        low_open=True,
+        optional=True,
     )
     correct_brightness: bool = _option(
         False,
@@ -265,7 +294,11 @@ class ReconstructOptions(_Options):
         bool,
     )
     integration: str | None = _option(
-        None, "normal integration (default ls for ps, footprint for irtps)", str, choices=INTEGRATION_METHODS, optional=True
+        None,
+        "normal integration (default ls for ps, footprint for irtps)",
+        str,
+        choices=INTEGRATION_METHODS,
+        optional=True,
     )
     base_height: float | str = _option(
         "auto",
@@ -278,7 +311,9 @@ class ReconstructOptions(_Options):
     bounces: int = _option(3, "inter-reflection bounces estimated", int, low=1, high=MAX_BOUNCES, group="IRT-PS")
     iterations: int = _option(8, "largest number of corrections", int, low=0, high=MAX_ITERATIONS, group="IRT-PS")
     samples: int = _option(64, "camera paths per pixel per estimate", int, low=1, high=MAX_SAMPLES, group="IRT-PS")
-    seed: int = _option(0, "random seed of the first estimate (pass t uses seed + t)", int, low=0, high=MAX_SEED, group="IRT-PS")
+    seed: int = _option(
+        0, "random seed of the first estimate (pass t uses seed + t)", int, low=0, high=MAX_SEED, group="IRT-PS"
+    )
     albedo_scale: float | str = _option(
         "auto",
         "factor from the fitted albedo to reflectance, for rendering the inter-reflections; auto: estimated from the images when the "
@@ -303,11 +338,32 @@ class ReconstructOptions(_Options):
         words=("auto",),
         group="IRT-PS",
     )
-    early_stop: bool = _option(True, "stop after two passes in a row whose residual does not fall below the best beyond its Monte-Carlo noise", bool, group="IRT-PS")
-    denoise: bool = _option(True, "filter each estimate along the surface (3x3, guided by heights, normals and albedo) before subtracting it", bool, group="IRT-PS")
-    update: str = _option("original", "A0 - E (original) or the paper's A_t - E_t (previous)", str, choices=UPDATES, group="IRT-PS")
-    stride: int = _option(1, "estimate at one pixel in SxS and interpolate (faster; 1: every pixel)", int, low=1, high=MAX_STRIDE, group="IRT-PS")
-    estimator: str = _option("physical", "indirect estimate: physical, or the paper's heuristic", str, choices=ESTIMATORS, group="IRT-PS")
+    early_stop: bool = _option(
+        True,
+        "stop after two passes in a row whose residual does not fall below the best beyond its Monte-Carlo noise",
+        bool,
+        group="IRT-PS",
+    )
+    denoise: bool = _option(
+        True,
+        "filter each estimate along the surface (3x3, guided by heights, normals and albedo) before subtracting it",
+        bool,
+        group="IRT-PS",
+    )
+    update: str = _option(
+        "original", "A0 - E (original) or the paper's A_t - E_t (previous)", str, choices=UPDATES, group="IRT-PS"
+    )
+    stride: int = _option(
+        1,
+        "estimate at one pixel in SxS and interpolate (faster; 1: every pixel)",
+        int,
+        low=1,
+        high=MAX_STRIDE,
+        group="IRT-PS",
+    )
+    estimator: str = _option(
+        "physical", "indirect estimate: physical, or the paper's heuristic", str, choices=ESTIMATORS, group="IRT-PS"
+    )
 
     #: Default normal integration of each method: IRT-PS renders the surface again, so it
     #: needs creases kept sharp.
@@ -358,7 +414,12 @@ class SynthOptions(_Options):
     environment: str = _option("cornell", "surroundings", str, choices=("cornell", "none"))
     floor: bool | None = _option(None, "a floor (default: only with the box)", bool, optional=True)
     base: float | None = _option(
-        None, "height of the object's boundary above the floor, pixel sizes, with vertical sides down to the floor (default: the shape's own)", float, low=0.0, high=float(MAX_SYNTH_SIZE), optional=True
+        None,
+        "height of the object's boundary above the floor, pixel sizes, with vertical sides down to the floor (default: the shape's own)",
+        float,
+        low=0.0,
+        high=float(MAX_SYNTH_SIZE),
+        optional=True,
     )
 
 
@@ -366,7 +427,9 @@ class SynthOptions(_Options):
 class TableOptions(_Options):
     """The comparison table: IRT-PS variants and their settings."""
 
-    bounces: tuple[int, ...] = _option((1, 2, 3), "IRT-PS variants: bounces estimated", int, low=1, high=MAX_BOUNCES, many=True)
+    bounces: tuple[int, ...] = _option(
+        (1, 2, 3), "IRT-PS variants: bounces estimated", int, low=1, high=MAX_BOUNCES, many=True
+    )
     iterations: int = _option(8, "IRT-PS corrections at most", int, low=0, high=MAX_ITERATIONS)
     samples: int = _option(64, "camera paths per pixel per estimate", int, low=1, high=MAX_SAMPLES)
     seed: int = _option(0, "random seed", int, low=0, high=MAX_SEED)
@@ -377,19 +440,48 @@ class TableOptions(_Options):
 class ClusterOptions(_Options):
     """The Dask cluster of a batch: a running one, or a local one of worker processes."""
 
-    scheduler: str | None = _option(None, "run on the Dask cluster of this scheduler (e.g. tcp://head-node:8786) instead of a local one", str, optional=True, metavar="ADDRESS")
-    workers: int | None = _option(None, "local cluster: worker processes (default: cores / threads per worker)", int, low=1, high=MAX_WORKERS, optional=True, metavar="N")
+    scheduler: str | None = _option(
+        None,
+        "run on the Dask cluster of this scheduler (e.g. tcp://head-node:8786) instead of a local one",
+        str,
+        optional=True,
+        metavar="ADDRESS",
+    )
+    workers: int | None = _option(
+        None,
+        "local cluster: worker processes (default: cores / threads per worker)",
+        int,
+        low=1,
+        high=MAX_WORKERS,
+        optional=True,
+        metavar="N",
+    )
     threads_per_worker: int | None = _option(
-        None, "local cluster: data sets per worker at once, and its Rust threads (default 1)", int, low=1, high=MAX_WORKERS, optional=True, metavar="T"
+        None,
+        "local cluster: data sets per worker at once, and its Rust threads (default 1)",
+        int,
+        low=1,
+        high=MAX_WORKERS,
+        optional=True,
+        metavar="T",
     )
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.scheduler is not None and (self.workers is not None or self.threads_per_worker is not None):
-            raise OptionError("scheduler", "--workers and --threads-per-worker set up the local cluster; with --scheduler, give them to 'dask worker' (--nworkers, --nthreads)")
+            raise OptionError(
+                "scheduler",
+                "--workers and --threads-per-worker set up the local cluster; with --scheduler, give them to 'dask worker' (--nworkers, --nthreads)",
+            )
 
 
-def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls: type[_Options], *, defaults: dict | None = None, groups: dict[str, str] | None = None) -> None:
+def add_arguments(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup,
+    cls: type[_Options],
+    *,
+    defaults: dict | None = None,
+    groups: dict[str, str] | None = None,
+) -> None:
     """Add one command-line option per field of `cls` (``--shadow-fraction`` for
     ``shadow_fraction``), with its help, default and choices.
 
@@ -440,7 +532,9 @@ def _converter(spec: _Spec):
         try:
             return int_argument(text) if spec.kind is int else parse_float(text, "value")
         except (ArgumentError, argparse.ArgumentTypeError):
-            raise argparse.ArgumentTypeError(f"{_value_text(text)} is not {dataclasses.replace(spec, optional=False).describe()}") from None
+            raise argparse.ArgumentTypeError(
+                f"{_value_text(text)} is not {dataclasses.replace(spec, optional=False).describe()}"
+            ) from None
 
     return convert
 

@@ -77,11 +77,15 @@ def check_output(out: str | Path, inputs: Iterable[str | Path], *, force: bool =
                         f"{'delete' if relation != 'lies inside' else 'change'} it: choose a folder outside the input"
                     )
     if kind is not None and kind.startswith(_NEVER_REPLACED):
-        raise OutputError(f"{option} {shown}: is {kind}, not a folder: choose another path (--force never replaces one)")
+        raise OutputError(
+            f"{option} {shown}: is {kind}, not a folder: choose another path (--force never replaces one)"
+        )
     if kind is None or force:
         return
     if kind == "file":
-        raise OutputError(f"{option} {shown}: is an existing file; writing there would replace it: choose another path, or pass --force")
+        raise OutputError(
+            f"{option} {shown}: is an existing file; writing there would replace it: choose another path, or pass --force"
+        )
     if kind != "folder":
         raise OutputError(f"{option} {shown}: is {kind}, not a folder: choose another path")
     if _names(Path(out), option, shown) and not written_by_irtps(out):

@@ -28,7 +28,9 @@ from irtps.scene import Scene
 PAPER_SCALE = dict.fromkeys(PAPER_BOUNCES, 0.05)
 
 
-def paper_environment_colour(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np.ndarray, *, reflections: int, seed: int = 0) -> np.ndarray:
+def paper_environment_colour(
+    scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np.ndarray, *, reflections: int, seed: int = 0
+) -> np.ndarray:
     """The paper's environment colour: albedos met along one random path per pixel.
 
     Parameters
@@ -79,7 +81,9 @@ def paper_environment_colour(scene: Scene, height: np.ndarray, albedo: np.ndarra
     return out
 
 
-def paper_indirect(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np.ndarray, *, reflections: int, seed: int = 0) -> np.ndarray:
+def paper_indirect(
+    scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np.ndarray, *, reflections: int, seed: int = 0
+) -> np.ndarray:
     """The paper's estimate ``E^r``: the scaled environment colour, the same for every light.
 
     Returns

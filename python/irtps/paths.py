@@ -147,7 +147,12 @@ def optional_file(path: str | Path, context: str | None = None) -> bool:
     return True
 
 
-def check_folder(path: str | Path, missing: str = NO_DATA_SET_FOLDER, context: str | None = None, error: type[Exception] = DatasetError) -> Path:
+def check_folder(
+    path: str | Path,
+    missing: str = NO_DATA_SET_FOLDER,
+    context: str | None = None,
+    error: type[Exception] = DatasetError,
+) -> Path:
     """``path`` if it is a readable folder; else raise ``error`` (`DatasetError`) naming it.
 
     Parameters

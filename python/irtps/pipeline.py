@@ -120,7 +120,14 @@ def reconstruction_pass(
             albedo_scale = previous.albedo_scale
             shape_change = float(np.abs(relief - previous.relief)[mask].mean())
             placement = place_surface(
-                dataset, relief, albedo, options, seed=options.seed, previous=previous.placement, shape_change=shape_change, albedo_scale=albedo_scale
+                dataset,
+                relief,
+                albedo,
+                options,
+                seed=options.seed,
+                previous=previous.placement,
+                shape_change=shape_change,
+                albedo_scale=albedo_scale,
             )
         elif rendered or (scene.relative_irradiance and scene.floor is not None and options.base_height == "auto"):
             # The floor is rendered to place the object: with the reflectance, so the scale first.
@@ -128,7 +135,15 @@ def reconstruction_pass(
             albedo_scale, placement = scale_and_place(dataset, relief, albedo, options, usable, seed=options.seed)
         else:
             albedo_scale, placement = None, place_surface(dataset, relief, albedo, options, seed=options.seed)
-    return Pass(fit=fit, relief=relief, albedo=albedo, placement=placement, height=placed(relief, mask, placement), albedo_scale=albedo_scale, timings=timings)
+    return Pass(
+        fit=fit,
+        relief=relief,
+        albedo=albedo,
+        placement=placement,
+        height=placed(relief, mask, placement),
+        albedo_scale=albedo_scale,
+        timings=timings,
+    )
 
 
 @contextmanager
@@ -171,11 +186,20 @@ def choose_dataset_robust(dataset: Dataset, options: ReconstructOptions) -> tupl
     the mode `irtps.ps.choose_robust` picks for it (other modes kept). `options` are resolved
     (`resolve_options`): the share leaves the data set's saturated observations out."""
     scene = dataset.scene
-    share = lobe_share(dataset.images, scene.light_directions, scene.light_irradiance, dataset.mask, shadow_fraction=options.shadow_fraction, saturation=options.saturation)
+    share = lobe_share(
+        dataset.images,
+        scene.light_directions,
+        scene.light_irradiance,
+        dataset.mask,
+        shadow_fraction=options.shadow_fraction,
+        saturation=options.saturation,
+    )
     return (dataclasses.replace(options, robust=choose_robust(share)) if options.robust == "auto" else options), share
 
 
-def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: ReconstructOptions, *, progress: bool = False) -> PsResult:
+def fit_photometric_stereo(
+    dataset: Dataset, images: np.ndarray, options: ReconstructOptions, *, progress: bool = False
+) -> PsResult:
     """Photometric stereo on `images` (the data set's, or corrected ones) with the data set's
     lights and mask and the options' robust settings. `images` are (K, H, W, 3), or
     (K, N, 3) at the mask's N pixels in row-major order (the corrected images of IRT-PS).
@@ -183,7 +207,9 @@ def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: Recons
     ``"auto"``), the one slow enough to want one (`irtps.ps.photometric_stereo`)."""
     scene, mask = dataset.scene, dataset.mask
     # (K, N, 3) observations are fitted as one row of N pixels, every one in the mask.
-    fitted, fitted_mask = (images, mask) if images.ndim == 4 else (images[:, None], np.ones((1, images.shape[1]), dtype=bool))
+    fitted, fitted_mask = (
+        (images, mask) if images.ndim == 4 else (images[:, None], np.ones((1, images.shape[1]), dtype=bool))
+    )
     fit = photometric_stereo(
         fitted,
         scene.light_directions,
@@ -207,7 +233,9 @@ def fit_photometric_stereo(dataset: Dataset, images: np.ndarray, options: Recons
     return frame
 
 
-def rendered_albedo(dataset: Dataset, fit: PsResult, relief: np.ndarray, coverage: np.ndarray | None = None) -> np.ndarray:
+def rendered_albedo(
+    dataset: Dataset, fit: PsResult, relief: np.ndarray, coverage: np.ndarray | None = None
+) -> np.ndarray:
     """The albedo of the triangulated surface `relief` that explains `fit`
     (`irtps.surface.surface_albedo`), where the fitted images hold the object's light over
     the fraction `coverage` (H, W) of each pixel's footprint (default 1): within [0, 1] for
@@ -215,7 +243,9 @@ def rendered_albedo(dataset: Dataset, fit: PsResult, relief: np.ndarray, coverag
     (`irtps.radiometry` scales it)."""
     scene = dataset.scene
     fitted = fit.albedo if coverage is None else fit.albedo / coverage[..., None].astype(np.float32)
-    return surface_albedo(fitted, relief, dataset.mask, scene.camera.pixel_size, largest=None if scene.relative_irradiance else 1.0)
+    return surface_albedo(
+        fitted, relief, dataset.mask, scene.camera.pixel_size, largest=None if scene.relative_irradiance else 1.0
+    )
 
 
 def fitted_observations(dataset: Dataset, options: ReconstructOptions) -> np.ndarray:
@@ -235,7 +265,9 @@ def surface_relief(dataset: Dataset, normals: np.ndarray, options: ReconstructOp
     """The height map of `normals`, integrated (``options.integration``), with the median
     of its mask's boundary at 0: float32, 0 outside the mask."""
     mask = dataset.mask
-    height = integrate_normals(normals, mask, pixel_size=dataset.scene.camera.pixel_size, method=options.integration_method)
+    height = integrate_normals(
+        normals, mask, pixel_size=dataset.scene.camera.pixel_size, method=options.integration_method
+    )
     return np.where(mask, place_height(height, mask, base_height=0.0), 0).astype(np.float32)
 
 
@@ -268,23 +300,52 @@ def place_surface(
         if previous.source != "images" or radius < PRECISION_PIXELS * scene.camera.pixel_size:
             return previous
         return estimate_placement(
-            scene, relief, albedo, dataset.mask, dataset.images, bounces=options.bounces, saturation=options.saturation, seed=seed, near=previous, radius=radius
+            scene,
+            relief,
+            albedo,
+            dataset.mask,
+            dataset.images,
+            bounces=options.bounces,
+            saturation=options.saturation,
+            seed=seed,
+            near=previous,
+            radius=radius,
         )
     if options.base_height == "boundary":
         return fallback_placement(scene)
     if options.base_height != "auto":
         return Placement(base_height=float(options.base_height), source="given")
-    return estimate_placement(scene, relief, albedo, dataset.mask, dataset.images, bounces=options.bounces, saturation=options.saturation, seed=seed)
+    return estimate_placement(
+        scene,
+        relief,
+        albedo,
+        dataset.mask,
+        dataset.images,
+        bounces=options.bounces,
+        saturation=options.saturation,
+        seed=seed,
+    )
 
 
 def scale_and_place(
-    dataset: Dataset, relief: np.ndarray, albedo: np.ndarray, options: ReconstructOptions, usable: np.ndarray, *, seed: int = 0
+    dataset: Dataset,
+    relief: np.ndarray,
+    albedo: np.ndarray,
+    options: ReconstructOptions,
+    usable: np.ndarray,
+    *,
+    seed: int = 0,
 ) -> tuple[AlbedoScale, Placement]:
     """The albedo scale and the placement of a first reconstruction. Each needs the other
     where the irradiance is relative and a floor is seen: the scale is estimated with the
     surface placed provisionally (the given height, else contract §6's fallback), then the
     floor is rendered with that scale to place it."""
-    provisional = place_surface(dataset, relief, albedo, dataclasses.replace(options, base_height="boundary") if options.base_height == "auto" else options)
+    provisional = place_surface(
+        dataset,
+        relief,
+        albedo,
+        dataclasses.replace(options, base_height="boundary") if options.base_height == "auto" else options,
+    )
     scale = resolve_albedo_scale(dataset, placed(relief, dataset.mask, provisional), albedo, usable, options, seed=seed)
     if options.base_height != "auto":
         return scale, provisional
@@ -292,7 +353,13 @@ def scale_and_place(
 
 
 def resolve_albedo_scale(
-    dataset: Dataset, height: np.ndarray, albedo: np.ndarray, usable: np.ndarray, options: ReconstructOptions, *, seed: int = 0
+    dataset: Dataset,
+    height: np.ndarray,
+    albedo: np.ndarray,
+    usable: np.ndarray,
+    options: ReconstructOptions,
+    *,
+    seed: int = 0,
 ) -> AlbedoScale:
     """The factor from fitted albedo to reflectance (`irtps.radiometry`): the options'
     number, else estimated from the images when the data set's irradiance is relative, else
@@ -301,7 +368,9 @@ def resolve_albedo_scale(
         return AlbedoScale(factor=float(options.albedo_scale), source="given")
     if not dataset.scene.relative_irradiance:
         return absolute_scale()
-    return estimate_albedo_scale(dataset.scene, height, albedo, dataset.mask, dataset.images, usable, bounces=options.bounces, seed=seed)
+    return estimate_albedo_scale(
+        dataset.scene, height, albedo, dataset.mask, dataset.images, usable, bounces=options.bounces, seed=seed
+    )
 
 
 def rendered_as(scene: Scene, albedo: np.ndarray, albedo_scale: AlbedoScale | None) -> tuple[Scene, np.ndarray]:

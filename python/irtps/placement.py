@@ -172,10 +172,16 @@ def estimate_placement(
     chosen = spread_lights(scene.light_directions, MAX_LIGHTS)
     scene = dataclasses.replace(scene, lights=tuple(scene.lights[k] for k in chosen))
     images = np.asarray(images, dtype=np.float32)[chosen]
-    unsaturated = np.ones((*images.shape[:3], 1), dtype=bool) if saturation is None else ~np.any(images >= saturation, axis=-1, keepdims=True)
+    unsaturated = (
+        np.ones((*images.shape[:3], 1), dtype=bool)
+        if saturation is None
+        else ~np.any(images >= saturation, axis=-1, keepdims=True)
+    )
     mask = np.asarray(mask, dtype=bool)
     relief = np.where(mask, np.asarray(height, dtype=np.float64), 0.0)
-    scene, relief, albedo, mask, images, unsaturated = _coarse(scene, relief, np.asarray(albedo, dtype=np.float64), mask, images, unsaturated)
+    scene, relief, albedo, mask, images, unsaturated = _coarse(
+        scene, relief, np.asarray(albedo, dtype=np.float64), mask, images, unsaturated
+    )
     floor_pixels = _floor_pixels(mask)
     if floor_pixels.size == 0:
         return fallback_placement(scene, "the mask covers nearly the whole image: no floor is visible")
@@ -197,17 +203,27 @@ def estimate_placement(
     if near is not None:
         bracket = (max(low, near.base_height - radius), min(high, near.base_height + radius))
         result = minimize_scalar(floor_residual, bounds=bracket, method="bounded", options={"xatol": precision})
-        return Placement(base_height=float(result.x), source="images", floor_residual=float(result.fun), floor_pixels=int(floor_pixels.size))
+        return Placement(
+            base_height=float(result.x),
+            source="images",
+            floor_residual=float(result.fun),
+            floor_pixels=int(floor_pixels.size),
+        )
     scan = np.linspace(low, high, SCAN_POINTS)
     values = [floor_residual(offset) for offset in scan]
     best = int(np.argmin(values))
     step = scan[1] - scan[0]
     bracket = (max(low, scan[best] - step), min(high, scan[best] + step))
     result = minimize_scalar(floor_residual, bounds=bracket, method="bounded", options={"xatol": precision})
-    offset, residual = (float(result.x), float(result.fun)) if result.fun <= values[best] else (float(scan[best]), values[best])
+    offset, residual = (
+        (float(result.x), float(result.fun)) if result.fun <= values[best] else (float(scan[best]), values[best])
+    )
     noise = abs(floor_residual(offset, seed + 1) - residual)
     if max(values) - residual <= SIGNIFICANCE * noise:
-        return fallback_placement(scene, "the floor looks the same whatever the object's height (no shadow or light of the object falls on it)")
+        return fallback_placement(
+            scene,
+            "the floor looks the same whatever the object's height (no shadow or light of the object falls on it)",
+        )
     return Placement(base_height=offset, source="images", floor_residual=residual, floor_pixels=int(floor_pixels.size))
 
 
@@ -234,7 +250,9 @@ def spread_lights(directions: np.ndarray, count: int) -> np.ndarray:
     return np.sort(chosen)
 
 
-def _coarse(scene: Scene, relief: np.ndarray, albedo: np.ndarray, mask: np.ndarray, images: np.ndarray, unsaturated: np.ndarray):
+def _coarse(
+    scene: Scene, relief: np.ndarray, albedo: np.ndarray, mask: np.ndarray, images: np.ndarray, unsaturated: np.ndarray
+):
     """The scene and its arrays averaged over f×f blocks of pixels, so that the image's larger
     side is at most `MAX_SIDE` pixels (unchanged if it already is).
 
@@ -273,9 +291,18 @@ def _coarse(scene: Scene, relief: np.ndarray, albedo: np.ndarray, mask: np.ndarr
     coarse_albedo = blocks(albedo * mask[..., None], 0).sum(axis=(1, 3)) / weight[..., None]
     coarse_images = blocks(images, 1).mean(axis=(2, 4), dtype=np.float32)
     coarse_unsaturated = blocks(unsaturated, 1).all(axis=(2, 4))
-    camera = dataclasses.replace(scene.camera, width=size[1], height=size[0], pixel_size=scene.camera.pixel_size * factor)
+    camera = dataclasses.replace(
+        scene.camera, width=size[1], height=size[0], pixel_size=scene.camera.pixel_size * factor
+    )
     coarse_scene = dataclasses.replace(scene, camera=camera)
-    return coarse_scene, np.where(inside, coarse_relief, 0.0), np.where(inside[..., None], coarse_albedo, 0.0), inside, coarse_images, coarse_unsaturated
+    return (
+        coarse_scene,
+        np.where(inside, coarse_relief, 0.0),
+        np.where(inside[..., None], coarse_albedo, 0.0),
+        inside,
+        coarse_images,
+        coarse_unsaturated,
+    )
 
 
 def _floor_height(scene: Scene) -> float:

@@ -9,7 +9,16 @@ import numpy as np
 from tqdm import tqdm
 
 from irtps import _core
-from irtps._checks import check_array, check_choice, check_finite, check_images_finite, check_mask, check_number, check_positive, document_choices
+from irtps._checks import (
+    check_array,
+    check_choice,
+    check_finite,
+    check_images_finite,
+    check_mask,
+    check_number,
+    check_positive,
+    document_choices,
+)
 from irtps.data import coarse_to_fine, spread_pixels
 from irtps.errors import ArgumentError
 from irtps.scene import irradiance_problem
@@ -20,7 +29,13 @@ ROBUST_MODES = ("tukey", "lobe", "threshold", "trim", "none")
 #: mode `choose_robust` picks for the object.
 ROBUST_CHOICES = ("auto", *ROBUST_MODES)
 #: Meaning of the values of `PsResult.flags`.
-FLAGS = {0: "fitted", 1: "full fit kept (too few non-coplanar lit observations)", 2: "no light", 3: "outside the mask", 4: "fitted with a specular lobe"}
+FLAGS = {
+    0: "fitted",
+    1: "full fit kept (too few non-coplanar lit observations)",
+    2: "no light",
+    3: "outside the mask",
+    4: "fitted with a specular lobe",
+}
 #: The flag of the pixels outside the mask.
 OUTSIDE_MASK = 3
 #: The flag of the pixels fitted as asked (with every mode but the lobe's).
@@ -199,7 +214,9 @@ def photometric_stereo(
     >>> print(np.round(fit.normals[0, 0], 4), np.round(fit.albedo[0, 0], 4))
     [0.  0.6 0.8] [0.5 0.5 0.5]
     """
-    images = np.ascontiguousarray(check_array("images", images, (None, None, None, 3), dtype=np.float32, copy=False, nonempty=True))
+    images = np.ascontiguousarray(
+        check_array("images", images, (None, None, None, 3), dtype=np.float32, copy=False, nonempty=True)
+    )
     mask = np.ascontiguousarray(check_mask(mask, images.shape[1:3], match="images"))
     check_images_finite("images", images, mask)
     check_choice("robust", robust, ROBUST_CHOICES)
@@ -211,21 +228,47 @@ def photometric_stereo(
     return _fit_in_bands(images, mask, settings)
 
 
-def _fit_auto(images: np.ndarray, mask: np.ndarray, light_directions: np.ndarray, light_irradiance: np.ndarray, shadow_fraction: float, saturation: float | None, progress: bool) -> PsResult:
+def _fit_auto(
+    images: np.ndarray,
+    mask: np.ndarray,
+    light_directions: np.ndarray,
+    light_irradiance: np.ndarray,
+    shadow_fraction: float,
+    saturation: float | None,
+    progress: bool,
+) -> PsResult:
     """`photometric_stereo` of float32 `images` with ``robust="auto"``: the Tukey fit and,
     beside it in the same call, `lobe_share`'s first pixels; then the rest of the check, if
     those leave the share undecided, and the lobe fit, if it is chosen."""
     settings = _core_settings(images, light_directions, light_irradiance, "lobe", shadow_fraction, saturation)
     directions, irradiance, _, shadow_fraction, saturation = settings
     check = _LobeCheck(mask, LOBE_SAMPLE)
-    tukey, flags = _core.tukey_with_lobe_check(images, mask, check.next_indices(mask.shape[1]), directions, irradiance, shadow_fraction, saturation, LOBE_CHECK_ROUNDS)
+    tukey, flags = _core.tukey_with_lobe_check(
+        images,
+        mask,
+        check.next_indices(mask.shape[1]),
+        directions,
+        irradiance,
+        shadow_fraction,
+        saturation,
+        LOBE_CHECK_ROUNDS,
+    )
     check.record(flags)
     while not check.done(stop_early=True):
         check.fit_next(images, settings)
     chosen = choose_robust(check.share)
     if chosen == "tukey":
         return PsResult(*tukey, robust_used=chosen, lobe_share=check.share)
-    fit = photometric_stereo(images, directions, irradiance, mask, robust=chosen, shadow_fraction=shadow_fraction, saturation=saturation, progress=progress)
+    fit = photometric_stereo(
+        images,
+        directions,
+        irradiance,
+        mask,
+        robust=chosen,
+        shadow_fraction=shadow_fraction,
+        saturation=saturation,
+        progress=progress,
+    )
     return dataclasses.replace(fit, robust_used=chosen, lobe_share=check.share)
 
 
@@ -234,7 +277,14 @@ def _fit_auto(images: np.ndarray, mask: np.ndarray, light_directions: np.ndarray
 _CoreSettings = tuple[np.ndarray, np.ndarray, str, float, float | None]
 
 
-def _core_settings(images: np.ndarray, light_directions: np.ndarray, light_irradiance: np.ndarray, robust: str, shadow_fraction: float, saturation: float | None) -> _CoreSettings:
+def _core_settings(
+    images: np.ndarray,
+    light_directions: np.ndarray,
+    light_irradiance: np.ndarray,
+    robust: str,
+    shadow_fraction: float,
+    saturation: float | None,
+) -> _CoreSettings:
     """The arguments of `_core.photometric_stereo` after `images` and the mask, checked."""
     directions, irradiance = checked_lights(light_directions, light_irradiance, len(images))
     check_choice("robust", robust, ROBUST_MODES)
@@ -259,7 +309,11 @@ def _fit_in_bands(images: np.ndarray, mask: np.ndarray, settings: _CoreSettings)
     with tqdm(total=int(mask.sum()), unit="px", desc="photometric stereo", leave=False, delay=0.5) as bar:
         for start in range(0, rows, band):
             rows_here = slice(start, min(start + band, rows))
-            parts.append(_core.photometric_stereo(np.ascontiguousarray(images[:, rows_here]), np.ascontiguousarray(mask[rows_here]), *settings))
+            parts.append(
+                _core.photometric_stereo(
+                    np.ascontiguousarray(images[:, rows_here]), np.ascontiguousarray(mask[rows_here]), *settings
+                )
+            )
             bar.update(int(mask[rows_here].sum()))
     normals, albedo, flags, used = (np.concatenate(arrays) for arrays in zip(*parts))
     return PsResult(normals, albedo, flags, used)
@@ -448,8 +502,12 @@ class _LobeCheck:
         """Fit the next batch's pixels of `images` in the lobe mode with `LOBE_CHECK_ROUNDS`
         rounds, the other `_core.photometric_stereo` arguments `settings`, and count them."""
         rows, cols = self._next()
-        observed = np.ascontiguousarray(images[:, rows, cols][:, None], dtype=np.float32)  # (K, 1, N, 3): one row of pixels
-        self.record(_core.photometric_stereo(observed, np.ones(observed.shape[1:3], bool), *settings, LOBE_CHECK_ROUNDS)[2][0])
+        observed = np.ascontiguousarray(
+            images[:, rows, cols][:, None], dtype=np.float32
+        )  # (K, 1, N, 3): one row of pixels
+        self.record(
+            _core.photometric_stereo(observed, np.ones(observed.shape[1:3], bool), *settings, LOBE_CHECK_ROUNDS)[2][0]
+        )
 
     def next_indices(self, width: int) -> list[int]:
         """The flat indices of the next batch's pixels, in images `width` pixels wide, for a

@@ -31,7 +31,14 @@ from irtps.placement import spread_lights
 from irtps.render import make_renderer
 from irtps.scene import Scene
 
-__all__ = ["AlbedoScale", "absolute_scale", "estimate_albedo_scale", "format_albedo_scale", "scaled_albedo", "scaled_scene"]
+__all__ = [
+    "AlbedoScale",
+    "absolute_scale",
+    "estimate_albedo_scale",
+    "format_albedo_scale",
+    "scaled_albedo",
+    "scaled_scene",
+]
 
 #: Lights rendered at most for the estimate (well spread, as for the placement).
 MAX_LIGHTS = 8
@@ -109,7 +116,10 @@ def format_albedo_scale(scale: AlbedoScale | dict) -> str:
 
 def scaled_scene(scene: Scene, factor: float) -> Scene:
     """`scene` with every light's irradiance divided by `factor` (and marked absolute)."""
-    lights = tuple(dataclasses.replace(light, irradiance=np.asarray(light.irradiance, dtype=np.float64) / factor) for light in scene.lights)
+    lights = tuple(
+        dataclasses.replace(light, irradiance=np.asarray(light.irradiance, dtype=np.float64) / factor)
+        for light in scene.lights
+    )
     return dataclasses.replace(scene, lights=lights, relative_irradiance=False)
 
 
@@ -181,17 +191,25 @@ def estimate_albedo_scale(
     albedo = np.asarray(albedo, dtype=np.float32)
     brightest = float(np.percentile(albedo[mask].max(axis=1), BRIGHTEST_PERCENTILE)) if mask.any() else 0.0
     if not brightest > 0:
-        return AlbedoScale(factor=1.0, source="images", reason="the object is black in every image: nothing fixes the albedo scale")
+        return AlbedoScale(
+            factor=1.0, source="images", reason="the object is black in every image: nothing fixes the albedo scale"
+        )
     high = 1.0 / brightest
     low = high / RANGE
     chosen = spread_lights(scene.light_directions, MAX_LIGHTS)
     scene = dataclasses.replace(scene, lights=tuple(scene.lights[k] for k in chosen))
     pixels = _grid(mask, MAX_PIXELS)
     observed = np.asarray(images, dtype=np.float32)[chosen].reshape(len(chosen), -1, 3)[:, pixels]
-    compared = np.broadcast_to(np.asarray(usable, dtype=bool)[chosen].reshape(len(chosen), -1, 1)[:, pixels], observed.shape)
+    compared = np.broadcast_to(
+        np.asarray(usable, dtype=bool)[chosen].reshape(len(chosen), -1, 1)[:, pixels], observed.shape
+    )
     total = float(np.abs(observed[compared]).sum())
     if total <= 0:
-        return AlbedoScale(factor=1.0, source="images", reason="no observation of the object to compare: nothing fixes the albedo scale")
+        return AlbedoScale(
+            factor=1.0,
+            source="images",
+            reason="no observation of the object to compare: nothing fixes the albedo scale",
+        )
     pixel_list = pixels.tolist()
     height = np.asarray(height, dtype=np.float32)
 
@@ -200,18 +218,26 @@ def estimate_albedo_scale(
 
     def residual(log_factor: float, path_seed: int = seed) -> float:
         factor = float(np.exp(log_factor))
-        renderer = geometry.with_reflectance(scaled_albedo(albedo, factor), scaled_scene(scene, factor).light_irradiance.astype(np.float32))
+        renderer = geometry.with_reflectance(
+            scaled_albedo(albedo, factor), scaled_scene(scene, factor).light_irradiance.astype(np.float32)
+        )
         planes = renderer.render_pixels(pixel_list, bounces, PATH_SAMPLES, DIRECT_SAMPLES, path_seed, False)
         return float(np.abs(planes.sum(axis=0) - observed)[compared].sum()) / total
 
-    result = minimize_scalar(residual, bounds=(np.log(low), np.log(high)), method="bounded", options={"xatol": np.log(PRECISION)})
+    result = minimize_scalar(
+        residual, bounds=(np.log(low), np.log(high)), method="bounded", options={"xatol": np.log(PRECISION)}
+    )
     # Brent's method never tries the ends of the range: the end is the answer when it is better.
     ends = [(residual(np.log(high)), np.log(high)), (residual(np.log(low)), np.log(low))]
     best_residual, best_log = min([(float(result.fun), float(result.x)), *ends])
     noise = abs(residual(best_log, seed + 1) - best_residual)
     if max(value for value, _ in ends) - best_residual <= SIGNIFICANCE * noise:
         return AlbedoScale(
-            factor=1.0, source="images", low=low, high=high, reason="the images look the same whatever the albedo scale: no inter-reflection seen"
+            factor=1.0,
+            source="images",
+            low=low,
+            high=high,
+            reason="the images look the same whatever the albedo scale: no inter-reflection seen",
         )
     return AlbedoScale(factor=float(np.exp(best_log)), source="images", low=low, high=high, residual=best_residual)
 

@@ -37,7 +37,16 @@ from irtps.records import RUN, stamp
 #: one writer's time).
 _EXR_WRITERS = max(1, min(4, os.cpu_count() or 1))
 #: What a reconstruction folder holds (`save_reconstruction`); ``indirect`` for IRT-PS only.
-RECONSTRUCTION_FILES = ("normal.exr", "albedo.exr", "height.exr", "mask.png", "mesh.ply", "mesh.obj", "run.json", "indirect")
+RECONSTRUCTION_FILES = (
+    "normal.exr",
+    "albedo.exr",
+    "height.exr",
+    "mask.png",
+    "mesh.ply",
+    "mesh.obj",
+    "run.json",
+    "indirect",
+)
 #: An image name's stem that can name its file in ``indirect/``: plain, not hidden.
 _PLAIN_STEM = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
 
@@ -287,7 +296,9 @@ def reconstruct(
     )
 
 
-def load_and_reconstruct(path: str | Path, method: str | None = None, *, exclude_images: str | None = None, **options) -> tuple[Dataset, Reconstruction]:
+def load_and_reconstruct(
+    path: str | Path, method: str | None = None, *, exclude_images: str | None = None, **options
+) -> tuple[Dataset, Reconstruction]:
     """Read a data set folder and reconstruct it, timing the reading too.
 
     Parameters
@@ -347,7 +358,10 @@ def _brightness_corrected(dataset: Dataset, options: ReconstructOptions) -> tupl
     first = fit_photometric_stereo(dataset, dataset.images, options)
     brightness = _image_agreement(dataset, first, options.saturation).brightness
     factors = np.where(np.isnan(brightness), 1.0, brightness)
-    lights = tuple(replace(light, irradiance=light.irradiance * factor) for light, factor in zip(dataset.scene.lights, factors, strict=True))
+    lights = tuple(
+        replace(light, irradiance=light.irradiance * factor)
+        for light, factor in zip(dataset.scene.lights, factors, strict=True)
+    )
     return replace(dataset, scene=replace(dataset.scene, lights=lights)), factors
 
 
@@ -359,7 +373,15 @@ def _image_agreement(dataset: Dataset, fit: PsResult, saturation: float | None) 
         unknown = np.full(len(dataset.scene.lights), np.nan)
         return ImageAgreement(unknown, unknown.copy())
     scene = dataset.scene
-    return image_agreement(dataset.images, scene.light_directions, scene.light_irradiance, fit.normals, fit.albedo, fitted, saturation=saturation)
+    return image_agreement(
+        dataset.images,
+        scene.light_directions,
+        scene.light_irradiance,
+        fit.normals,
+        fit.albedo,
+        fitted,
+        saturation=saturation,
+    )
 
 
 def _advise_lobe(dataset: Dataset, robust_used: str, share: float) -> None:
@@ -435,7 +457,9 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
         write_exr(folder / "albedo.exr", result.albedo)
         write_exr(folder / "height.exr", result.height)
         write_png(folder / "mask.png", result.mask.astype(np.float32), bit_depth=8)
-        vertices, faces, colors, normals = height_field_mesh(result.height, result.mask, result.pixel_size, albedo=result.albedo, normals=result.normals)
+        vertices, faces, colors, normals = height_field_mesh(
+            result.height, result.mask, result.pixel_size, albedo=result.albedo, normals=result.normals
+        )
         write_ply(folder / "mesh.ply", vertices, faces, colors=colors, normals=normals)
         write_obj(folder / "mesh.obj", vertices, faces, normals=normals)
         run = {
@@ -456,7 +480,9 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             "images": list(result.image_names),
             "excluded_images": list(result.excluded_images),
             "image_agreement": None if result.image_agreement is None else result.image_agreement.to_dict(),
-            "irradiance_factors": None if result.irradiance_factors is None else [round(float(factor), 4) for factor in result.irradiance_factors],
+            "irradiance_factors": None
+            if result.irradiance_factors is None
+            else [round(float(factor), 4) for factor in result.irradiance_factors],
         }
         if result.object_indirect is not None:
             (folder / "indirect").mkdir()
@@ -464,7 +490,11 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             # it is written: never more than the writers' images in memory.
             names = indirect_file_names(result.image_names, len(result.object_indirect))
             with ThreadPoolExecutor(max_workers=_EXR_WRITERS) as writers:
-                list(writers.map(lambda k: write_exr(folder / "indirect" / names[k], result.indirect_image(k)), range(len(names))))
+                list(
+                    writers.map(
+                        lambda k: write_exr(folder / "indirect" / names[k], result.indirect_image(k)), range(len(names))
+                    )
+                )
         (folder / "run.json").write_text(json.dumps(run, indent=2))
 
 
@@ -484,7 +514,11 @@ def indirect_file_names(image_names: Sequence[str], count: int) -> list[str]:
     ['000.exr', '001.exr']
     """
     stems = [PurePosixPath(name).stem for name in image_names]
-    if len(stems) == count and len({stem.lower() for stem in stems}) == count and all(map(_PLAIN_STEM.fullmatch, stems)):
+    if (
+        len(stems) == count
+        and len({stem.lower() for stem in stems}) == count
+        and all(map(_PLAIN_STEM.fullmatch, stems))
+    ):
         return [f"{stem}.exr" for stem in stems]
     return [f"{k:03d}.exr" for k in range(count)]
 
@@ -532,7 +566,6 @@ def _check_unit_normals(path: Path, normals: np.ndarray, mask: np.ndarray) -> No
         )
 
 
-
 #: Fields of ``run.json`` that readers rely on, and the JSON types each may take.
 _RUN_FIELDS = {
     "source": (str, type(None)),
@@ -555,8 +588,20 @@ _OPTIONAL_RUN_FIELDS = {
     "image_agreement": (dict, type(None)),
     "irradiance_factors": (list, type(None)),
 }
-_HISTORY_FIELDS = {"index": (int,), "height_change": (int, float, type(None)), "timings": (dict,), "metrics": (dict, type(None))}
-_JSON_TYPE_NAMES = {dict: "an object", list: "a list", str: "a string", int: "a number", float: "a number", type(None): "null"}
+_HISTORY_FIELDS = {
+    "index": (int,),
+    "height_change": (int, float, type(None)),
+    "timings": (dict,),
+    "metrics": (dict, type(None)),
+}
+_JSON_TYPE_NAMES = {
+    dict: "an object",
+    list: "a list",
+    str: "a string",
+    int: "a number",
+    float: "a number",
+    type(None): "null",
+}
 
 
 def load_run_record(path: str | Path) -> dict:

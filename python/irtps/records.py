@@ -26,7 +26,17 @@ from pathlib import Path
 from irtps.errors import IrtpsError
 from irtps.guarded import parse_json
 
-__all__ = ["BATCH", "RENDERING", "REPORT", "REPORT_MARKER", "RUN", "TABLE", "irtps_version", "stamp", "written_by_irtps"]
+__all__ = [
+    "BATCH",
+    "RENDERING",
+    "REPORT",
+    "REPORT_MARKER",
+    "RUN",
+    "TABLE",
+    "irtps_version",
+    "stamp",
+    "written_by_irtps",
+]
 
 RUN = "irtps.run/1"
 TABLE = "irtps.table/1"
@@ -35,7 +45,13 @@ RENDERING = "irtps.rendering/1"
 REPORT = "irtps.report/1"
 
 #: The record of each kind of output folder: its path inside the folder, and its format.
-RECORDS = {"run.json": RUN, "table.json": TABLE, "batch.json": BATCH, "gt/rendering.json": RENDERING, "index.html": REPORT}
+RECORDS = {
+    "run.json": RUN,
+    "table.json": TABLE,
+    "batch.json": BATCH,
+    "gt/rendering.json": RENDERING,
+    "index.html": REPORT,
+}
 
 #: The line in the head of a report's page that marks it as ours.
 REPORT_MARKER = f'<meta name="irtps-format" content="{REPORT}">'

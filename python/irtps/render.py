@@ -266,7 +266,9 @@ def check_frame_memory(scene: Scene, planes: int = 1) -> None:
     )
 
 
-def render_sparse(renderer: _core.Renderer, mask: np.ndarray, bounces: int, samples: int, seed: int, stride: int) -> np.ndarray:
+def render_sparse(
+    renderer: _core.Renderer, mask: np.ndarray, bounces: int, samples: int, seed: int, stride: int
+) -> np.ndarray:
     """Inter-reflected light (bounces 1..B summed) at a sparse subset of the pixels of
     `mask`, interpolated to the rest of them: float32 (K, H, W, 3), 0 outside `mask`.
 
@@ -307,7 +309,9 @@ def check_counts(bounces: int, samples: int, seed: int) -> None:
     RenderOptions(bounces=bounces, samples=samples, seed=seed)
 
 
-def _render_planes(renderer, scene: Scene, bounces: int, samples: int, direct_samples: int, seed: int, split: bool, progress: bool) -> np.ndarray:
+def _render_planes(
+    renderer, scene: Scene, bounces: int, samples: int, direct_samples: int, seed: int, split: bool, progress: bool
+) -> np.ndarray:
     """Render all rows in chunks (for the progress bar): float32 (P, K, H, W, 3)."""
     rows, cols = scene.camera.height, scene.camera.width
     planes = int(direct_samples > 0) + (bounces if split else min(bounces, 1))

@@ -246,12 +246,16 @@ def _shading_figure(height: np.ndarray, mask: np.ndarray, record: dict, notes: l
     pixel_size = record.get("pixel_size")
     if pixel_size is None:
         pixel_size = ASSUMED_PIXEL_SIZE
-        notes.append(f"run.json does not record the pixel size (an older irtps wrote it): the shaded relief assumes {ASSUMED_PIXEL_SIZE:g} world unit per pixel.")
+        notes.append(
+            f"run.json does not record the pixel size (an older irtps wrote it): the shaded relief assumes {ASSUMED_PIXEL_SIZE:g} world unit per pixel."
+        )
     caption = (
         "The reconstructed height field (height.exr) as a matte grey surface lit from the upper left, 45° above the "
         "image plane: it shows the integrated shape itself, bumps and dents included. Grey: outside the mask."
     )
-    return ReportFigure("shading", "Shaded height field", caption, image_png(hillshade(height, mask, pixel_size), "Shaded height field"))
+    return ReportFigure(
+        "shading", "Shaded height field", caption, image_png(hillshade(height, mask, pixel_size), "Shaded height field")
+    )
 
 
 def _indirect_figure(folder: Path, mask: np.ndarray, window: tuple[slice, slice]) -> ReportFigure | None:
@@ -271,7 +275,9 @@ def _indirect_figure(folder: Path, mask: np.ndarray, window: tuple[slice, slice]
         "Colour bled from coloured surroundings shows here; so does, at the object's edge, the light of the floor or box "
         "that the edge pixels see past the object (subtracted with it)."
     )
-    return ReportFigure("indirect", "Estimated inter-reflections", caption, image_png(rgb, "Estimated inter-reflections"))
+    return ReportFigure(
+        "indirect", "Estimated inter-reflections", caption, image_png(rgb, "Estimated inter-reflections")
+    )
 
 
 def report_inputs(run_dir: str | Path, truth: str | Path | None = None) -> list[Path]:
@@ -342,18 +348,26 @@ def _error_figures(maps: ErrorMaps, metrics: Metrics, window: tuple[slice, slice
     if maps.angular_deg is not None:
         title = f"Angular error (mean {metrics.normal_mean_angular_deg:.2f}°)"
         caption = f"Angle between the reconstructed and the true normal, per pixel (median {metrics.normal_median_angular_deg:.2f}°). {scale}"
-        figures.append(ReportFigure("angular_error", title, caption, error_map_png(maps.angular_deg[window], title, "degrees")))
+        figures.append(
+            ReportFigure("angular_error", title, caption, error_map_png(maps.angular_deg[window], title, "degrees"))
+        )
     if maps.height_aligned is not None:
         title = f"Height error (mean {metrics.height_error_aligned:.3g})"
         caption = (
             f"|H_true − H − c| per pixel, in world units, after removing the median offset c = {metrics.height_offset:.3g} "
             f"(normals fix the height only up to a constant). {scale}"
         )
-        figures.append(ReportFigure("height_error", title, caption, error_map_png(maps.height_aligned[window], title, "world units")))
+        figures.append(
+            ReportFigure(
+                "height_error", title, caption, error_map_png(maps.height_aligned[window], title, "world units")
+            )
+        )
     if maps.albedo is not None:
         title = f"Albedo error (mean {metrics.albedo_error:.3g})"
         caption = f"|ρ_true − ρ| per pixel, averaged over R, G and B, without rescaling. {scale}"
-        figures.append(ReportFigure("albedo_error", title, caption, error_map_png(maps.albedo[window], title, "|Δ albedo|")))
+        figures.append(
+            ReportFigure("albedo_error", title, caption, error_map_png(maps.albedo[window], title, "|Δ albedo|"))
+        )
     return figures
 
 
@@ -381,4 +395,10 @@ def _convergence_figure(history: list[dict], chosen: int | None) -> ReportFigure
         "Σ|rendered − observed| / Σ|observed| on the object: the measure of a run without ground truth. The ringed "
         "pass, the one with the lowest residual, is the result."
     )
-    return ReportFigure("convergence", "Convergence of the iterations", caption, convergence_png(passes, errors, residuals, chosen), wide=True)
+    return ReportFigure(
+        "convergence",
+        "Convergence of the iterations",
+        caption,
+        convergence_png(passes, errors, residuals, chosen),
+        wide=True,
+    )

@@ -88,16 +88,27 @@ def report_html(report: Report) -> str:
         parts.append('<ul class="notes">' + "".join(f"<li>{escape(note)}</li>" for note in report.notes) + "</ul>")
     rows, cols = report.window
     parts += ['<section id="figures">', "<h2>Figures</h2>"]
-    parts.append(f"<p>The maps are cropped to the object: rows {rows.start}–{rows.stop - 1}, columns {cols.start}–{cols.stop - 1} of the image.</p>")
+    parts.append(
+        f"<p>The maps are cropped to the object: rows {rows.start}–{rows.stop - 1}, columns {cols.start}–{cols.stop - 1} of the image.</p>"
+    )
     parts.append('<div class="grid">')
     parts += [_figure(figure) for figure in report.figures]
     parts += ["</div>", "</section>"]
-    parts += ['<section id="errors">', "<h2>Errors against ground truth</h2>", f"<p>Ground truth: {escape(report.ground_truth)}</p>"]
+    parts += [
+        '<section id="errors">',
+        "<h2>Errors against ground truth</h2>",
+        f"<p>Ground truth: {escape(report.ground_truth)}</p>",
+    ]
     if report.metrics is not None:
         parts.append(f"<pre>{escape(format_metrics(report.metrics))}</pre>")
     parts.append("</section>")
     if record["history"]:
-        parts += ['<section id="iterations">', "<h2>Iterations</h2>", _history_table(record["history"], record.get("chosen_pass")), "</section>"]
+        parts += [
+            '<section id="iterations">',
+            "<h2>Iterations</h2>",
+            _history_table(record["history"], record.get("chosen_pass")),
+            "</section>",
+        ]
     for anchor, title, values in (
         ("parameters", "Parameters", record["parameters"]),
         ("timings", "Timings (seconds)", {stage: f"{seconds:.3f}" for stage, seconds in record["timings_s"].items()}),
@@ -116,7 +127,11 @@ def _summary(report: Report) -> str:
     if parameters.get("method") == "irtps":
         corrections = max(len(record["history"]) - 1, 0)
         chosen = record.get("chosen_pass")
-        result = "" if chosen is None else f"; the result is pass {chosen}" + (" (classic photometric stereo)" if chosen == 0 else "")
+        result = (
+            ""
+            if chosen is None
+            else f"; the result is pass {chosen}" + (" (classic photometric stereo)" if chosen == 0 else "")
+        )
         method = f"IRT-PS ({parameters.get('bounces')} bounces estimated, {corrections} corrections{result}{'; ' + robust if robust else ''})"
     else:
         method = "Classic photometric stereo" + (f" ({robust})" if robust else "")
@@ -166,14 +181,22 @@ def _figure(figure: ReportFigure) -> str:
 
 
 def _history_table(history: list[dict], chosen: int | None) -> str:
-    rows = ["<tr><th>pass</th><th>residual</th><th>mean angular error (°)</th><th>mean |height change|</th><th>seconds</th></tr>"]
+    rows = [
+        "<tr><th>pass</th><th>residual</th><th>mean angular error (°)</th><th>mean |height change|</th><th>seconds</th></tr>"
+    ]
     for step in history:
         error = (step["metrics"] or {}).get("normal_mean_angular_deg")
         residual = (step.get("residual") or {}).get("object")
         change = step["height_change"]
         seconds = sum(step["timings"].values())
         index = f"{step['index']} (result)" if step["index"] == chosen else str(step["index"])
-        cells = (index, "n/a" if residual is None else f"{residual:.4f}", "n/a" if error is None else f"{error:.2f}", "n/a" if change is None else f"{change:.4g}", f"{seconds:.2f}")
+        cells = (
+            index,
+            "n/a" if residual is None else f"{residual:.4f}",
+            "n/a" if error is None else f"{error:.2f}",
+            "n/a" if change is None else f"{change:.4g}",
+            f"{seconds:.2f}",
+        )
         rows.append("<tr>" + "".join(f"<td>{cell}</td>" for cell in cells) + "</tr>")
     return "<table>" + "".join(rows) + "</table>"
 
@@ -181,5 +204,8 @@ def _history_table(history: list[dict], chosen: int | None) -> str:
 def _key_value_table(values: dict) -> str:
     if not values:
         return "<p>None recorded.</p>"
-    rows = (f"<tr><th>{escape(str(key))}</th><td>{escape(value if isinstance(value, str) else json.dumps(value))}</td></tr>" for key, value in values.items())
+    rows = (
+        f"<tr><th>{escape(str(key))}</th><td>{escape(value if isinstance(value, str) else json.dumps(value))}</td></tr>"
+        for key, value in values.items()
+    )
     return "<table>" + "".join(rows) + "</table>"

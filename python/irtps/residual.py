@@ -169,8 +169,12 @@ def render_with_residual(
     sparse = rendering.sparse(mask)
     on_object, halves = np.zeros(2), np.zeros(2)
     for chunk in _chunks(len(object_pixels)):
-        direct, parts = rendering.pixels(object_pixels[chunk], None if sparse is None else [half[:, chunk] for half in sparse])
-        indirect[:, chunk], noise_energy[chunk], sums = _core.compare_rendering(direct, parts, counts, observed, compared, chunk.start)
+        direct, parts = rendering.pixels(
+            object_pixels[chunk], None if sparse is None else [half[:, chunk] for half in sparse]
+        )
+        indirect[:, chunk], noise_energy[chunk], sums = _core.compare_rendering(
+            direct, parts, counts, observed, compared, chunk.start
+        )
         on_object += sums[:2]
         if len(parts) == 2:
             halves += sums[2:]
@@ -179,12 +183,22 @@ def render_with_residual(
     surroundings = None
     if scene.floor is not None:
         surroundings = _surroundings_residual(rendering, ~mask, images, usable, counts)
-    residual = Residual(object=float(on_object[0] / scale), surroundings=surroundings, noise=float(abs(halves[0] - halves[1]) / scale / 2))
+    residual = Residual(
+        object=float(on_object[0] / scale),
+        surroundings=surroundings,
+        noise=float(abs(halves[0] - halves[1]) / scale / 2),
+    )
     return Rerendering(indirect=indirect, residual=residual, noise_energy=noise_energy)
 
 
 def compared_observations(
-    images: np.ndarray, irradiance: np.ndarray, mask: np.ndarray, *, robust: bool, shadow_fraction: float, saturation: float | None
+    images: np.ndarray,
+    irradiance: np.ndarray,
+    mask: np.ndarray,
+    *,
+    robust: bool,
+    shadow_fraction: float,
+    saturation: float | None,
 ) -> np.ndarray:
     """The observations the residual compares: bool (K, H, W, 1).
 
@@ -208,7 +222,9 @@ def compared_observations(
     # One image at a time: no temporary the size of the images.
     if saturation is not None:
         for kept, image in zip(usable, images):
-            kept[..., 0] = ~((image[..., 0] >= saturation) | (image[..., 1] >= saturation) | (image[..., 2] >= saturation))
+            kept[..., 0] = ~(
+                (image[..., 0] >= saturation) | (image[..., 1] >= saturation) | (image[..., 2] >= saturation)
+            )
     if robust:
         # Shadows are told apart on the object only: around it every observation is kept.
         irradiance = np.asarray(irradiance, dtype=np.float32)
@@ -232,15 +248,27 @@ class _Halves:
     """Renders pixels as the residual needs them: the direct image, and the inter-reflected
     light of each half of the camera paths (traced, or taken from sparse frames)."""
 
-    def __init__(self, renderer, bounces: int, counts: tuple[int, ...], seeds: tuple[int, int], seed: int, stride: int) -> None:
-        self.renderer, self.bounces, self.counts, self.seeds, self.seed, self.stride = renderer, bounces, counts, seeds, seed, stride
+    def __init__(
+        self, renderer, bounces: int, counts: tuple[int, ...], seeds: tuple[int, int], seed: int, stride: int
+    ) -> None:
+        self.renderer, self.bounces, self.counts, self.seeds, self.seed, self.stride = (
+            renderer,
+            bounces,
+            counts,
+            seeds,
+            seed,
+            stride,
+        )
 
     def sparse(self, pixels: np.ndarray) -> list[np.ndarray] | None:
         """With a stride above 1, each half's inter-reflected light at the listed pixels of
         the bool image `pixels`, rendered sparsely and interpolated: (K, N, 3) each."""
         if self.stride == 1:
             return None
-        return [render_sparse(self.renderer, pixels, self.bounces, count, half_seed, self.stride)[:, pixels] for count, half_seed in zip(self.counts, self.seeds)]
+        return [
+            render_sparse(self.renderer, pixels, self.bounces, count, half_seed, self.stride)[:, pixels]
+            for count, half_seed in zip(self.counts, self.seeds)
+        ]
 
     def pixels(self, pixels: np.ndarray, sparse: list[np.ndarray] | None) -> tuple[np.ndarray, list[np.ndarray]]:
         """(direct (K, n, 3), [each half's inter-reflected light (K, n, 3)]) at the listed
@@ -248,14 +276,18 @@ class _Halves:
         listed = pixels.tolist()
         if sparse is not None:
             return self.renderer.render_pixels(listed, 0, 1, DIRECT_SAMPLES, self.seed, False, True)[0], sparse
-        planes = self.renderer.render_pixels(listed, self.bounces, self.counts[0], DIRECT_SAMPLES, self.seeds[0], False, True)
+        planes = self.renderer.render_pixels(
+            listed, self.bounces, self.counts[0], DIRECT_SAMPLES, self.seeds[0], False, True
+        )
         parts = [planes[1]]
         if len(self.counts) == 2:
             parts.append(self.renderer.render_pixels(listed, self.bounces, self.counts[1], 0, self.seeds[1], False)[0])
         return planes[0], parts
 
 
-def _surroundings_residual(rendering: _Halves, around: np.ndarray, images: np.ndarray, usable: np.ndarray | None, counts: tuple[int, ...]) -> float | None:
+def _surroundings_residual(
+    rendering: _Halves, around: np.ndarray, images: np.ndarray, usable: np.ndarray | None, counts: tuple[int, ...]
+) -> float | None:
     """The residual over the pixels of the bool image `around`: every observation that is
     not saturated (`usable`); None when there is none."""
     pixels = np.flatnonzero(around)
@@ -265,7 +297,9 @@ def _surroundings_residual(rendering: _Halves, around: np.ndarray, images: np.nd
         direct, parts = rendering.pixels(pixels[chunk], None if sparse is None else [half[:, chunk] for half in sparse])
         rows, cols = np.unravel_index(pixels[chunk], around.shape)
         keep = None if usable is None else usable[:, rows, cols, 0]
-        sums += _core.compare_rendering(direct, parts, counts, np.asarray(images[:, rows, cols], dtype=np.float32), keep)[2][:2]
+        sums += _core.compare_rendering(
+            direct, parts, counts, np.asarray(images[:, rows, cols], dtype=np.float32), keep
+        )[2][:2]
     return float(sums[0] / sums[1]) if sums[1] > 0 else None
 
 

@@ -208,7 +208,9 @@ def parse_scene(obj: object, source: str = "scene.json") -> Scene:
     floor = None if root["floor"] is None else _parse_floor(fields, root["floor"])
     floor_height = 0.0 if floor is None else floor.height
     environment = _parse_environment(fields, root["environment"], floor_height)
-    return Scene(camera=camera, lights=lights, floor=floor, environment=environment, relative_irradiance=irradiance == "relative")
+    return Scene(
+        camera=camera, lights=lights, floor=floor, environment=environment, relative_irradiance=irradiance == "relative"
+    )
 
 
 def scene_to_dict(scene: Scene) -> dict:
@@ -347,7 +349,10 @@ def _parse_camera(fields: _Fields, value: object) -> Camera:
         fields.fail("camera", f"size {width}x{height} exceeds the largest supported image ({MAX_IMAGE_PIXELS} pixels)")
     pixel_size = fields.positive_number(camera["pixel_size"], "camera.pixel_size")
     if not MIN_PIXEL_SIZE <= pixel_size <= MAX_PIXEL_SIZE:
-        fields.fail("camera.pixel_size", f"{pixel_size:g} is out of range: expected a number from {MIN_PIXEL_SIZE:g} to {MAX_PIXEL_SIZE:g} (world units per pixel)")
+        fields.fail(
+            "camera.pixel_size",
+            f"{pixel_size:g} is out of range: expected a number from {MIN_PIXEL_SIZE:g} to {MAX_PIXEL_SIZE:g} (world units per pixel)",
+        )
     return Camera(width=width, height=height, pixel_size=pixel_size)
 
 

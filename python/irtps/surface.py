@@ -92,7 +92,12 @@ def footprint_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 
     weight = np.zeros((rows, cols))
     # The quarter of block (i, j) nearest its corner (i, j) lies in triangle 1, the one
     # nearest (i+1, j+1) in triangle 2, and the other two quarters half in each.
-    for (r, c), part in (((slice(None, -1), slice(None, -1)), first), ((slice(1, None), slice(1, None)), second), ((slice(1, None), slice(None, -1)), split), ((slice(None, -1), slice(1, None)), split)):
+    for (r, c), part in (
+        ((slice(None, -1), slice(None, -1)), first),
+        ((slice(1, None), slice(1, None)), second),
+        ((slice(1, None), slice(None, -1)), split),
+        ((slice(None, -1), slice(1, None)), split),
+    ):
         normals[r, c] += np.where(meshed[..., None], part, 0.0)
         weight[r, c] += meshed
     return normals / np.maximum(weight, 1.0)[..., None]
@@ -113,7 +118,9 @@ def meshed_blocks(mask: np.ndarray) -> np.ndarray:
     return mask[:-1, :-1] & mask[1:, :-1] & mask[:-1, 1:] & mask[1:, 1:]
 
 
-def surface_albedo(albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0, *, largest: float | None = 1.0) -> np.ndarray:
+def surface_albedo(
+    albedo_ps: np.ndarray, height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0, *, largest: float | None = 1.0
+) -> np.ndarray:
     """The albedo of the triangulated surface that explains photometric stereo's fit.
 
     Photometric stereo measures ``ρ·n̄``, with ``n̄`` the mean unit normal over the pixel's

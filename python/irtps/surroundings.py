@@ -99,7 +99,12 @@ def mesh_coverage(mask: np.ndarray) -> np.ndarray:
     mask = np.asarray(mask, dtype=bool)
     meshed = meshed_blocks(mask).astype(np.float64)
     quarters = np.zeros(mask.shape)
-    for rows, cols in ((slice(None, -1), slice(None, -1)), (slice(1, None), slice(1, None)), (slice(1, None), slice(None, -1)), (slice(None, -1), slice(1, None))):
+    for rows, cols in (
+        (slice(None, -1), slice(None, -1)),
+        (slice(1, None), slice(1, None)),
+        (slice(1, None), slice(None, -1)),
+        (slice(None, -1), slice(1, None)),
+    ):
         quarters[rows, cols] += meshed
     return np.where(mask, quarters / 4.0, 0.0)
 
@@ -110,7 +115,9 @@ def edge_pixels(mask: np.ndarray) -> np.ndarray:
     return mask & (mesh_coverage(mask) < 1.0)
 
 
-def surroundings_light(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np.ndarray, *, seed: int = 0) -> SurroundingsLight:
+def surroundings_light(
+    scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np.ndarray, *, seed: int = 0
+) -> SurroundingsLight:
     """The direct light of the floor and box seen in the object's edge pixels.
 
     Parameters
@@ -155,7 +162,9 @@ def surroundings_light(scene: Scene, height: np.ndarray, albedo: np.ndarray, mas
 
     def rendered(offset: float) -> np.ndarray:
         moved = np.where(mask, np.asarray(height, dtype=np.float32) + np.float32(offset), 0).astype(np.float32)
-        return make_renderer(scene, moved, black, mask).render_pixels(pixels, 0, 1, DIRECT_SAMPLES, seed, False, True)[0]
+        return make_renderer(scene, moved, black, mask).render_pixels(pixels, 0, 1, DIRECT_SAMPLES, seed, False, True)[
+            0
+        ]
 
     seen = rendered(0.0)
     change = np.maximum(*(np.abs(rendered(offset) - seen).sum(axis=2) for offset in (-step, step))).max(axis=0)

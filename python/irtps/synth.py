@@ -43,7 +43,9 @@ def _cavity(size: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray
     top, bowl_radius, depth = 0.3 * size, 0.3 * size, 0.2 * size
     sphere_radius = (bowl_radius**2 + depth**2) / (2 * depth)
     r2 = rows**2 + cols**2
-    dent = np.where(r2 < bowl_radius**2, np.sqrt(np.clip(sphere_radius**2 - r2, 0, None)) - (sphere_radius - depth), 0.0)
+    dent = np.where(
+        r2 < bowl_radius**2, np.sqrt(np.clip(sphere_radius**2 - r2, 0, None)) - (sphere_radius - depth), 0.0
+    )
     return np.where(mask, top - dent, 0.0), mask
 
 
@@ -134,7 +136,9 @@ def make_albedo(mask: np.ndarray, pattern: str, rng: np.random.Generator, colour
     if pattern == "uniform":
         albedo = np.broadcast_to(np.asarray(colour, dtype=np.float64), (*size, 3)).copy()
     elif pattern == "textured":
-        noise = np.stack([ndimage.gaussian_filter(rng.standard_normal(size), sigma=max(size) / 16) for _ in range(3)], axis=-1)
+        noise = np.stack(
+            [ndimage.gaussian_filter(rng.standard_normal(size), sigma=max(size) / 16) for _ in range(3)], axis=-1
+        )
         noise /= np.abs(noise).max()
         albedo = 0.55 + 0.35 * noise
     else:
@@ -202,7 +206,10 @@ def synthesize(
     if base is not None:
         height = place_height(height, mask, base_height=base, per_component=False)
         if height[mask].min() < 0:
-            raise OptionError("base", f"{base:g} puts part of the {shape} below the floor (its lowest point is {-height[mask].min() + base:.3g} below its boundary)")
+            raise OptionError(
+                "base",
+                f"{base:g} puts part of the {shape} below the floor (its lowest point is {-height[mask].min() + base:.3g} below its boundary)",
+            )
     height = np.where(mask, height, 0.0).astype(np.float32)
     has_floor = environment == "cornell" if floor is None else floor
     box = None
@@ -218,6 +225,8 @@ def synthesize(
     )
     albedo_map = make_albedo(mask, albedo, rng)
     rendering = render(scene, height, albedo_map, mask, bounces=bounces, samples=samples, seed=seed, progress=progress)
-    truth = GroundTruth(height=height, normal=height_to_normals(height, mask), albedo=albedo_map, direct=rendering.direct)
+    truth = GroundTruth(
+        height=height, normal=height_to_normals(height, mask), albedo=albedo_map, direct=rendering.direct
+    )
     dataset = Dataset(scene=scene, images=rendering.images, mask=mask, gt=truth, source=f"synth:{shape}")
     return dataset, rendering

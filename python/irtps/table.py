@@ -27,16 +27,26 @@ ROWS = (
 def method_names(bounces: Sequence[int], paper: bool = True) -> list[str]:
     """Column names: ``PS``, ``IRTPSr1`` … for each bounce count, then (with `paper`) the
     paper's estimator ``Paper-r1`` … for the counts it takes (1 to 3)."""
-    return ["PS"] + [f"IRTPSr{r}" for r in bounces] + ([f"Paper-r{r}" for r in bounces if r in PAPER_BOUNCES] if paper else [])
+    return (
+        ["PS"]
+        + [f"IRTPSr{r}" for r in bounces]
+        + ([f"Paper-r{r}" for r in bounces if r in PAPER_BOUNCES] if paper else [])
+    )
 
 
 def _runs(options: TableOptions) -> list[tuple[str, ReconstructOptions]]:
     """(column, reconstruction options) for each column."""
-    irtps = ReconstructOptions(method="irtps", iterations=options.iterations, samples=options.samples, seed=options.seed)
+    irtps = ReconstructOptions(
+        method="irtps", iterations=options.iterations, samples=options.samples, seed=options.seed
+    )
     runs = [("PS", ReconstructOptions(method="ps"))]
     runs += [(f"IRTPSr{r}", dataclasses.replace(irtps, bounces=r)) for r in options.bounces]
     if options.paper:
-        runs += [(f"Paper-r{r}", dataclasses.replace(irtps, bounces=r, estimator="paper", update="previous")) for r in options.bounces if r in PAPER_BOUNCES]
+        runs += [
+            (f"Paper-r{r}", dataclasses.replace(irtps, bounces=r, estimator="paper", update="previous"))
+            for r in options.bounces
+            if r in PAPER_BOUNCES
+        ]
     return runs
 
 
@@ -85,7 +95,9 @@ def comparison_table(
     names = [name for name, _ in datasets]
     repeated = sorted({name for name in names if names.count(name) > 1})
     if repeated:
-        raise ArgumentError("datasets", f"the name {repeated[0]!r} is given to more than one data set (names must be distinct)")
+        raise ArgumentError(
+            "datasets", f"the name {repeated[0]!r} is given to more than one data set (names must be distinct)"
+        )
     methods = method_names(options.bounces, options.paper)
     per_dataset: dict[str, dict[str, dict]] = {}
     for name, data in datasets:
@@ -94,7 +106,9 @@ def comparison_table(
         per_dataset[name] = {}
         for method, run in _runs(options):
             result = reconstruct(data, options=run)
-            metrics = evaluate(mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=data.gt)
+            metrics = evaluate(
+                mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=data.gt
+            )
             per_dataset[name][method] = metrics.to_dict()
             if on_result is not None:
                 on_result(name, method, result)
@@ -102,7 +116,9 @@ def comparison_table(
     for method in methods:
         overall[method] = {}
         for _, key in ROWS:
-            values = [per_dataset[name][method][key] for name in per_dataset if per_dataset[name][method][key] is not None]
+            values = [
+                per_dataset[name][method][key] for name in per_dataset if per_dataset[name][method][key] is not None
+            ]
             overall[method][key] = float(np.mean(values)) if values else None
     return {
         "methods": methods,
@@ -134,5 +150,9 @@ def format_table(table: dict) -> str:
         lines.append("")
     text = "\n".join(lines).rstrip() + "\n"
     fitted = table.get("images_fitted", {})
-    left_out = [f"{name}: {format_images_fitted(fitted[name], excluded)}" for name, excluded in table.get("excluded_images", {}).items() if excluded]
+    left_out = [
+        f"{name}: {format_images_fitted(fitted[name], excluded)}"
+        for name, excluded in table.get("excluded_images", {}).items()
+        if excluded
+    ]
     return text + "\n" + "\n".join(left_out) + "\n" if left_out else text
