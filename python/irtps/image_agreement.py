@@ -74,9 +74,9 @@ class ImageAgreement:
         """
         try:
             figures = [
-                np.array([np.nan if value is None else value for value in record[name]], dtype=np.float64)
+                np.array([np.nan if value is None else value for value in record[name]], dtype=np.float64)  # type: ignore[index]
                 for name in ("brightness", "spread")
-            ]  # type: ignore[index]
+            ]
         except (KeyError, TypeError, ValueError):
             figures = []
         if len(figures) != 2 or figures[0].shape != figures[1].shape or figures[0].ndim != 1:
