@@ -37,7 +37,7 @@ except ImportError:  # pragma: no cover - depends on the environment
     sys.exit("embree_compare.py needs Embree's Python bindings: pip install embreex")
 
 from irtps import _core
-from irtps.scene import CornellBox, Floor
+from irtps.model.scene import CornellBox, Floor
 
 OFFSET = 1e-3
 

@@ -1,4 +1,4 @@
-"""Benchmark of normal integration (irtps.integrate) on masked fields.
+"""Benchmark of normal integration (irtps.geometry.integrate) on masked fields.
 
 A smooth surface (a spherical cap plus ripples) seen through a disc mask, its exact
 normals integrated with ``method="ls"`` and ``method="mestimator"`` (also on normals with
@@ -36,8 +36,8 @@ import time
 
 import numpy as np
 
-from irtps import integrate as integ
-from irtps.integrate import integrate_normals
+from irtps.geometry import integrate as integ
+from irtps.geometry.integrate import integrate_normals
 
 
 def field(n: int, outliers: float = 0.0, seed: int = 0):
@@ -253,7 +253,7 @@ def main(argv=None):
         import scipy
 
         report = {
-            "benchmark": "normal integration (irtps.integrate.integrate_normals)",
+            "benchmark": "normal integration (irtps.geometry.integrate.integrate_normals)",
             "machine": {"cores": os.cpu_count(), "platform": platform.platform(), "load_average": load},
             "versions": {
                 "python": sys.version.split()[0],

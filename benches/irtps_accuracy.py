@@ -28,8 +28,8 @@ from pathlib import Path
 
 import irtps
 from irtps.errors import IrtpsWarning
-from irtps.options import ReconstructOptions
-from irtps.pipeline import choose_dataset_robust, fit_photometric_stereo, resolve_options
+from irtps.model.options import ReconstructOptions
+from irtps.irt.pipeline import choose_dataset_robust, fit_photometric_stereo, resolve_options
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--samples", type=int, help="camera paths per pixel of IRT-PS's estimates (default: irtps's)")
     parser.add_argument(
-        "--no-denoise", action="store_true", help="IRT-PS without the filter of its estimates (irtps.denoise)"
+        "--no-denoise", action="store_true", help="IRT-PS without the filter of its estimates (irtps.render.denoise)"
     )
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)

@@ -35,9 +35,9 @@ import numpy as np
 from irtps_accuracy import angular_error, floor_error
 
 import irtps
-from irtps.data import Dataset, GroundTruth
+from irtps.model.data import Dataset, GroundTruth
 from irtps.errors import IrtpsWarning
-from irtps.scene import Light
+from irtps.model.scene import Light
 
 #: (label, synthesize keywords)
 CASES = [
@@ -108,7 +108,7 @@ def mitsuba_dataset(mi, variant: str, keywords: dict, seed: int, changes: dict |
     `MITSUBA_VARIATIONS`), rendered by Mitsuba."""
     from mitsuba_compare import MitsubaScene
 
-    from irtps.render import make_renderer, render
+    from irtps.render.renderer import make_renderer, render
 
     changes = changes or {}
     geometry, _ = irtps.synthesize(size=80, lights=12, bounces=0, samples=1, **keywords)

@@ -6,7 +6,7 @@ Cornell box with a floor, 128×128 pixels, 20 lights). Both renderers produce it
 component: bounces 1..r (r = ``--bounces``, default 3) for every light, each pixel averaged
 over its square footprint, as the scene contract defines it.
 
-- **irtps**: ``irtps.render.render_indirect``, one call for all lights (each traced path
+- **irtps**: ``irtps.render.renderer.render_indirect``, one call for all lights (each traced path
   serves every light). Its time includes building the BVH and the light-visibility cache.
 - **Mitsuba 3**: the very same triangles (``Renderer.mesh_arrays()``: height field, skirt,
   floor and walls, per-vertex albedo as a ``vertex_color`` mesh attribute), one-sided
@@ -427,7 +427,7 @@ class ErrorMeter:
 
 
 def timed_irtps(case, spp: int, seed: int, repeats: int):
-    from irtps.render import render_indirect
+    from irtps.render.renderer import render_indirect
 
     times, image = [], None
     for r in range(repeats):
@@ -450,7 +450,7 @@ class Case:
 
 
 def make_case(args) -> Case:
-    from irtps.synth import synthesize
+    from irtps.render.synth import synthesize
 
     # The data set's images (direct + 4 bounces at 64 paths) feed only the IRT-PS iteration.
     dataset, _ = synthesize(
@@ -470,7 +470,7 @@ def make_case(args) -> Case:
 def check_direct(ms: MitsubaScene, case: Case, lights: list[int], seed: int) -> dict:
     """Mitsuba's direct-only images against irtps's, both with DIRECT_SAMPLES per pixel
     (fewer leave per-pixel errors of several percent where a shadow edge crosses a crease)."""
-    from irtps.render import render
+    from irtps.render.renderer import render
 
     ours = render(
         case.scene,
@@ -536,7 +536,7 @@ def time_iteration(case: Case, samples: int, repeats: int, seed: int) -> dict:
     """Seconds of one IRT-PS pass (photometric stereo, integration, indirect estimate with the
     residual's direct image); the placement is given, as its search runs once per data set."""
     from irtps.errors import IrtpsWarning
-    from irtps.interreflection import remove_interreflections
+    from irtps.irt.interreflection import remove_interreflections
 
     totals, stages = [], []
     with warnings.catch_warnings():
@@ -578,7 +578,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.exit("no usable Mitsuba variant")
 
     from irtps import __version__ as irtps_version
-    from irtps.render import make_renderer
+    from irtps.render.renderer import make_renderer
 
     case = make_case(args)
     renderer = make_renderer(case.scene, case.height, case.albedo, case.mask)
@@ -625,7 +625,7 @@ def main(argv: list[str] | None = None) -> int:
     )
 
     # 3. Sweeps, taking turns so that load from other processes affects both alike.
-    from irtps.render import render_indirect
+    from irtps.render.renderer import render_indirect
 
     render_indirect(case.scene, case.height, case.albedo, case.mask, bounces=args.bounces, samples=1, seed=0)  # warm-up
     irtps_curve = Curve("irtps")
@@ -748,7 +748,7 @@ def main(argv: list[str] | None = None) -> int:
     # 5. One IRT-PS iteration.
     counts = args.iteration_samples
     if counts is None:
-        from irtps.options import ReconstructOptions
+        from irtps.model.options import ReconstructOptions
 
         counts = sorted(
             {ReconstructOptions().samples, 256}

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 import irtps
-from irtps.ps import ROBUST_MODES, choose_robust, lobe_share, photometric_stereo
+from irtps.ps.fit import ROBUST_MODES, choose_robust, lobe_share, photometric_stereo
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 #: (Blinn-Phong exponent, highlight strength, share of observations in soft cast shadow)

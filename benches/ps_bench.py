@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 from irtps import _core
-from irtps.ps import ROBUST_MODES, lobe_share, photometric_stereo
+from irtps.ps.fit import ROBUST_MODES, lobe_share, photometric_stereo
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "diligent"
 

@@ -12,7 +12,7 @@ aluminium and copper). Paths of up to 4 bounces (``max_depth`` 6), ``--samples``
 For each, the mean angular error of every ``--robust`` mode against the height field's
 normals (scene contract §2), how far ``auto`` (the default) is below plain least squares, and
 the share of the object's pixels that take a lobe in ``auto``'s check (``irtps.lobe_share``,
-the lobe fit cut to ``irtps.ps.LOBE_CHECK_ROUNDS`` rounds, from which ``auto`` picks
+the lobe fit cut to ``irtps.ps.fit.LOBE_CHECK_ROUNDS`` rounds, from which ``auto`` picks
 ``lobe``, from one half on, or ``tukey``). With ``--irtps``, also
 the error of ``irtps.reconstruct``'s IRT-PS (defaults; the object's own inter-reflections, in
 a scene of the shape alone with the render's lights) beside its classic photometric stereo:
@@ -44,10 +44,10 @@ from ps_accuracy import COLUMNS, mode_errors
 import irtps
 from irtps import height_to_normals, integrate_normals
 from irtps.errors import IrtpsWarning
-from irtps.evaluate import angular_error_deg
-from irtps.render import make_renderer
-from irtps.scene import Camera, Light, Scene
-from irtps.synth import SHAPES
+from irtps.evaluate.metrics import angular_error_deg
+from irtps.render.renderer import make_renderer
+from irtps.model.scene import Camera, Light, Scene
+from irtps.render.synth import SHAPES
 
 DILIGENT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "diligent"
 #: Diffuse reflectance of the Lambertian and plastic materials' base.

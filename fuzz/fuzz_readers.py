@@ -3,12 +3,12 @@
 Targets (the first argument):
 
 ``exr``
-    `irtps.imageio.read_image` on an ``.exr`` file holding the input bytes (the Rust
+    `irtps.io.imageio.read_image` on an ``.exr`` file holding the input bytes (the Rust
     OpenEXR reader, channel checks, the finite-value check).
 ``png``
     The same on a ``.png`` file (the Rust PNG reader).
 ``scene``
-    `irtps.scene.load_scene` on a ``scene.json`` holding the input bytes.
+    `irtps.model.scene.load_scene` on a ``scene.json`` holding the input bytes.
 ``dataset``
     `irtps.load_dataset` on a tiny data set folder, irtps or DiLiGenT layout, one of
     whose files is replaced by the input: its first byte picks the file, the rest is
@@ -44,10 +44,10 @@ import scipy.io
 
 with atheris.instrument_imports(include=["irtps"]):
     from irtps import _core
-    from irtps.dataset import load_dataset
+    from irtps.io.dataset import load_dataset
     from irtps.errors import DatasetError
-    from irtps.imageio import read_image
-    from irtps.scene import load_scene
+    from irtps.io.imageio import read_image
+    from irtps.model.scene import load_scene
 
 FIXTURES = Path(__file__).resolve().parents[1] / "tests" / "data"
 MITSUBA = FIXTURES / "mitsuba_small" / "cap_cornell"

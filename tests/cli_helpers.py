@@ -5,7 +5,7 @@ import signal
 from pathlib import Path
 
 from irtps import _core
-from irtps.cli import main
+from irtps.cli.main import main
 
 
 def refused(argv, capsys) -> str:

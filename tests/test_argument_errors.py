@@ -12,13 +12,22 @@ import pytest
 import irtps
 from irtps import _core
 from irtps.errors import ArgumentError
-from irtps.options import OptionError
-from irtps.synth import synthesize
+from irtps.model.options import OptionError
+from irtps.render.synth import synthesize
 
 #: The modules whose `__all__` functions take arrays, besides those `irtps` exports itself.
-ARRAY_MODULES = ["display", "evaluate", "figures", "integrate", "interreflection", "mesh", "residual", "surface"]
+ARRAY_MODULES = [
+    "report.display",
+    "evaluate.metrics",
+    "report.figures",
+    "geometry.integrate",
+    "irt.interreflection",
+    "io.mesh",
+    "render.residual",
+    "geometry.surface",
+]
 #: Functions that only format a record for printing: they take no argument to check.
-FORMATTING = {"irtps.evaluate.format_metrics"}
+FORMATTING = {"irtps.evaluate.metrics.format_metrics"}
 
 MASK = np.ones((4, 4), bool)
 EMPTY = np.zeros((4, 4), bool)
@@ -57,33 +66,33 @@ def _canonical(dotted: str) -> str:
 
 #: (function, call with one bad argument, the text the message must start with)
 CASES = {
-    "irtps.display.object_window": (lambda f: f(EMPTY), "mask: "),
-    "irtps.display.normal_to_rgb": (lambda f: f(NORMALS[:, :, :2], MASK), "normals: "),
-    "irtps.display.albedo_to_rgb": (lambda f: f(np.full((4, 4, 3), np.nan), MASK), "albedo: "),
-    "irtps.display.radiance_to_rgb": (lambda f: f(ALBEDO, WRONG), "mask: "),
-    "irtps.display.hillshade": (lambda f: f(HEIGHT, MASK, pixel_size=0), "pixel_size: "),
-    "irtps.evaluate.angular_error_deg": (lambda f: f(NORMALS, NORMALS[:3], MASK), "normals_gt: "),
-    "irtps.evaluate.evaluate": (lambda f: f(mask=MASK, height=WRONG, gt=None), "height: "),
-    "irtps.evaluate.error_maps": (lambda f: f(mask=MASK, gt=None, base_height=np.inf), "base_height: "),
-    "irtps.figures.image_png": (lambda f: f(HEIGHT, "t"), "rgb: "),
-    "irtps.figures.error_map_png": (lambda f: f(np.full((2, 2), np.nan), "t", "u"), "errors: "),
-    "irtps.figures.convergence_png": (lambda f: f([0, 1], [1.0], [0.1, 0.2]), "passes: "),
-    "irtps.figures.agreement_png": (lambda f: f(["a.png"], [np.nan], [np.nan]), "brightness: "),
-    "irtps.integrate.integrate_normals": (lambda f: f(NORMALS, method="poisson"), "method: "),
-    "irtps.integrate.normals_to_gradients": (lambda f: f(NORMALS, max_slope=-1), "max_slope: "),
-    "irtps.integrate.place_height": (lambda f: f(HEIGHT, WRONG), "mask: "),
-    "irtps.integrate.mask_boundary": (lambda f: f(np.zeros(4, bool)), "mask: "),
-    "irtps.interreflection.remove_interreflections": (lambda f: f(_dataset(), bounces=0), "bounces: "),
-    "irtps.interreflection.check_traceable": (lambda f: f({"mask": MASK}), "dataset: "),
-    "irtps.surface.meshed_blocks": (lambda f: f(np.zeros(4, bool)), "mask: "),
-    "irtps.mesh.height_field_mesh": (lambda f: f(HEIGHT, MASK, albedo=ALBEDO[:3]), "albedo: "),
-    "irtps.mesh.write_ply": (lambda f: f("unused.ply", np.zeros((3, 3)), np.array([[0, 1, 5]])), "faces: "),
-    "irtps.mesh.write_obj": (lambda f: f("unused.obj", np.zeros((3, 2)), np.zeros((0, 3), int)), "vertices: "),
-    "irtps.residual.compared_observations": (
+    "irtps.report.display.object_window": (lambda f: f(EMPTY), "mask: "),
+    "irtps.report.display.normal_to_rgb": (lambda f: f(NORMALS[:, :, :2], MASK), "normals: "),
+    "irtps.report.display.albedo_to_rgb": (lambda f: f(np.full((4, 4, 3), np.nan), MASK), "albedo: "),
+    "irtps.report.display.radiance_to_rgb": (lambda f: f(ALBEDO, WRONG), "mask: "),
+    "irtps.report.display.hillshade": (lambda f: f(HEIGHT, MASK, pixel_size=0), "pixel_size: "),
+    "irtps.evaluate.metrics.angular_error_deg": (lambda f: f(NORMALS, NORMALS[:3], MASK), "normals_gt: "),
+    "irtps.evaluate.metrics.evaluate": (lambda f: f(mask=MASK, height=WRONG, gt=None), "height: "),
+    "irtps.evaluate.metrics.error_maps": (lambda f: f(mask=MASK, gt=None, base_height=np.inf), "base_height: "),
+    "irtps.report.figures.image_png": (lambda f: f(HEIGHT, "t"), "rgb: "),
+    "irtps.report.figures.error_map_png": (lambda f: f(np.full((2, 2), np.nan), "t", "u"), "errors: "),
+    "irtps.report.figures.convergence_png": (lambda f: f([0, 1], [1.0], [0.1, 0.2]), "passes: "),
+    "irtps.report.figures.agreement_png": (lambda f: f(["a.png"], [np.nan], [np.nan]), "brightness: "),
+    "irtps.geometry.integrate.integrate_normals": (lambda f: f(NORMALS, method="poisson"), "method: "),
+    "irtps.geometry.integrate.normals_to_gradients": (lambda f: f(NORMALS, max_slope=-1), "max_slope: "),
+    "irtps.geometry.integrate.place_height": (lambda f: f(HEIGHT, WRONG), "mask: "),
+    "irtps.geometry.integrate.mask_boundary": (lambda f: f(np.zeros(4, bool)), "mask: "),
+    "irtps.irt.interreflection.remove_interreflections": (lambda f: f(_dataset(), bounces=0), "bounces: "),
+    "irtps.irt.interreflection.check_traceable": (lambda f: f({"mask": MASK}), "dataset: "),
+    "irtps.geometry.surface.meshed_blocks": (lambda f: f(np.zeros(4, bool)), "mask: "),
+    "irtps.io.mesh.height_field_mesh": (lambda f: f(HEIGHT, MASK, albedo=ALBEDO[:3]), "albedo: "),
+    "irtps.io.mesh.write_ply": (lambda f: f("unused.ply", np.zeros((3, 3)), np.array([[0, 1, 5]])), "faces: "),
+    "irtps.io.mesh.write_obj": (lambda f: f("unused.obj", np.zeros((3, 2)), np.zeros((0, 3), int)), "vertices: "),
+    "irtps.render.residual.compared_observations": (
         lambda f: f(np.zeros((3, 4, 4, 3)), np.ones((3, 3)), WRONG, robust=True, shadow_fraction=0.05, saturation=None),
         "mask: ",
     ),
-    "irtps.residual.render_with_residual": (
+    "irtps.render.residual.render_with_residual": (
         lambda f: f(
             _scene(),
             np.zeros((8, 8)),
@@ -95,32 +104,32 @@ CASES = {
         ),
         "samples: ",
     ),
-    "irtps.surface.height_to_normals": (lambda f: f(HEIGHT, WRONG), "mask: "),
-    "irtps.surface.footprint_normals": (lambda f: f(HEIGHT, MASK, pixel_size=-1.0), "pixel_size: "),
-    "irtps.surface.surface_albedo": (lambda f: f(ALBEDO[:, :2], HEIGHT, MASK), "albedo_ps: "),
-    "irtps.ps.photometric_stereo": (
+    "irtps.geometry.surface.height_to_normals": (lambda f: f(HEIGHT, WRONG), "mask: "),
+    "irtps.geometry.surface.footprint_normals": (lambda f: f(HEIGHT, MASK, pixel_size=-1.0), "pixel_size: "),
+    "irtps.geometry.surface.surface_albedo": (lambda f: f(ALBEDO[:, :2], HEIGHT, MASK), "albedo_ps: "),
+    "irtps.ps.fit.photometric_stereo": (
         lambda f: f(np.zeros((3, 4, 4, 3)), LIGHTS, np.ones((3, 3)), robust="huber"),
         "robust: ",
     ),
-    "irtps.ps.lobe_share": (lambda f: f(np.zeros((3, 4, 4, 3)), LIGHTS, np.ones((3, 3)), sample=0), "sample: "),
-    "irtps.ps.choose_robust": (lambda f: f(1.5), "share: "),
-    "irtps.render.render": (
+    "irtps.ps.fit.lobe_share": (lambda f: f(np.zeros((3, 4, 4, 3)), LIGHTS, np.ones((3, 3)), sample=0), "sample: "),
+    "irtps.ps.fit.choose_robust": (lambda f: f(1.5), "share: "),
+    "irtps.render.renderer.render": (
         lambda f: f(_scene(), np.zeros((8, 8)), np.full((8, 8, 3), 0.5), WRONG, bounces=1, samples=4),
         "mask: ",
     ),
-    "irtps.render.render_indirect": (
+    "irtps.render.renderer.render_indirect": (
         lambda f: f(_scene(), np.zeros((8, 9)), np.full((8, 8, 3), 0.5), np.ones((8, 8), bool), stride=0),
         "stride: ",
     ),
-    "irtps.reconstruct.reconstruct": (lambda f: f(_dataset(), method="magic"), "method: "),
-    "irtps.reconstruct.save_reconstruction": (lambda f: f(_dataset(), "unused"), "result: "),
-    "irtps.synth.synthesize": (lambda f: f("cube"), "shape: "),
-    "irtps.dataset.load_dataset": (lambda f: f("no/such/folder"), "no/such/folder: "),
-    "irtps.image_selection.exclude_images": (lambda f: f(_dataset(), "5-1"), "exclude_images: "),
-    "irtps.dataset.load_ground_truth": (lambda f: f("no/such/folder", (4, 4)), "no/such/folder: "),
-    "irtps.dataset.load_scene_object": (lambda f: f("no/such/folder"), "no/such/folder"),
-    "irtps.dataset.save_dataset": (lambda f: f(_dataset(), "unused", extra={"../x.exr": HEIGHT}), "extra: "),
-    "irtps.scene.load_scene": (lambda f: f("no/such/scene.json"), "no/such/scene.json: "),
+    "irtps.irt.reconstruct.reconstruct": (lambda f: f(_dataset(), method="magic"), "method: "),
+    "irtps.irt.reconstruct.save_reconstruction": (lambda f: f(_dataset(), "unused"), "result: "),
+    "irtps.render.synth.synthesize": (lambda f: f("cube"), "shape: "),
+    "irtps.io.dataset.load_dataset": (lambda f: f("no/such/folder"), "no/such/folder: "),
+    "irtps.io.image_selection.exclude_images": (lambda f: f(_dataset(), "5-1"), "exclude_images: "),
+    "irtps.io.dataset.load_ground_truth": (lambda f: f("no/such/folder", (4, 4)), "no/such/folder: "),
+    "irtps.io.dataset.load_scene_object": (lambda f: f("no/such/folder"), "no/such/folder"),
+    "irtps.io.dataset.save_dataset": (lambda f: f(_dataset(), "unused", extra={"../x.exr": HEIGHT}), "extra: "),
+    "irtps.model.scene.load_scene": (lambda f: f("no/such/scene.json"), "no/such/scene.json: "),
 }
 
 

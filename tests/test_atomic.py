@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 from irtps import DatasetError
-from irtps.atomic import atomic_output_dir, atomic_write_bytes, atomic_write_text
+from irtps._shared.atomic import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
 
 class Boom(Exception):
@@ -168,7 +168,7 @@ def test_write_bytes_under_a_file_names_the_folder(tmp_path):
 # when it starts deleting the old output, after the new one is in place.
 WRITER = """
 import os, shutil, sys
-from irtps.atomic import atomic_output_dir, atomic_write_bytes
+from irtps._shared.atomic import atomic_output_dir, atomic_write_bytes
 
 final, kind, when = sys.argv[1], sys.argv[2], sys.argv[3]
 
@@ -382,7 +382,7 @@ def test_nested_writes_in_one_process_do_not_clean_each_other(tmp_path):
 # same output ROUNDS times, each time all of its parts with the stamp WRITER-ROUND.
 RACER = """
 import sys
-from irtps.atomic import atomic_output_dir, atomic_write_bytes
+from irtps._shared.atomic import atomic_output_dir, atomic_write_bytes
 
 final, kind, writer, rounds = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4])
 print("ready", flush=True)

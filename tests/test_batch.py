@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import irtps.batch
+import irtps.batch.run
 from irtps import evaluate, load_dataset, reconstruct
-from irtps.batch import local_cluster, reconstruct_many
-from irtps.cli import main
-from irtps.reconstruct import load_reconstruction
+from irtps.batch.run import local_cluster, reconstruct_many
+from irtps.cli.main import main
+from irtps.irt.reconstruct import load_reconstruction
 
 from cli_helpers import saturate
 
@@ -67,14 +67,14 @@ def test_outputs_match_a_direct_reconstruction_and_a_failure_stops_nothing(clust
 
 def test_a_task_that_dies_is_reported_and_the_others_finish(cluster, three_sets, tmp_path, monkeypatch):
     cap, ball, _ = three_sets
-    real_task = irtps.batch.reconstruct_to_folder
+    real_task = irtps.batch.run.reconstruct_to_folder
 
     def task_losing_the_ball(source, destination, options, **settings):
         if Path(source).name == "ball":
             raise RuntimeError("worker lost")
         return real_task(source, destination, options, **settings)
 
-    monkeypatch.setattr(irtps.batch, "reconstruct_to_folder", task_losing_the_ball)
+    monkeypatch.setattr(irtps.batch.run, "reconstruct_to_folder", task_losing_the_ball)
     results = reconstruct_many([ball, cap], tmp_path / "out", client=cluster)
     assert [(r.status, r.error, r.seconds) for r in results][0] == ("failed", "RuntimeError: worker lost", None)
     assert results[1].status == "ok" and (tmp_path / "out" / "cap" / "normal.exr").is_file()
@@ -263,7 +263,7 @@ def test_warnings_of_a_task_are_printed_with_the_data_set_name_and_recorded(clus
 
 def test_warnings_are_kept_once_and_other_categories_keep_theirs(cluster, three_sets, tmp_path, monkeypatch):
     cap, ball, _ = three_sets
-    real = irtps.batch.load_and_reconstruct
+    real = irtps.batch.run.load_and_reconstruct
 
     def warning_twice(source, **options):
         for _ in range(2):
@@ -272,7 +272,7 @@ def test_warnings_are_kept_once_and_other_categories_keep_theirs(cluster, three_
             warnings.warn("old option", np.exceptions.VisibleDeprecationWarning)
         return real(source, **options)
 
-    monkeypatch.setattr(irtps.batch, "load_and_reconstruct", warning_twice)
+    monkeypatch.setattr(irtps.batch.run, "load_and_reconstruct", warning_twice)
     with warnings.catch_warnings(record=True) as shown:
         warnings.simplefilter("always")
         results = reconstruct_many([cap, ball], tmp_path / "out", client=cluster)
@@ -297,7 +297,7 @@ def test_warnings_are_kept_once_and_other_categories_keep_theirs(cluster, three_
 def test_a_task_records_its_warnings_alone_while_others_run_in_other_threads(tmp_path):
     from concurrent.futures import ThreadPoolExecutor
 
-    from irtps.batch import _recorded_warnings
+    from irtps.batch.run import _recorded_warnings
 
     barrier = threading.Barrier(4)
 
@@ -318,7 +318,7 @@ def test_a_task_records_its_warnings_alone_while_others_run_in_other_threads(tmp
 def test_recording_leaves_other_threads_warnings_and_their_catch_warnings_alone():
     from concurrent.futures import ThreadPoolExecutor
 
-    from irtps.batch import _recorded_warnings
+    from irtps.batch.run import _recorded_warnings
 
     recording, warned, ended = threading.Event(), threading.Event(), threading.Event()
 
@@ -348,8 +348,8 @@ def test_recording_leaves_other_threads_warnings_and_their_catch_warnings_alone(
 
 
 def test_a_stopping_worker_finishes_the_write_under_way_then_exits_and_starts_no_other(monkeypatch, request):
-    tasks, exits, events = irtps.batch._Tasks(), [], []
-    monkeypatch.setattr(irtps.batch.os, "_exit", exits.append)
+    tasks, exits, events = irtps.batch.run._Tasks(), [], []
+    monkeypatch.setattr(irtps.batch.run.os, "_exit", exits.append)
     request.addfinalizer(
         functools.partial(logging.disable, logging.root.manager.disable)
     )  # exit_after_writes silences logging

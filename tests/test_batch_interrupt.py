@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from irtps.dataset import save_dataset
-from irtps.synth import synthesize
+from irtps.io.dataset import save_dataset
+from irtps.render.synth import synthesize
 
 from cli_helpers import interruptible, saturate
 

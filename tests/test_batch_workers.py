@@ -19,10 +19,10 @@ from pathlib import Path
 
 import pytest
 
-import irtps.batch
-from irtps.cli import main
-from irtps.dataset import save_dataset
-from irtps.synth import synthesize
+import irtps.batch.run
+from irtps.cli.main import main
+from irtps.io.dataset import save_dataset
+from irtps.render.synth import synthesize
 
 distributed = pytest.importorskip("distributed")
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="kills worker processes with SIGKILL")
@@ -38,7 +38,7 @@ def dask_setup(worker) -> None:
     flags = os.environ.get(FLAGS)
     if flags is None:
         return
-    real = irtps.batch.load_and_reconstruct
+    real = irtps.batch.run.load_and_reconstruct
 
     def load_and_reconstruct(source, **options):
         name = Path(source).name
@@ -52,7 +52,7 @@ def dask_setup(worker) -> None:
             os.kill(os.getpid(), signal.SIGKILL)
         return real(source, **options)
 
-    irtps.batch.load_and_reconstruct = load_and_reconstruct
+    irtps.batch.run.load_and_reconstruct = load_and_reconstruct
 
 
 @pytest.fixture
@@ -74,7 +74,7 @@ def flags(tmp_path, monkeypatch):
 def received(monkeypatch):
     """A function that waits until the client has received the results of the named data sets."""
     names, arrived = [], threading.Condition()
-    real = irtps.batch._result_of
+    real = irtps.batch.run._result_of
 
     def recording(future, name, source):
         outcome = real(future, name, source)
@@ -83,7 +83,7 @@ def received(monkeypatch):
             arrived.notify_all()
         return outcome
 
-    monkeypatch.setattr(irtps.batch, "_result_of", recording)
+    monkeypatch.setattr(irtps.batch.run, "_result_of", recording)
 
     def wait_for(*expected):
         with arrived:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from irtps import load_dataset
-from irtps.cli import main
+from irtps.cli.main import main
 
 SMALL = Path(__file__).parent / "data" / "mitsuba_small" / "cap_cornell"
 

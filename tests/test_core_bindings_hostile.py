@@ -15,7 +15,7 @@ import pytest
 
 import irtps
 from irtps import ArgumentError, _core
-from irtps.scene import Floor
+from irtps.model.scene import Floor
 
 F32 = np.float32
 LIGHTS = np.array([[0, 0, 1], [0.6, 0, 0.8], [0, 0.6, 0.8], [-0.6, 0, 0.8]], F32)

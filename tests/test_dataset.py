@@ -18,8 +18,8 @@ from irtps import (
     load_dataset,
     save_dataset,
 )
-from irtps.imageio import read_exr, read_image, read_images, read_mask, read_png, write_exr, write_png
-from irtps.scene import scene_to_dict
+from irtps.io.imageio import read_exr, read_image, read_images, read_mask, read_png, write_exr, write_png
+from irtps.model.scene import scene_to_dict
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 MITSUBA = SHARED / "data" / "mitsuba"

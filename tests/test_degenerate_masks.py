@@ -10,9 +10,9 @@ import irtps
 import numpy as np
 import pytest
 from irtps import _core
-from irtps.evaluate import angular_error_deg
-from irtps.interreflection import check_traceable
-from irtps.surroundings import surroundings_light
+from irtps.evaluate.metrics import angular_error_deg
+from irtps.irt.interreflection import check_traceable
+from irtps.render.surroundings import surroundings_light
 
 from cli_helpers import refused
 
@@ -148,7 +148,7 @@ def test_irtps_with_stray_pixels_beside_the_object_gives_finite_results(tmp_path
 @pytest.mark.parametrize("shape", DEGENERATE)
 def test_the_command_prints_no_numpy_warning_on_a_degenerate_mask(tmp_path, capsys, fixture, shape):
     folder = _with_mask(tmp_path, fixture, DEGENERATE[shape])
-    from irtps.cli import main
+    from irtps.cli.main import main
 
     assert main(["reconstruct", str(folder), "--out", str(tmp_path / "ps"), "--method", "ps"]) == 0
     printed = capsys.readouterr().err

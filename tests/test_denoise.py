@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 import irtps
-from irtps.denoise import denoise_indirect
+from irtps.render.denoise import denoise_indirect
 from irtps.errors import ArgumentError
-from irtps.render import render_indirect
-from irtps.residual import render_with_residual
+from irtps.render.renderer import render_indirect
+from irtps.render.residual import render_with_residual
 
 
 @pytest.mark.parametrize("albedo", ["uniform", "textured"])

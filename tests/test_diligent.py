@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.io
 from irtps import DatasetError, _core, load_dataset, save_dataset
-from irtps.diligent import load_diligent
+from irtps.io.diligent import load_diligent
 
 FIXTURE = Path(__file__).resolve().parent / "data" / "diligent_ball_small"
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"

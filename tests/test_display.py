@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from irtps.display import BACKGROUND, albedo_to_rgb, hillshade, normal_to_rgb, object_window, radiance_to_rgb
+from irtps.report.display import BACKGROUND, albedo_to_rgb, hillshade, normal_to_rgb, object_window, radiance_to_rgb
 from irtps.errors import ArgumentError
 
 

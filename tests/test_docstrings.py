@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 import irtps
-from irtps.integrate import METHODS, ROBUST_WEIGHTS, integrate_normals
-from irtps.ps import ROBUST_CHOICES, photometric_stereo
+from irtps.geometry.integrate import METHODS, ROBUST_WEIGHTS, integrate_normals
+from irtps.ps.fit import ROBUST_CHOICES, photometric_stereo
 
 PACKAGE = Path(irtps.__file__).parent
 MODULES = sorted(module.name for module in pkgutil.walk_packages(irtps.__path__, "irtps."))
@@ -27,7 +27,11 @@ def _has_examples(path: Path) -> bool:
     return any(">>>" in (ast.get_docstring(node) or "") for node in nodes)
 
 
-WITH_EXAMPLES = sorted(f"irtps.{path.stem}" for path in PACKAGE.glob("*.py") if _has_examples(path))
+WITH_EXAMPLES = sorted(
+    ".".join(("irtps", *path.relative_to(PACKAGE).with_suffix("").parts))
+    for path in PACKAGE.rglob("*.py")
+    if _has_examples(path)
+)
 
 
 def test_every_module_with_examples_is_collected():

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 from irtps import GroundTruth, IrtpsError
-from irtps.evaluate import Metrics, angular_error_deg, error_maps, evaluate, format_metrics
+from irtps.evaluate.metrics import Metrics, angular_error_deg, error_maps, evaluate, format_metrics
 
 
 def normal_map(*rows):
@@ -262,7 +262,7 @@ def test_irtps_evaluate_refuses_a_normal_map_that_is_not_unit_on_the_mask(tmp_pa
     from pathlib import Path
 
     from irtps import _core
-    from irtps.cli import main
+    from irtps.cli.main import main
 
     from cli_helpers import refused
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from irtps import DatasetError, _core
-from irtps.cli import main
+from irtps.cli.main import main
 
 from cli_helpers import interruptible, saturate
 
@@ -630,7 +630,7 @@ def test_running_out_of_memory_is_a_clear_error(tmp_path, monkeypatch, capsys):
     def allocate(path, **options):
         raise MemoryError("Unable to allocate 90.9 TiB for an array with shape (10000000, 10000000)")
 
-    monkeypatch.setattr(sys.modules["irtps.reconstruct"], "load_dataset", allocate)
+    monkeypatch.setattr(sys.modules["irtps.irt.reconstruct"], "load_dataset", allocate)
     assert main(["reconstruct", str(BALL), "--out", str(tmp_path / "out")]) == 2
     assert capsys.readouterr().err == (
         "irtps: error: not enough memory (Unable to allocate 90.9 TiB for an array with shape (10000000, 10000000))\n"

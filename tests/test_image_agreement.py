@@ -1,4 +1,4 @@
-"""How each image agrees with the fit (`irtps.image_agreement`): exact on Lambertian renders,
+"""How each image agrees with the fit (`irtps.ps.image_agreement`): exact on Lambertian renders,
 a faulty image's factor and a shifted image's spread on a real object, what a run prints and
 records; ``correct_brightness``, which scales each light by its image's brightness."""
 
@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from irtps import ArgumentError, angular_error_deg, load_dataset, reconstruct, synthesize
-from irtps.cli import main
-from irtps.image_agreement import MIN_PIXELS, ImageAgreement, format_image_agreement, image_agreement
+from irtps.cli.main import main
+from irtps.ps.image_agreement import MIN_PIXELS, ImageAgreement, format_image_agreement, image_agreement
 
 FIXTURE = Path(__file__).resolve().parent / "data" / "diligent_ball_small"
 

@@ -1,4 +1,4 @@
-"""Leaving images out of a data set (`irtps.image_selection`, ``load_dataset(exclude_images=)``,
+"""Leaving images out of a data set (`irtps.io.image_selection`, ``load_dataset(exclude_images=)``,
 ``irtps reconstruct --exclude-images``): which images a list names, that they are neither
 read nor fitted, and what a run records (IRT-PS's estimates named after their images)."""
 
@@ -20,12 +20,12 @@ from irtps import (
     save_dataset,
     save_reconstruction,
 )
-from irtps.batch import _complete_indirect
-from irtps.cli import main
-from irtps.evaluate import angular_error_deg
-from irtps.image_selection import excluded_indices, exclusions_by_name, parse_image_list
-from irtps.imageio import read_exr
-from irtps.synth import synthesize
+from irtps.batch.run import _complete_indirect
+from irtps.cli.main import main
+from irtps.evaluate.metrics import angular_error_deg
+from irtps.io.image_selection import excluded_indices, exclusions_by_name, parse_image_list
+from irtps.io.imageio import read_exr
+from irtps.render.synth import synthesize
 
 FIXTURE = Path(__file__).resolve().parent / "data" / "diligent_ball_small"
 #: The fixture's images, as filenames.txt lists them.

@@ -3,7 +3,7 @@
 A data set's files need not be inside its folder: DiLiGenT's ``filenames.txt`` may list
 ``../other/009.png`` or an absolute path, and any folder or file of a data set may be a
 symbolic link to another place. Every command that writes compares its --out with every
-file and folder it reads, as the reader finds them (`irtps.dataset.dataset_inputs` and its
+file and folder it reads, as the reader finds them (`irtps.io.dataset.dataset_inputs` and its
 kin), so that --out can name none of them, with or without --force. And a folder of the
 user's that merely holds a file named like one of our records (``index.html``,
 ``run.json`` ...) is not taken for an output of irtps.
@@ -19,10 +19,11 @@ from pathlib import Path
 import pytest
 import scipy.io
 
-from irtps import _core, guarded
-from irtps.batch import local_cluster
-from irtps.cli import main
-from irtps.dataset import (
+from irtps import _core
+from irtps._shared import guarded
+from irtps.batch.run import local_cluster
+from irtps.cli.main import main
+from irtps.io.dataset import (
     dataset_inputs,
     ground_truth_inputs,
     load_dataset,
@@ -194,7 +195,7 @@ def opened(monkeypatch):
         return real_loadmat(file, *args, **kwargs)
 
     monkeypatch.setattr(scipy.io, "loadmat", loadmat)
-    monkeypatch.setattr(sys.modules["irtps.imageio"], "open", python_open, raising=False)
+    monkeypatch.setattr(sys.modules["irtps.io.imageio"], "open", python_open, raising=False)
     return paths
 
 

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 import scipy.ndimage
 
-import irtps.integrate
+import irtps.geometry.integrate
 from irtps.errors import IrtpsError
-from irtps.integrate import integrate_normals, mask_boundary, place_height
-from irtps.surface import height_to_normals
+from irtps.geometry.integrate import integrate_normals, mask_boundary, place_height
+from irtps.geometry.surface import height_to_normals
 
 N = 128  # image side (pixels)
 S = 1.0 / N  # pixel size: the image spans [-0.5, 0.5] in x and y
@@ -235,7 +235,7 @@ def test_grazing_and_backfacing_normals_stay_bounded():
     normals[40, 30] = [0.0, 0.0, 0.0]  # no normal at all
     height = integrate_normals(normals, mask, pixel_size=1.0 / 64, max_slope=5.0)
     assert np.all(np.isfinite(height))
-    p, q = irtps.integrate.normals_to_gradients(normals, mask, max_slope=5.0)
+    p, q = irtps.geometry.integrate.normals_to_gradients(normals, mask, max_slope=5.0)
     assert p[20, 20] == -5.0 and q[30, 40] == 5.0 and p[40, 30] == 0.0
     assert np.max(np.abs(p)) <= 5.0 and np.max(np.abs(q)) <= 5.0
 
@@ -373,7 +373,7 @@ def _v_grooves_on_a_disc(size=160):
 
 
 def test_footprint_integration_keeps_creases_that_least_squares_blunts():
-    from irtps.surface import height_to_normals
+    from irtps.geometry.surface import height_to_normals
 
     height, mask = _v_grooves_on_a_disc()
     normals = height_to_normals(height, mask)  # the footprint-mean (central-difference) normals
@@ -389,7 +389,7 @@ def test_footprint_integration_keeps_creases_that_least_squares_blunts():
 
 
 def test_footprint_integration_of_a_smooth_surface_with_two_parts():
-    from irtps.surface import height_to_normals
+    from irtps.geometry.surface import height_to_normals
 
     rows, cols = np.mgrid[0:96, 0:96].astype(float)
     mask = ((rows - 30) ** 2 + (cols - 30) ** 2 < 20**2) | ((rows - 66) ** 2 + (cols - 66) ** 2 < 22**2)
@@ -445,22 +445,22 @@ def test_same_mask_reuses_the_factorisation_and_matches_conjugate_gradients(meth
     x, y = grid(64)
     truth, normals = sinusoid(x, y)
     mask = disc(x, y)
-    irtps.integrate._LAST_SYSTEM.clear()
+    irtps.geometry.integrate._LAST_SYSTEM.clear()
     built = []
-    original = irtps.integrate._SpdSolver.__init__
+    original = irtps.geometry.integrate._SpdSolver.__init__
 
     def counting(self, matrix, name, *, direct):
         built.append(direct)
         original(self, matrix, name, direct=direct)
 
-    monkeypatch.setattr(irtps.integrate._SpdSolver, "__init__", counting)
+    monkeypatch.setattr(irtps.geometry.integrate._SpdSolver, "__init__", counting)
     first = integrate_normals(normals, mask, pixel_size=1 / 64, method=method)
     second = integrate_normals(normals[:, ::-1] * [-1, 1, 1], mask, pixel_size=1 / 64, method=method)
     assert built == [True]  # one factorisation for both
     assert not np.allclose(first, second)  # a new right-hand side, not a cached answer
-    monkeypatch.setattr(irtps.integrate, "_LS_DIRECT_LIMIT", 0)
-    monkeypatch.setattr(irtps.integrate, "_FOOTPRINT_DIRECT_LIMIT", 0)
-    irtps.integrate._LAST_SYSTEM.clear()
+    monkeypatch.setattr(irtps.geometry.integrate, "_LS_DIRECT_LIMIT", 0)
+    monkeypatch.setattr(irtps.geometry.integrate, "_FOOTPRINT_DIRECT_LIMIT", 0)
+    irtps.geometry.integrate._LAST_SYSTEM.clear()
     iterative = integrate_normals(normals, mask, pixel_size=1 / 64, method=method, tolerance=1e-10)
     assert built == [True, False]
     np.testing.assert_allclose(first, iterative, rtol=0, atol=1e-5 * np.ptp(first[mask]))

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import irtps
-from irtps.cli import main
+from irtps.cli.main import main
 from irtps.errors import IrtpsError
-from irtps.interreflection import remove_interreflections
+from irtps.irt.interreflection import remove_interreflections
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +89,7 @@ def test_bad_settings_are_named(grooves, argument, value):
 def test_footprint_normals_of_a_plane_are_its_normal():
     rows, cols = np.mgrid[0:6, 0:7].astype(float)
     height = 0.5 * cols - 0.25 * rows  # dz/dx = 0.5, dz/dy = +0.25 (y grows against rows)
-    n = irtps.surface.footprint_normals(height, np.ones((6, 7), bool), pixel_size=1.0)
+    n = irtps.geometry.surface.footprint_normals(height, np.ones((6, 7), bool), pixel_size=1.0)
     expected = np.array([-0.5, -0.25, 1.0]) / np.linalg.norm([-0.5, -0.25, 1.0])
     np.testing.assert_allclose(n[1:-1, 1:-1], np.broadcast_to(expected, (4, 5, 3)), atol=1e-12)
 
@@ -101,7 +101,9 @@ def test_surface_albedo_undoes_the_crease_bias_of_photometric_stereo(grooves):
     mask, truth = grooves.mask, grooves.gt.albedo
     inner = mask & ~np.isnan(fit.albedo[..., 0])
     fitted_bias = np.mean(fit.albedo[inner] - truth[inner])
-    corrected = irtps.surface.surface_albedo(fit.albedo, grooves.gt.height, mask, grooves.scene.camera.pixel_size)
+    corrected = irtps.geometry.surface.surface_albedo(
+        fit.albedo, grooves.gt.height, mask, grooves.scene.camera.pixel_size
+    )
     corrected_bias = np.mean(corrected[inner] - truth[inner])
     assert fitted_bias < -0.02  # crease pixels read dark
     assert abs(corrected_bias) < 0.6 * abs(fitted_bias)  # the rest: cast shadows in the narrow grooves
@@ -116,4 +118,4 @@ def test_a_reconstruction_gives_its_inter_reflection_estimate_as_images_and_save
     np.testing.assert_array_equal(frames[:, mask], result.object_indirect)
     assert not frames[:, ~mask].any() and frames[:, mask].max() > 0
     irtps.save_reconstruction(result, tmp_path / "out")
-    np.testing.assert_array_equal(irtps.imageio.read_exr(tmp_path / "out" / "indirect" / "004.exr"), frames[4])
+    np.testing.assert_array_equal(irtps.io.imageio.read_exr(tmp_path / "out" / "indirect" / "004.exr"), frames[4])

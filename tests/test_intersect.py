@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from irtps import _core
-from irtps.scene import Floor
+from irtps.model.scene import Floor
 
 
 def flat_renderer(n: int = 16, height: float = 2.0, floor: float = 0.0) -> _core.Renderer:

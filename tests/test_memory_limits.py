@@ -3,7 +3,7 @@
 The refusal names the field or folder, comes before the large allocation (the images of
 a data set are not decoded, the lights of a synthetic scene are not made), and ends with
 exit status 2 and one line ``irtps: error: ...``. The available memory is made small by
-replacing `irtps.resources.available_memory_bytes`, except for the 10^8 lights of
+replacing `irtps._shared.resources.available_memory_bytes`, except for the 10^8 lights of
 ``irtps synth``, which no machine holds.
 """
 
@@ -16,13 +16,13 @@ import subprocess
 import sys
 from pathlib import Path
 
-import irtps.diligent
-import irtps.resources
+import irtps.io.diligent
+import irtps._shared.resources
 import pytest
-from irtps.cli import main
-from irtps.resources import return_freed_memory
+from irtps.cli.main import main
+from irtps._shared.resources import return_freed_memory
 from irtps.errors import IrtpsError
-from irtps.resources import available_memory_bytes, check_memory, format_bytes
+from irtps._shared.resources import available_memory_bytes, check_memory, format_bytes
 
 from cli_helpers import refused
 
@@ -36,7 +36,7 @@ def memory(monkeypatch):
     """Set the memory the checks see as available, in bytes."""
 
     def set_available(nbytes):
-        monkeypatch.setattr(irtps.resources, "available_memory_bytes", lambda: nbytes)
+        monkeypatch.setattr(irtps._shared.resources, "available_memory_bytes", lambda: nbytes)
 
     return set_available
 
@@ -48,8 +48,8 @@ def no_decoding(monkeypatch):
     def decode(paths):
         raise AssertionError(f"decoded {len(paths)} images before checking the memory")
 
-    monkeypatch.setattr(sys.modules["irtps.dataset"], "read_images", decode)
-    monkeypatch.setattr(sys.modules["irtps.diligent"], "read_images", decode)
+    monkeypatch.setattr(sys.modules["irtps.io.dataset"], "read_images", decode)
+    monkeypatch.setattr(sys.modules["irtps.io.diligent"], "read_images", decode)
 
 
 def _snapshot(folder):
@@ -138,7 +138,7 @@ def test_a_synthetic_scene_that_does_not_fit_is_refused(memory, tmp_path, capsys
 
 _CHILD = """
 import resource, sys
-from irtps.cli import main
+from irtps.cli.main import main
 status = main(sys.argv[1:])
 print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)  # kB on Linux
 sys.exit(status)
@@ -199,12 +199,12 @@ def test_available_memory_is_known_on_linux():
 
 
 def test_check_memory_names_the_field(monkeypatch):
-    monkeypatch.setattr(irtps.resources, "available_memory_bytes", lambda: 20_100_000_000)
+    monkeypatch.setattr(irtps._shared.resources, "available_memory_bytes", lambda: 20_100_000_000)
     check_memory(20_100_000_000, "lights: fits exactly")
     with pytest.raises(IrtpsError) as error:
         check_memory(41_200_000_000, "lights: 100000000 lights of 96x96 images")
     assert str(error.value) == "lights: 100000000 lights of 96x96 images need 41.2 GB, more than the 20.1 GB available"
-    monkeypatch.setattr(irtps.resources, "available_memory_bytes", lambda: None)
+    monkeypatch.setattr(irtps._shared.resources, "available_memory_bytes", lambda: None)
     check_memory(10**30, "unknown memory: nothing is refused")
 
 
@@ -233,11 +233,11 @@ def test_the_command_fixes_glibcs_mmap_threshold():
 
 _LIMITED_CHILD = """
 import resource, sys
-import irtps.resources
+import irtps._shared.resources
 from irtps import _core
-from irtps.cli import main
+from irtps.cli.main import main
 margin = int(sys.argv[1])
-irtps.resources.available_memory_bytes = lambda: None  # as where it cannot be read: no check up front
+irtps._shared.resources.available_memory_bytes = lambda: None  # as where it cannot be read: no check up front
 in_use = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmSize")) * 1024
 resource.setrlimit(resource.RLIMIT_AS, (in_use + margin, in_use + margin))
 if sys.argv[2] == "read_images":

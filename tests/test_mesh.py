@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 from irtps import IrtpsError
-from irtps.mesh import height_field_mesh, write_obj, write_ply
+from irtps.io.mesh import height_field_mesh, write_obj, write_ply
 
 # A non-rectangular mask: an L of three 2x2 blocks, plus an isolated pixel and a 1x2 strip
 # that no triangle uses.

@@ -1,6 +1,6 @@
 """Options: each declared once, validated once, named with its range, for every command.
 
-The command line, the Python API and batch runs all go through `irtps.options`; a value out
+The command line, the Python API and batch runs all go through `irtps.model.options`; a value out
 of range is refused before anything runs, as one line naming the option and its range.
 """
 
@@ -12,9 +12,16 @@ from pathlib import Path
 import pytest
 
 import irtps
-from irtps.cli import build_parser, main
-from irtps.interreflection import remove_interreflections
-from irtps.options import ClusterOptions, OptionError, ReconstructOptions, RenderOptions, SynthOptions, TableOptions
+from irtps.cli.main import build_parser, main
+from irtps.irt.interreflection import remove_interreflections
+from irtps.model.options import (
+    ClusterOptions,
+    OptionError,
+    ReconstructOptions,
+    RenderOptions,
+    SynthOptions,
+    TableOptions,
+)
 
 DATA = Path(__file__).parent / "data"
 BALL = DATA / "diligent_ball_small"
@@ -180,7 +187,7 @@ def test_the_command_line_reaches_every_reconstruction_option(tmp_path):
             "trim",
         ]
     )
-    options = irtps.options.from_arguments(ReconstructOptions, args)
+    options = irtps.model.options.from_arguments(ReconstructOptions, args)
     assert options == ReconstructOptions(method="irtps", relaxation=0.5, base_height="boundary", robust="trim")
 
 

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pytest
 
-from irtps.batch import local_cluster
-from irtps.cli import main
+from irtps.batch.run import local_cluster
+from irtps.cli.main import main
 
 from cli_helpers import refused, tree as _tree
 

@@ -5,9 +5,9 @@ import pytest
 
 import irtps
 from irtps.errors import IrtpsError
-from irtps.interreflection import remove_interreflections
-from irtps.paper_estimator import PAPER_SCALE, paper_environment_colour, paper_indirect
-from irtps.scene import Camera, CornellBox, Floor, Light, Scene
+from irtps.irt.interreflection import remove_interreflections
+from irtps.irt.paper_estimator import PAPER_SCALE, paper_environment_colour, paper_indirect
+from irtps.model.scene import Camera, CornellBox, Floor, Light, Scene
 
 
 def _closed_uniform_box(albedo: float) -> tuple[Scene, np.ndarray, np.ndarray, np.ndarray]:

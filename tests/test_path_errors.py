@@ -18,9 +18,9 @@ import time
 from pathlib import Path
 
 import pytest
-from irtps.batch import local_cluster
-from irtps.cli import main
-from irtps.paths import file_problem, folder_problem, optional_file, resolve_path
+from irtps.batch.run import local_cluster
+from irtps.cli.main import main
+from irtps._shared.paths import file_problem, folder_problem, optional_file, resolve_path
 
 from cli_helpers import refused
 

@@ -10,11 +10,11 @@ import pytest
 from scipy import ndimage
 
 import irtps
-from irtps.cli import main
+from irtps.cli.main import main
 from irtps.errors import IrtpsWarning
-from irtps.options import OptionError, ReconstructOptions
-from irtps.placement import estimate_placement
-from irtps.synth import synthesize
+from irtps.model.options import OptionError, ReconstructOptions
+from irtps.geometry.placement import estimate_placement
+from irtps.render.synth import SHAPES, synthesize
 
 BALL = Path(__file__).parent / "data" / "diligent_ball_small"  # 48x44, 8 lights, no floor
 
@@ -131,7 +131,7 @@ def test_a_base_height_that_is_not_a_number_auto_or_boundary_is_refused(value):
 
 
 def test_synth_places_every_shape_at_the_base_asked_for_and_refuses_one_below_the_floor():
-    for shape in irtps.synth.SHAPES:
+    for shape in SHAPES:
         data, _ = synthesize(shape, size=32, lights=3, bounces=0, base=20.0)
         assert _boundary_median(data) == pytest.approx(20.0, abs=1e-4) and data.gt.height[data.mask].min() >= 0
     with pytest.raises(OptionError, match="base: 0 puts part of the pedestal below the floor"):

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 import irtps
-from irtps.cli import main
+from irtps.cli.main import main
 from irtps.errors import IrtpsError
-from irtps.evaluate import angular_error_deg
-from irtps.interreflection import remove_interreflections
-from irtps.ps import (
+from irtps.evaluate.metrics import angular_error_deg
+from irtps.irt.interreflection import remove_interreflections
+from irtps.ps.fit import (
     LOBE_CHECK_ROUNDS,
     LOBE_FIRST,
     LOBE_FITTED,
@@ -399,7 +399,7 @@ def test_the_check_takes_objects_to_the_side_of_the_line_the_full_lobe_fit_does(
 
 
 def test_a_share_is_decided_only_clear_of_the_line():
-    from irtps.ps import share_is_decided
+    from irtps.ps.fit import share_is_decided
 
     # One half is never clear of the line, however many pixels say so.
     assert not any(share_is_decided(fitted // 2, fitted) for fitted in range(2, 1001, 2))

@@ -8,7 +8,7 @@ import inspect
 import irtps
 import numpy as np
 import pytest
-from irtps.synth import synthesize
+from irtps.render.synth import synthesize
 
 LIGHTS = np.array([[0, 0, 1], [0.6, 0, 0.8], [0, 0.6, 0.8], [-0.6, 0, 0.8]])
 IRRADIANCE = np.full((4, 3), np.pi)

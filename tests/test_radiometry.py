@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 import irtps
-from irtps.cli import main
+from irtps.cli.main import main
 from irtps.errors import DatasetError
-from irtps.radiometry import estimate_albedo_scale
-from irtps.residual import compared_observations
-from irtps.scene import parse_scene, scene_to_dict
-from irtps.synth import synthesize
+from irtps.render.radiometry import estimate_albedo_scale
+from irtps.render.residual import compared_observations
+from irtps.model.scene import parse_scene, scene_to_dict
+from irtps.render.synth import synthesize
 
 READING = Path(__file__).parent / "data" / "diligent_reading_small"
 

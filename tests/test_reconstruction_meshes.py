@@ -8,8 +8,8 @@ import pytest
 import trimesh
 
 from irtps import reconstruct, save_reconstruction
-from irtps.reconstruct import load_reconstruction
-from irtps.synth import synthesize
+from irtps.irt.reconstruct import load_reconstruction
+from irtps.render.synth import synthesize
 
 PIXEL_SIZE = 0.25
 

@@ -10,8 +10,8 @@ import pytest
 
 from irtps import Camera, CornellBox, Light, Scene, render
 from irtps.errors import IrtpsError
-from irtps.scene import MAX_PIXEL_SIZE, MIN_PIXEL_SIZE
-from irtps.synth import synthesize
+from irtps.model.scene import MAX_PIXEL_SIZE, MIN_PIXEL_SIZE
+from irtps.render.synth import synthesize
 
 PI = np.pi
 
@@ -95,7 +95,7 @@ def test_bounce_b_scales_with_albedo_to_the_power_b_plus_one():
 
 def test_same_seed_same_images_whatever_the_thread_count(tmp_path):
     script = (
-        "import numpy as np, sys; from irtps.synth import synthesize; "
+        "import numpy as np, sys; from irtps.render.synth import synthesize; "
         "d, r = synthesize('grooves', size=24, lights=3, bounces=2, samples=16, seed=5, environment='none'); "
         "np.save(sys.argv[1], r.bounces)"
     )
@@ -122,8 +122,8 @@ def test_bad_arguments_raise_named_errors():
 def test_sparse_indirect_estimate_is_exact_where_rendered_and_close_elsewhere():
     from scipy import ndimage
 
-    from irtps.render import render_indirect
-    from irtps.synth import synthesize
+    from irtps.render.renderer import render_indirect
+    from irtps.render.synth import synthesize
 
     data, _ = synthesize("cap", size=32, lights=4, environment="cornell", bounces=0, seed=3)
     height, albedo = data.gt.height, data.gt.albedo

@@ -11,10 +11,10 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from irtps.cli import main
+from irtps.cli.main import main
 from irtps.errors import IrtpsError
-from irtps.report import build_report, write_report
-from irtps.report_page import report_html
+from irtps.report.build import build_report, write_report
+from irtps.report.page import report_html
 
 SMALL = Path(__file__).parent / "data" / "mitsuba_small" / "cap_cornell"
 BALL = Path(__file__).parent / "data" / "diligent_ball_small"

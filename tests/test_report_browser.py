@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from irtps.cli import main
+from irtps.cli.main import main
 
 SMALL = Path(__file__).parent / "data" / "mitsuba_small" / "cap_cornell"
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from irtps import Camera, Floor, Light, Scene, render
-from irtps.residual import compared_observations, render_with_residual
+from irtps.render.residual import compared_observations, render_with_residual
 
 SIZE = 40
 

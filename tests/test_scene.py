@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from irtps import Camera, CornellBox, DatasetError, Floor, IrtpsError, Light, Scene, load_scene
-from irtps.scene import parse_scene, scene_to_dict, write_scene
+from irtps.model.scene import parse_scene, scene_to_dict, write_scene
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 MITSUBA = SHARED / "data" / "mitsuba"

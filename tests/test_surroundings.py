@@ -5,8 +5,8 @@ import irtps
 import numpy as np
 import pytest
 from irtps import Camera, Floor, Light, Scene
-from irtps.interreflection import remove_interreflections
-from irtps.surroundings import edge_pixels, mesh_coverage, surroundings_light
+from irtps.irt.interreflection import remove_interreflections
+from irtps.render.surroundings import edge_pixels, mesh_coverage, surroundings_light
 
 
 def _block_scene(direction, floor=True):

@@ -5,8 +5,8 @@ import json
 import pytest
 
 import irtps
-from irtps.cli import main
-from irtps.table import ROWS, comparison_table, format_table
+from irtps.cli.main import main
+from irtps.evaluate.table import ROWS, comparison_table, format_table
 
 
 @pytest.fixture(scope="module")

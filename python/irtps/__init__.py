@@ -1,18 +1,18 @@
 """irtps: Iterative Ray Tracing Photometric Stereo."""
 
-from irtps.data import Dataset, GroundTruth
-from irtps.dataset import load_dataset, load_ground_truth, load_scene_object, save_dataset
+from irtps.model.data import Dataset, GroundTruth
+from irtps.io.dataset import load_dataset, load_ground_truth, load_scene_object, save_dataset
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
-from irtps.evaluate import Metrics, angular_error_deg, evaluate
-from irtps.image_selection import exclude_images
-from irtps.integrate import integrate_normals, place_height
-from irtps.ps import PsResult, choose_robust, lobe_share, photometric_stereo
-from irtps.reconstruct import Reconstruction, reconstruct, save_reconstruction
-from irtps.records import irtps_version
-from irtps.render import Rendering, render, render_indirect
-from irtps.scene import Camera, CornellBox, Floor, Light, Scene, load_scene
-from irtps.surface import height_to_normals
-from irtps.synth import synthesize
+from irtps.evaluate.metrics import Metrics, angular_error_deg, evaluate
+from irtps.io.image_selection import exclude_images
+from irtps.geometry.integrate import integrate_normals, place_height
+from irtps.ps.fit import PsResult, choose_robust, lobe_share, photometric_stereo
+from irtps.irt.reconstruct import Reconstruction, reconstruct, save_reconstruction
+from irtps._shared.records import irtps_version
+from irtps.render.renderer import Rendering, render, render_indirect
+from irtps.model.scene import Camera, CornellBox, Floor, Light, Scene, load_scene
+from irtps.geometry.surface import height_to_normals
+from irtps.render.synth import synthesize
 
 __version__ = irtps_version()
 

@@ -15,7 +15,7 @@ from typing import final
 import numpy as np
 import numpy.typing as npt
 
-from irtps.scene import CornellBox, Floor
+from irtps.model.scene import CornellBox, Floor
 
 __all__ = [
     "read_exr",

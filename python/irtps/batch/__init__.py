@@ -1,0 +1,1 @@
+"""Many data sets on a Dask cluster."""

@@ -1,0 +1,1 @@
+"""Height fields: integration of normals, the surface, the placement on the floor."""

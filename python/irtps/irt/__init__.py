@@ -1,0 +1,1 @@
+"""Iterative ray tracing photometric stereo: the loop, its passes, the paper's estimator, reconstruct."""

@@ -1,0 +1,387 @@
+"""One pass of the reconstruction pipeline: photometric stereo, normal integration,
+placement, the height raised to it inside the mask (`reconstruction_pass`).
+
+Classic photometric stereo is one pass on the data set's images: IRT-PS with zero
+corrections. IRT-PS (`irtps.irt.interreflection`) runs one pass per corrected image set, each
+given the one before.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import numpy as np
+
+from irtps.model.data import Dataset
+from irtps.geometry.integrate import integrate_normals, place_height
+from irtps.model.options import OptionError, ReconstructOptions
+from irtps.geometry.placement import PRECISION_PIXELS, Placement, estimate_placement, fallback_placement
+from irtps.ps.fit import OUTSIDE_MASK, PsResult, choose_robust, lobe_share, photometric_stereo
+from irtps.render.radiometry import AlbedoScale, absolute_scale, estimate_albedo_scale, scaled_albedo, scaled_scene
+from irtps.render.residual import compared_observations
+from irtps.model.scene import Scene
+from irtps.geometry.surface import surface_albedo
+
+#: Heights are float32 (24 significant bits): a surface placed further than this many pixel
+#: sizes from the origin keeps no precision for its relief.
+MAX_BASE_HEIGHT_PIXELS = 1e6
+#: IRT-PS refines an estimated placement within this many times the mean change of the
+#: relief from the pass before.
+PLACEMENT_SEARCH_CHANGES = 3.0
+
+
+@dataclasses.dataclass
+class Pass:
+    """What one pass of the pipeline reconstructed (`reconstruction_pass`).
+
+    Attributes
+    ----------
+    fit : PsResult
+        Photometric stereo on the pass's images.
+    relief : numpy.ndarray
+        float32 (H, W) height map of the fit's normals, its mask's boundary median at 0.
+    albedo : numpy.ndarray
+        The albedo of the triangulated relief that explains the fit (`rendered_albedo`).
+    placement : Placement
+        Where the relief stands.
+    height : numpy.ndarray
+        float32 (H, W) relief raised to the placement inside the mask, 0 outside.
+    albedo_scale : AlbedoScale or None
+        The factor from fitted albedo to rendered reflectance, where it was resolved.
+    timings : dict
+        Seconds per stage: ``photometric_stereo``, ``integration``, ``placement``.
+    """
+
+    fit: PsResult
+    relief: np.ndarray
+    albedo: np.ndarray
+    placement: Placement
+    height: np.ndarray
+    albedo_scale: AlbedoScale | None
+    timings: dict[str, float]
+
+
+def reconstruction_pass(
+    dataset: Dataset,
+    images: np.ndarray,
+    options: ReconstructOptions,
+    *,
+    previous: Pass | None = None,
+    usable: np.ndarray | None = None,
+    rendered: bool = False,
+    coverage: np.ndarray | None = None,
+    progress: bool = False,
+) -> Pass:
+    """Photometric stereo on `images`, integration, placement and the placed height.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        Lights, mask, scene and the input images (which place the object).
+    images : numpy.ndarray
+        (K, H, W, 3): the data set's images, or images corrected for inter-reflections.
+    options : ReconstructOptions
+        Resolved settings (`resolve_options`).
+    previous : Pass, optional
+        The pass before (IRT-PS): its placement is refined as the relief changed from its
+        relief (`place_surface`), and its albedo scale is kept.
+    usable : numpy.ndarray, optional
+        The observations compared (`fitted_observations`), computed where needed if not
+        given.
+    rendered : bool
+        The reconstruction will be rendered (IRT-PS): a first pass resolves the albedo
+        scale (`resolve_albedo_scale`) even where the placement does not need it.
+    coverage : numpy.ndarray, optional
+        (H, W): the fraction of each pixel's footprint whose light `images` hold (IRT-PS's
+        edge pixels, their surroundings' light subtracted: `irtps.render.surroundings`); the
+        albedo is the fitted one over it. Default 1.
+    progress : bool
+        Show a progress bar for a lobe-mode fit (`fit_photometric_stereo`).
+
+    Returns
+    -------
+    Pass
+        Its ``albedo_scale`` is None where neither the rendering nor the placement needed
+        it (classic photometric stereo on absolute irradiance, or with a given placement).
+    """
+    mask = dataset.mask
+    timings: dict[str, float] = {}
+    with timed(timings, "photometric_stereo"):
+        fit = fit_photometric_stereo(dataset, images, options, progress=progress)
+    with timed(timings, "integration"):
+        relief = surface_relief(dataset, fit.normals, options)
+    with timed(timings, "placement"):
+        albedo = rendered_albedo(dataset, fit, relief, coverage)
+        scene = dataset.scene
+        if previous is not None:
+            albedo_scale = previous.albedo_scale
+            shape_change = float(np.abs(relief - previous.relief)[mask].mean())
+            placement = place_surface(
+                dataset,
+                relief,
+                albedo,
+                options,
+                seed=options.seed,
+                previous=previous.placement,
+                shape_change=shape_change,
+                albedo_scale=albedo_scale,
+            )
+        elif rendered or (scene.relative_irradiance and scene.floor is not None and options.base_height == "auto"):
+            # The floor is rendered to place the object: with the reflectance, so the scale first.
+            usable = fitted_observations(dataset, options) if usable is None else usable
+            albedo_scale, placement = scale_and_place(dataset, relief, albedo, options, usable, seed=options.seed)
+        else:
+            albedo_scale, placement = None, place_surface(dataset, relief, albedo, options, seed=options.seed)
+    return Pass(
+        fit=fit,
+        relief=relief,
+        albedo=albedo,
+        placement=placement,
+        height=placed(relief, mask, placement),
+        albedo_scale=albedo_scale,
+        timings=timings,
+    )
+
+
+@contextmanager
+def timed(timings: dict[str, float], stage: str) -> Iterator[None]:
+    """Record in ``timings[stage]`` the seconds that the ``with`` block takes."""
+    start = time.perf_counter()
+    yield
+    timings[stage] = time.perf_counter() - start
+
+
+def resolve_options(dataset: Dataset, options: ReconstructOptions) -> ReconstructOptions:
+    """`options` with the defaults that depend on the data set filled in.
+
+    ``saturation``: the data set's (1 for PNG images); ``integration``: the method's
+    default. A numeric ``base_height`` is checked against the data set's scale.
+
+    Raises
+    ------
+    OptionError
+        If ``base_height`` lies so far from the scene that float32 heights lose the relief.
+    """
+    pixel_size = dataset.scene.camera.pixel_size
+    base_height = options.base_height
+    limit = MAX_BASE_HEIGHT_PIXELS * pixel_size
+    if not isinstance(base_height, str) and abs(base_height) > limit:
+        raise OptionError(
+            "base_height",
+            f"{base_height:g} is out of range for this data set: expected at most {MAX_BASE_HEIGHT_PIXELS:g} pixel sizes "
+            f"({limit:g} world units) from 0 (heights are float32)",
+        )
+    return dataclasses.replace(
+        options,
+        saturation=dataset.saturation if options.saturation is None else options.saturation,
+        integration=options.integration_method,
+    )
+
+
+def choose_dataset_robust(dataset: Dataset, options: ReconstructOptions) -> tuple[ReconstructOptions, float]:
+    """The data set's `irtps.ps.fit.lobe_share`, and `options` with robust ``"auto"`` replaced by
+    the mode `irtps.ps.fit.choose_robust` picks for it (other modes kept). `options` are resolved
+    (`resolve_options`): the share leaves the data set's saturated observations out."""
+    scene = dataset.scene
+    share = lobe_share(
+        dataset.images,
+        scene.light_directions,
+        scene.light_irradiance,
+        dataset.mask,
+        shadow_fraction=options.shadow_fraction,
+        saturation=options.saturation,
+    )
+    return (dataclasses.replace(options, robust=choose_robust(share)) if options.robust == "auto" else options), share
+
+
+def fit_photometric_stereo(
+    dataset: Dataset, images: np.ndarray, options: ReconstructOptions, *, progress: bool = False
+) -> PsResult:
+    """Photometric stereo on `images` (the data set's, or corrected ones) with the data set's
+    lights and mask and the options' robust settings. `images` are (K, H, W, 3), or
+    (K, N, 3) at the mask's N pixels in row-major order (the corrected images of IRT-PS).
+    `progress`: a progress bar for the lobe mode's fit of (K, H, W, 3) images (asked for, or chosen by
+    ``"auto"``), the one slow enough to want one (`irtps.ps.fit.photometric_stereo`)."""
+    scene, mask = dataset.scene, dataset.mask
+    # (K, N, 3) observations are fitted as one row of N pixels, every one in the mask.
+    fitted, fitted_mask = (
+        (images, mask) if images.ndim == 4 else (images[:, None], np.ones((1, images.shape[1]), dtype=bool))
+    )
+    fit = photometric_stereo(
+        fitted,
+        scene.light_directions,
+        scene.light_irradiance,
+        fitted_mask,
+        robust=options.robust,
+        shadow_fraction=options.shadow_fraction,
+        saturation=options.saturation,
+        progress=progress and options.robust in ("lobe", "auto") and images.ndim == 4,
+    )
+    if images.ndim == 4:
+        return fit
+    frame = PsResult(
+        normals=np.zeros((*mask.shape, 3), np.float32),
+        albedo=np.zeros((*mask.shape, 3), np.float32),
+        flags=np.full(mask.shape, OUTSIDE_MASK, np.uint8),
+        used=np.zeros(mask.shape, np.uint16),
+    )
+    for name in ("normals", "albedo", "flags", "used"):
+        getattr(frame, name)[mask] = getattr(fit, name)[0]
+    return frame
+
+
+def rendered_albedo(
+    dataset: Dataset, fit: PsResult, relief: np.ndarray, coverage: np.ndarray | None = None
+) -> np.ndarray:
+    """The albedo of the triangulated surface `relief` that explains `fit`
+    (`irtps.geometry.surface.surface_albedo`), where the fitted images hold the object's light over
+    the fraction `coverage` (H, W) of each pixel's footprint (default 1): within [0, 1] for
+    absolute irradiance; in the irradiance's units, unbounded, for relative irradiance
+    (`irtps.render.radiometry` scales it)."""
+    scene = dataset.scene
+    fitted = fit.albedo if coverage is None else fit.albedo / coverage[..., None].astype(np.float32)
+    return surface_albedo(
+        fitted, relief, dataset.mask, scene.camera.pixel_size, largest=None if scene.relative_irradiance else 1.0
+    )
+
+
+def fitted_observations(dataset: Dataset, options: ReconstructOptions) -> np.ndarray:
+    """The observations a rendering of the reconstruction is compared with
+    (`irtps.render.residual.compared_observations` under the options' robust settings)."""
+    return compared_observations(
+        dataset.images,
+        dataset.scene.light_irradiance,
+        dataset.mask,
+        robust=options.robust != "none",
+        shadow_fraction=options.shadow_fraction,
+        saturation=options.saturation,
+    )
+
+
+def surface_relief(dataset: Dataset, normals: np.ndarray, options: ReconstructOptions) -> np.ndarray:
+    """The height map of `normals`, integrated (``options.integration``), with the median
+    of its mask's boundary at 0: float32, 0 outside the mask."""
+    mask = dataset.mask
+    height = integrate_normals(
+        normals, mask, pixel_size=dataset.scene.camera.pixel_size, method=options.integration_method
+    )
+    return np.where(mask, place_height(height, mask, base_height=0.0), 0).astype(np.float32)
+
+
+def place_surface(
+    dataset: Dataset,
+    relief: np.ndarray,
+    albedo: np.ndarray,
+    options: ReconstructOptions,
+    *,
+    seed: int = 0,
+    previous: Placement | None = None,
+    shape_change: float = 0.0,
+    albedo_scale: AlbedoScale | None = None,
+) -> Placement:
+    """Where the surface `relief` (boundary median at 0) stands (contract §6).
+
+    ``options.base_height``: a number is taken as given; ``"boundary"`` is the fallback
+    (the floor's height); ``"auto"`` estimates it from the floor in the data set's images
+    (`irtps.geometry.placement.estimate_placement`), with the fallback where nothing fixes it.
+    Given the `previous` estimate, for a relief that changed by `shape_change` on average
+    (world units), the estimate is refined within three times that change of it; the
+    fallback and given placements are kept. With an `albedo_scale` (relative irradiance),
+    the floor is rendered with the reflectance and the irradiance it implies.
+    """
+    scene = dataset.scene
+    if albedo_scale is not None:
+        scene, albedo = rendered_as(scene, albedo, albedo_scale)
+    if previous is not None:
+        radius = PLACEMENT_SEARCH_CHANGES * shape_change
+        if previous.source != "images" or radius < PRECISION_PIXELS * scene.camera.pixel_size:
+            return previous
+        return estimate_placement(
+            scene,
+            relief,
+            albedo,
+            dataset.mask,
+            dataset.images,
+            bounces=options.bounces,
+            saturation=options.saturation,
+            seed=seed,
+            near=previous,
+            radius=radius,
+        )
+    if options.base_height == "boundary":
+        return fallback_placement(scene)
+    if options.base_height != "auto":
+        return Placement(base_height=float(options.base_height), source="given")
+    return estimate_placement(
+        scene,
+        relief,
+        albedo,
+        dataset.mask,
+        dataset.images,
+        bounces=options.bounces,
+        saturation=options.saturation,
+        seed=seed,
+    )
+
+
+def scale_and_place(
+    dataset: Dataset,
+    relief: np.ndarray,
+    albedo: np.ndarray,
+    options: ReconstructOptions,
+    usable: np.ndarray,
+    *,
+    seed: int = 0,
+) -> tuple[AlbedoScale, Placement]:
+    """The albedo scale and the placement of a first reconstruction. Each needs the other
+    where the irradiance is relative and a floor is seen: the scale is estimated with the
+    surface placed provisionally (the given height, else contract §6's fallback), then the
+    floor is rendered with that scale to place it."""
+    provisional = place_surface(
+        dataset,
+        relief,
+        albedo,
+        dataclasses.replace(options, base_height="boundary") if options.base_height == "auto" else options,
+    )
+    scale = resolve_albedo_scale(dataset, placed(relief, dataset.mask, provisional), albedo, usable, options, seed=seed)
+    if options.base_height != "auto":
+        return scale, provisional
+    return scale, place_surface(dataset, relief, albedo, options, seed=seed, albedo_scale=scale)
+
+
+def resolve_albedo_scale(
+    dataset: Dataset,
+    height: np.ndarray,
+    albedo: np.ndarray,
+    usable: np.ndarray,
+    options: ReconstructOptions,
+    *,
+    seed: int = 0,
+) -> AlbedoScale:
+    """The factor from fitted albedo to reflectance (`irtps.render.radiometry`): the options'
+    number, else estimated from the images when the data set's irradiance is relative, else
+    1. `height` is the placed reconstruction, `usable` the observations compared."""
+    if options.albedo_scale != "auto":
+        return AlbedoScale(factor=float(options.albedo_scale), source="given")
+    if not dataset.scene.relative_irradiance:
+        return absolute_scale()
+    return estimate_albedo_scale(
+        dataset.scene, height, albedo, dataset.mask, dataset.images, usable, bounces=options.bounces, seed=seed
+    )
+
+
+def rendered_as(scene: Scene, albedo: np.ndarray, albedo_scale: AlbedoScale | None) -> tuple[Scene, np.ndarray]:
+    """The scene and albedo to render a reconstruction with: as they are for absolute
+    irradiance (or no scale), else the reflectance and the irradiance that `albedo_scale`
+    implies."""
+    if albedo_scale is None or albedo_scale.source == "absolute":
+        return scene, albedo
+    return scaled_scene(scene, albedo_scale.factor), scaled_albedo(albedo, albedo_scale.factor)
+
+
+def placed(relief: np.ndarray, mask: np.ndarray, placement: Placement) -> np.ndarray:
+    """`relief` raised to `placement` inside the mask: float32, 0 outside."""
+    return np.where(mask, relief + np.float32(placement.base_height), 0).astype(np.float32)

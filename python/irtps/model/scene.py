@@ -1,0 +1,514 @@
+"""The scene description of a data set (``scene.json``, contract ``irtps.scene/1``).
+
+The world frame is right-handed: x to the right, y up, z toward the camera. The
+camera is orthographic and looks along -z.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import numbers
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NoReturn
+
+import numpy as np
+
+from irtps._shared.checks import check_path
+from irtps._shared.atomic import atomic_write_text
+from irtps.errors import DatasetError
+from irtps.io.imageio import MAX_IMAGE_PIXELS
+from irtps._shared.guarded import read_json, shown
+from irtps._shared.paths import exists
+
+FORMAT = "irtps.scene/1"
+"""The value of the ``format`` field this version reads and writes."""
+
+MIN_LIGHTS = 3
+"""Photometric stereo needs at least three lights."""
+
+UNIT_TOLERANCE = 1e-3
+"""How far the norm of a light direction may be from 1."""
+
+_WALLS = ("left", "right", "back", "front")
+_SCENE_KEYS = ("format", "camera", "lights", "floor", "environment")
+#: Values of the optional top-level ``irradiance`` field.
+IRRADIANCE_KINDS = ("absolute", "relative")
+_BOX_KEYS = ("type", "x", "y", "z_top", "albedo")
+
+
+@dataclass(frozen=True)
+class Camera:
+    """An orthographic camera looking along -z, centred on the z axis.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size in pixels.
+    pixel_size : float
+        Side of a pixel's square footprint, in world units.
+    """
+
+    width: int
+    height: int
+    pixel_size: float
+
+    def pixel_centers(self) -> tuple[np.ndarray, np.ndarray]:
+        """World coordinates of the pixel centres.
+
+        Returns
+        -------
+        x, y : numpy.ndarray
+            Two float64 arrays of shape (height, width): pixel (i, j) is centred at
+            ``x = (j + 0.5 - W/2) * s`` and ``y = (H/2 - i - 0.5) * s``.
+        """
+        s = self.pixel_size
+        x_row = (np.arange(self.width) + 0.5 - self.width / 2) * s
+        y_column = (self.height / 2 - np.arange(self.height) - 0.5) * s
+        return np.meshgrid(x_row, y_column)
+
+
+@dataclass(frozen=True, eq=False)
+class Light:
+    """A distant directional light.
+
+    Attributes
+    ----------
+    direction : numpy.ndarray
+        Unit vector (3,) from the surface toward the light, z > 0. Read-only.
+    irradiance : numpy.ndarray
+        RGB irradiance (3,) on a surface facing the light. Read-only.
+    """
+
+    direction: np.ndarray
+    irradiance: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("direction", "irradiance"):
+            vector = np.array(getattr(self, name), dtype=np.float64)
+            if vector.shape != (3,):
+                raise DatasetError(f"Light.{name} must have 3 components, got shape {vector.shape}")
+            vector.flags.writeable = False
+            object.__setattr__(self, name, vector)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Light):
+            return NotImplemented
+        return bool(
+            np.array_equal(self.direction, other.direction) and np.array_equal(self.irradiance, other.irradiance)
+        )
+
+    def __hash__(self) -> int:
+        return hash((tuple(self.direction), tuple(self.irradiance)))
+
+
+@dataclass(frozen=True)
+class Floor:
+    """The plane ``z = height`` with a uniform RGB albedo in [0, 1]."""
+
+    height: float
+    albedo: tuple[float, float, float]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "albedo", tuple(float(v) for v in self.albedo))
+
+
+@dataclass(frozen=True)
+class CornellBox:
+    """Four Lambertian walls from the floor up to ``z_top``, open at the top.
+
+    The left wall is at ``x = x[0]``, the right at ``x = x[1]``, the front at
+    ``y = y[0]`` and the back at ``y = y[1]``; each faces the inside and is black
+    outside. Albedos are RGB triples in [0, 1].
+    """
+
+    x: tuple[float, float]
+    y: tuple[float, float]
+    z_top: float
+    albedo_left: tuple[float, float, float]
+    albedo_right: tuple[float, float, float]
+    albedo_back: tuple[float, float, float]
+    albedo_front: tuple[float, float, float]
+
+    def __post_init__(self) -> None:
+        for name in ("x", "y", *(f"albedo_{wall}" for wall in _WALLS)):
+            object.__setattr__(self, name, tuple(float(v) for v in getattr(self, name)))
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Camera, lights and surroundings of a data set.
+
+    Attributes
+    ----------
+    camera : Camera
+    lights : tuple of Light
+        Image k of the data set is taken under ``lights[k]`` alone.
+    floor : Floor or None
+        None means there is no floor.
+    environment : CornellBox or None
+        None means nothing surrounds the object and the floor.
+    relative_irradiance : bool
+        The lights' irradiance is known only up to one common factor (``"irradiance":
+        "relative"`` in ``scene.json``; DiLiGenT's intensities): the fitted albedo is the
+        reflectance over that factor, which IRT-PS estimates (`irtps.render.radiometry`).
+    """
+
+    camera: Camera
+    lights: tuple[Light, ...]
+    floor: Floor | None = None
+    environment: CornellBox | None = None
+    relative_irradiance: bool = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "lights", tuple(self.lights))
+
+    @property
+    def light_directions(self) -> np.ndarray:
+        """Unit light directions, float64 array (K, 3)."""
+        return np.stack([light.direction for light in self.lights])
+
+    @property
+    def light_irradiance(self) -> np.ndarray:
+        """RGB irradiance of each light, float64 array (K, 3)."""
+        return np.stack([light.irradiance for light in self.lights])
+
+
+def parse_scene(obj: object, source: str = "scene.json") -> Scene:
+    """Validate a parsed ``scene.json`` and build the scene.
+
+    Parameters
+    ----------
+    obj : object
+        The parsed JSON value.
+    source : str
+        Name of the file it came from, used as the prefix of error messages.
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    DatasetError
+        If any field is missing, of the wrong JSON type, unknown or out of range;
+        the message names the field path, e.g. ``lights[3].direction``.
+    """
+    fields = _Fields(source)
+    scene_format = fields.mapping(obj, "", required=("format",), optional=(*_SCENE_KEYS, "irradiance"))["format"]
+    if scene_format != FORMAT:
+        fields.fail("format", f"is {shown(scene_format)}: unknown format (expected {FORMAT!r})")
+    root = fields.mapping(obj, "", required=_SCENE_KEYS, optional=("irradiance",))
+    irradiance = root.get("irradiance", "absolute")
+    if irradiance not in IRRADIANCE_KINDS:
+        fields.fail("irradiance", f"is {shown(irradiance)}: expected one of {', '.join(map(repr, IRRADIANCE_KINDS))}")
+    camera = _parse_camera(fields, root["camera"])
+    lights = _parse_lights(fields, root["lights"])
+    floor = None if root["floor"] is None else _parse_floor(fields, root["floor"])
+    floor_height = 0.0 if floor is None else floor.height
+    environment = _parse_environment(fields, root["environment"], floor_height)
+    return Scene(
+        camera=camera, lights=lights, floor=floor, environment=environment, relative_irradiance=irradiance == "relative"
+    )
+
+
+def scene_to_dict(scene: Scene) -> dict:
+    """The JSON object of a scene; ``parse_scene`` inverts it exactly.
+
+    Parameters
+    ----------
+    scene : Scene
+
+    Returns
+    -------
+    dict
+        Plain Python values (dict, list, str, int, float, None), with ``format``.
+    """
+    camera = scene.camera
+    return {
+        "format": FORMAT,
+        "camera": {
+            "projection": "orthographic",
+            "width": int(camera.width),
+            "height": int(camera.height),
+            "pixel_size": float(camera.pixel_size),
+        },
+        "lights": [
+            {"direction": _floats(light.direction), "irradiance": _floats(light.irradiance)} for light in scene.lights
+        ],
+        "floor": None
+        if scene.floor is None
+        else {"height": float(scene.floor.height), "albedo": _floats(scene.floor.albedo)},
+        "environment": _environment_to_dict(scene.environment),
+    } | ({"irradiance": "relative"} if scene.relative_irradiance else {})
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a ``scene.json`` file.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    DatasetError
+        If the file is missing, not a readable regular file (a directory, a FIFO, a
+        symlink loop ...; checked before opening it), is not valid JSON (the message gives
+        the line and column) or is JSON past the bounds of `irtps._shared.guarded` (nesting, digits,
+        size, repeated keys), or does not follow the contract.
+    """
+    path = check_path("path", path)
+    if not exists(path):
+        raise DatasetError(f"{path}: file not found")
+    obj = read_json(path)
+    return parse_scene(obj, str(path))
+
+
+def write_scene(scene: Scene, path: str | Path) -> None:
+    """Validate a scene and write it atomically as ``scene.json``.
+
+    Parameters
+    ----------
+    scene : Scene
+    path : str or pathlib.Path
+
+    Raises
+    ------
+    DatasetError
+        If the scene breaks the contract (the file is then not written).
+    """
+    obj = scene_to_dict(scene)
+    parse_scene(obj, str(path))
+    atomic_write_text(path, json.dumps(obj, indent=1) + "\n")
+
+
+#: Range of a pixel's world size. The core's geometry is float32; it renders in a frame of
+#: one unit a pixel (z from the middle of the object's heights), so every pixel size in the
+#: range renders alike, and the squares of world coordinates (up to the image size times
+#: this) stay finite and above float32's smallest normal number.
+MIN_PIXEL_SIZE, MAX_PIXEL_SIZE = 1e-9, 1e9
+
+
+#: Range of each positive channel of a light's irradiance (0 is a channel the light lacks).
+#: The core works in float32: the images divided by the irradiance, the albedo fitted in its
+#: units (relative irradiance) and the renderings of albedo times irradiance must stay finite
+#: and above its smallest normal number (at 1e-40 the residual's ratios overflowed).
+MIN_IRRADIANCE, MAX_IRRADIANCE = 1e-9, 1e9
+
+
+def upward_problem(z: float) -> str | None:
+    """Why a light direction whose z component is `z` does not point toward the camera side,
+    or None: z must be above 0 as the core holds it, in float32.
+
+    Examples
+    --------
+    >>> upward_problem(0.5) is None
+    True
+    >>> upward_problem(1e-50)
+    'must point toward the camera side (z > 0), got z = 1e-50, which is 0 in float32'
+    """
+    if np.float32(z) > 0.0:
+        return None
+    zero = ", which is 0 in float32" if z > 0.0 else ""
+    return f"must point toward the camera side (z > 0), got z = {z:g}{zero}"
+
+
+def irradiance_problem(irradiance) -> str | None:
+    """What makes an RGB irradiance unusable, or None: a negative channel, or a positive one
+    outside [`MIN_IRRADIANCE`, `MAX_IRRADIANCE`].
+
+    Examples
+    --------
+    >>> irradiance_problem([1.0, 0.0, 2.5]) is None
+    True
+    >>> irradiance_problem([1e308, 1.0, 1.0])
+    'has channel 0 = 1e+308, out of range: expected 0 or a number from 1e-09 to 1e+09'
+    """
+    values = [float(value) for value in irradiance]
+    if min(values) < 0.0:
+        return f"must not be negative, got {values}"
+    for channel, value in enumerate(values):
+        if value != 0.0 and not MIN_IRRADIANCE <= value <= MAX_IRRADIANCE:
+            return f"has channel {channel} = {value:g}, out of range: expected 0 or a number from {MIN_IRRADIANCE:g} to {MAX_IRRADIANCE:g}"
+    return None
+
+
+def _parse_camera(fields: _Fields, value: object) -> Camera:
+    camera = fields.mapping(value, "camera", required=("projection", "width", "height", "pixel_size"))
+    if camera["projection"] != "orthographic":
+        fields.fail("camera.projection", f"is {shown(camera['projection'])}: only 'orthographic' is supported")
+    width = fields.positive_int(camera["width"], "camera.width")
+    height = fields.positive_int(camera["height"], "camera.height")
+    if width * height > MAX_IMAGE_PIXELS:
+        fields.fail("camera", f"size {width}x{height} exceeds the largest supported image ({MAX_IMAGE_PIXELS} pixels)")
+    pixel_size = fields.positive_number(camera["pixel_size"], "camera.pixel_size")
+    if not MIN_PIXEL_SIZE <= pixel_size <= MAX_PIXEL_SIZE:
+        fields.fail(
+            "camera.pixel_size",
+            f"{pixel_size:g} is out of range: expected a number from {MIN_PIXEL_SIZE:g} to {MAX_PIXEL_SIZE:g} (world units per pixel)",
+        )
+    return Camera(width=width, height=height, pixel_size=pixel_size)
+
+
+def _parse_lights(fields: _Fields, value: object) -> tuple[Light, ...]:
+    entries = fields.array(value, "lights")
+    if len(entries) < MIN_LIGHTS:
+        fields.fail("lights", f"has {len(entries)} lights: photometric stereo needs at least {MIN_LIGHTS}")
+    lights = []
+    for k, entry in enumerate(entries):
+        where = f"lights[{k}]"
+        light = fields.mapping(entry, where, required=("direction", "irradiance"))
+        direction = fields.vector3(light["direction"], f"{where}.direction")
+        norm = math.hypot(*direction)
+        if abs(norm - 1.0) > UNIT_TOLERANCE:
+            fields.fail(f"{where}.direction", f"is not a unit vector (norm {norm:.6g})")
+        upward = upward_problem(direction[2])
+        if upward is not None:
+            fields.fail(f"{where}.direction", upward)
+        irradiance = fields.vector3(light["irradiance"], f"{where}.irradiance")
+        problem = irradiance_problem(irradiance)
+        if problem is not None:
+            fields.fail(f"{where}.irradiance", problem)
+        lights.append(Light(direction=np.array(direction), irradiance=np.array(irradiance)))
+    return tuple(lights)
+
+
+def _parse_floor(fields: _Fields, value: object) -> Floor:
+    floor = fields.mapping(value, "floor", required=("height", "albedo"))
+    return Floor(
+        height=fields.number(floor["height"], "floor.height"),
+        albedo=fields.rgb01(floor["albedo"], "floor.albedo"),
+    )
+
+
+def _parse_environment(fields: _Fields, value: object, floor_height: float) -> CornellBox | None:
+    kind = fields.mapping(value, "environment", required=("type",), optional=_BOX_KEYS)["type"]
+    if kind == "none":
+        fields.mapping(value, "environment", required=("type",))
+        return None
+    if kind != "cornell_box":
+        fields.fail("environment.type", f"is {shown(kind)}: expected 'none' or 'cornell_box'")
+    box = fields.mapping(value, "environment", required=_BOX_KEYS)
+    x = fields.interval(box["x"], "environment.x")
+    y = fields.interval(box["y"], "environment.y")
+    z_top = fields.number(box["z_top"], "environment.z_top")
+    if z_top <= floor_height:
+        fields.fail("environment.z_top", f"({z_top:g}) must be above the floor height ({floor_height:g})")
+    albedo = fields.mapping(box["albedo"], "environment.albedo", required=_WALLS)
+    walls = {f"albedo_{wall}": fields.rgb01(albedo[wall], f"environment.albedo.{wall}") for wall in _WALLS}
+    return CornellBox(x=x, y=y, z_top=z_top, **walls)
+
+
+def _environment_to_dict(box: CornellBox | None) -> dict:
+    if box is None:
+        return {"type": "none"}
+    return {
+        "type": "cornell_box",
+        "x": _floats(box.x),
+        "y": _floats(box.y),
+        "z_top": float(box.z_top),
+        "albedo": {wall: _floats(getattr(box, f"albedo_{wall}")) for wall in _WALLS},
+    }
+
+
+def _floats(values) -> list[float]:
+    return [float(v) for v in values]
+
+
+def _json_type(value: object) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, numbers.Number):
+        return f"the number {value!r}"
+    if isinstance(value, str):
+        return f"the string {shown(value)}"
+    if isinstance(value, (list, tuple)):
+        return "an array"
+    if isinstance(value, dict):
+        return "an object"
+    return type(value).__name__
+
+
+class _Fields:
+    """Typed access to parsed JSON; every error names the source and the field path."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+
+    def fail(self, field: str, problem: str) -> NoReturn:
+        raise DatasetError(f"{self.source}: {field} {problem}")
+
+    def expect(self, value: object, field: str, expected: str) -> NoReturn:
+        self.fail(field, f"must be {expected}, got {_json_type(value)}")
+
+    def mapping(self, value: object, field: str, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> dict:
+        """A JSON object with the ``required`` keys and no keys outside ``required + optional``."""
+        where = field or "the top level"
+        if not isinstance(value, dict):
+            self.expect(value, where, "an object")
+        for key in required:
+            if key not in value:
+                self.fail(_join(field, key), "is missing")
+        for key in value:
+            if key not in required and key not in optional:
+                self.fail(where, f"has an unknown field {shown(key)}")
+        return value
+
+    def array(self, value: object, field: str) -> list:
+        if not isinstance(value, (list, tuple)):
+            self.expect(value, field, "an array")
+        return list(value)
+
+    def number(self, value: object, field: str) -> float:
+        if not isinstance(value, numbers.Real) or isinstance(value, bool):
+            self.expect(value, field, "a number")
+        if not math.isfinite(value):
+            self.fail(field, f"must be a finite number, got {value!r}")
+        return float(value)
+
+    def positive_number(self, value: object, field: str) -> float:
+        number = self.number(value, field)
+        if number <= 0.0:
+            self.fail(field, f"must be positive, got {number:g}")
+        return number
+
+    def positive_int(self, value: object, field: str) -> int:
+        if not isinstance(value, numbers.Integral) or isinstance(value, bool):
+            self.expect(value, field, "a positive integer")
+        if value <= 0:
+            self.fail(field, f"must be a positive integer, got {value}")
+        return int(value)
+
+    def vector3(self, value: object, field: str) -> tuple[float, float, float]:
+        items = self.array(value, field)
+        if len(items) != 3:
+            self.fail(field, f"must have 3 numbers, got {len(items)}")
+        first, second, third = (self.number(item, f"{field}[{c}]") for c, item in enumerate(items))
+        return first, second, third
+
+    def rgb01(self, value: object, field: str) -> tuple[float, float, float]:
+        rgb = self.vector3(value, field)
+        if min(rgb) < 0.0 or max(rgb) > 1.0:
+            self.fail(field, f"must be RGB values in [0, 1], got {list(rgb)}")
+        return rgb
+
+    def interval(self, value: object, field: str) -> tuple[float, float]:
+        items = self.array(value, field)
+        if len(items) != 2:
+            self.fail(field, f"must be [low, high], got {len(items)} numbers")
+        low, high = (self.number(item, f"{field}[{c}]") for c, item in enumerate(items))
+        if not low < high:
+            self.fail(field, f"must be [low, high] with low < high, got [{low:g}, {high:g}]")
+        return low, high
+
+
+def _join(field: str, key: str) -> str:
+    return f"{field}.{key}" if field else key

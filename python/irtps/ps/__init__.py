@@ -1,0 +1,1 @@
+"""Photometric stereo: the fit, its robust statistics, the images' agreement with it."""

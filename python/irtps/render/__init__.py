@@ -1,0 +1,1 @@
+"""Rendering a reconstruction in its surroundings, and what follows from a rendering."""

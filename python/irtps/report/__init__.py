@@ -1,0 +1,1 @@
+"""A reconstruction's figures and web page."""
