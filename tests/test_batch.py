@@ -99,10 +99,22 @@ def test_a_batch_on_its_client_ends_while_another_client_is_the_default(cluster,
     gc.collect()
 
 
+def test_bad_arguments_are_argument_errors_naming_them(tmp_path):
+    with pytest.raises(irtps.ArgumentError, match="^datasets: none given$") as caught:
+        reconstruct_many([], tmp_path / "out")
+    assert caught.value.argument == "datasets" and isinstance(caught.value, ValueError)
+    for arguments, name in [({"workers": 0}, "workers"), ({"threads_per_worker": 0}, "threads_per_worker")]:
+        with pytest.raises(irtps.ArgumentError, match=f"^{name}: must be at least 1, not 0$") as caught:
+            with local_cluster(**arguments):
+                pass
+        assert caught.value.argument == name
+    assert not (tmp_path / "out").exists()
+
+
 def test_unknown_options_fail_before_anything_runs(cluster, three_sets, tmp_path):
-    with pytest.raises(irtps.IrtpsError, match="bounce"):
+    with pytest.raises(irtps.ArgumentError, match="bounce"):
         reconstruct_many(three_sets, tmp_path / "out", client=cluster, bounce=2)
-    with pytest.raises(irtps.IrtpsError, match="method"):
+    with pytest.raises(irtps.ArgumentError, match="method"):
         reconstruct_many(three_sets, tmp_path / "out", client=cluster, method="mitsuba")
     assert not (tmp_path / "out").exists()
 

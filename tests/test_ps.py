@@ -12,11 +12,15 @@ from irtps.cli.main import main
 from irtps.errors import IrtpsError
 from irtps.evaluate.metrics import angular_error_deg
 from irtps.irt.interreflection import remove_interreflections
+from irtps import _core
 from irtps.ps.fit import (
+    DARK,
+    FLAGS,
     LOBE_CHECK_ROUNDS,
     LOBE_FIRST,
-    LOBE_FITTED,
-    OUTSIDE_MASK,
+    LOBE,
+    MASKED_OUT,
+    OK,
     PsResult,
     choose_robust,
     lobe_share,
@@ -280,7 +284,7 @@ def test_the_auto_mode_of_an_empty_mask_fits_nothing():
         np.zeros(data.mask.shape, bool),
         robust="auto",
     )
-    assert fit.robust_used == "tukey" and fit.lobe_share == 0.0 and (fit.flags == OUTSIDE_MASK).all()
+    assert fit.robust_used == "tukey" and fit.lobe_share == 0.0 and (fit.flags == MASKED_OUT).all()
 
 
 @pytest.mark.parametrize("mode", ["tukey", "lobe", "threshold", "trim", "none", "auto"])
@@ -298,10 +302,10 @@ def test_irtps_fits_every_pass_with_the_mode_auto_picked():
     result = irtps.reconstruct(metal, "irtps", iterations=1, samples=4)
     # Every pass is fitted in lobe mode: the returned fit has lobe pixels whichever it is.
     assert result.robust_used == "lobe" and result.lobe_share > 0.5
-    assert (result.flags[metal.mask] == LOBE_FITTED).mean() > 0.5
+    assert (result.flags[metal.mask] == LOBE).mean() > 0.5
     # The loop called alone picks the same way.
     loop = remove_interreflections(metal, iterations=0)
-    assert (loop.fit.flags[metal.mask] == LOBE_FITTED).mean() > 0.5
+    assert (loop.fit.flags[metal.mask] == LOBE).mean() > 0.5
 
 
 @pytest.mark.parametrize("name, most", [("diligent_ball_small", 0.05), ("diligent_reading_small", 0.3)])
@@ -364,7 +368,7 @@ def test_lobe_share_near_the_line_is_measured_on_every_pixel_as_one_fit(monkeypa
     # Doubled from the first pixels until all were fitted, the share never clear of the line.
     assert calls == [LOBE_FIRST, LOBE_FIRST, 2 * LOBE_FIRST, 4 * LOBE_FIRST, int(data.mask.sum()) - 8 * LOBE_FIRST]
     whole = _check_fit(data)
-    assert share == pytest.approx((whole.flags[data.mask] == LOBE_FITTED).mean(), abs=1e-12)
+    assert share == pytest.approx((whole.flags[data.mask] == LOBE).mean(), abs=1e-12)
     assert 0.3 < share < 0.7
 
 
@@ -390,7 +394,7 @@ def _check_fit(data: irtps.Dataset) -> PsResult:
 def test_the_check_takes_objects_to_the_side_of_the_line_the_full_lobe_fit_does(make):
     data = make()
     args = (data.images, data.scene.light_directions, data.scene.light_irradiance, data.mask)
-    full = (photometric_stereo(*args, robust="lobe").flags[data.mask] == LOBE_FITTED).mean()
+    full = (photometric_stereo(*args, robust="lobe").flags[data.mask] == LOBE).mean()
     share = lobe_share(*args, stop_early=False)
     assert choose_robust(share) == choose_robust(full)
     # Measured (lobe mode, check): metal cap 84 / 74 %, half of it 50 / 44 %, reading 17.1 /
@@ -408,3 +412,15 @@ def test_a_share_is_decided_only_clear_of_the_line():
     # 1 000 pixels tell 45 % from one half (Wilson half-width 4.7 points at 3 sigma), not 46 %.
     assert share_is_decided(450, 1000) and share_is_decided(550, 1000)
     assert not share_is_decided(460, 1000) and not share_is_decided(540, 1000)
+
+
+def test_flag_values_are_those_the_core_writes():
+    """`irtps.ps.fit`'s flags name the constants of rust/ps.rs `mod flag`, which the binding
+    does not export: a masked-out, a fitted and a dark (no light) pixel, straight from the core."""
+    lights = np.array([[0, 0, 1], [0.6, 0, 0.8], [0, 0.6, 0.8], [-0.6, 0, 0.8]], np.float32)
+    images = np.zeros((4, 1, 3, 3), np.float32)
+    images[:, 0, 1] = 0.5 * lights[:, 2:3]  # a flat grey pixel, lit by every light
+    mask = np.array([[False, True, True]])  # pixel 2: on the object, black in every image
+    _, _, flags, _ = _core.photometric_stereo(images, mask, lights, np.ones((4, 3), np.float32), "none")
+    assert flags.tolist() == [[MASKED_OUT, OK, DARK]]
+    assert FLAGS[MASKED_OUT] == "outside the mask" and FLAGS[OK] == "fitted" and FLAGS[DARK] == "no light"

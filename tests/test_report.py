@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from irtps.cli.main import main
-from irtps.errors import IrtpsError
+from irtps.errors import DatasetError, IrtpsError
 from irtps.report.build import build_report, write_report
 from irtps.report.page import report_html
 
@@ -195,9 +195,9 @@ def test_a_run_without_recorded_pixel_size_gets_a_note(run_copy):
 
 
 def test_a_folder_that_is_not_a_reconstruction_is_named(tmp_path):
-    with pytest.raises(IrtpsError, match=f"{tmp_path / 'missing'}: no such reconstruction folder"):
+    with pytest.raises(DatasetError, match=f"{tmp_path / 'missing'}: no such reconstruction folder"):
         build_report(tmp_path / "missing")
-    with pytest.raises(IrtpsError, match=f"{SMALL / 'run.json'}: missing .not a reconstruction folder"):
+    with pytest.raises(DatasetError, match=f"{SMALL / 'run.json'}: missing .not a reconstruction folder"):
         build_report(SMALL)
 
 
@@ -227,7 +227,7 @@ def test_a_folder_that_is_not_a_reconstruction_is_named(tmp_path):
 def test_a_malformed_run_json_names_the_field(run_copy, change, message):
     path = run_copy / "run.json"
     path.write_text(change(path.read_text()))
-    with pytest.raises(IrtpsError, match=message):
+    with pytest.raises(DatasetError, match=message):
         build_report(run_copy)
 
 

@@ -2,10 +2,10 @@
 the sparse Cholesky factorisation.
 
 Errors about an input arrive as `irtps.errors.ArgumentError` (an argument) or
-`irtps.errors.DatasetError` (a file's content), failures to read or write as `OSError`, a
-buffer that cannot be allocated as `MemoryError` (naming it and its bytes); a value pyo3
-cannot convert (a wrong dtype, a negative count) as its `TypeError` or `OverflowError`, with
-a note naming the argument.
+`irtps.errors.DatasetError` (a file: its content, and also a failure to open, read or write
+it, naming the file; never as an `OSError`), a buffer that cannot be allocated as
+`MemoryError` (naming it and its bytes); a value pyo3 cannot convert (a wrong dtype, a
+negative count) as its `TypeError` or `OverflowError`, with a note naming the argument.
 """
 
 from collections.abc import Sequence

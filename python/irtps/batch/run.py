@@ -319,10 +319,12 @@ def reconstruct_many(
 
     Raises
     ------
-    IrtpsError
+    ArgumentError
         Before anything runs: no data set, an option unknown or out of range
         (`irtps.model.options.OptionError`), a malformed list of images to leave out or one for
-        a ``NAME`` that is none of the data sets', or dask not installed.
+        a ``NAME`` that is none of the data sets'.
+    IrtpsError
+        Before anything runs: dask not installed.
 
     Examples
     --------
@@ -339,7 +341,7 @@ def reconstruct_many(
     True
     """
     if not datasets:
-        raise IrtpsError("datasets: none given")
+        raise ArgumentError("datasets", "none given")
     options = ReconstructOptions.build(options, **settings)
     distributed = _import_distributed()
     from tqdm import tqdm
@@ -433,8 +435,10 @@ def local_cluster(workers: int | None = None, threads_per_worker: int = 1, *, pr
 
     Raises
     ------
+    ArgumentError
+        If ``workers`` or ``threads_per_worker`` is below 1.
     IrtpsError
-        If ``workers`` or ``threads_per_worker`` is below 1, or dask is not installed.
+        If dask is not installed.
 
     Examples
     --------
@@ -443,9 +447,9 @@ def local_cluster(workers: int | None = None, threads_per_worker: int = 1, *, pr
     2
     """
     if workers is not None and workers < 1:
-        raise IrtpsError(f"workers: must be at least 1, not {workers}")
+        raise ArgumentError("workers", f"must be at least 1, not {workers}")
     if threads_per_worker < 1:
-        raise IrtpsError(f"threads_per_worker: must be at least 1, not {threads_per_worker}")
+        raise ArgumentError("threads_per_worker", f"must be at least 1, not {threads_per_worker}")
     distributed = _import_distributed()
     import dask  # installed with distributed
 

@@ -19,7 +19,7 @@ from irtps.model.data import Dataset
 from irtps.geometry.integrate import integrate_normals, place_height
 from irtps.model.options import OptionError, ReconstructOptions
 from irtps.geometry.placement import PRECISION_PIXELS, Placement, estimate_placement, fallback_placement
-from irtps.ps.fit import OUTSIDE_MASK, PsResult, choose_robust, lobe_share, photometric_stereo
+from irtps.ps.fit import MASKED_OUT, PsResult, choose_robust, lobe_share, photometric_stereo
 from irtps.render.radiometry import AlbedoScale, absolute_scale, estimate_albedo_scale, scaled_albedo, scaled_scene
 from irtps.render.residual import compared_observations
 from irtps.model.scene import Scene
@@ -225,7 +225,7 @@ def fit_photometric_stereo(
     frame = PsResult(
         normals=np.zeros((*mask.shape, 3), np.float32),
         albedo=np.zeros((*mask.shape, 3), np.float32),
-        flags=np.full(mask.shape, OUTSIDE_MASK, np.uint8),
+        flags=np.full(mask.shape, MASKED_OUT, np.uint8),
         used=np.zeros(mask.shape, np.uint16),
     )
     for name in ("normals", "albedo", "flags", "used"):

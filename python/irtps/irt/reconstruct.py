@@ -35,7 +35,7 @@ from irtps.irt.pipeline import (
     timed,
 )
 from irtps.geometry.placement import Placement
-from irtps.ps.fit import FITTED, FLAGS, LOBE_ADVISED, LOBE_FITTED, PsResult, check_lights, format_lobe_share
+from irtps.ps.fit import OK, FLAGS, LOBE_ADVISED, LOBE, PsResult, check_lights, format_lobe_share
 from irtps.render.radiometry import AlbedoScale
 from irtps._shared.records import RUN, stamp
 
@@ -374,7 +374,7 @@ def _brightness_corrected(dataset: Dataset, options: ReconstructOptions) -> tupl
 def _image_agreement(dataset: Dataset, fit: PsResult, saturation: float | None) -> ImageAgreement:
     """How each image agrees with `fit` (`irtps.ps.image_agreement`), over the pixels it fitted
     as asked or with a lobe."""
-    fitted = dataset.mask & ((fit.flags == FITTED) | (fit.flags == LOBE_FITTED))
+    fitted = dataset.mask & ((fit.flags == OK) | (fit.flags == LOBE))
     if not fitted.any():
         unknown = np.full(len(dataset.scene.lights), np.nan)
         return ImageAgreement(unknown, unknown.copy())
@@ -627,13 +627,14 @@ def load_run_record(path: str | Path) -> dict:
 
     Raises
     ------
-    IrtpsError
+    DatasetError
         Naming the folder or the file and field: a missing folder or ``run.json``, text
         that is not JSON or is past the bounds of `irtps._shared.guarded`, a ``format`` other than
-        ``irtps.run/1`` (folders written before irtps recorded it have none), or a field missing or of the wrong type (``source`` a string or
-        null; ``parameters``, ``timings_s`` and ``flags`` objects; ``pixel_size`` a
-        number; ``history`` a list of objects with an integer ``index``, a numeric or
-        null ``height_change`` and an object or null ``metrics``).
+        ``irtps.run/1`` (folders written before irtps recorded it have none), or a field missing
+        or of the wrong type (``source`` a string or null; ``parameters``, ``timings_s`` and
+        ``flags`` objects; ``pixel_size`` a number; ``history`` a list of objects with an
+        integer ``index``, a numeric or null ``height_change`` and an object or null
+        ``metrics``). A `DatasetError` is an `IrtpsError` and a ``ValueError``.
 
     Examples
     --------
@@ -648,26 +649,26 @@ def load_run_record(path: str | Path) -> dict:
     """
     folder = check_folder(path, missing="no such reconstruction folder")
     run_path = check_file(folder / "run.json", "not a reconstruction folder written by irtps reconstruct?")
-    record = read_json(run_path, error=IrtpsError)
+    record = read_json(run_path)
     _check_fields(run_path, "", record, _RUN_FIELDS, _OPTIONAL_RUN_FIELDS)
     if record.get("format", RUN) != RUN:
-        raise IrtpsError(f"{run_path}: format {record['format']!r} is not a reconstruction's ({RUN!r})")
+        raise DatasetError(f"{run_path}: format {record['format']!r} is not a reconstruction's ({RUN!r})")
     for k, step in enumerate(record["history"]):
         _check_fields(run_path, f"history[{k}]", step, _HISTORY_FIELDS, {})
     return record
 
 
 def _check_fields(run_path: Path, name: str, value, required: dict, optional: dict) -> None:
-    """Raise `IrtpsError` unless ``value`` is an object whose fields have the listed types."""
+    """Raise `DatasetError` unless ``value`` is an object whose fields have the listed types."""
     if not isinstance(value, dict):
-        raise IrtpsError(f"{run_path}: {name or 'the file'} must be an object, found {json.dumps(value)[:40]}")
+        raise DatasetError(f"{run_path}: {name or 'the file'} must be an object, found {json.dumps(value)[:40]}")
     prefix = f"{name}." if name else ""
     for field_name, types in {**required, **optional}.items():
         if field_name not in value:
             if field_name in required:
-                raise IrtpsError(f"{run_path}: {prefix}{field_name} is missing")
+                raise DatasetError(f"{run_path}: {prefix}{field_name} is missing")
             continue
         item = value[field_name]
         if isinstance(item, bool) or not isinstance(item, types):
             expected = " or ".join(dict.fromkeys(_JSON_TYPE_NAMES[t] for t in types))
-            raise IrtpsError(f"{run_path}: {prefix}{field_name} must be {expected}, found {json.dumps(item)[:40]}")
+            raise DatasetError(f"{run_path}: {prefix}{field_name} must be {expected}, found {json.dumps(item)[:40]}")

@@ -28,18 +28,27 @@ ROBUST_MODES = ("tukey", "lobe", "threshold", "trim", "none")
 #: What `photometric_stereo` takes for `robust`: a mode of `ROBUST_MODES`, or ``"auto"``, the
 #: mode `choose_robust` picks for the object.
 ROBUST_CHOICES = ("auto", *ROBUST_MODES)
+# The values of `PsResult.flags`, as the core writes them: the constants of ``rust/ps.rs``
+# ``mod flag``, under the same names (the binding does not export them;
+# tests/test_ps.py checks them against what the core writes).
+#: The flag of the pixels fitted as asked (with every mode but the lobe's).
+OK = 0
+#: The flag of a robust fit's pixels left with too few non-coplanar observations: the full fit kept.
+FULL_FIT = 1
+#: The flag of the pixels no light reached: normal (0, 0, 1), albedo 0.
+DARK = 2
+#: The flag of the pixels outside the mask.
+MASKED_OUT = 3
+#: The flag of the pixels fitted with a specular lobe (robust mode ``"lobe"``).
+LOBE = 4
 #: Meaning of the values of `PsResult.flags`.
 FLAGS = {
-    0: "fitted",
-    1: "full fit kept (too few non-coplanar lit observations)",
-    2: "no light",
-    3: "outside the mask",
-    4: "fitted with a specular lobe",
+    OK: "fitted",
+    FULL_FIT: "full fit kept (too few non-coplanar lit observations)",
+    DARK: "no light",
+    MASKED_OUT: "outside the mask",
+    LOBE: "fitted with a specular lobe",
 }
-#: The flag of the pixels outside the mask.
-OUTSIDE_MASK = 3
-#: The flag of the pixels fitted as asked (with every mode but the lobe's).
-FITTED = 0
 
 
 @dataclass
@@ -162,7 +171,7 @@ def photometric_stereo(
           is each channel's diffuse term, without the highlight. A pixel keeps its Tukey
           fit unless the lobe lowers Tukey's loss by more than the Bayesian information
           criterion asks for its two extra parameters, or when it lights fewer than 6
-          unsaturated observations; pixels fitted with a lobe are flagged (``FLAGS[4]``).
+          unsaturated observations; pixels fitted with a lobe are flagged (`LOBE`).
           About 90 times slower than ``"tukey"`` (0.5–2 s on a DiLiGenT object), and worse
           than it on matte objects with deep folds, where it can take inter-reflected light
           for a lobe. `lobe_share` tells which objects want it, and `choose_robust` picks
@@ -181,7 +190,7 @@ def photometric_stereo(
         - ``"none"``: plain least squares on every observation.
 
         Where a selection leaves fewer than 3 non-coplanar lights, the pixel falls back to a
-        wider one and is flagged (``FLAGS[1]``): threshold to every observation, trim to
+        wider one and is flagged (`FULL_FIT`): threshold to every observation, trim to
         every unsaturated one (then every one), Tukey's start as threshold. A re-weighting
         that leaves fewer than 4 stops, and Tukey keeps the fit before it.
     shadow_fraction : float
@@ -319,8 +328,6 @@ def _fit_in_bands(images: np.ndarray, mask: np.ndarray, settings: _CoreSettings)
     return PsResult(normals, albedo, flags, used)
 
 
-#: The flag of the pixels that the lobe mode fitted with a specular lobe.
-LOBE_FITTED = 4
 #: Object pixels `lobe_share` fits at most, by default.
 LOBE_SAMPLE = 1000
 #: Object pixels `lobe_share` fits first; it doubles them until the share is clearly on one
@@ -524,7 +531,7 @@ class _LobeCheck:
 
     def record(self, flags: np.ndarray) -> None:
         """Count the next batch's flags (N,)."""
-        self.lobes += int((flags == LOBE_FITTED).sum())
+        self.lobes += int((flags == LOBE).sum())
         self.fitted += self.batch
 
     @property

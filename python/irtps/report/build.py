@@ -27,7 +27,7 @@ import numpy as np
 from irtps._shared.atomic import atomic_output_dir
 from irtps.io.dataset import GroundTruth, ground_truth_inputs, is_data_set, load_ground_truth
 from irtps.report.display import albedo_to_rgb, hillshade, normal_to_rgb, object_window, radiance_to_rgb
-from irtps.errors import IrtpsError
+from irtps.errors import DatasetError, IrtpsError
 from irtps.evaluate.metrics import ErrorMaps, Metrics, error_maps, evaluate
 from irtps.report.figures import agreement_png, convergence_png, error_map_png, image_png
 from irtps.ps.image_agreement import ImageAgreement
@@ -131,9 +131,11 @@ def build_report(run_dir: str | Path, *, truth: str | Path | None = None) -> Rep
 
     Raises
     ------
-    IrtpsError
+    DatasetError
         Naming the folder or file: not a reconstruction folder, a malformed
-        ``run.json`` or image, or a ``truth`` folder without ground truth.
+        ``run.json`` or image.
+    IrtpsError
+        Naming it: a ``truth`` folder without ground truth.
 
     Examples
     --------
@@ -266,7 +268,7 @@ def _indirect_figure(folder: Path, mask: np.ndarray, window: tuple[slice, slice]
     for path in paths:
         image = read_exr(path)
         if image.shape != total.shape:
-            raise IrtpsError(f"{path}: shape {image.shape} differs from the reconstruction's {total.shape}")
+            raise DatasetError(f"{path}: shape {image.shape} differs from the reconstruction's {total.shape}")
         total += image
     rgb, scale = radiance_to_rgb(total[window] / len(paths), mask[window])
     caption = (
