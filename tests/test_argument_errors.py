@@ -122,7 +122,7 @@ CASES = {
         "stride: ",
     ),
     "irtps.irt.reconstruct.reconstruct": (lambda f: f(_dataset(), method="magic"), "method: "),
-    "irtps.irt.reconstruct.save_reconstruction": (lambda f: f(_dataset(), "unused"), "result: "),
+    "irtps.irt.folder.save_reconstruction": (lambda f: f(_dataset(), "unused"), "result: "),
     "irtps.render.synth.synthesize": (lambda f: f("cube"), "shape: "),
     "irtps.io.dataset.load_dataset": (lambda f: f("no/such/folder"), "no/such/folder: "),
     "irtps.io.image_selection.exclude_images": (lambda f: f(_dataset(), "5-1"), "exclude_images: "),

@@ -17,7 +17,7 @@ import irtps.batch.run
 from irtps import evaluate, load_dataset, reconstruct
 from irtps.batch.run import local_cluster, reconstruct_many
 from irtps.cli.main import main
-from irtps.irt.reconstruct import load_reconstruction
+from irtps.irt.folder import load_reconstruction
 
 from cli_helpers import saturate
 

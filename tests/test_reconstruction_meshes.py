@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 from irtps import reconstruct, save_reconstruction
-from irtps.irt.reconstruct import load_reconstruction
+from irtps.irt.folder import load_reconstruction
 from irtps.render.synth import synthesize
 
 PIXEL_SIZE = 0.25

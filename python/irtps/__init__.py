@@ -7,7 +7,8 @@ from irtps.evaluate.metrics import Metrics, angular_error_deg, evaluate
 from irtps.io.image_selection import exclude_images
 from irtps.geometry.integrate import integrate_normals, place_height
 from irtps.ps.fit import PsResult, choose_robust, lobe_share, photometric_stereo
-from irtps.irt.reconstruct import Reconstruction, reconstruct, save_reconstruction
+from irtps.irt.folder import save_reconstruction
+from irtps.irt.reconstruct import Reconstruction, reconstruct
 from irtps._shared.records import irtps_version
 from irtps.render.renderer import Rendering, render, render_indirect
 from irtps.model.scene import Camera, CornellBox, Floor, Light, Scene, load_scene

@@ -52,13 +52,8 @@ from irtps.io.image_selection import parse_image_list, select_images
 from irtps.model.options import ReconstructOptions
 from irtps._shared.paths import resolve_path
 from irtps._shared.records import BATCH, stamp
-from irtps.irt.reconstruct import (
-    indirect_file_names,
-    load_and_reconstruct,
-    load_reconstruction,
-    load_run_record,
-    save_reconstruction,
-)
+from irtps.irt.folder import indirect_file_names, load_reconstruction, load_run_record, save_reconstruction
+from irtps.irt.reconstruct import load_and_reconstruct
 
 __all__ = [
     "BatchResult",
@@ -184,7 +179,7 @@ def reconstruct_to_folder(
     and left out the images that `exclude_images` names, no other; its normal, albedo and
     height maps and its mask read back, all of one size; its two meshes are files that are
     not empty; and when the chosen IRT-PS pass is not pass 0, ``indirect/`` holds a file for
-    each image fitted (`irtps.irt.reconstruct.indirect_file_names`), none empty. Any other output
+    each image fitted (`irtps.irt.folder.indirect_file_names`), none empty. Any other output
     folder is reconstructed again and replaced.
 
     Parameters

@@ -55,7 +55,8 @@ from irtps.geometry.placement import format_placement
 from irtps.ps.fit import format_lobe_share
 from irtps.render.radiometry import format_albedo_scale
 from irtps._shared.records import TABLE, stamp, written_by_irtps
-from irtps.irt.reconstruct import load_and_reconstruct, load_reconstruction, save_reconstruction
+from irtps.irt.folder import load_reconstruction, save_reconstruction
+from irtps.irt.reconstruct import load_and_reconstruct
 from irtps.render.renderer import Rendering, render
 from irtps._shared.resources import return_freed_memory
 from irtps.geometry.surface import height_to_normals

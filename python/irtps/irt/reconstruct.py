@@ -1,32 +1,24 @@
-"""The reconstruction pipeline: photometric stereo, normal integration, height placement."""
+"""The reconstruction pipeline: photometric stereo, normal integration, height placement.
+
+The folder a `Reconstruction` is saved to and read back from is `irtps.irt.folder`'s.
+"""
 
 from __future__ import annotations
 
-import json
-import os
-import platform
-import re
 import time
 import warnings
-from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass, field, replace
-from pathlib import Path, PurePosixPath
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
-from irtps._shared.checks import check_instance, check_path
-from irtps._shared.atomic import atomic_output_dir
+from irtps._shared.checks import check_instance
 from irtps.model.data import pixel_observations
-from irtps.io.dataset import Dataset, load_dataset, read_albedo_map, read_height_map, read_normal_map
+from irtps.io.dataset import Dataset, load_dataset
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
-from irtps._shared.guarded import read_json
 from irtps.ps.image_agreement import ImageAgreement, image_agreement
-from irtps.io.imageio import read_mask, write_exr, write_png
 from irtps.irt.interreflection import Iteration, check_traceable, remove_interreflections
-from irtps.io.mesh import height_field_mesh, write_obj, write_ply
 from irtps.model.options import ReconstructOptions
-from irtps._shared.paths import check_file, check_folder
 from irtps.irt.pipeline import (
     choose_dataset_robust,
     fit_photometric_stereo,
@@ -35,26 +27,8 @@ from irtps.irt.pipeline import (
     timed,
 )
 from irtps.geometry.placement import Placement
-from irtps.ps.fit import OK, FLAGS, LOBE_ADVISED, LOBE, PsResult, check_lights, format_lobe_share
+from irtps.ps.fit import OK, LOBE_ADVISED, LOBE, PsResult, check_lights, format_lobe_share
 from irtps.render.radiometry import AlbedoScale
-from irtps._shared.records import RUN, stamp
-
-#: Indirect images written at once, one per core up to 4 (on 2 cores, 2 writers take 0.7 of
-#: one writer's time).
-_EXR_WRITERS = max(1, min(4, os.cpu_count() or 1))
-#: What a reconstruction folder holds (`save_reconstruction`); ``indirect`` for IRT-PS only.
-RECONSTRUCTION_FILES = (
-    "normal.exr",
-    "albedo.exr",
-    "height.exr",
-    "mask.png",
-    "mesh.ply",
-    "mesh.obj",
-    "run.json",
-    "indirect",
-)
-#: An image name's stem that can name its file in ``indirect/``: plain, not hidden.
-_PLAIN_STEM = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
 
 
 @dataclass
@@ -425,250 +399,3 @@ def _check_input(dataset: Dataset, saturation: float | None, robust: str) -> Non
             IrtpsWarning,
             stacklevel=3,
         )
-
-
-def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str | None = None) -> None:
-    """Write a reconstruction folder atomically.
-
-    Files: ``normal.exr`` (R, G, B = nx, ny, nz), ``albedo.exr``, ``height.exr`` (Y),
-    ``mask.png``, ``mesh.ply`` (binary; the height field with per-vertex albedo colour and
-    normals), ``mesh.obj`` (the same vertices, triangles and normals as Wavefront OBJ text,
-    see `irtps.io.mesh`), ``run.json`` (parameters, pixel size, timings, versions, source,
-    placement, IRT-PS history with each pass's residual, the pass chosen, the images fitted,
-    how each agrees with the fit, those left out, and the factors of ``correct_brightness``)
-    and, for IRT-PS, ``indirect/`` (for each image fitted, the estimate of
-    its inter-reflected light that the chosen pass removed, with the surroundings' light in the
-    edge pixels, `irtps.render.surroundings`, named as `indirect_file_names` says; none when that
-    is pass 0).
-
-    Parameters
-    ----------
-    result : Reconstruction
-    path : str or pathlib.Path
-        The output folder; replaced only once everything is written.
-    source : str, optional
-        The input data set, recorded in ``run.json``.
-
-    Raises
-    ------
-    ArgumentError
-        If `result` is not a `Reconstruction`.
-    DatasetError
-        If the folder cannot be written.
-    """
-    if not isinstance(result, Reconstruction):
-        raise ArgumentError("result", f"expected a Reconstruction, got {type(result).__name__}")
-    with atomic_output_dir(check_path("path", path)) as folder:
-        write_exr(folder / "normal.exr", result.normals)
-        write_exr(folder / "albedo.exr", result.albedo)
-        write_exr(folder / "height.exr", result.height)
-        write_png(folder / "mask.png", result.mask.astype(np.float32), bit_depth=8)
-        vertices, faces, colors, normals = height_field_mesh(
-            result.height, result.mask, result.pixel_size, albedo=result.albedo, normals=result.normals
-        )
-        write_ply(folder / "mesh.ply", vertices, faces, colors=colors, normals=normals)
-        write_obj(folder / "mesh.obj", vertices, faces, normals=normals)
-        run = {
-            **stamp(RUN),
-            "python": platform.python_version(),
-            "numpy": np.__version__,
-            "source": source,
-            "parameters": result.parameters,
-            "pixel_size": result.pixel_size,
-            "timings_s": result.timings,
-            "flags": {name: int((result.flags[result.mask] == value).sum()) for value, name in FLAGS.items()},
-            "placement": None if result.placement is None else result.placement.to_dict(),
-            "history": [asdict(step) for step in result.history],
-            "chosen_pass": result.chosen,
-            "albedo_scale": None if result.albedo_scale is None else result.albedo_scale.to_dict(),
-            "lobe_share": result.lobe_share,
-            "robust_used": result.robust_used,
-            "images": list(result.image_names),
-            "excluded_images": list(result.excluded_images),
-            "image_agreement": None if result.image_agreement is None else result.image_agreement.to_dict(),
-            "irradiance_factors": None
-            if result.irradiance_factors is None
-            else [round(float(factor), 4) for factor in result.irradiance_factors],
-        }
-        if result.object_indirect is not None:
-            (folder / "indirect").mkdir()
-            # A few at a time (the core compresses with the GIL released), each image made as
-            # it is written: never more than the writers' images in memory.
-            names = indirect_file_names(result.image_names, len(result.object_indirect))
-            with ThreadPoolExecutor(max_workers=_EXR_WRITERS) as writers:
-                list(
-                    writers.map(
-                        lambda k: write_exr(folder / "indirect" / names[k], result.indirect_image(k)), range(len(names))
-                    )
-                )
-        (folder / "run.json").write_text(json.dumps(run, indent=2))
-
-
-def indirect_file_names(image_names: Sequence[str], count: int) -> list[str]:
-    """The files of a reconstruction's ``indirect/``, one for each of the `count` images fitted.
-
-    Each image's own name with ``.exr`` for its extension (``001.exr`` for DiLiGenT's
-    ``001.png``, ``000.exr`` for the contract layout's ``000.exr``), so that a file names
-    the image whatever was left out; ``000.exr``, ``001.exr`` … by position where the names
-    are not `count` distinct plain file names (letters, digits, ``_``, ``-``, ``.``).
-
-    Examples
-    --------
-    >>> indirect_file_names(["021.png", "041.png"], 2)
-    ['021.exr', '041.exr']
-    >>> indirect_file_names(["a/x.png", "b/x.png"], 2)
-    ['000.exr', '001.exr']
-    """
-    stems = [PurePosixPath(name).stem for name in image_names]
-    if (
-        len(stems) == count
-        and len({stem.lower() for stem in stems}) == count
-        and all(map(_PLAIN_STEM.fullmatch, stems))
-    ):
-        return [f"{stem}.exr" for stem in stems]
-    return [f"{k:03d}.exr" for k in range(count)]
-
-
-def load_reconstruction(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Read the normals, albedo, height and mask of a reconstruction folder.
-
-    Returns
-    -------
-    (normals (H, W, 3), albedo (H, W, 3), height (H, W), mask (H, W) bool)
-
-    Raises
-    ------
-    DatasetError
-        Naming the file: missing, unreadable, non-finite, or of another size than
-        ``normal.exr``; a normal on the mask that is not a unit vector (irtps writes unit
-        normals there, even where a pixel had no light: `_check_unit_normals`).
-    """
-    folder = check_folder(path, missing="no such reconstruction folder")
-    normal_path = check_file(folder / "normal.exr", "not a reconstruction folder?")
-    normals = read_normal_map(normal_path)
-    size = normals.shape[:2]
-    albedo = read_albedo_map(folder / "albedo.exr", size)
-    height = read_height_map(folder / "height.exr", size)
-    mask = read_mask(folder / "mask.png", size)
-    _check_unit_normals(normal_path, normals, mask)
-    return normals, albedo, height, mask
-
-
-#: How far from 1 the length of a reconstruction's normal on its mask may be: float32 files
-#: hold unit normals to 1e-7, half-float ones (written by other tools) to 1e-3.
-NORMAL_LENGTH_TOLERANCE = 1e-2
-
-
-def _check_unit_normals(path: Path, normals: np.ndarray, mask: np.ndarray) -> None:
-    """Refuse a normal on the mask whose length is not 1 (within `NORMAL_LENGTH_TOLERANCE`):
-    a zero normal would be scored as 90° off, an error of the file's, not of the shape's."""
-    length = np.linalg.norm(normals, axis=-1)
-    wrong = mask & (np.abs(length - 1.0) > NORMAL_LENGTH_TOLERANCE)
-    if wrong.any():
-        row, col = np.argwhere(wrong)[0]
-        raise DatasetError(
-            f"{path}: the normal at row {row}, column {col} has length {length[row, col]:.3g}, not 1 "
-            f"({int(wrong.sum())} of the mask's {int(mask.sum())} normals are not unit vectors)"
-        )
-
-
-#: Fields of ``run.json`` that readers rely on, and the JSON types each may take.
-_RUN_FIELDS = {
-    "source": (str, type(None)),
-    "parameters": (dict,),
-    "timings_s": (dict,),
-    "flags": (dict,),
-    "history": (list,),
-}
-#: Fields that folders written by older versions of irtps lack.
-_OPTIONAL_RUN_FIELDS = {
-    "format": (str,),
-    "pixel_size": (int, float),
-    "placement": (dict, type(None)),
-    "chosen_pass": (int, type(None)),
-    "albedo_scale": (dict, type(None)),
-    "lobe_share": (int, float, type(None)),
-    "robust_used": (str, type(None)),
-    "images": (list,),
-    "excluded_images": (list,),
-    "image_agreement": (dict, type(None)),
-    "irradiance_factors": (list, type(None)),
-}
-_HISTORY_FIELDS = {
-    "index": (int,),
-    "height_change": (int, float, type(None)),
-    "timings": (dict,),
-    "metrics": (dict, type(None)),
-}
-_JSON_TYPE_NAMES = {
-    dict: "an object",
-    list: "a list",
-    str: "a string",
-    int: "a number",
-    float: "a number",
-    type(None): "null",
-}
-
-
-def load_run_record(path: str | Path) -> dict:
-    """Read and check the ``run.json`` of a reconstruction folder.
-
-    Parameters
-    ----------
-    path : str or pathlib.Path
-        The reconstruction folder (from `save_reconstruction` or ``irtps reconstruct``).
-
-    Returns
-    -------
-    dict
-        The record as written by `save_reconstruction`. ``pixel_size``, ``placement``,
-        ``chosen_pass`` and ``albedo_scale`` are absent from folders written before irtps
-        recorded them.
-
-    Raises
-    ------
-    DatasetError
-        Naming the folder or the file and field: a missing folder or ``run.json``, text
-        that is not JSON or is past the bounds of `irtps._shared.guarded`, a ``format`` other than
-        ``irtps.run/1`` (folders written before irtps recorded it have none), or a field missing
-        or of the wrong type (``source`` a string or null; ``parameters``, ``timings_s`` and
-        ``flags`` objects; ``pixel_size`` a number; ``history`` a list of objects with an
-        integer ``index``, a numeric or null ``height_change`` and an object or null
-        ``metrics``). A `DatasetError` is an `IrtpsError` and a ``ValueError``.
-
-    Examples
-    --------
-    >>> import tempfile
-    >>> from irtps.render.synth import synthesize
-    >>> data, _ = synthesize("cap", size=16, lights=4, bounces=0, environment="none")
-    >>> with tempfile.TemporaryDirectory() as folder:
-    ...     save_reconstruction(reconstruct(data), folder + "/out", source="cap")
-    ...     record = load_run_record(folder + "/out")
-    >>> record["source"], record["parameters"]["method"], record["history"]
-    ('cap', 'ps', [])
-    """
-    folder = check_folder(path, missing="no such reconstruction folder")
-    run_path = check_file(folder / "run.json", "not a reconstruction folder written by irtps reconstruct?")
-    record = read_json(run_path)
-    _check_fields(run_path, "", record, _RUN_FIELDS, _OPTIONAL_RUN_FIELDS)
-    if record.get("format", RUN) != RUN:
-        raise DatasetError(f"{run_path}: format {record['format']!r} is not a reconstruction's ({RUN!r})")
-    for k, step in enumerate(record["history"]):
-        _check_fields(run_path, f"history[{k}]", step, _HISTORY_FIELDS, {})
-    return record
-
-
-def _check_fields(run_path: Path, name: str, value, required: dict, optional: dict) -> None:
-    """Raise `DatasetError` unless ``value`` is an object whose fields have the listed types."""
-    if not isinstance(value, dict):
-        raise DatasetError(f"{run_path}: {name or 'the file'} must be an object, found {json.dumps(value)[:40]}")
-    prefix = f"{name}." if name else ""
-    for field_name, types in {**required, **optional}.items():
-        if field_name not in value:
-            if field_name in required:
-                raise DatasetError(f"{run_path}: {prefix}{field_name} is missing")
-            continue
-        item = value[field_name]
-        if isinstance(item, bool) or not isinstance(item, types):
-            expected = " or ".join(dict.fromkeys(_JSON_TYPE_NAMES[t] for t in types))
-            raise DatasetError(f"{run_path}: {prefix}{field_name} must be {expected}, found {json.dumps(item)[:40]}")

@@ -35,7 +35,7 @@ from irtps.io.imageio import read_exr
 from irtps._shared.guarded import shown
 from irtps._shared.output_rule import check_output
 from irtps._shared.paths import folder_problem
-from irtps.irt.reconstruct import RECONSTRUCTION_FILES, load_reconstruction, load_run_record
+from irtps.irt.folder import RECONSTRUCTION_FILES, load_reconstruction, load_run_record
 from irtps.report.page import recorded_agreement, report_html
 
 __all__ = ["PAGE_FILE", "REPORT_FOLDER", "Report", "ReportFigure", "build_report", "report_inputs", "write_report"]
@@ -85,7 +85,7 @@ class Report:
     run_dir : pathlib.Path
         The reconstruction folder.
     record : dict
-        Its ``run.json`` (`irtps.irt.reconstruct.load_run_record`).
+        Its ``run.json`` (`irtps.irt.folder.load_run_record`).
     size : tuple of int
         (H, W) of the maps.
     object_pixels : int
