@@ -34,12 +34,6 @@ LAYERS = [
 #: Imports from a higher layer (or a peer) that the layers allow for now, (importer, imported):
 #: known violations that a later step of issue 45 fixes, taking them out of this list.
 KNOWN_VIOLATIONS = {
-    # The options' choice lists and bounds, read from the modules that use them (issue 45).
-    ("model.options", "io.imageio"),
-    ("model.options", "geometry.integrate"),
-    ("model.options", "ps.fit"),
-    # The scene's bound on the image size, MAX_IMAGE_PIXELS (issue 45).
-    ("model.scene", "io.imageio"),
     # The placement renders the floor around the object (issue 45).
     ("geometry.placement", "render.renderer"),
     # Each pass is evaluated against the ground truth (issue 45).
