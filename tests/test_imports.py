@@ -34,8 +34,6 @@ LAYERS = [
 #: Imports from a higher layer (or a peer) that the layers allow for now, (importer, imported):
 #: known violations that a later step of issue 45 fixes, taking them out of this list.
 KNOWN_VIOLATIONS = {
-    # The placement renders the floor around the object (issue 45).
-    ("geometry.placement", "render.renderer"),
     # Each pass is evaluated against the ground truth (issue 45).
     ("irt.interreflection", "evaluate.metrics"),
 }

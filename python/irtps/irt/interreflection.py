@@ -145,7 +145,7 @@ def remove_interreflections(
           reflectance at pass 0 when the irradiance is relative (`irtps.render.radiometry`), 1
           otherwise; a number gives it;
         - ``base_height``: ``"auto"`` estimates the placement from the floor around the
-          object at pass 0 (`irtps.geometry.placement`) and refines it as the shape changes;
+          object at pass 0 (`irtps.render.placement`) and refines it as the shape changes;
           ``"boundary"`` or a number as for `irtps.reconstruct`;
         - ``relaxation``: ``"auto"`` adapts the step toward each new estimate (see the
           module); a number in (0, 2) fixes it (1 takes each new estimate whole);
