@@ -44,7 +44,7 @@ from ps_accuracy import COLUMNS, mode_errors
 import irtps
 from irtps import height_to_normals, integrate_normals
 from irtps.errors import IrtpsWarning
-from irtps.evaluate.metrics import angular_error_deg
+from irtps.model.metrics import angular_error_deg
 from irtps.render.renderer import make_renderer
 from irtps.model.scene import Camera, Light, Scene
 from irtps.render.synth import SHAPES

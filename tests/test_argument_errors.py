@@ -18,7 +18,7 @@ from irtps.render.synth import synthesize
 #: The modules whose `__all__` functions take arrays, besides those `irtps` exports itself.
 ARRAY_MODULES = [
     "report.display",
-    "evaluate.metrics",
+    "model.metrics",
     "report.figures",
     "geometry.integrate",
     "irt.interreflection",
@@ -27,7 +27,7 @@ ARRAY_MODULES = [
     "geometry.surface",
 ]
 #: Functions that only format a record for printing: they take no argument to check.
-FORMATTING = {"irtps.evaluate.metrics.format_metrics"}
+FORMATTING = {"irtps.model.metrics.format_metrics"}
 
 MASK = np.ones((4, 4), bool)
 EMPTY = np.zeros((4, 4), bool)
@@ -71,9 +71,9 @@ CASES = {
     "irtps.report.display.albedo_to_rgb": (lambda f: f(np.full((4, 4, 3), np.nan), MASK), "albedo: "),
     "irtps.report.display.radiance_to_rgb": (lambda f: f(ALBEDO, WRONG), "mask: "),
     "irtps.report.display.hillshade": (lambda f: f(HEIGHT, MASK, pixel_size=0), "pixel_size: "),
-    "irtps.evaluate.metrics.angular_error_deg": (lambda f: f(NORMALS, NORMALS[:3], MASK), "normals_gt: "),
-    "irtps.evaluate.metrics.evaluate": (lambda f: f(mask=MASK, height=WRONG, gt=None), "height: "),
-    "irtps.evaluate.metrics.error_maps": (lambda f: f(mask=MASK, gt=None, base_height=np.inf), "base_height: "),
+    "irtps.model.metrics.angular_error_deg": (lambda f: f(NORMALS, NORMALS[:3], MASK), "normals_gt: "),
+    "irtps.model.metrics.evaluate": (lambda f: f(mask=MASK, height=WRONG, gt=None), "height: "),
+    "irtps.model.metrics.error_maps": (lambda f: f(mask=MASK, gt=None, base_height=np.inf), "base_height: "),
     "irtps.report.figures.image_png": (lambda f: f(HEIGHT, "t"), "rgb: "),
     "irtps.report.figures.error_map_png": (lambda f: f(np.full((2, 2), np.nan), "t", "u"), "errors: "),
     "irtps.report.figures.convergence_png": (lambda f: f([0, 1], [1.0], [0.1, 0.2]), "passes: "),

@@ -10,7 +10,7 @@ import irtps
 import numpy as np
 import pytest
 from irtps import _core
-from irtps.evaluate.metrics import angular_error_deg
+from irtps.model.metrics import angular_error_deg
 from irtps.irt.interreflection import check_traceable
 from irtps.render.surroundings import surroundings_light
 

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 from irtps import GroundTruth, IrtpsError
-from irtps.evaluate.metrics import Metrics, angular_error_deg, error_maps, evaluate, format_metrics
+from irtps.model.metrics import Metrics, angular_error_deg, error_maps, evaluate, format_metrics
 
 
 def normal_map(*rows):

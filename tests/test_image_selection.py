@@ -22,7 +22,7 @@ from irtps import (
 )
 from irtps.batch.run import _complete_indirect
 from irtps.cli.main import main
-from irtps.evaluate.metrics import angular_error_deg
+from irtps.model.metrics import angular_error_deg
 from irtps.io.image_selection import excluded_indices, exclusions_by_name, parse_image_list
 from irtps.io.imageio import read_exr
 from irtps.render.synth import synthesize

@@ -31,20 +31,6 @@ LAYERS = [
     ["report", "batch"],
     ["cli"],
 ]
-#: Imports from a higher layer (or a peer) that the layers allow for now, (importer, imported):
-#: known violations that a later step of issue 45 fixes, taking them out of this list.
-KNOWN_VIOLATIONS = {
-    # The options' choice lists and bounds, read from the modules that use them (issue 45).
-    ("model.options", "io.imageio"),
-    ("model.options", "geometry.integrate"),
-    ("model.options", "ps.fit"),
-    # The scene's bound on the image size, MAX_IMAGE_PIXELS (issue 45).
-    ("model.scene", "io.imageio"),
-    # The placement renders the floor around the object (issue 45).
-    ("geometry.placement", "render.renderer"),
-    # Each pass is evaluated against the ground truth (issue 45).
-    ("irt.interreflection", "evaluate.metrics"),
-}
 
 
 def _file(module: str) -> Path:
@@ -127,8 +113,7 @@ def test_no_import_from_a_higher_layer():
         for other in _imports(module)
         if module.split(".")[0] != other.split(".")[0] and _layer(other) >= _layer(module)
     }
-    assert upward <= KNOWN_VIOLATIONS, sorted(upward - KNOWN_VIOLATIONS)
-    assert not KNOWN_VIOLATIONS - upward, f"no longer imported, take them out: {sorted(KNOWN_VIOLATIONS - upward)}"
+    assert not upward, sorted(upward)
 
 
 def test_the_subpackages_import_nothing():

@@ -13,7 +13,7 @@ import irtps
 from irtps.cli.main import main
 from irtps.errors import IrtpsWarning
 from irtps.model.options import OptionError, ReconstructOptions
-from irtps.geometry.placement import estimate_placement
+from irtps.render.placement import estimate_placement
 from irtps.render.synth import SHAPES, synthesize
 
 BALL = Path(__file__).parent / "data" / "diligent_ball_small"  # 48x44, 8 lights, no floor

@@ -10,7 +10,7 @@ import pytest
 import irtps
 from irtps.cli.main import main
 from irtps.errors import IrtpsError
-from irtps.evaluate.metrics import angular_error_deg
+from irtps.model.metrics import angular_error_deg
 from irtps.irt.interreflection import remove_interreflections
 from irtps import _core
 from irtps.ps.fit import (

@@ -1,9 +1,13 @@
 """irtps: Iterative Ray Tracing Photometric Stereo."""
 
+# The subpackage `irtps.evaluate` is loaded before the function `evaluate` is bound below: a
+# subpackage first loaded later (by `irtps.evaluate.table`'s import) would take its name.
+from irtps import evaluate as _evaluate_subpackage
+
 from irtps.model.data import Dataset, GroundTruth
 from irtps.io.dataset import load_dataset, load_ground_truth, load_scene_object, save_dataset
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
-from irtps.evaluate.metrics import Metrics, angular_error_deg, evaluate
+from irtps.model.metrics import Metrics, angular_error_deg, evaluate
 from irtps.io.image_selection import exclude_images
 from irtps.geometry.integrate import integrate_normals, place_height
 from irtps.ps.fit import PsResult, choose_robust, lobe_share, photometric_stereo
@@ -15,6 +19,7 @@ from irtps.model.scene import Camera, CornellBox, Floor, Light, Scene, load_scen
 from irtps.geometry.surface import height_to_normals
 from irtps.render.synth import synthesize
 
+del _evaluate_subpackage
 __version__ = irtps_version()
 
 __all__ = [

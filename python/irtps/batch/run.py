@@ -47,7 +47,7 @@ from pathlib import Path
 from irtps._shared.atomic import atomic_write_text
 from irtps.io.dataset import dataset_image_names, load_ground_truth
 from irtps.errors import ArgumentError, IrtpsError, IrtpsWarning
-from irtps.evaluate.metrics import evaluate
+from irtps.model.metrics import evaluate
 from irtps.io.image_selection import parse_image_list, select_images
 from irtps.model.options import ReconstructOptions
 from irtps._shared.paths import resolve_path
@@ -91,7 +91,7 @@ class BatchResult:
     error : str or None
         Why it failed: the error message, which names the file or field concerned.
     metrics : dict or None
-        The errors against the data set's ground truth (`irtps.evaluate.metrics.Metrics.to_dict`);
+        The errors against the data set's ground truth (`irtps.model.metrics.Metrics.to_dict`);
         None without ground truth or on failure.
     warnings : tuple of str
         The warnings raised while the worker read, reconstructed and wrote the data set,

@@ -36,7 +36,7 @@ from irtps.io.dataset import (
     scene_object_inputs,
 )
 from irtps.errors import ArgumentError, IrtpsError, IrtpsWarning
-from irtps.evaluate.metrics import evaluate, format_metrics
+from irtps.model.metrics import evaluate, format_metrics
 from irtps.ps.image_agreement import format_image_agreement
 from irtps.io.image_selection import exclusions_by_name, format_images_fitted
 from irtps.model.options import (

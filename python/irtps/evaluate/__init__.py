@@ -1,1 +1,1 @@
-"""Errors against ground truth, and the comparison table."""
+"""The comparison table of methods against ground truth (the errors themselves: `irtps.model.metrics`)."""

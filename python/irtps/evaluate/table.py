@@ -9,7 +9,7 @@ import numpy as np
 
 from irtps.model.data import Dataset
 from irtps.errors import ArgumentError
-from irtps.evaluate.metrics import evaluate
+from irtps.model.metrics import evaluate
 from irtps.io.image_selection import format_images_fitted
 from irtps.model.options import PAPER_BOUNCES, ReconstructOptions, TableOptions
 from irtps.irt.reconstruct import Reconstruction, reconstruct
@@ -79,7 +79,7 @@ def comparison_table(
     dict
         ``{"methods": [...], "rows": [...], "datasets": {name: {method: metrics}},
         "overall": {method: metrics}, "images_fitted": {name: count}, "excluded_images":
-        {name: [file names]}}``, metrics being `irtps.evaluate.metrics.Metrics.to_dict`; the
+        {name: [file names]}}``, metrics being `irtps.model.metrics.Metrics.to_dict`; the
         overall value of a metric is its mean over the data sets that have it; the images
         each data set fitted and those it left out (`irtps.exclude_images`).
 

@@ -40,11 +40,13 @@ from irtps._shared.checks import (
     document_choices,
 )
 from irtps.errors import ArgumentError
+from irtps.model.constants import INTEGRATION_METHODS
 from irtps.ps.robust_stats import median_and_sigma
 
 __all__ = ["integrate_normals", "mask_boundary", "normals_to_gradients", "place_height"]
 
-METHODS = ("ls", "mestimator", "footprint", "dct", "fc")
+#: The integration methods, declared by the model (the options list them).
+METHODS = INTEGRATION_METHODS
 ROBUST_WEIGHTS = ("huber", "cauchy")
 # Tuning constants giving 95 % efficiency on Gaussian residuals (in units of the scale).
 _HUBER_K = 1.345

@@ -21,11 +21,12 @@ from irtps.errors import DatasetError, IrtpsWarning
 from irtps._shared.paths import MISSING, check_file, file_problem
 from irtps._shared.resources import check_memory
 
+# The largest image irtps reads or makes, declared by the model (the scene and options check it),
+# importable here too.
+from irtps.model.constants import MAX_IMAGE_PIXELS as MAX_IMAGE_PIXELS
+
 PNG_BIT_DEPTHS = (8, 16)
 """Bit depths of PNG files that can be written."""
-
-MAX_IMAGE_PIXELS = _core.MAX_IMAGE_PIXELS
-"""The largest image irtps reads or makes, in pixels (width x height): 2^27."""
 
 
 def read_exr(path: str | Path) -> np.ndarray:

@@ -35,7 +35,7 @@ from irtps.model.data import Dataset, pixel_observations
 from irtps.io.dataset import MASK_FILE
 from irtps.render.denoise import denoise_indirect
 from irtps.errors import ArgumentError, DatasetError, IrtpsWarning
-from irtps.evaluate.metrics import evaluate
+from irtps.model.metrics import evaluate
 from irtps.model.options import ReconstructOptions
 from irtps.irt.paper_estimator import paper_indirect
 from irtps.irt.pipeline import (
@@ -87,7 +87,7 @@ class Iteration:
     timings : dict
         Seconds per stage.
     metrics : dict or None
-        Errors against ground truth (`irtps.evaluate.metrics.Metrics.to_dict`), when present.
+        Errors against ground truth (`irtps.model.metrics.Metrics.to_dict`), when present.
     """
 
     index: int
@@ -145,7 +145,7 @@ def remove_interreflections(
           reflectance at pass 0 when the irradiance is relative (`irtps.render.radiometry`), 1
           otherwise; a number gives it;
         - ``base_height``: ``"auto"`` estimates the placement from the floor around the
-          object at pass 0 (`irtps.geometry.placement`) and refines it as the shape changes;
+          object at pass 0 (`irtps.render.placement`) and refines it as the shape changes;
           ``"boundary"`` or a number as for `irtps.reconstruct`;
         - ``relaxation``: ``"auto"`` adapts the step toward each new estimate (see the
           module); a number in (0, 2) fixes it (1 takes each new estimate whole);

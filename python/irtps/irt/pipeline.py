@@ -18,9 +18,10 @@ import numpy as np
 from irtps.model.data import Dataset
 from irtps.geometry.integrate import integrate_normals, place_height
 from irtps.model.options import OptionError, ReconstructOptions
-from irtps.geometry.placement import PRECISION_PIXELS, Placement, estimate_placement, fallback_placement
+from irtps.geometry.placement import Placement, fallback_placement
 from irtps.ps.fit import MASKED_OUT, PsResult, choose_robust, lobe_share, photometric_stereo
 from irtps.render.radiometry import AlbedoScale, absolute_scale, estimate_albedo_scale, scaled_albedo, scaled_scene
+from irtps.render.placement import PRECISION_PIXELS, estimate_placement
 from irtps.render.residual import compared_observations
 from irtps.model.scene import Scene
 from irtps.geometry.surface import surface_albedo
@@ -286,7 +287,7 @@ def place_surface(
 
     ``options.base_height``: a number is taken as given; ``"boundary"`` is the fallback
     (the floor's height); ``"auto"`` estimates it from the floor in the data set's images
-    (`irtps.geometry.placement.estimate_placement`), with the fallback where nothing fixes it.
+    (`irtps.render.placement.estimate_placement`), with the fallback where nothing fixes it.
     Given the `previous` estimate, for a relief that changed by `shape_change` on average
     (world units), the estimate is refined within three times that change of it; the
     fallback and given placements are kept. With an `albedo_scale` (relative irradiance),

@@ -157,7 +157,7 @@ def reconstruct(
         Fields of `ReconstructOptions` that replace those of `options`, e.g.
         ``bounces=2``. ``saturation`` defaults to ``dataset.saturation`` (1.0 for PNG
         images, else none); ``base_height`` to ``"auto"``: estimated from the floor around
-        the object (`irtps.geometry.placement`), the floor's height where nothing fixes it.
+        the object (`irtps.render.placement`), the floor's height where nothing fixes it.
 
     Returns
     -------

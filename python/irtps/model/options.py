@@ -25,9 +25,7 @@ import numpy as np
 
 from irtps.errors import ArgumentError
 from irtps._shared.guarded import parse_float, parse_int
-from irtps.io.imageio import MAX_IMAGE_PIXELS
-from irtps.geometry.integrate import METHODS as INTEGRATION_METHODS
-from irtps.ps.fit import ROBUST_CHOICES, ROBUST_MODES
+from irtps.model.constants import INTEGRATION_METHODS, MAX_IMAGE_PIXELS, ROBUST_CHOICES, ROBUST_MODES
 
 __all__ = [
     "ESTIMATORS",

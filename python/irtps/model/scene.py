@@ -18,7 +18,7 @@ import numpy as np
 from irtps._shared.checks import check_path
 from irtps._shared.atomic import atomic_write_text
 from irtps.errors import DatasetError
-from irtps.io.imageio import MAX_IMAGE_PIXELS
+from irtps.model.constants import MAX_IMAGE_PIXELS
 from irtps._shared.guarded import read_json, shown
 from irtps._shared.paths import exists
 

@@ -23,11 +23,9 @@ from irtps.model.data import coarse_to_fine, spread_pixels
 from irtps.errors import ArgumentError
 from irtps.model.scene import irradiance_problem
 
-#: Robust modes of a fit, the default first.
-ROBUST_MODES = ("tukey", "lobe", "threshold", "trim", "none")
-#: What `photometric_stereo` takes for `robust`: a mode of `ROBUST_MODES`, or ``"auto"``, the
-#: mode `choose_robust` picks for the object.
-ROBUST_CHOICES = ("auto", *ROBUST_MODES)
+# The robust modes (and "auto"), declared by the model (the options list them).
+from irtps.model.constants import ROBUST_CHOICES, ROBUST_MODES
+
 # The values of `PsResult.flags`, as the core writes them: the constants of ``rust/ps.rs``
 # ``mod flag``, under the same names (the binding does not export them;
 # tests/test_ps.py checks them against what the core writes).

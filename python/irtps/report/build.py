@@ -28,7 +28,7 @@ from irtps._shared.atomic import atomic_output_dir
 from irtps.io.dataset import GroundTruth, ground_truth_inputs, is_data_set, load_ground_truth
 from irtps.report.display import albedo_to_rgb, hillshade, normal_to_rgb, object_window, radiance_to_rgb
 from irtps.errors import DatasetError, IrtpsError
-from irtps.evaluate.metrics import ErrorMaps, Metrics, error_maps, evaluate
+from irtps.model.metrics import ErrorMaps, Metrics, error_maps, evaluate
 from irtps.report.figures import agreement_png, convergence_png, error_map_png, image_png
 from irtps.ps.image_agreement import ImageAgreement
 from irtps.io.imageio import read_exr

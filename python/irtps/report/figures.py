@@ -66,7 +66,7 @@ def error_map_png(errors: np.ndarray, title: str, unit: str) -> bytes:
     Parameters
     ----------
     errors : numpy.ndarray
-        (H, W) non-negative errors, NaN where not evaluated (as `irtps.evaluate.metrics.error_maps`
+        (H, W) non-negative errors, NaN where not evaluated (as `irtps.model.metrics.error_maps`
         gives).
     title : str
     unit : str

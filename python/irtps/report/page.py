@@ -12,7 +12,7 @@ from html import escape
 from typing import TYPE_CHECKING
 
 from irtps.errors import ArgumentError
-from irtps.evaluate.metrics import format_metrics
+from irtps.model.metrics import format_metrics
 from irtps.ps.image_agreement import ImageAgreement, format_image_agreement
 from irtps.io.image_selection import format_images_fitted
 from irtps.geometry.placement import format_placement
