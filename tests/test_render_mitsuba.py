@@ -4,22 +4,40 @@ Uses the small copy in tests/data/mitsuba_small (3 lights per scene); when the f
 data sets are present, every light of every scene there is checked too.
 """
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import ndimage
 
-from irtps import height_to_normals, load_dataset, load_scene_object, render
+from irtps import DatasetError, height_to_normals, load_dataset, load_scene_object, render
 
 SMALL = Path(__file__).parent / "data" / "mitsuba_small"
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mitsuba"
+#: Why the scene reader refuses a shared scene of a camera model it does not read yet.
+NOT_READ_YET = "a perspective camera (and a rig's near lights and mesh surroundings): not read yet, issues 46 and 48"
+
+
+def _scene(folder: Path):
+    """A scene as a test parameter: a shared one with a perspective camera is an expected
+    failure of the scene reader (strict: it must start passing when the reader takes it)."""
+    projection = json.loads((folder / "scene.json").read_text())["camera"].get("projection")
+    marks = (
+        []
+        if projection == "orthographic"
+        else [pytest.mark.xfail(raises=DatasetError, strict=True, reason=NOT_READ_YET)]
+    )
+    return pytest.param(folder, marks=marks, id=f"{folder.parent.name}/{folder.name}")
+
+
 SCENES = [SMALL / "cap_cornell", SMALL / "grooves_dark"]
 if SHARED.is_dir():
     SCENES += sorted(p for p in SHARED.iterdir() if (p / "scene.json").is_file())
+PARAMS = [_scene(folder) for folder in SCENES]
 
 
-@pytest.fixture(scope="module", params=SCENES, ids=lambda p: f"{p.parent.name}/{p.name}")
+@pytest.fixture(scope="module", params=PARAMS)
 def rendered(request):
     folder = request.param
     scene, height, albedo, mask = load_scene_object(folder)
@@ -45,10 +63,10 @@ def test_indirect_light_object_mean_matches_within_five_percent(rendered):
     np.testing.assert_allclose(got, expected, rtol=0.05)
 
 
-def test_normals_from_heights_match_the_reference_normals():
-    for folder in SCENES:
-        scene, height, _, mask = load_scene_object(folder)
-        reference = load_dataset(folder).gt.normal
-        ours = height_to_normals(height, mask, scene.camera.pixel_size)
-        cosine = np.clip((ours * reference).sum(-1)[mask], -1, 1)
-        assert np.degrees(np.arccos(cosine)).max() < 0.1, folder
+@pytest.mark.parametrize("folder", PARAMS)
+def test_normals_from_heights_match_the_reference_normals(folder):
+    scene, height, _, mask = load_scene_object(folder)
+    reference = load_dataset(folder).gt.normal
+    ours = height_to_normals(height, mask, scene.camera.pixel_size)
+    cosine = np.clip((ours * reference).sum(-1)[mask], -1, 1)
+    assert np.degrees(np.arccos(cosine)).max() < 0.1, folder
