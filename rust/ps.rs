@@ -201,6 +201,18 @@ pub fn photometric_stereo(
     let gram = check_lights(lights)?;
     check_images(images, mask, lights.len())?;
     check_settings(settings)?;
+    fit_checked(images, mask, lights, gram, settings)
+}
+
+/// `photometric_stereo` of inputs already checked (`gram` from `check_lights`): what the
+/// auto mode runs after checking its images once for both of its fits.
+fn fit_checked(
+    images: &[f32],
+    mask: &[bool],
+    lights: &[Light],
+    gram: Mat3,
+    settings: &PsSettings,
+) -> Result<PsOutput> {
     let fit = Fit::new(lights, gram, settings);
     let mut out = PsOutput::new(mask.len())?;
     let per_pixel = Lights::new(&fit.directions, &fit.scale, &fit.saturated_b, gram);
@@ -320,7 +332,9 @@ pub fn tukey_with_lobe_check(
             Vec::new(),
         ));
     }
+    let gram = check_lights(lights)?;
     check_images(images, mask, lights.len())?;
+    check_settings(&tukey)?;
     let look = || {
         let observed: Vec<f32> = images
             .chunks_exact(3 * n)
@@ -332,7 +346,7 @@ pub fn tukey_with_lobe_check(
             .collect();
         photometric_stereo(&observed, &vec![true; check.len()], lights, &lobe)
     };
-    let (fit, looked) = rayon::join(|| photometric_stereo(images, mask, lights, &tukey), look);
+    let (fit, looked) = rayon::join(|| fit_checked(images, mask, lights, gram, &tukey), look);
     Ok((fit?, looked?.flags))
 }
 
