@@ -29,7 +29,7 @@ from pathlib import Path
 import irtps
 from irtps.errors import IrtpsWarning
 from irtps.model.options import ReconstructOptions
-from irtps.irt.pipeline import choose_dataset_robust, fit_photometric_stereo, resolve_options
+from irtps.irt.pipeline import fit_photometric_stereo, resolve_options, with_chosen_robust
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -43,7 +43,8 @@ def floor_error(dataset) -> float | None:
     would reach."""
     if dataset.gt is None or dataset.gt.direct is None:
         return None
-    options, _ = choose_dataset_robust(dataset, resolve_options(dataset, ReconstructOptions()))
+    options = resolve_options(dataset, ReconstructOptions())
+    options = with_chosen_robust(options, fit_photometric_stereo(dataset, dataset.images, options))
     return angular_error(dataset, fit_photometric_stereo(dataset, dataset.gt.direct, options).normals)
 
 

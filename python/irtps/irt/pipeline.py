@@ -19,7 +19,7 @@ from irtps.model.data import Dataset
 from irtps.geometry.integrate import integrate_normals, place_height
 from irtps.model.options import OptionError, ReconstructOptions
 from irtps.geometry.placement import Placement, fallback_placement
-from irtps.ps.fit import MASKED_OUT, PsResult, choose_robust, lobe_share, photometric_stereo
+from irtps.ps.fit import MASKED_OUT, PsResult, lobe_share, photometric_stereo
 from irtps.render.radiometry import AlbedoScale, absolute_scale, estimate_albedo_scale, scaled_albedo, scaled_scene
 from irtps.render.placement import PRECISION_PIXELS, estimate_placement
 from irtps.render.residual import compared_observations
@@ -182,12 +182,12 @@ def resolve_options(dataset: Dataset, options: ReconstructOptions) -> Reconstruc
     )
 
 
-def choose_dataset_robust(dataset: Dataset, options: ReconstructOptions) -> tuple[ReconstructOptions, float]:
-    """The data set's `irtps.ps.fit.lobe_share`, and `options` with robust ``"auto"`` replaced by
-    the mode `irtps.ps.fit.choose_robust` picks for it (other modes kept). `options` are resolved
-    (`resolve_options`): the share leaves the data set's saturated observations out."""
+def dataset_lobe_share(dataset: Dataset, options: ReconstructOptions) -> float:
+    """The data set's `irtps.ps.fit.lobe_share`, under the options' shadow fraction and
+    saturation level (`options` resolved by `resolve_options`: the share leaves the data set's
+    saturated observations out)."""
     scene = dataset.scene
-    share = lobe_share(
+    return lobe_share(
         dataset.images,
         scene.light_directions,
         scene.light_irradiance,
@@ -195,7 +195,21 @@ def choose_dataset_robust(dataset: Dataset, options: ReconstructOptions) -> tupl
         shadow_fraction=options.shadow_fraction,
         saturation=options.saturation,
     )
-    return (dataclasses.replace(options, robust=choose_robust(share)) if options.robust == "auto" else options), share
+
+
+def with_chosen_robust(options: ReconstructOptions, fit: PsResult) -> ReconstructOptions:
+    """`options` with a robust mode ``"auto"`` replaced by the mode that `fit`, made with it,
+    chose; other modes kept.
+
+    ``"auto"`` is chosen in one place: the fit of the input images
+    (`irtps.ps.fit.photometric_stereo`, by `irtps.ps.fit.choose_robust`); classic photometric
+    stereo, the brightness correction's first fit and IRT-PS's pass 0 are that fit, and what
+    follows them fits with its choice.
+    """
+    if options.robust != "auto":
+        return options
+    assert fit.robust_used is not None, "photometric_stereo's auto mode tells the mode it chose"
+    return dataclasses.replace(options, robust=fit.robust_used)
 
 
 def fit_photometric_stereo(

@@ -17,14 +17,16 @@ from irtps.model.data import pixel_observations
 from irtps.io.dataset import Dataset, load_dataset
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
 from irtps.ps.image_agreement import ImageAgreement, image_agreement
-from irtps.irt.interreflection import Iteration, check_traceable, remove_interreflections
+from irtps.irt.interreflection import check_traceable, remove_interreflections
+from irtps.irt.loop_state import Iteration
 from irtps.model.options import ReconstructOptions
 from irtps.irt.pipeline import (
-    choose_dataset_robust,
+    dataset_lobe_share,
     fit_photometric_stereo,
     reconstruction_pass,
     resolve_options,
     timed,
+    with_chosen_robust,
 )
 from irtps.geometry.placement import Placement
 from irtps.ps.fit import OK, LOBE_ADVISED, LOBE, PsResult, check_lights, format_lobe_share
@@ -209,24 +211,24 @@ def reconstruct(
     timings: dict[str, float] = {}
     share = None
     first = None
-    if options.robust == "auto" and options.method == "ps" and not options.correct_brightness:
-        # The fit that the result is: its photometric stereo makes auto's choice (`lobe_share`'s
-        # first pixels beside the Tukey fit).
-        first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
-        chosen = first.fit.robust_used
-        assert chosen is not None, "photometric_stereo's auto mode tells the mode it chose"
-        options, share = replace(options, robust=chosen), first.fit.lobe_share
-    elif options.robust != "lobe":
+    if options.robust not in ("auto", "lobe"):
+        # A mode asked for: the share only advises the lobe mode where it would fit better.
         with timed(timings, "lobe_share"):
-            options, share = choose_dataset_robust(dataset, options)
+            share = dataset_lobe_share(dataset, options)
         _advise_lobe(dataset, options.robust, share)
     factors = None
     if options.correct_brightness:
         with timed(timings, "brightness_correction"):
-            dataset, factors = _brightness_corrected(dataset, options)
+            dataset, factors, brightness_fit = _brightness_corrected(dataset, options)
+        options, share = _chosen(options, brightness_fit, share)
+    elif options.robust == "auto" and options.method == "ps":
+        # The fit that the result is chooses the mode.
+        first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
+        options, share = _chosen(options, first.fit, share)
     if options.method == "irtps":
         with timed(timings, "irtps"):
             loop = remove_interreflections(dataset, options, progress=progress)
+        options, share = _chosen(options, loop.first_fit, share)
         with timed(timings, "image_agreement"):
             agreement = _image_agreement(dataset, loop.first_fit, options.saturation)
         return Reconstruction(
@@ -332,9 +334,9 @@ def load_and_reconstruct(
     return dataset, result
 
 
-def _brightness_corrected(dataset: Dataset, options: ReconstructOptions) -> tuple[Dataset, np.ndarray]:
+def _brightness_corrected(dataset: Dataset, options: ReconstructOptions) -> tuple[Dataset, np.ndarray, PsResult]:
     """The data set with each light's irradiance scaled by its image's brightness against a
-    first fit of `options`' robust mode, and the factors (1 where not known)."""
+    first fit of `options`' robust mode, the factors (1 where not known), and that fit."""
     first = fit_photometric_stereo(dataset, dataset.images, options)
     brightness = _image_agreement(dataset, first, options.saturation).brightness
     factors = np.where(np.isnan(brightness), 1.0, brightness)
@@ -342,7 +344,15 @@ def _brightness_corrected(dataset: Dataset, options: ReconstructOptions) -> tupl
         replace(light, irradiance=light.irradiance * factor)
         for light, factor in zip(dataset.scene.lights, factors, strict=True)
     )
-    return replace(dataset, scene=replace(dataset.scene, lights=lights)), factors
+    return replace(dataset, scene=replace(dataset.scene, lights=lights)), factors, first
+
+
+def _chosen(options: ReconstructOptions, fit: PsResult, share: float | None) -> tuple[ReconstructOptions, float | None]:
+    """`options` with the robust mode that `fit` chose for ``"auto"`` (`with_chosen_robust`),
+    and the lobe share: the one `fit` measured to choose, else `share`."""
+    if options.robust != "auto":
+        return options, share
+    return with_chosen_robust(options, fit), fit.lobe_share
 
 
 def _image_agreement(dataset: Dataset, fit: PsResult, saturation: float | None) -> ImageAgreement:

@@ -1,0 +1,140 @@
+"""What the IRT-PS loop carries from one pass to the next (`LoopState`), and what each pass
+recorded (`Iteration`).
+
+The loop (`irtps.irt.interreflection.remove_interreflections`) runs one pass per image set;
+the state holds the images the next pass fits, the running estimate of the light subtracted
+from them and how it moves (`irtps.irt.update`), and the best pass so far, judged by its
+residual against the input images.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from irtps.irt.pipeline import Pass
+from irtps.irt.relaxation import AdaptiveStep
+from irtps.ps.fit import PsResult
+from irtps.render.residual import Residual
+
+__all__ = ["PATIENCE", "SIGNIFICANCE", "BestPass", "Iteration", "LoopState"]
+
+#: A pass improves on the best so far when its residual is lower by this many standard
+#: deviations of its Monte-Carlo noise.
+SIGNIFICANCE = 2.0
+#: The loop stops after this many passes in a row that do not improve on the best (one
+#: is not enough: an over-relaxed step can raise the residual once on the way down).
+PATIENCE = 2
+
+
+@dataclass
+class Iteration:
+    """What one pass of the loop measured.
+
+    Attributes
+    ----------
+    index : int
+        0 is classic photometric stereo on the input images.
+    height_change : float or None
+        Mean absolute change of the height map from the previous pass (world units).
+    residual : dict
+        `irtps.render.residual.Residual` of the pass's reconstruction, as a dict.
+    base_height : float or None
+        Where the pass's reconstruction stands (`irtps.geometry.placement.Placement.base_height`).
+    step : float or None
+        The step taken toward the estimate rendered from this pass (None on the last).
+    timings : dict
+        Seconds per stage.
+    metrics : dict or None
+        Errors against ground truth (`irtps.model.metrics.Metrics.to_dict`), when present.
+    """
+
+    index: int
+    height_change: float | None
+    residual: dict = field(default_factory=dict)
+    base_height: float | None = None
+    step: float | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+    metrics: dict | None = None
+
+
+@dataclass
+class BestPass:
+    """The pass with the lowest residual so far, and the light subtracted from its images
+    (None for pass 0)."""
+
+    residual: Residual
+    index: int
+    reconstruction: Pass
+    subtracted: np.ndarray | None
+
+
+@dataclass
+class LoopState:
+    """The IRT-PS loop between two passes.
+
+    Attributes
+    ----------
+    observed : numpy.ndarray
+        (K, N, 3) input observations A₀ at the mask's N pixels, row-major.
+    saturated : numpy.ndarray or None
+        (K, N, 1) bool, the observations at or above the saturation level, kept as observed
+        in every corrected image set; None without a level.
+    images : numpy.ndarray
+        The images the next pass fits: the input (K, H, W, 3) before pass 1, then corrected
+        (K, N, 3) observations.
+    step : float
+        The step toward the next estimate (the fixed relaxation, or the adaptive one's last).
+    steps : AdaptiveStep
+        The adaptive step's record of steps taken and their noise.
+    previous : Pass or None
+        The last pass.
+    estimate : numpy.ndarray or None
+        The running estimate Eₜ of the inter-reflections in the object's pixels (K, N, 3).
+    previous_change : numpy.ndarray or None
+        The last change of the estimate, before the step.
+    subtracted : numpy.ndarray or None
+        What the next pass's images have subtracted from A₀: Eₜ, plus the surroundings' light
+        Sₜ in edge pixels.
+    coverage : numpy.ndarray or None
+        How much of each edge pixel the surroundings' correction covers
+        (`irtps.render.surroundings`), for the next pass's placement.
+    best : BestPass or None
+        The pass with the lowest residual so far.
+    stalled : int
+        Passes in a row that did not improve on the best beyond their noise.
+    history : list of Iteration
+        Every pass's record.
+    first_fit : PsResult or None
+        Pass 0's fit: classic photometric stereo of the input images.
+    """
+
+    observed: np.ndarray
+    saturated: np.ndarray | None
+    images: np.ndarray
+    step: float
+    steps: AdaptiveStep = field(default_factory=AdaptiveStep)
+    previous: Pass | None = None
+    estimate: np.ndarray | None = None
+    previous_change: np.ndarray | None = None
+    subtracted: np.ndarray | None = None
+    coverage: np.ndarray | None = None
+    best: BestPass | None = None
+    stalled: int = 0
+    history: list[Iteration] = field(default_factory=list)
+    first_fit: PsResult | None = None
+
+    def judge(self, index: int, current: Pass, residual: Residual) -> None:
+        """Record pass `index`'s `residual`: the best pass so far, and whether it improved on
+        the one before beyond `SIGNIFICANCE` times its noise."""
+        best = self.best
+        improved = best is None or residual.object < best.residual.object - SIGNIFICANCE * residual.noise
+        self.stalled = 0 if improved else self.stalled + 1
+        if best is None or residual.object < best.residual.object:
+            self.best = BestPass(residual, index, current, self.subtracted)
+
+    @property
+    def stalled_out(self) -> bool:
+        """`PATIENCE` passes in a row have not improved on the best."""
+        return self.stalled == PATIENCE
