@@ -32,7 +32,7 @@ from tqdm import tqdm
 
 from irtps._shared.checks import check_instance
 from irtps.model.data import Dataset, pixel_observations
-from irtps.io.dataset import MASK_FILE
+from irtps.io.dataset_files import MASK_FILE
 from irtps.render.denoise import denoise_indirect
 from irtps.errors import ArgumentError, DatasetError, IrtpsWarning
 from irtps.model.metrics import evaluate
