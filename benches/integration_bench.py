@@ -37,7 +37,11 @@ import time
 import numpy as np
 
 from irtps.geometry import integrate as integ
+from irtps.geometry import sparse_solvers
+from irtps.geometry.footprint_integration import FootprintSystem
 from irtps.geometry.integrate import integrate_normals
+from irtps.geometry.least_squares_integration import LeastSquaresProblem
+from irtps.geometry.sparse_solvers import AmgPreconditioner, pcg
 
 
 def field(n: int, outliers: float = 0.0, seed: int = 0):
@@ -78,12 +82,12 @@ def profile_ls(normals, mask, s):
     p, q = integ._gradients(nn, mm, 10.0)
     phases["checks+slopes"] = time.perf_counter() - t
     t = time.perf_counter()
-    problem = integ._Problem(mm, p * s, -q * s)
+    problem = LeastSquaresProblem(mm, p * s, -q * s)
     a = problem.matrix(np.full(problem.n_edges, 2.0))
     b = problem.rhs(problem.t_f + problem.t_b)
     phases["system"] = time.perf_counter() - t
     t = time.perf_counter()
-    amg = integ._AmgPreconditioner(a)
+    amg = AmgPreconditioner(a)
     phases["amg_setup"] = time.perf_counter() - t
     count = [0]
 
@@ -92,7 +96,7 @@ def profile_ls(normals, mask, s):
         return amg(r)
 
     t = time.perf_counter()
-    integ._pcg(a, b, precondition, np.zeros(problem.n), 1e-5)
+    pcg(a, b, precondition, np.zeros(problem.n), 1e-5)
     phases["pcg"] = time.perf_counter() - t
     phases["pcg_iterations"] = count[0]
     phases["amg_levels"] = len(amg.levels)
@@ -105,8 +109,8 @@ def solver_systems(n):
     nn, mm = integ._check_normals_mask(normals, mask)
     p, q = integ._gradients(nn, mm, 10.0)
     gc, gr = p * s, -q * s
-    problem = integ._Problem(mm, gc, gr)
-    footprint = integ._FootprintSystem(mm)
+    problem = LeastSquaresProblem(mm, gc, gr)
+    footprint = FootprintSystem(mm)
     return {
         "ls": (problem.matrix(np.full(problem.n_edges, 2.0)), problem.rhs(problem.t_f + problem.t_b)),
         "footprint": (footprint.normal, footprint.rhs(gc, gr)),
@@ -131,10 +135,10 @@ def compare_solvers(n, runs, passes=6):
             factor_values = factor.factor_len
             del factor
             t = time.perf_counter()
-            amg = integ._AmgPreconditioner(a)
+            amg = AmgPreconditioner(a)
             setup_s.append(time.perf_counter() - t)
             t = time.perf_counter()
-            x_cg, iterations, _ = integ._pcg(a, b, amg, np.zeros(b.size), 1e-5)
+            x_cg, iterations, _ = pcg(a, b, amg, np.zeros(b.size), 1e-5)
             cg_s.append(time.perf_counter() - t)
             del amg
         m = {
@@ -212,7 +216,7 @@ def main(argv=None):
             normals, mask, truth, s = field(n, outliers)
             times = []
             for _ in range(args.runs):
-                integ._LAST_SYSTEM.clear()  # each run sets its system up: a first integration on the mask
+                sparse_solvers._LAST_SYSTEM.clear()  # each run sets its system up: a first integration on the mask
                 t = time.perf_counter()
                 height = integrate_normals(normals, mask, pixel_size=s, method=method)
                 times.append(time.perf_counter() - t)

@@ -20,6 +20,7 @@ ARRAY_MODULES = [
     "report.display",
     "model.metrics",
     "report.figures",
+    "geometry.boundary",
     "geometry.integrate",
     "irt.interreflection",
     "io.mesh",
@@ -80,8 +81,8 @@ CASES = {
     "irtps.report.figures.agreement_png": (lambda f: f(["a.png"], [np.nan], [np.nan]), "brightness: "),
     "irtps.geometry.integrate.integrate_normals": (lambda f: f(NORMALS, method="poisson"), "method: "),
     "irtps.geometry.integrate.normals_to_gradients": (lambda f: f(NORMALS, max_slope=-1), "max_slope: "),
-    "irtps.geometry.integrate.place_height": (lambda f: f(HEIGHT, WRONG), "mask: "),
-    "irtps.geometry.integrate.mask_boundary": (lambda f: f(np.zeros(4, bool)), "mask: "),
+    "irtps.geometry.boundary.place_height": (lambda f: f(HEIGHT, WRONG), "mask: "),
+    "irtps.geometry.boundary.mask_boundary": (lambda f: f(np.zeros(4, bool)), "mask: "),
     "irtps.irt.interreflection.remove_interreflections": (lambda f: f(_dataset(), bounces=0), "bounces: "),
     "irtps.irt.interreflection.check_traceable": (lambda f: f({"mask": MASK}), "dataset: "),
     "irtps.geometry.surface.meshed_blocks": (lambda f: f(np.zeros(4, bool)), "mask: "),
@@ -128,7 +129,7 @@ CASES = {
     "irtps.io.image_selection.exclude_images": (lambda f: f(_dataset(), "5-1"), "exclude_images: "),
     "irtps.io.dataset.load_ground_truth": (lambda f: f("no/such/folder", (4, 4)), "no/such/folder: "),
     "irtps.io.dataset.load_scene_object": (lambda f: f("no/such/folder"), "no/such/folder"),
-    "irtps.io.dataset.save_dataset": (lambda f: f(_dataset(), "unused", extra={"../x.exr": HEIGHT}), "extra: "),
+    "irtps.io.dataset_writer.save_dataset": (lambda f: f(_dataset(), "unused", extra={"../x.exr": HEIGHT}), "extra: "),
     "irtps.model.scene.load_scene": (lambda f: f("no/such/scene.json"), "no/such/scene.json: "),
 }
 

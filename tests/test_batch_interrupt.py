@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from irtps.io.dataset import save_dataset
+from irtps.io.dataset_writer import save_dataset
 from irtps.render.synth import synthesize
 
 from cli_helpers import interruptible, saturate

@@ -21,7 +21,7 @@ import pytest
 
 import irtps.batch.run
 from irtps.cli.main import main
-from irtps.io.dataset import save_dataset
+from irtps.io.dataset_writer import save_dataset
 from irtps.render.synth import synthesize
 
 distributed = pytest.importorskip("distributed")

@@ -3,7 +3,7 @@
 A data set's files need not be inside its folder: DiLiGenT's ``filenames.txt`` may list
 ``../other/009.png`` or an absolute path, and any folder or file of a data set may be a
 symbolic link to another place. Every command that writes compares its --out with every
-file and folder it reads, as the reader finds them (`irtps.io.dataset.dataset_inputs` and its
+file and folder it reads, as the reader finds them (`irtps.io.dataset_files.dataset_inputs` and its
 kin), so that --out can name none of them, with or without --force. And a folder of the
 user's that merely holds a file named like one of our records (``index.html``,
 ``run.json`` ...) is not taken for an output of irtps.
@@ -23,14 +23,8 @@ from irtps import _core
 from irtps._shared import guarded
 from irtps.batch.run import local_cluster
 from irtps.cli.main import main
-from irtps.io.dataset import (
-    dataset_inputs,
-    ground_truth_inputs,
-    load_dataset,
-    load_ground_truth,
-    load_scene_object,
-    scene_object_inputs,
-)
+from irtps.io.dataset import load_dataset, load_ground_truth, load_scene_object
+from irtps.io.dataset_files import dataset_inputs, ground_truth_inputs, scene_object_inputs
 
 from cli_helpers import refused, tree as _tree
 

@@ -4,9 +4,13 @@ import numpy as np
 import pytest
 import scipy.ndimage
 
+import irtps.geometry.footprint_integration
 import irtps.geometry.integrate
+import irtps.geometry.least_squares_integration
+import irtps.geometry.sparse_solvers
 from irtps.errors import IrtpsError
-from irtps.geometry.integrate import integrate_normals, mask_boundary, place_height
+from irtps.geometry.boundary import mask_boundary, place_height
+from irtps.geometry.integrate import integrate_normals
 from irtps.geometry.surface import height_to_normals
 
 N = 128  # image side (pixels)
@@ -445,22 +449,22 @@ def test_same_mask_reuses_the_factorisation_and_matches_conjugate_gradients(meth
     x, y = grid(64)
     truth, normals = sinusoid(x, y)
     mask = disc(x, y)
-    irtps.geometry.integrate._LAST_SYSTEM.clear()
+    irtps.geometry.sparse_solvers._LAST_SYSTEM.clear()
     built = []
-    original = irtps.geometry.integrate._SpdSolver.__init__
+    original = irtps.geometry.sparse_solvers.SpdSolver.__init__
 
     def counting(self, matrix, name, *, direct):
         built.append(direct)
         original(self, matrix, name, direct=direct)
 
-    monkeypatch.setattr(irtps.geometry.integrate._SpdSolver, "__init__", counting)
+    monkeypatch.setattr(irtps.geometry.sparse_solvers.SpdSolver, "__init__", counting)
     first = integrate_normals(normals, mask, pixel_size=1 / 64, method=method)
     second = integrate_normals(normals[:, ::-1] * [-1, 1, 1], mask, pixel_size=1 / 64, method=method)
     assert built == [True]  # one factorisation for both
     assert not np.allclose(first, second)  # a new right-hand side, not a cached answer
-    monkeypatch.setattr(irtps.geometry.integrate, "_LS_DIRECT_LIMIT", 0)
-    monkeypatch.setattr(irtps.geometry.integrate, "_FOOTPRINT_DIRECT_LIMIT", 0)
-    irtps.geometry.integrate._LAST_SYSTEM.clear()
+    monkeypatch.setattr(irtps.geometry.least_squares_integration, "_LS_DIRECT_LIMIT", 0)
+    monkeypatch.setattr(irtps.geometry.footprint_integration, "_FOOTPRINT_DIRECT_LIMIT", 0)
+    irtps.geometry.sparse_solvers._LAST_SYSTEM.clear()
     iterative = integrate_normals(normals, mask, pixel_size=1 / 64, method=method, tolerance=1e-10)
     assert built == [True, False]
     np.testing.assert_allclose(first, iterative, rtol=0, atol=1e-5 * np.ptp(first[mask]))

@@ -5,11 +5,13 @@
 from irtps import evaluate as _evaluate_subpackage
 
 from irtps.model.data import Dataset, GroundTruth
-from irtps.io.dataset import load_dataset, load_ground_truth, load_scene_object, save_dataset
+from irtps.io.dataset import load_dataset, load_ground_truth, load_scene_object
+from irtps.io.dataset_writer import save_dataset
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
 from irtps.model.metrics import Metrics, angular_error_deg, evaluate
 from irtps.io.image_selection import exclude_images
-from irtps.geometry.integrate import integrate_normals, place_height
+from irtps.geometry.integrate import integrate_normals
+from irtps.geometry.boundary import place_height
 from irtps.ps.fit import PsResult, choose_robust, lobe_share, photometric_stereo
 from irtps.irt.folder import save_reconstruction
 from irtps.irt.reconstruct import Reconstruction, reconstruct

@@ -45,7 +45,8 @@ from multiprocessing import resource_tracker
 from pathlib import Path
 
 from irtps._shared.atomic import atomic_write_text
-from irtps.io.dataset import dataset_image_names, load_ground_truth
+from irtps.io.dataset import load_ground_truth
+from irtps.io.dataset_files import dataset_image_names
 from irtps.errors import ArgumentError, IrtpsError, IrtpsWarning
 from irtps.model.metrics import evaluate
 from irtps.io.image_selection import parse_image_list, select_images
@@ -324,7 +325,7 @@ def reconstruct_many(
     Examples
     --------
     >>> import tempfile
-    >>> from irtps.io.dataset import save_dataset
+    >>> from irtps.io.dataset_writer import save_dataset
     >>> from irtps.render.synth import synthesize
     >>> data, _ = synthesize("cap", size=24, lights=6, bounces=0, environment="none")
     >>> with tempfile.TemporaryDirectory() as folder, local_cluster(1, processes=False) as client:

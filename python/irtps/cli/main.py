@@ -25,16 +25,9 @@ from irtps.batch.run import (
     summary_table,
     write_summary,
 )
-from irtps.io.dataset import (
-    Dataset,
-    GroundTruth,
-    dataset_inputs,
-    load_dataset,
-    load_scene_object,
-    load_ground_truth,
-    save_dataset,
-    scene_object_inputs,
-)
+from irtps.io.dataset import Dataset, GroundTruth, load_dataset, load_scene_object, load_ground_truth
+from irtps.io.dataset_files import dataset_inputs, scene_object_inputs
+from irtps.io.dataset_writer import save_dataset
 from irtps.errors import ArgumentError, IrtpsError, IrtpsWarning
 from irtps.model.metrics import evaluate, format_metrics
 from irtps.ps.image_agreement import format_image_agreement
@@ -213,7 +206,7 @@ def _cmd_batch(args: argparse.Namespace) -> None:
 
 
 def _batch_inputs(folders: list[Path], exclusions: dict[str, str | None]) -> list[Path]:
-    """Every file and folder that a batch reads (`irtps.io.dataset.dataset_inputs`); of a data
+    """Every file and folder that a batch reads (`irtps.io.dataset_files.dataset_inputs`); of a data
     set that cannot be read, its folder (its task fails as it reads, writing nothing)."""
     inputs: list[Path] = []
     for folder, images in zip(folders, exclusions.values(), strict=True):

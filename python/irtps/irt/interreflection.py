@@ -38,7 +38,7 @@ from irtps._shared.checks import check_instance
 from irtps.errors import ArgumentError, DatasetError, IrtpsWarning
 from irtps.geometry.placement import Placement
 from irtps.geometry.surface import meshed_blocks
-from irtps.io.dataset import MASK_FILE
+from irtps.io.dataset_files import MASK_FILE
 from irtps.irt.loop_state import Iteration, LoopState
 from irtps.irt.pipeline import (
     Pass,

@@ -16,7 +16,8 @@ from contextlib import contextmanager
 import numpy as np
 
 from irtps.model.data import Dataset
-from irtps.geometry.integrate import integrate_normals, place_height
+from irtps.geometry.integrate import integrate_normals
+from irtps.geometry.boundary import place_height
 from irtps.model.options import OptionError, ReconstructOptions
 from irtps.geometry.placement import Placement, fallback_placement
 from irtps.ps.fit import MASKED_OUT, PsResult, lobe_share, photometric_stereo

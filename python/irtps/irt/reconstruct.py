@@ -313,7 +313,7 @@ def load_and_reconstruct(
     Examples
     --------
     >>> import tempfile
-    >>> from irtps.io.dataset import save_dataset
+    >>> from irtps.io.dataset_writer import save_dataset
     >>> from irtps.render.synth import synthesize
     >>> data, _ = synthesize("cap", size=24, lights=6, bounces=0, environment="none")
     >>> with tempfile.TemporaryDirectory() as folder:

@@ -1,6 +1,6 @@
 """The data classes of a data set, `Dataset` and `GroundTruth`: the arrays, checked against
-the scene. Reading and writing them is `irtps.io.dataset`'s (the layouts), which depends on this
-module, never the other way.
+the scene. Reading and writing them is `irtps.io.dataset`'s and `irtps.io.dataset_writer`'s (the
+layouts), which depend on this module, never the other way.
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ from scipy import ndimage
 from irtps._shared.checks import check_choice
 from irtps.model.data import Dataset, GroundTruth
 from irtps.errors import ArgumentError
-from irtps.geometry.integrate import place_height
+from irtps.geometry.boundary import place_height
 from irtps.model.options import OptionError, RenderOptions, SynthOptions
 from irtps.render.renderer import Rendering, check_render_memory, render
 from irtps.model.scene import Camera, CornellBox, Floor, Light, Scene

@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from irtps._shared.atomic import atomic_output_dir
-from irtps.io.dataset import GroundTruth, ground_truth_inputs, is_data_set, load_ground_truth
+from irtps.io.dataset import GroundTruth, load_ground_truth
+from irtps.io.dataset_files import ground_truth_inputs, is_data_set
 from irtps.report.display import albedo_to_rgb, hillshade, normal_to_rgb, object_window, radiance_to_rgb
 from irtps.errors import DatasetError, IrtpsError
 from irtps.model.metrics import ErrorMaps, Metrics, error_maps, evaluate
@@ -285,7 +286,7 @@ def _indirect_figure(folder: Path, mask: np.ndarray, window: tuple[slice, slice]
 def report_inputs(run_dir: str | Path, truth: str | Path | None = None) -> list[Path]:
     """What a report of `run_dir` reads: the reconstruction's files and what is read of the
     data set of its ground truth (`truth`, else the source recorded in ``run.json`` when it
-    is there; `irtps.io.dataset.ground_truth_inputs`).
+    is there; `irtps.io.dataset_files.ground_truth_inputs`).
 
     Parameters
     ----------
