@@ -54,9 +54,10 @@ def return_freed_memory() -> bool:
 
     glibc maps every block above a threshold on its own and unmaps it when it is freed, but
     raises the threshold to the size of each such block freed (up to 32 MiB): from then on,
-    image-sized temporaries come from the heap and stay resident after they are freed. On
-    DiLiGenT reading that kept classic photometric stereo's peak resident memory at 1.52x
-    the decoded images instead of 1.40x. This fixes the threshold at its initial 128 KiB.
+    image-sized temporaries come from the heap and stay resident after they are freed, which
+    raised classic photometric stereo's peak resident memory on DiLiGenT reading by a tenth of
+    the decoded images (benches/README.md, IRT-PS cost). This fixes the threshold at its
+    initial 128 KiB.
 
     Returns
     -------

@@ -10,7 +10,7 @@ result, scaled by a constant per reflection depth, is subtracted from every imag
 The paper leaves the scale open. `PAPER_SCALE` holds the value picked on the shared Mitsuba
 scenes (cap_cornell and grooves_dark): a grid search over 0, 0.02, 0.05, 0.1, 0.2 and 0.4,
 for the lowest mean angular error after 6 passes of the paper's own update
-(Aₜ₊₁ = Aₜ − Eₜ), chose 0.05 for r = 1, 2 and 3 alike (see the README). The estimate ignores the lights, the
+(Aₜ₊₁ = Aₜ − Eₜ), chose 0.05 for r = 1, 2 and 3 alike (see docs/method.md). The estimate ignores the lights, the
 Lambert cosine and the light's path, which is what the physically based estimator
 (`irtps.render.renderer.render_indirect`) adds.
 """

@@ -104,10 +104,10 @@ def image_agreement(
     whose observation is neither saturated nor black, the ratio of the observed brightness
     (channels summed) to the fitted one, ``ρ ⊙ E_k · (n·l) / π``. Brightness: its median,
     over the median image's. Spread: the robust standard deviation of its logarithm. On real
-    objects, sound images stay within a few per cent of the median brightness (DiLiGenT ball
-    0.94–1.01, reading 0.94–1.07) and spread 0.8–1.7 % (ball) and 3–11 % (reading, whose
-    folds hold shadows the fit leaves out); images shifted by 3 pixels spread 3.1–4.1 % and
-    26–32 % (``benches/image_faults.py``).
+    objects, sound images stay within a few per cent of the median brightness and spread a
+    few per cent (more on an object whose folds hold shadows the fit leaves out); an image
+    shifted by a few pixels spreads several times wider (``benches/image_faults.py``, whose
+    figures are in docs/accuracy.md).
 
     Parameters
     ----------

@@ -15,9 +15,8 @@ estimate was rendered on, filters K × 3 planes with one set of weights and carr
 noise energy through them, which none of them does.
 
 Measured with ``benches/irtps_accuracy.py`` on the shared Mitsuba scenes, the filtered
-estimate from 64 paths a pixel gives IRT-PS lower errors than the raw one from 256 did
-(cap_cornell 1.90° against 1.92°, grooves_dark 2.73° against 2.83°, pedestal_cornell 5.40°
-against 5.44°) at a quarter of the tracing; see benches/README.md.
+estimate from 64 paths a pixel gives IRT-PS lower errors than the raw one from 256 did, at a
+quarter of the tracing; the figures are in benches/README.md (IRT-PS cost).
 """
 
 from __future__ import annotations

@@ -186,7 +186,7 @@ def _coarse(
     is on the object where any of its pixels is: the coarse skirt then stands, on average
     over where the object's edge falls in its blocks, where the full-resolution one does
     (with most of its pixels instead, the object shrinks by about a quarter block a side,
-    and a 384² pedestal was placed 1.9 % of its height too high; now 0.1 %). Its relief
+    and is placed too high). Its relief
     and albedo are those of its object pixels; it is usable where none of its
     observations is saturated.
     """

@@ -7,9 +7,9 @@ mean absolute input, on the object's pixels and, where the scene has a floor, on
 visible surroundings. On the object it compares the observations that photometric stereo
 fits (`compared_observations`): a real object's shadows hold light that the Lambertian
 rendering of a slightly wrong shape can match by chance, so that a worse shape could seem
-to explain them better; measured on DiLiGenT reading, the residual over every observation
-fell from classic photometric stereo to IRT-PS's first pass while the error rose by 1.3°,
-and the residual over the fitted observations rose with it. The same rendering gives IRT-PS its next estimate of the
+to explain them better: on DiLiGenT reading, the residual over every observation fell
+from classic photometric stereo to IRT-PS's first pass while the error rose, and the
+residual over the fitted observations rose with it (docs/method.md, The residual). The same rendering gives IRT-PS its next estimate of the
 inter-reflected light, so the residual costs only the direct image.
 
 The inter-reflected light is rendered as two independent halves of the camera paths; the

@@ -6,7 +6,8 @@ footprint of a pixel at the mask's edge reaches past the last triangles: there t
 sees the floor or the box beside or below the object, not the object. Photometric stereo
 reads that light as the object's, which tilts the normals of the edge pixels toward the
 floor's and brightens their albedo: on the shared pedestal_cornell (its top 20 units
-above the floor) the edge pixels are 39° off even without inter-reflections.
+above the floor) the edge pixels are tens of degrees off even without inter-reflections
+(docs/method.md, Edge pixels).
 
 IRT-PS renders its reconstruction anyway, so it renders that light too (the direct light
 of the surroundings seen in each edge pixel's footprint: the reconstruction rendered with
@@ -41,11 +42,12 @@ __all__ = ["STABILITY", "SurroundingsLight", "edge_pixels", "mesh_coverage", "su
 
 #: Largest change of a pixel's surroundings light under any one light (Σ over channels of
 #: |change|) when the object moves by one pixel up or down, relative to its light under the
-#: light that shows it most, at which it is subtracted. Measured at the true shapes of the
-#: shared scenes: 0 at 99 % of the edge pixels of pedestal_cornell (its cast shadows reach
-#: far beyond the footprints), 0.41 to 0.83 (10th to 90th percentile) at those of
-#: cap_cornell, none below 0.05. A criterion summed over the lights let a shadow's edge
-#: under one light of eight through, and made a synthesized cap 1 unit high 0.5° worse.
+#: light that shows it most, at which it is subtracted. At the true shapes of the shared
+#: scenes it is 0 at nearly every edge pixel of pedestal_cornell (its cast shadows reach far
+#: beyond the footprints) and above this bound at every edge pixel of cap_cornell (1
+#: unit high), so the one is corrected and the other left as observed. Taken under each
+#: light, not summed over the lights: a sum lets a shadow's edge under one light of eight
+#: through.
 STABILITY = 0.05
 
 
