@@ -15,16 +15,10 @@ from typing import Any
 import numpy as np
 
 from irtps._shared.atomic import atomic_output_dir
-from irtps.batch.run import (
-    SUMMARY_JSON,
-    SUMMARY_MARKDOWN,
-    connect,
-    local_cluster,
-    output_names,
-    reconstruct_many,
-    summary_table,
-    write_summary,
-)
+from irtps.batch.cluster import connect, local_cluster
+from irtps.batch.plan import output_names
+from irtps.batch.run import reconstruct_many
+from irtps.batch.summary import SUMMARY_JSON, SUMMARY_MARKDOWN, summary_table, write_summary
 from irtps.io.dataset import (
     Dataset,
     GroundTruth,
