@@ -287,8 +287,8 @@ class ReconstructOptions(_Options):
     correct_brightness: bool = _option(
         False,
         "scale each light's irradiance by its image's brightness against a first fit (the summary's brightness line) and fit "
-        "again: for a rig whose recorded irradiance is off in some images (DiLiGenT reading with images 1-20 1.5x too bright: "
-        "13.44 -> 11.42 deg; data sets whose irradiance is right move by -0.16 to +0.02 deg)",
+        "again: for a rig whose recorded irradiance is off in some images (e.g. DiLiGenT reading with images 1-20 1.5x too "
+        "bright); data sets whose irradiance is right barely move",
         bool,
     )
     integration: str | None = _option(
