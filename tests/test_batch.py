@@ -14,8 +14,10 @@ import numpy as np
 import pytest
 
 import irtps.batch.run
+import irtps.batch.task
 from irtps import evaluate, load_dataset, reconstruct
-from irtps.batch.run import local_cluster, reconstruct_many
+from irtps.batch.cluster import local_cluster
+from irtps.batch.run import reconstruct_many
 from irtps.cli.main import main
 from irtps.irt.folder import load_reconstruction
 
@@ -275,7 +277,7 @@ def test_warnings_of_a_task_are_printed_with_the_data_set_name_and_recorded(clus
 
 def test_warnings_are_kept_once_and_other_categories_keep_theirs(cluster, three_sets, tmp_path, monkeypatch):
     cap, ball, _ = three_sets
-    real = irtps.batch.run.load_and_reconstruct
+    real = irtps.batch.task.load_and_reconstruct
 
     def warning_twice(source, **options):
         for _ in range(2):
@@ -284,7 +286,7 @@ def test_warnings_are_kept_once_and_other_categories_keep_theirs(cluster, three_
             warnings.warn("old option", np.exceptions.VisibleDeprecationWarning)
         return real(source, **options)
 
-    monkeypatch.setattr(irtps.batch.run, "load_and_reconstruct", warning_twice)
+    monkeypatch.setattr(irtps.batch.task, "load_and_reconstruct", warning_twice)
     with warnings.catch_warnings(record=True) as shown:
         warnings.simplefilter("always")
         results = reconstruct_many([cap, ball], tmp_path / "out", client=cluster)
@@ -309,12 +311,12 @@ def test_warnings_are_kept_once_and_other_categories_keep_theirs(cluster, three_
 def test_a_task_records_its_warnings_alone_while_others_run_in_other_threads(tmp_path):
     from concurrent.futures import ThreadPoolExecutor
 
-    from irtps.batch.run import _recorded_warnings
+    from irtps.batch.task_warnings import recorded_warnings
 
     barrier = threading.Barrier(4)
 
     def task(index):
-        with _recorded_warnings() as recorded:
+        with recorded_warnings() as recorded:
             barrier.wait()
             warnings.warn(f"task {index}", irtps.IrtpsWarning)
             barrier.wait()
@@ -330,12 +332,12 @@ def test_a_task_records_its_warnings_alone_while_others_run_in_other_threads(tmp
 def test_recording_leaves_other_threads_warnings_and_their_catch_warnings_alone():
     from concurrent.futures import ThreadPoolExecutor
 
-    from irtps.batch.run import _recorded_warnings
+    from irtps.batch.task_warnings import recorded_warnings
 
     recording, warned, ended = threading.Event(), threading.Event(), threading.Event()
 
     def task():
-        with _recorded_warnings() as recorded:
+        with recorded_warnings() as recorded:
             recording.set()
             warned.wait()
             warnings.warn("in the task", irtps.IrtpsWarning)
@@ -360,8 +362,8 @@ def test_recording_leaves_other_threads_warnings_and_their_catch_warnings_alone(
 
 
 def test_a_stopping_worker_finishes_the_write_under_way_then_exits_and_starts_no_other(monkeypatch, request):
-    tasks, exits, events = irtps.batch.run._Tasks(), [], []
-    monkeypatch.setattr(irtps.batch.run.os, "_exit", exits.append)
+    tasks, exits, events = irtps.batch.task._Tasks(), [], []
+    monkeypatch.setattr(irtps.batch.task.os, "_exit", exits.append)
     request.addfinalizer(
         functools.partial(logging.disable, logging.root.manager.disable)
     )  # exit_after_writes silences logging

@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 import irtps.batch.run
+import irtps.batch.task
 from irtps.cli.main import main
 from irtps.io.dataset_writer import save_dataset
 from irtps.render.synth import synthesize
@@ -38,7 +39,7 @@ def dask_setup(worker) -> None:
     flags = os.environ.get(FLAGS)
     if flags is None:
         return
-    real = irtps.batch.run.load_and_reconstruct
+    real = irtps.batch.task.load_and_reconstruct
 
     def load_and_reconstruct(source, **options):
         name = Path(source).name
@@ -52,7 +53,7 @@ def dask_setup(worker) -> None:
             os.kill(os.getpid(), signal.SIGKILL)
         return real(source, **options)
 
-    irtps.batch.run.load_and_reconstruct = load_and_reconstruct
+    irtps.batch.task.load_and_reconstruct = load_and_reconstruct
 
 
 @pytest.fixture

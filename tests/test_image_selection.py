@@ -20,7 +20,7 @@ from irtps import (
     save_dataset,
     save_reconstruction,
 )
-from irtps.batch.run import _complete_indirect
+from irtps.batch.resume import _complete_indirect
 from irtps.cli.main import main
 from irtps.model.metrics import angular_error_deg
 from irtps.io.image_selection import excluded_indices, exclusions_by_name, parse_image_list

@@ -21,7 +21,7 @@ import scipy.io
 
 from irtps import _core
 from irtps._shared import guarded
-from irtps.batch.run import local_cluster
+from irtps.batch.cluster import local_cluster
 from irtps.cli.main import main
 from irtps.io.dataset import load_dataset, load_ground_truth, load_scene_object
 from irtps.io.dataset_files import dataset_inputs, ground_truth_inputs, scene_object_inputs

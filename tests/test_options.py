@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 import irtps
-from irtps.cli.main import build_parser, main
+from irtps.cli.main import main
+from irtps.cli.parser import build_parser
 from irtps.irt.interreflection import remove_interreflections
 from irtps.model.options import (
     ClusterOptions,

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from irtps.batch.run import local_cluster
+from irtps.batch.cluster import local_cluster
 from irtps.cli.main import main
 
 from cli_helpers import refused, tree as _tree

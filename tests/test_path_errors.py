@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 import pytest
-from irtps.batch.run import local_cluster
+from irtps.batch.cluster import local_cluster
 from irtps.cli.main import main
 from irtps._shared.paths import file_problem, folder_problem, optional_file, resolve_path
 

@@ -156,7 +156,7 @@ def exclusions_by_name(entries: Sequence[str], names: Sequence[str]) -> dict[str
         The lists, each ``LIST`` or ``NAME=LIST`` (``NAME`` the longest of `names` that the
         entry starts with, followed by ``=``).
     names : sequence of str
-        The data sets' names (`irtps.batch.run.output_names`).
+        The data sets' names (`irtps.batch.plan.output_names`).
 
     Returns
     -------

@@ -1,0 +1,66 @@
+"""The data sets of a batch: the name of each one's output folder and the images it leaves out."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from irtps._shared.paths import resolve_path
+from irtps.batch.summary import SUMMARY_JSON, SUMMARY_MARKDOWN
+from irtps.errors import ArgumentError
+from irtps.io.image_selection import parse_image_list
+
+__all__ = ["dataset_exclusions", "output_names"]
+
+
+def output_names(paths: Sequence[str | Path]) -> list[str]:
+    """Distinct output folder names for data set folders: their base names, with ``-2``,
+    ``-3`` … added to repeats.
+
+    Parameters
+    ----------
+    paths : sequence of str or pathlib.Path
+
+    Returns
+    -------
+    list of str
+        One name per path, in order; none is ``batch.json`` or ``batch.md``.
+
+    Examples
+    --------
+    >>> output_names(["a/ball", "b/ball", "cap", "ball-2"])
+    ['ball', 'ball-2', 'cap', 'ball-2-2']
+    """
+    taken = {SUMMARY_JSON, SUMMARY_MARKDOWN}
+    names = []
+    for path in paths:
+        base = resolve_path(path).name
+        name, suffix = base, 2
+        while name in taken:
+            name, suffix = f"{base}-{suffix}", suffix + 1
+        taken.add(name)
+        names.append(name)
+    return names
+
+
+def dataset_exclusions(
+    exclude_images: str | Mapping[str, str | None] | None, names: list[str]
+) -> dict[str, str | None]:
+    """Each data set's list of images to leave out (`irtps.batch.run.reconstruct_many`'s
+    ``exclude_images``), each list checked for form."""
+    if exclude_images is None or isinstance(exclude_images, str):
+        if exclude_images is not None:
+            parse_image_list(exclude_images)
+        return dict.fromkeys(names, exclude_images)
+    if not isinstance(exclude_images, Mapping):
+        raise ArgumentError(
+            "exclude_images",
+            f"expected a list of images or a mapping of data set names to lists, got {type(exclude_images).__name__}",
+        )
+    unknown = sorted(set(exclude_images) - set(names), key=str)
+    if unknown:
+        raise ArgumentError("exclude_images", f"{unknown[0]!r} is none of the data sets ({', '.join(names)})")
+    for images in exclude_images.values():
+        if images is not None:
+            parse_image_list(images)
+    return {name: exclude_images.get(name) for name in names}

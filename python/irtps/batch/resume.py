@@ -1,0 +1,60 @@
+"""Resumed batches: whether an output folder of an earlier run is complete and can be kept."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from irtps._shared.paths import resolve_path
+from irtps.errors import IrtpsError
+from irtps.io.dataset_files import dataset_image_names
+from irtps.io.image_selection import select_images
+from irtps.irt.folder import indirect_file_names, load_reconstruction, load_run_record
+from irtps.model.options import ReconstructOptions
+
+__all__ = ["complete_output"]
+
+
+def complete_output(
+    destination: str, source: str, options: ReconstructOptions, exclude_images: str | None
+) -> tuple | None:
+    """The normals, albedo, height and mask of a complete output folder of `source` made
+    with `options`, leaving out the images of `exclude_images` (see
+    `irtps.batch.task.reconstruct_to_folder`), and its recorded robust mode, or None."""
+    folder = Path(destination)
+    try:
+        record = load_run_record(folder)
+        maps = load_reconstruction(folder)
+        meshes = all(_nonempty_file(folder / name) for name in ("mesh.ply", "mesh.obj"))
+        indirect = not record.get("chosen_pass") or _complete_indirect(folder / "indirect", record.get("images", []))
+        excluded = select_images(dataset_image_names(source), exclude_images, where=source).excluded
+    except (IrtpsError, OSError):
+        return None
+    same_run = (
+        record["source"] == str(resolve_path(source))
+        and _same_options(record["parameters"], options)
+        and tuple(record.get("excluded_images", ())) == excluded
+    )
+    return (maps, record.get("robust_used")) if same_run and meshes and indirect else None
+
+
+def _complete_indirect(folder: Path, images: list[str]) -> bool:
+    """Whether a folder holds one file for each image fitted (`indirect_file_names`; images
+    numbered from ``000.exr`` where ``run.json`` does not list them) and nothing else, none
+    empty."""
+    files = {file.name: file for file in folder.iterdir()}
+    expected = indirect_file_names(images, len(images) if images else len(files))
+    return bool(files) and files.keys() == set(expected) and all(map(_nonempty_file, files.values()))
+
+
+def _nonempty_file(path: Path) -> bool:
+    return path.is_file() and path.stat().st_size > 0
+
+
+def _same_options(recorded: dict, options: ReconstructOptions) -> bool:
+    """Whether a ``run.json``'s parameters are `options`; an option left unset (None),
+    which the reconstruction resolves for each data set, matches any recorded value."""
+    wanted = json.loads(json.dumps(options.to_dict()))
+    return recorded.keys() == wanted.keys() and all(
+        value is None or recorded[key] == value for key, value in wanted.items()
+    )
