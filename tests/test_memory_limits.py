@@ -224,8 +224,8 @@ def test_format_bytes():
     not (sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc"), reason="mallopt is glibc's"
 )
 def test_the_command_fixes_glibcs_mmap_threshold():
-    # Its effect on a run's peak is measured by benches/memory_bench.py (1.52x -> 1.40x the
-    # decoded images on DiLiGenT reading); here, that glibc takes the setting.
+    # Its effect on a run's peak is measured by benches/memory_bench.py; here, that glibc
+    # takes the setting.
     assert return_freed_memory()
 
 

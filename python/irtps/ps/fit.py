@@ -170,8 +170,8 @@ def photometric_stereo(
           fit unless the lobe lowers Tukey's loss by more than the Bayesian information
           criterion asks for its two extra parameters, or when it lights fewer than 6
           unsaturated observations; pixels fitted with a lobe are flagged (`LOBE`).
-          About 90 times slower than ``"tukey"`` (0.5–2 s on a DiLiGenT object), and worse
-          than it on matte objects with deep folds, where it can take inter-reflected light
+          About two orders of magnitude slower than ``"tukey"`` (seconds on a DiLiGenT
+          object; docs/accuracy.md), and worse than it on matte objects with deep folds, where it can take inter-reflected light
           for a lobe. `lobe_share` tells which objects want it, and `choose_robust` picks
           it from there (as ``"auto"`` does).
         - ``"auto"`` (default, as in ``irtps.reconstruct``): ``"lobe"`` for an object most of
@@ -332,10 +332,10 @@ LOBE_SAMPLE = 1000
 #: side of `LOBE_ADVISED` (`share_is_decided`) or `LOBE_SAMPLE` are fitted.
 LOBE_FIRST = 64
 #: Rounds of each exponent's fit, from each start, in `lobe_share`'s fits (the lobe mode's
-#: own fit has 15): half the cost per pixel. Measured on the 47 objects of benches/README.md
-#: (real and rendered, 96 lights, 1 000 pixels each), the shares are 0–9 points lower than
-#: after 15 rounds (10 on a metal under 24 lights, tests/test_ps.py), some pixels taking a
-#: lobe only in later rounds, and every object falls on the same side of `LOBE_ADVISED`.
+#: own fit has 15): half the cost per pixel. The shares come out a few points lower than
+#: after 15 rounds, some pixels taking a lobe only in later rounds, and the real and rendered
+#: objects of benches/README.md fall on the same side of `LOBE_ADVISED` either way
+#: (tests/test_ps.py checks a metal under 24 lights).
 LOBE_CHECK_ROUNDS = 5
 #: Standard deviations of the Wilson score interval by which `share_is_decided` judges a share
 #: clearly on one side of `LOBE_ADVISED`: about one chance in 740 per look that a binomial
@@ -437,14 +437,10 @@ def lobe_share(
 
     A broad highlight that covers many lights (metal, metallic paint, a broad glaze) is what
     the lobe explains; on a matte object with shadows and inter-reflection few pixels take
-    one. Measured on 1 000 pixels of renders of DiLiGenT's shapes in six materials and of the
-    real objects (benches/README.md): 0.1–1.1 % on Lambertian surfaces, 9 % on DiLiGenT ball
-    (as many of the 64 pixels that decide it), 32 % on reading (27 % of its first 64, which
-    decide it; both with saturated observations left out), 19–26 % on a sharp plastic,
-    47–89 % on broad plastics and 65–87 % on rough aluminium and copper; 0–9 points below the
-    full lobe fit's shares, and on the same side of `LOBE_ADVISED` for each of 47 real and
-    rendered objects (96 lights). Where most pixels take one, the lobe mode fits the object
-    better than the Tukey fit.
+    one: Lambertian surfaces and DiLiGenT's matte objects stay well below `LOBE_ADVISED`,
+    broad plastics and rough metals above it (the measured shares of real objects and of
+    renders in six materials are in benches/README.md). Where most pixels take one, the
+    lobe mode fits the object better than the Tukey fit.
 
     Parameters
     ----------
