@@ -439,7 +439,7 @@ def lobe_share(
     the lobe explains; on a matte object with shadows and inter-reflection few pixels take
     one: Lambertian surfaces and DiLiGenT's matte objects stay well below `LOBE_ADVISED`,
     broad plastics and rough metals above it (the measured shares of real objects and of
-    renders in six materials are in benches/README.md). Where most pixels take one, the
+    renders in six materials are in docs/accuracy.md). Where most pixels take one, the
     lobe mode fits the object better than the Tukey fit.
 
     Parameters
