@@ -8,6 +8,7 @@ evaluating and rendering need. The files each reads are found by `irtps.io.datas
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,7 @@ from irtps.io.dataset_files import (
 )
 from irtps.io.diligent import load_diligent, load_diligent_ground_truth
 from irtps.io.image_selection import parse_image_list
+from irtps.io.intrinsics import Intrinsics, read_intrinsics, with_intrinsics
 from irtps.io.imageio import (
     check_stack_memory,
     clip_negative,
@@ -41,7 +43,13 @@ from irtps.model.scene import Scene
 _HEIGHT_CHANNEL_TOLERANCE = 1e-6
 
 
-def load_dataset(path: str | Path, *, ground_truth: bool = True, exclude_images: str | None = None) -> Dataset:
+def load_dataset(
+    path: str | Path,
+    *,
+    ground_truth: bool = True,
+    exclude_images: str | None = None,
+    intrinsics: str | Path | None = None,
+) -> Dataset:
     """Read a data set folder, in the irtps layout or the DiLiGenT layout.
 
     Parameters
@@ -54,6 +62,10 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True, exclude_images:
     exclude_images : str, optional
         Images to leave out, not read (`irtps.io.image_selection`): numbers and ranges of
         numbers that match the images' numbered file names (``"1-20,37"``), or file names.
+    intrinsics : str or pathlib.Path, optional
+        A ``K.txt`` (`irtps.io.intrinsics`): the data set's camera is then the perspective
+        camera of those intrinsics (`irtps.io.intrinsics.with_intrinsics`), whatever the
+        folder says.
 
     Returns
     -------
@@ -70,7 +82,9 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True, exclude_images:
         optional file such as ``mask.png`` is absent only when nothing is at its path),
         an image count that is not the number of lights, sizes that disagree,
         non-finite pixels, too few lights, a light that is not a unit vector with
-        z > 0, an unknown format.
+        z > 0, an unknown format; naming the intrinsics file (read before any image), one
+        that is not a usable intrinsic matrix or whose principal point lies far outside
+        the data set's images (`irtps.model.camera.intrinsics_problem`).
     ArgumentError
         Naming ``exclude_images``: malformed (checked before anything is read), an item
         that names no image, or fewer than 3 images left.
@@ -86,15 +100,18 @@ def load_dataset(path: str | Path, *, ground_truth: bool = True, exclude_images:
     path = check_path("path", path)
     if exclude_images is not None:
         parse_image_list(exclude_images)
+    camera = None if intrinsics is None else read_intrinsics(check_path("intrinsics", intrinsics))
     folder = check_folder(path)
-    if dataset_layout(folder) == "diligent":
-        return load_diligent(folder, ground_truth=ground_truth, exclude_images=exclude_images)
-    return _load_irtps(folder, ground_truth, exclude_images)
+    if dataset_layout(folder) == "irtps":
+        return _load_irtps(folder, ground_truth, exclude_images, camera)
+    dataset = load_diligent(folder, ground_truth=ground_truth, exclude_images=exclude_images)
+    return dataset if camera is None else dataclasses.replace(dataset, scene=with_intrinsics(dataset.scene, camera))
 
 
-def _load_irtps(folder: Path, ground_truth: bool, exclude_images: str | None) -> Dataset:
+def _load_irtps(folder: Path, ground_truth: bool, exclude_images: str | None, camera: Intrinsics | None) -> Dataset:
     files = irtps_files(folder, ground_truth, exclude_images)
-    scene, paths = files.scene, files.images
+    scene = files.scene if camera is None else with_intrinsics(files.scene, camera)
+    paths = files.images
     size = (scene.camera.height, scene.camera.width)
     check_stack_memory(paths, size)
     images = read_images(paths)
@@ -171,6 +188,7 @@ def _read_ground_truth(files: TruthFiles, size: tuple[int, int]) -> GroundTruth 
         "height": None if files.height is None else read_height_map(files.height, size),
         "normal": None if files.normal is None else read_normal_map(files.normal, size),
         "albedo": None if files.albedo is None else read_albedo_map(files.albedo, size),
+        "depth": None if files.depth is None else read_height_map(files.depth, size, "depth map"),
     }
     if files.direct:
         check_stack_memory(files.direct, size)
@@ -218,8 +236,9 @@ def load_scene_object(path: str | Path) -> tuple[Scene, np.ndarray, np.ndarray, 
     return scene, height, albedo, mask
 
 
-def read_height_map(path: Path, size: tuple[int, int]) -> np.ndarray:
-    """A finite (H, W) height map of size ``size`` from an EXR file (Y, or R = G = B).
+def read_height_map(path: Path, size: tuple[int, int], what: str = "height map") -> np.ndarray:
+    """A finite (H, W) height map (or another map of one value a pixel, `what`: the depth map
+    of ``gt/depth.exr``) of size ``size`` from an EXR file (Y, or R = G = B).
 
     Raises
     ------
@@ -232,7 +251,7 @@ def read_height_map(path: Path, size: tuple[int, int]) -> np.ndarray:
         spread = float(np.ptp(height, axis=2).max())
         if spread > _HEIGHT_CHANNEL_TOLERANCE * max(1.0, float(np.abs(height).max())):
             raise DatasetError(
-                f"{path}: R, G and B differ (by up to {spread:g}); a height map needs R = G = B or a single Y channel"
+                f"{path}: R, G and B differ (by up to {spread:g}); a {what} needs R = G = B or a single Y channel"
             )
         height = np.ascontiguousarray(height[:, :, 0])
     return _checked_size(path, height, size)

@@ -84,7 +84,13 @@ def dataset_image_names(path: str | Path) -> tuple[str, ...]:
     return tuple(image.name for image in _numbered_images(folder / IMAGES_FOLDER, len(scene.lights)))
 
 
-def dataset_inputs(path: str | Path, *, ground_truth: bool = True, exclude_images: str | None = None) -> list[Path]:
+def dataset_inputs(
+    path: str | Path,
+    *,
+    ground_truth: bool = True,
+    exclude_images: str | None = None,
+    intrinsics: str | Path | None = None,
+) -> list[Path]:
     """Every file and folder that `irtps.io.dataset.load_dataset` reads, found by the code
     that reads them (the small files that list the rest are read; no image is decoded).
 
@@ -94,14 +100,14 @@ def dataset_inputs(path: str | Path, *, ground_truth: bool = True, exclude_image
 
     Parameters
     ----------
-    path, ground_truth, exclude_images
+    path, ground_truth, exclude_images, intrinsics
         As for `irtps.io.dataset.load_dataset`.
 
     Returns
     -------
     list of pathlib.Path
         The data set folder, then the files and folders read, as the reader names them
-        (symbolic links not resolved).
+        (symbolic links not resolved), then the intrinsics file, if given.
 
     Raises
     ------
@@ -121,10 +127,11 @@ def dataset_inputs(path: str | Path, *, ground_truth: bool = True, exclude_image
     """
     if exclude_images is not None:
         parse_image_list(exclude_images)
+    camera = [] if intrinsics is None else [check_path("intrinsics", intrinsics)]
     folder = check_folder(check_path("path", path))
     if dataset_layout(folder) == "diligent":
-        return diligent_inputs(folder, ground_truth=ground_truth, exclude_images=exclude_images)
-    return irtps_files(folder, ground_truth, exclude_images).paths()
+        return diligent_inputs(folder, ground_truth=ground_truth, exclude_images=exclude_images) + camera
+    return irtps_files(folder, ground_truth, exclude_images).paths() + camera
 
 
 def ground_truth_inputs(path: str | Path) -> list[Path]:
@@ -202,9 +209,11 @@ class TruthFiles(NamedTuple):
     albedo: Path | None
     #: The direct-light images of the lights kept (none when they are not read).
     direct: list[Path]
+    #: A perspective camera's depth map (contract §1b).
+    depth: Path | None = None
 
     def paths(self) -> list[Path]:
-        maps = [path for path in (self.height, self.normal, self.albedo) if path is not None]
+        maps = [path for path in (self.height, self.normal, self.albedo, self.depth) if path is not None]
         return [self.folder, *maps, *self.direct]
 
 
@@ -213,12 +222,14 @@ def _truth_files(folder: Path, count: int, kept: list[int] | None = None, direct
     `direct`, the direct-light images of the lights `kept` (default all `count`)."""
     if not optional_folder(folder):
         return None
-    height, normal, albedo = (_optional_path(folder / f"{name}.exr") for name in ("height", "normal", "albedo"))
+    height, normal, albedo, depth = (
+        _optional_path(folder / f"{name}.exr") for name in ("height", "normal", "albedo", "depth")
+    )
     direct_paths: list[Path] = []
     if direct and optional_folder(folder / "direct"):
         direct_paths = _numbered_images(folder / "direct", count)
         direct_paths = direct_paths if kept is None else [direct_paths[k] for k in kept]
-    return TruthFiles(folder, height, normal, albedo, direct_paths)
+    return TruthFiles(folder, height, normal, albedo, direct_paths, depth)
 
 
 def ground_truth_files(folder: Path) -> tuple[Scene, TruthFiles | None]:

@@ -33,9 +33,10 @@ def save_dataset(
     """Write a data set folder in the irtps layout, atomically.
 
     Writes ``scene.json``, ``images/000.exr`` ..., ``mask.png`` (8-bit, 0 or 255)
-    and, when present, ``gt/height.exr`` (Y), ``gt/normal.exr``, ``gt/albedo.exr``
-    and ``gt/direct/000.exr`` .... An existing folder at ``path`` is replaced only
-    once everything is written.
+    and, when present, ``gt/height.exr`` (Y), ``gt/normal.exr``, ``gt/albedo.exr``,
+    ``gt/depth.exr`` (Y; an unknown depth, NaN, is written as 0, as outside the mask: no
+    point a camera sees has depth 0) and ``gt/direct/000.exr`` .... An existing folder at
+    ``path`` is replaced only once everything is written.
 
     Parameters
     ----------
@@ -92,10 +93,11 @@ def _gt_files(gt: GroundTruth | None) -> dict[str, list[tuple[str, np.ndarray]]]
     if gt is None:
         return {}
     files = {}
-    for name in ("height", "normal", "albedo"):
+    for name in ("height", "normal", "albedo", "depth"):
         value = getattr(gt, name)
         if value is not None:
-            files[name] = [(f"{GT_FOLDER}/{name}.exr", value)]
+            known = np.where(np.isnan(value), np.float32(0.0), value) if name == "depth" else value
+            files[name] = [(f"{GT_FOLDER}/{name}.exr", known)]
     if gt.direct is not None:
         files["direct"] = [(f"{GT_FOLDER}/direct/{image_file_name(k)}", image) for k, image in enumerate(gt.direct)]
     return files

@@ -2,8 +2,11 @@
 
 A DiLiGenT folder holds the images listed in ``filenames.txt`` (16-bit PNG), one
 line per image in ``light_directions.txt`` (x right, y up, z toward the camera:
-the irtps frame) and ``light_intensities.txt`` (RGB), ``mask.png`` and, for
-evaluation, ``Normal_gt.mat`` (variable ``Normal_gt``, (H, W, 3)).
+the irtps frame) and ``light_intensities.txt`` (RGB), ``mask.png``, optionally the
+camera's intrinsics ``K.txt`` (`irtps.io.intrinsics`: the folder is then perspective) and, for
+evaluation, ``Normal_gt.mat`` (variable ``Normal_gt``, (H, W, 3)) and ``depth_gt.npz``
+(variable ``depth_gt``, (H, W): depth along the optical axis in millimetres, NaN where
+unknown).
 """
 
 from __future__ import annotations
@@ -17,10 +20,12 @@ import scipy.io
 
 from irtps.model.data import Dataset, GroundTruth
 from irtps._shared.checks import check_finite
-from irtps.errors import ArgumentError, DatasetError
-from irtps._shared.guarded import parse_float, read_text
+from irtps.errors import DatasetError
+from irtps._shared.guarded import read_text
 from irtps.io.image_selection import ImageSelection, select_images
 from irtps.io.imageio import check_stack_memory, format_size, png_saturation, read_images, read_mask
+from irtps.io.intrinsics import INTRINSICS_FILE, Intrinsics, read_intrinsics, with_intrinsics
+from irtps.io.number_lines import three_numbers
 from irtps._shared.paths import check_file, check_folder, optional_file
 from irtps.model.scene import MIN_LIGHTS, Camera, Light, Scene, irradiance_problem, upward_problem
 
@@ -30,6 +35,8 @@ INTENSITIES_FILE = "light_intensities.txt"
 MASK_FILE = "mask.png"
 NORMALS_FILE = "Normal_gt.mat"
 NORMALS_VARIABLE = "Normal_gt"
+DEPTH_FILE = "depth_gt.npz"
+DEPTH_VARIABLE = "depth_gt"
 
 UNIT_TOLERANCE = 1e-2
 """How far the norm of a listed light direction may be from 1; within it, it is renormalised."""
@@ -42,7 +49,8 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
     ----------
     path : str or pathlib.Path
     ground_truth : bool
-        Also read the normals of ``Normal_gt.mat`` when the file is present.
+        Also read the normals of ``Normal_gt.mat`` and the depth of ``depth_gt.npz`` when
+        the files are present.
     exclude_images : str, optional
         Images to leave out, not read (`irtps.io.image_selection`): ``"1-20"`` for
         ``001.png`` … ``020.png``, or file names as ``filenames.txt`` lists them.
@@ -53,7 +61,10 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
         Images in ``filenames.txt`` order, read at full bit depth and divided by
         ``2^bits - 1``. Each light's irradiance is its line of
         ``light_intensities.txt``. The camera is orthographic with the images'
-        size and ``pixel_size`` 1; there is no floor and no environment.
+        size and ``pixel_size`` 1, or, when the folder holds a ``K.txt``, perspective with
+        those intrinsics and its optical centre at ``(0, 0, sqrt(fx * fy))``, where a pixel
+        at the object's base is 1 wide (`irtps.io.intrinsics.with_intrinsics`); there is
+        no floor and no environment.
         ``saturation`` is 1.0: a PNG value of ``2^bits - 1`` is clipped.
         ``mask.png`` is optional (absent means every pixel; anything else at that path
         that is not a readable file is an error).
@@ -63,7 +74,9 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
     DatasetError
         Naming the file (and line) and the problem: a missing file or one that is
         not a readable regular file (a directory, a FIFO, a symlink loop), line counts
-        that disagree, an image listed twice, a direction that is not a unit vector (beyond 1e-2) or
+        that disagree, a ``K.txt`` that is not a usable intrinsic matrix for the images
+        (`irtps.io.intrinsics.read_intrinsics`, `irtps.io.intrinsics.with_intrinsics`), a
+        ``depth_gt.npz`` without a real (H, W) ``depth_gt`` of positive or NaN values, an image listed twice, a direction that is not a unit vector (beyond 1e-2) or
         has z <= 0, a negative intensity or one out of range
         (`irtps.model.scene.irradiance_problem`), fewer than 3 lights, images of
         different sizes or with non-finite values.
@@ -87,12 +100,14 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
     images = read_images(image_paths)
     size = images.shape[1:3]
     mask = read_mask(files.mask, size) if files.mask is not None else np.ones(size, dtype=bool)
-    gt = None if files.normals is None else GroundTruth(normal=_read_normals(files.normals, size))
+    gt = _ground_truth(files.normals, files.depth, size)
     scene = Scene(
         camera=Camera(width=size[1], height=size[0], pixel_size=1.0),
         lights=files.lights,
         relative_irradiance=True,  # light_intensities.txt: relative RGB intensities
     )
+    if files.intrinsics is not None:
+        scene = with_intrinsics(scene, files.intrinsics)
     saturation = png_saturation(image_paths)
     return Dataset(
         scene=scene,
@@ -117,11 +132,14 @@ class _DiligentFiles(NamedTuple):
     selection: ImageSelection
     mask: Path | None
     normals: Path | None
+    intrinsics: Intrinsics | None
+    depth: Path | None
 
     def paths(self) -> list[Path]:
         lists = [self.folder / name for name in (FILENAMES_FILE, DIRECTIONS_FILE, INTENSITIES_FILE)]
-        optional = [path for path in (self.mask, self.normals) if path is not None]
-        return [self.folder, *lists, *self.images, *optional]
+        camera = [] if self.intrinsics is None else [self.intrinsics.source]
+        optional = [path for path in (self.mask, self.normals, self.depth) if path is not None]
+        return [self.folder, *lists, *camera, *self.images, *optional]
 
 
 def _diligent_files(folder: Path, ground_truth: bool, exclude_images: str | None) -> _DiligentFiles:
@@ -143,14 +161,17 @@ def _diligent_files(folder: Path, ground_truth: bool, exclude_images: str | None
         check_file(image_path, f"listed on line {line} of {FILENAMES_FILE}")
     lights = tuple(Light(direction=directions[k], irradiance=intensities[k]) for k in selection.kept)
     mask = folder / MASK_FILE if optional_file(folder / MASK_FILE) else None
-    normals = folder / NORMALS_FILE if ground_truth and optional_file(folder / NORMALS_FILE) else None
-    return _DiligentFiles(folder, lights, image_paths, selection, mask, normals)
+    normals, depth = (
+        folder / name if ground_truth and optional_file(folder / name) else None for name in (NORMALS_FILE, DEPTH_FILE)
+    )
+    intrinsics = read_intrinsics(folder / INTRINSICS_FILE) if optional_file(folder / INTRINSICS_FILE) else None
+    return _DiligentFiles(folder, lights, image_paths, selection, mask, normals, intrinsics, depth)
 
 
 def diligent_inputs(path: str | Path, *, ground_truth: bool = True, exclude_images: str | None = None) -> list[Path]:
     """Every file and folder that `load_diligent` reads, found by the code that reads them:
-    the folder, its three lists, the images listed (wherever they are) but those left out,
-    the mask and the true normals when present.
+    the folder, its three lists, its ``K.txt`` when present, the images listed (wherever they
+    are) but those left out, the mask and the true normals and depth when present.
 
     Raises
     ------
@@ -161,13 +182,15 @@ def diligent_inputs(path: str | Path, *, ground_truth: bool = True, exclude_imag
 
 
 def diligent_ground_truth_inputs(path: str | Path) -> list[Path]:
-    """The folder and, when present, the ``Normal_gt.mat`` that `load_diligent_ground_truth` reads."""
+    """The folder and, when present, the ``Normal_gt.mat`` and ``depth_gt.npz`` that
+    `load_diligent_ground_truth` reads."""
     folder = check_folder(path)
-    return [folder, *([folder / NORMALS_FILE] if optional_file(folder / NORMALS_FILE) else [])]
+    return [folder, *(folder / name for name in (NORMALS_FILE, DEPTH_FILE) if optional_file(folder / name))]
 
 
 def load_diligent_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | None:
-    """Read only the true normals (``Normal_gt.mat``) of a DiLiGenT folder, no images.
+    """Read only the true normals (``Normal_gt.mat``) and depth (``depth_gt.npz``) of a
+    DiLiGenT folder, no images.
 
     Parameters
     ----------
@@ -178,10 +201,21 @@ def load_diligent_ground_truth(path: str | Path, size: tuple[int, int]) -> Groun
     Returns
     -------
     GroundTruth or None
-        None when the folder has no ``Normal_gt.mat``.
+        None when the folder has neither file.
     """
-    normals_path = check_folder(path) / NORMALS_FILE
-    return GroundTruth(normal=_read_normals(normals_path, size)) if optional_file(normals_path) else None
+    folder = check_folder(path)
+    normals, depth = (folder / name if optional_file(folder / name) else None for name in (NORMALS_FILE, DEPTH_FILE))
+    return _ground_truth(normals, depth, size)
+
+
+def _ground_truth(normals: Path | None, depth: Path | None, size: tuple[int, int]) -> GroundTruth | None:
+    """The true normals and depth of the files present, None if neither is."""
+    if normals is None and depth is None:
+        return None
+    return GroundTruth(
+        normal=None if normals is None else _read_normals(normals, size),
+        depth=None if depth is None else _read_depth(depth, size),
+    )
 
 
 def diligent_image_names(folder: str | Path) -> tuple[str, ...]:
@@ -216,16 +250,7 @@ def _read_table(path: Path) -> tuple[np.ndarray, list[int]]:
     """Three finite numbers per line: a float64 (N, 3) array and the line numbers."""
     rows, numbers = [], []
     for number, line in _read_lines(path):
-        fields = line.replace(",", " ").split()
-        try:
-            row = [parse_float(field, "field") for field in fields]
-        except ArgumentError:
-            raise DatasetError(f"{path}: line {number}: expected 3 numbers, got {line!r}") from None
-        if len(row) != 3:
-            raise DatasetError(f"{path}: line {number}: expected 3 numbers, got {len(row)}")
-        if not all(np.isfinite(row)):
-            raise DatasetError(f"{path}: line {number}: non-finite value in {line!r}")
-        rows.append(row)
+        rows.append(three_numbers(path, number, line))
         numbers.append(number)
     return np.array(rows, dtype=np.float64).reshape(-1, 3), numbers
 
@@ -277,3 +302,29 @@ def _read_normals(path: Path, size: tuple[int, int]) -> np.ndarray:
     normals = normals.astype(np.float32)
     check_finite(path, normals, error=DatasetError)
     return normals
+
+
+def _read_depth(path: Path, size: tuple[int, int]) -> np.ndarray:
+    """The (H, W) float32 depth of ``depth_gt.npz`` at `path`: positive, NaN where unknown."""
+    try:
+        with np.load(path, allow_pickle=False) as variables:
+            found = sorted(variables.files)
+            depth = np.asarray(variables[DEPTH_VARIABLE]) if DEPTH_VARIABLE in found else None
+    except MemoryError:
+        raise
+    except Exception as error:  # numpy raises many types on a malformed file (BadZipFile, ValueError, OSError...)
+        raise DatasetError(f"{path}: not a readable NumPy .npz file ({error})") from None
+    if depth is None:
+        raise DatasetError(f"{path}: no variable {DEPTH_VARIABLE!r} (found {found})")
+    if depth.ndim != 2 or depth.shape != tuple(size):
+        raise DatasetError(f"{path}: {DEPTH_VARIABLE} has shape {depth.shape}, expected the images' {tuple(size)}")
+    if not np.issubdtype(depth.dtype, np.floating):
+        raise DatasetError(f"{path}: {DEPTH_VARIABLE} holds {depth.dtype} values, expected floating-point numbers")
+    depth = depth.astype(np.float32)
+    known = ~np.isnan(depth)
+    if not (np.isfinite(depth[known]).all() and (depth[known] > 0.0).all()):
+        row, column = np.argwhere(known & ~(np.isfinite(depth) & (depth > 0.0)))[0]
+        raise DatasetError(
+            f"{path}: {DEPTH_VARIABLE} is {depth[row, column]:g} at row {row}, column {column}: a depth is positive, or NaN where unknown"
+        )
+    return depth

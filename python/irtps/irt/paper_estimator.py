@@ -54,10 +54,10 @@ def paper_environment_colour(
     rows, cols = np.nonzero(mask)
     xs, ys = scene.camera.pixel_centers()
     point = np.column_stack([xs[rows, cols], ys[rows, cols], np.asarray(height, np.float64)[rows, cols]])
-    normal = _height_field_normals(height, mask, scene.camera.pixel_size)[rows, cols]
+    normal = _height_field_normals(height, mask, scene.camera.orthographic_pixel_size)[rows, cols]
     colour = np.ones((len(rows), 3))
     alive = np.ones(len(rows), dtype=bool)
-    offset = 1e-3 * scene.camera.pixel_size
+    offset = 1e-3 * scene.camera.orthographic_pixel_size
     for _ in range(reflections):
         direction = _cosine_directions(normal, rng)
         t, triangle = renderer.intersect((point + offset * normal).astype(np.float32), direction.astype(np.float32))

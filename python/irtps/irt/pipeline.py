@@ -167,7 +167,7 @@ def resolve_options(dataset: Dataset, options: ReconstructOptions) -> Reconstruc
     OptionError
         If ``base_height`` lies so far from the scene that float32 heights lose the relief.
     """
-    pixel_size = dataset.scene.camera.pixel_size
+    pixel_size = dataset.scene.camera.orthographic_pixel_size
     base_height = options.base_height
     limit = MAX_BASE_HEIGHT_PIXELS * pixel_size
     if not isinstance(base_height, str) and abs(base_height) > limit:
@@ -260,7 +260,11 @@ def rendered_albedo(
     scene = dataset.scene
     fitted = fit.albedo if coverage is None else fit.albedo / coverage[..., None].astype(np.float32)
     return surface_albedo(
-        fitted, relief, dataset.mask, scene.camera.pixel_size, largest=None if scene.relative_irradiance else 1.0
+        fitted,
+        relief,
+        dataset.mask,
+        scene.camera.orthographic_pixel_size,
+        largest=None if scene.relative_irradiance else 1.0,
     )
 
 
@@ -282,7 +286,7 @@ def surface_relief(dataset: Dataset, normals: np.ndarray, options: ReconstructOp
     of its mask's boundary at 0: float32, 0 outside the mask."""
     mask = dataset.mask
     height = integrate_normals(
-        normals, mask, pixel_size=dataset.scene.camera.pixel_size, method=options.integration_method
+        normals, mask, pixel_size=dataset.scene.camera.orthographic_pixel_size, method=options.integration_method
     )
     return np.where(mask, place_height(height, mask, base_height=0.0), 0).astype(np.float32)
 
@@ -313,7 +317,7 @@ def place_surface(
         scene, albedo = rendered_as(scene, albedo, albedo_scale)
     if previous is not None:
         radius = PLACEMENT_SEARCH_CHANGES * shape_change
-        if previous.source != "images" or radius < PRECISION_PIXELS * scene.camera.pixel_size:
+        if previous.source != "images" or radius < PRECISION_PIXELS * scene.camera.orthographic_pixel_size:
             return previous
         return estimate_placement(
             scene,

@@ -20,6 +20,7 @@ from irtps.ps.image_agreement import ImageAgreement, image_agreement
 from irtps.irt.interreflection import check_traceable, remove_interreflections
 from irtps.irt.loop_state import Iteration
 from irtps.model.options import ReconstructOptions
+from irtps.model.scene import orthographic_scene
 from irtps.irt.pipeline import (
     dataset_lobe_share,
     fit_photometric_stereo,
@@ -50,7 +51,8 @@ class Reconstruction:
     flags : numpy.ndarray
         uint8 (H, W) per-pixel photometric-stereo flags (see `irtps.ps.fit.FLAGS`).
     pixel_size : float
-        World size of a pixel.
+        World size of a pixel (of a perspective camera's orthographic stand-in, for now:
+        `irtps.model.scene.orthographic_scene`).
     timings : dict
         Seconds spent in each stage.
     parameters : dict
@@ -184,6 +186,9 @@ def reconstruct(
     Warns
     -----
     IrtpsWarning
+        For a perspective camera, that it is taken as its orthographic stand-in
+        (`irtps.model.scene.orthographic_scene`: until the pinhole tracer and perspective
+        integration, every step runs on it; ``pixel_size`` is then the stand-in's).
         When observations are saturated, with their count; when most of the object's pixels
         reflect a broad specular lobe and the robust mode asked for is neither ``"auto"`` nor
         ``"lobe"``, advising the lobe mode (`Reconstruction.lobe_share`).
@@ -203,7 +208,9 @@ def reconstruct(
     check_instance("dataset", dataset, Dataset)
     if method is not None:
         settings["method"] = method
-    options = resolve_options(dataset, ReconstructOptions.build(options, **settings))
+    options = ReconstructOptions.build(options, **settings)
+    dataset = _orthographic(dataset)
+    options = resolve_options(dataset, options)
     _check_input(dataset, options.saturation, options.robust)
     if options.method == "irtps":
         check_traceable(dataset)
@@ -237,7 +244,7 @@ def reconstruct(
             height=loop.height,
             mask=dataset.mask,
             flags=loop.fit.flags,
-            pixel_size=dataset.scene.camera.pixel_size,
+            pixel_size=dataset.scene.camera.orthographic_pixel_size,
             timings=timings,
             parameters=parameters,
             object_indirect=loop.indirect,
@@ -264,7 +271,7 @@ def reconstruct(
         height=first.height,
         mask=dataset.mask,
         flags=first.fit.flags,
-        pixel_size=dataset.scene.camera.pixel_size,
+        pixel_size=dataset.scene.camera.orthographic_pixel_size,
         timings=timings,
         parameters=parameters,
         placement=first.placement,
@@ -279,7 +286,12 @@ def reconstruct(
 
 
 def load_and_reconstruct(
-    path: str | Path, method: str | None = None, *, exclude_images: str | None = None, **options
+    path: str | Path,
+    method: str | None = None,
+    *,
+    exclude_images: str | None = None,
+    intrinsics: str | Path | None = None,
+    **options,
 ) -> tuple[Dataset, Reconstruction]:
     """Read a data set folder and reconstruct it, timing the reading too.
 
@@ -291,6 +303,8 @@ def load_and_reconstruct(
         As for `reconstruct`.
     exclude_images : str, optional
         Images not to read (`irtps.load_dataset`), e.g. ``"1-20"``.
+    intrinsics : str or pathlib.Path, optional
+        A ``K.txt`` that gives the data set a perspective camera (`irtps.load_dataset`).
     **options
         The other keyword arguments of `reconstruct` (``options``, ``progress``, fields
         of `ReconstructOptions`).
@@ -327,11 +341,18 @@ def load_and_reconstruct(
     settings = {key: value for key, value in options.items() if key not in ("options", "progress")}
     ReconstructOptions.build(options.get("options"), **settings)  # a bad option fails before the data set is read
     start = time.perf_counter()
-    dataset = load_dataset(path, exclude_images=exclude_images)
+    dataset = load_dataset(path, exclude_images=exclude_images, intrinsics=intrinsics)
     loaded = time.perf_counter() - start
     result = reconstruct(dataset, **options)
     result.timings = {"load": loaded, **result.timings}
     return dataset, result
+
+
+def _orthographic(dataset: Dataset) -> Dataset:
+    """`dataset`, seen by the orthographic stand-in of a perspective camera
+    (`irtps.model.scene.orthographic_scene`, which warns)."""
+    scene = orthographic_scene(dataset.scene, dataset.source or "the data set")
+    return dataset if scene is dataset.scene else replace(dataset, scene=scene)
 
 
 def _brightness_corrected(dataset: Dataset, options: ReconstructOptions) -> tuple[Dataset, np.ndarray, PsResult]:

@@ -65,7 +65,7 @@ def estimate_indirect(
                 rendered.height,
                 rendered.albedo,
                 rendered.mask,
-                rendered.scene.camera.pixel_size,
+                rendered.scene.camera.orthographic_pixel_size,
             )
     return estimate, float(noise_energy.sum())
 

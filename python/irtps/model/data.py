@@ -27,15 +27,21 @@ class GroundTruth:
         float32 (H, W, 3): RGB albedo.
     direct : numpy.ndarray or None
         float32 (K, H, W, 3): the direct-light-only image for each light.
+    depth : numpy.ndarray or None
+        float32 (H, W), perspective cameras: each object pixel's depth along the optical axis
+        (contract §1b: its point is ``optical_center + depth * ray``, at height
+        ``zc - depth``), world units; 0 outside the mask, NaN where unknown (DiLiGenT's
+        ``depth_gt``, in millimetres).
     """
 
     height: np.ndarray | None = None
     normal: np.ndarray | None = None
     albedo: np.ndarray | None = None
     direct: np.ndarray | None = None
+    depth: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        for name in ("height", "normal", "albedo", "direct"):
+        for name in ("height", "normal", "albedo", "direct", "depth"):
             value = getattr(self, name)
             if value is not None:
                 setattr(self, name, np.asarray(value, dtype=np.float32))
@@ -155,7 +161,7 @@ def image_file_name(k: int, suffix: str = ".exr") -> str:
 
 
 def _gt_shapes(count: int, size: tuple[int, int]) -> dict[str, tuple[int, ...]]:
-    return {"height": size, "normal": (*size, 3), "albedo": (*size, 3), "direct": (count, *size, 3)}
+    return {"height": size, "normal": (*size, 3), "albedo": (*size, 3), "direct": (count, *size, 3), "depth": size}
 
 
 def _expect_shape(name: str, array: np.ndarray, shape: tuple[int, ...]) -> None:

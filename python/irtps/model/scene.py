@@ -1,14 +1,16 @@
 """The scene description of a data set (``scene.json``, contract ``irtps.scene/1``).
 
 The world frame is right-handed: x to the right, y up, z toward the camera. The
-camera is orthographic and looks along -z.
+camera (`irtps.model.camera`) looks along -z: orthographic, or a perspective pinhole.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import numbers
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NoReturn
@@ -17,7 +19,8 @@ import numpy as np
 
 from irtps._shared.checks import check_path
 from irtps._shared.atomic import atomic_write_text
-from irtps.errors import DatasetError
+from irtps.errors import DatasetError, IrtpsWarning
+from irtps.model.camera import Camera, intrinsics_problem
 from irtps.model.constants import MAX_IMAGE_PIXELS
 from irtps._shared.guarded import read_json, shown
 from irtps._shared.paths import exists
@@ -36,37 +39,11 @@ _SCENE_KEYS = ("format", "camera", "lights", "floor", "environment")
 #: Values of the optional top-level ``irradiance`` field.
 IRRADIANCE_KINDS = ("absolute", "relative")
 _BOX_KEYS = ("type", "x", "y", "z_top", "albedo")
-
-
-@dataclass(frozen=True)
-class Camera:
-    """An orthographic camera looking along -z, centred on the z axis.
-
-    Attributes
-    ----------
-    width, height : int
-        Image size in pixels.
-    pixel_size : float
-        Side of a pixel's square footprint, in world units.
-    """
-
-    width: int
-    height: int
-    pixel_size: float
-
-    def pixel_centers(self) -> tuple[np.ndarray, np.ndarray]:
-        """World coordinates of the pixel centres.
-
-        Returns
-        -------
-        x, y : numpy.ndarray
-            Two float64 arrays of shape (height, width): pixel (i, j) is centred at
-            ``x = (j + 0.5 - W/2) * s`` and ``y = (H/2 - i - 0.5) * s``.
-        """
-        s = self.pixel_size
-        x_row = (np.arange(self.width) + 0.5 - self.width / 2) * s
-        y_column = (self.height / 2 - np.arange(self.height) - 0.5) * s
-        return np.meshgrid(x_row, y_column)
+#: The fields of each projection's ``camera`` object besides ``projection`` (contract §1, §1b).
+_CAMERA_KEYS = {
+    "orthographic": ("width", "height", "pixel_size"),
+    "perspective": ("width", "height", "fx", "fy", "cx", "cy", "optical_center"),
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,6 +140,16 @@ class Scene:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "lights", tuple(self.lights))
+        if self.camera.optical_center is not None and self.camera.optical_center[2] <= self.base_height:
+            raise DatasetError(
+                f"Scene.camera.optical_center {_optical_center_problem(self.camera.optical_center[2], self.base_height)}"
+            )
+
+    @property
+    def base_height(self) -> float:
+        """The height the object stands on: the floor's, 0 where there is no floor (the
+        contract's skirts run down to it)."""
+        return 0.0 if self.floor is None else self.floor.height
 
     @property
     def light_directions(self) -> np.ndarray:
@@ -208,9 +195,60 @@ def parse_scene(obj: object, source: str = "scene.json") -> Scene:
     floor = None if root["floor"] is None else _parse_floor(fields, root["floor"])
     floor_height = 0.0 if floor is None else floor.height
     environment = _parse_environment(fields, root["environment"], floor_height)
+    if camera.optical_center is not None and camera.optical_center[2] <= floor_height:
+        fields.fail("camera.optical_center", _optical_center_problem(camera.optical_center[2], floor_height))
     return Scene(
         camera=camera, lights=lights, floor=floor, environment=environment, relative_irradiance=irradiance == "relative"
     )
+
+
+def orthographic_scene(scene: Scene, where: str) -> Scene:
+    """The scene as the steps that trace or integrate only orthographically see it.
+
+    `scene` itself when its camera is orthographic. For a perspective camera, the same scene
+    seen by the camera's orthographic stand-in (`irtps.model.camera.Camera.orthographic_stand_in`)
+    at the depth of the object's base: the optical centre's height minus `Scene.base_height`
+    (the floor's, or 0), a pixel size of that depth over the focal length; with an
+    `IrtpsWarning` that says so. (A camera given by its intrinsics alone, DiLiGenT's ``K.txt``,
+    has its optical centre where that pixel size is the data set's, 1 for DiLiGenT:
+    `irtps.io.intrinsics`.)
+
+    Parameters
+    ----------
+    scene : Scene
+    where : str
+        What the scene belongs to (a data set folder), named by the warning.
+
+    Raises
+    ------
+    DatasetError
+        Naming `where`: a stand-in whose pixel size is outside the range of an orthographic
+        camera's (`MIN_PIXEL_SIZE` to `MAX_PIXEL_SIZE`).
+
+    Warns
+    -----
+    IrtpsWarning
+        For a perspective camera, naming `where`, the stand-in's pixel size and depth.
+    """
+    camera = scene.camera
+    if camera.optical_center is None:
+        return scene
+    depth = camera.optical_center[2] - scene.base_height
+    stand_in = camera.orthographic_stand_in(depth)
+    if not MIN_PIXEL_SIZE <= stand_in.orthographic_pixel_size <= MAX_PIXEL_SIZE:
+        raise DatasetError(
+            f"{where}: the perspective camera's orthographic stand-in has pixel size {stand_in.pixel_size:g} "
+            f"(depth {depth:g} over focal length {camera.focal_length:g}), out of range: expected "
+            f"{MIN_PIXEL_SIZE:g} to {MAX_PIXEL_SIZE:g}"
+        )
+    warnings.warn(
+        f"{where}: the perspective camera is traced as an orthographic camera of pixel size {stand_in.pixel_size:.6g} "
+        f"(its pixel footprint at the object's base, {depth:g} from the optical centre): the pinhole tracer and "
+        "perspective integration are not there yet",
+        IrtpsWarning,
+        stacklevel=3,
+    )
+    return dataclasses.replace(scene, camera=stand_in)
 
 
 def scene_to_dict(scene: Scene) -> dict:
@@ -225,15 +263,9 @@ def scene_to_dict(scene: Scene) -> dict:
     dict
         Plain Python values (dict, list, str, int, float, None), with ``format``.
     """
-    camera = scene.camera
     return {
         "format": FORMAT,
-        "camera": {
-            "projection": "orthographic",
-            "width": int(camera.width),
-            "height": int(camera.height),
-            "pixel_size": float(camera.pixel_size),
-        },
+        "camera": _camera_to_dict(scene.camera),
         "lights": [
             {"direction": _floats(light.direction), "irradiance": _floats(light.irradiance)} for light in scene.lights
         ],
@@ -340,13 +372,21 @@ def irradiance_problem(irradiance) -> str | None:
 
 
 def _parse_camera(fields: _Fields, value: object) -> Camera:
-    camera = fields.mapping(value, "camera", required=("projection", "width", "height", "pixel_size"))
-    if camera["projection"] != "orthographic":
-        fields.fail("camera.projection", f"is {shown(camera['projection'])}: only 'orthographic' is supported")
+    kind = fields.mapping(
+        value, "camera", required=("projection",), optional=_CAMERA_KEYS["perspective"] + ("pixel_size",)
+    )
+    projection = kind["projection"]
+    if projection not in _CAMERA_KEYS:
+        fields.fail(
+            "camera.projection", f"is {shown(projection)}: expected one of {', '.join(map(repr, _CAMERA_KEYS))}"
+        )
+    camera = fields.mapping(value, "camera", required=("projection", *_CAMERA_KEYS[projection]))
     width = fields.positive_int(camera["width"], "camera.width")
     height = fields.positive_int(camera["height"], "camera.height")
     if width * height > MAX_IMAGE_PIXELS:
         fields.fail("camera", f"size {width}x{height} exceeds the largest supported image ({MAX_IMAGE_PIXELS} pixels)")
+    if projection == "perspective":
+        return _parse_perspective(fields, camera, width, height)
     pixel_size = fields.positive_number(camera["pixel_size"], "camera.pixel_size")
     if not MIN_PIXEL_SIZE <= pixel_size <= MAX_PIXEL_SIZE:
         fields.fail(
@@ -356,6 +396,34 @@ def _parse_camera(fields: _Fields, value: object) -> Camera:
     return Camera(width=width, height=height, pixel_size=pixel_size)
 
 
+def _parse_perspective(fields: _Fields, camera: dict, width: int, height: int) -> Camera:
+    """The perspective camera of contract §1b, from its checked ``camera`` object."""
+    fx, fy, cx, cy = (fields.number(camera[name], f"camera.{name}") for name in ("fx", "fy", "cx", "cy"))
+    problem = intrinsics_problem(fx, fy, cx, cy, (height, width))
+    if problem is not None:
+        fields.fail(f"camera.{problem[0]}", problem[1])
+    center = fields.vector3(camera["optical_center"], "camera.optical_center")
+    if center[:2] != (0.0, 0.0):
+        fields.fail("camera.optical_center", f"must be [0, 0, zc] (the pinhole on the z axis), got {list(center)}")
+    return Camera(width, height, projection="perspective", fx=fx, fy=fy, cx=cx, cy=cy, optical_center=center)
+
+
+def _optical_center_problem(zc: float, base_height: float) -> str:
+    return f"is at height {zc:g}, not above the object's base ({base_height:g}: the floor, or 0 without one)"
+
+
+def _camera_to_dict(camera: Camera) -> dict:
+    size = {"width": int(camera.width), "height": int(camera.height)}
+    if camera.pixel_size is not None:
+        return {"projection": "orthographic", **size, "pixel_size": float(camera.pixel_size)}
+    return {
+        "projection": "perspective",
+        **size,
+        **{name: float(getattr(camera, name)) for name in ("fx", "fy", "cx", "cy")},
+        "optical_center": _floats(camera.optical_center),
+    }
+
+
 def _parse_lights(fields: _Fields, value: object) -> tuple[Light, ...]:
     entries = fields.array(value, "lights")
     if len(entries) < MIN_LIGHTS:
@@ -363,6 +431,13 @@ def _parse_lights(fields: _Fields, value: object) -> tuple[Light, ...]:
     lights = []
     for k, entry in enumerate(entries):
         where = f"lights[{k}]"
+        if isinstance(entry, dict) and "type" in entry:
+            kind = entry["type"]
+            if kind == "point":
+                fields.fail(
+                    f"{where}.type", "is 'point': point lights (contract §4) are not supported yet, only distant lights"
+                )
+            fields.fail(f"{where}.type", f"is {shown(kind)}: unknown (a distant light has no type)")
         light = fields.mapping(entry, where, required=("direction", "irradiance"))
         direction = fields.vector3(light["direction"], f"{where}.direction")
         norm = math.hypot(*direction)
@@ -388,10 +463,12 @@ def _parse_floor(fields: _Fields, value: object) -> Floor:
 
 
 def _parse_environment(fields: _Fields, value: object, floor_height: float) -> CornellBox | None:
-    kind = fields.mapping(value, "environment", required=("type",), optional=_BOX_KEYS)["type"]
+    kind = fields.mapping(value, "environment", required=("type",), optional=(*_BOX_KEYS, "file"))["type"]
     if kind == "none":
         fields.mapping(value, "environment", required=("type",))
         return None
+    if kind == "mesh":
+        fields.fail("environment.type", "is 'mesh': environments given as a mesh (contract §3b) are not supported yet")
     if kind != "cornell_box":
         fields.fail("environment.type", f"is {shown(kind)}: expected 'none' or 'cornell_box'")
     box = fields.mapping(value, "environment", required=_BOX_KEYS)

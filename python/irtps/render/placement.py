@@ -145,7 +145,7 @@ def estimate_placement(
 
     low = floor_height(scene)
     high = low + _height_range(scene)
-    precision = PRECISION_PIXELS * scene.camera.pixel_size
+    precision = PRECISION_PIXELS * scene.camera.orthographic_pixel_size
     if near is not None:
         bracket = (max(low, near.base_height - radius), min(high, near.base_height + radius))
         result = minimize_scalar(floor_residual, bounds=bracket, method="bounded", options={"xatol": precision})
@@ -215,7 +215,7 @@ def _coarse(
     coarse_images = blocks(images, 1).mean(axis=(2, 4), dtype=np.float32)
     coarse_unsaturated = blocks(unsaturated, 1).all(axis=(2, 4))
     camera = dataclasses.replace(
-        scene.camera, width=size[1], height=size[0], pixel_size=scene.camera.pixel_size * factor
+        scene.camera, width=size[1], height=size[0], pixel_size=scene.camera.orthographic_pixel_size * factor
     )
     coarse_scene = dataclasses.replace(scene, camera=camera)
     return (
@@ -231,7 +231,7 @@ def _coarse(
 def _height_range(scene: Scene) -> float:
     """How far above the floor the boundary may stand: the image's larger side."""
     camera = scene.camera
-    return max(camera.width, camera.height) * camera.pixel_size
+    return max(camera.width, camera.height) * camera.orthographic_pixel_size
 
 
 def _floor_pixels(mask: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ from irtps._shared.checks import check_array, check_finite, check_instance, chec
 from irtps.errors import ArgumentError
 from irtps.model.options import RenderOptions
 from irtps._shared.resources import check_memory
-from irtps.model.scene import Scene
+from irtps.model.scene import Scene, orthographic_scene
 
 #: Footprint samples per pixel for the direct image (stratified; shadows are traced exactly).
 DEFAULT_DIRECT_SAMPLES = 64
@@ -59,7 +59,8 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
     Parameters
     ----------
     scene : Scene
-        Camera, lights, floor and environment.
+        Camera, lights, floor and environment. A perspective camera is traced as its
+        orthographic stand-in (`irtps.model.scene.orthographic_scene`, which warns).
     height : numpy.ndarray
         (H, W) heights of the object above the floor, world units.
     albedo : numpy.ndarray
@@ -80,7 +81,8 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
         If the light visibility cache (about ``4 * K * H * W`` bytes) would need more
         memory than is available.
     """
-    camera = check_instance("scene", scene, Scene).camera
+    scene = orthographic_scene(check_instance("scene", scene, Scene), "the scene rendered")
+    camera = scene.camera
     check_memory(
         _CACHE_BYTES_PER_PIXEL * len(scene.lights) * camera.height * camera.width,
         f"lights: {len(scene.lights)} lights of {camera.width}x{camera.height} images (light visibility cache)",
@@ -95,7 +97,7 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
         height,
         mask,
         albedo,
-        camera.pixel_size,
+        camera.orthographic_pixel_size,
         scene.light_directions.astype(np.float32),
         scene.light_irradiance.astype(np.float32),
         scene.floor,
@@ -157,7 +159,9 @@ def render(
     Parameters
     ----------
     scene : Scene
-        Camera, lights, floor and environment.
+        Camera, lights, floor and environment. A perspective camera is traced as its
+        orthographic stand-in (`irtps.model.scene.orthographic_scene`, which warns): the
+        pinhole tracer is still to come.
     height, albedo, mask : numpy.ndarray
         The object: (H, W) heights, (H, W, 3) albedo, (H, W) bool mask.
     bounces : int

@@ -160,7 +160,7 @@ def surroundings_light(
     edge = edge_pixels(mask)
     pixels = np.flatnonzero(edge).tolist()
     black = np.zeros_like(albedo, dtype=np.float32)
-    step = scene.camera.pixel_size
+    step = scene.camera.orthographic_pixel_size
 
     def rendered(offset: float) -> np.ndarray:
         moved = np.where(mask, np.asarray(height, dtype=np.float32) + np.float32(offset), 0).astype(np.float32)
