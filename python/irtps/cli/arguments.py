@@ -24,6 +24,7 @@ __all__ = [
     "CLUSTER",
     "EXCLUDE_IMAGES",
     "EXCLUDE_IMAGES_BY_NAME",
+    "INTRINSICS",
     "RECONSTRUCT",
     "RENDER",
     "SYNTH",
@@ -157,6 +158,17 @@ EXCLUDE_IMAGES = Argument(
     help="images to leave out (not read): numbers and ranges of numbers that match the images' numbered file names "
     "(1-20,37: DiLiGenT's 001.png ... 020.png and 037.png; the irtps layout's images count from 000.exr), or file "
     "names; for images a light misfired in, that the object moved in, or that cannot be read",
+)
+
+#: The perspective camera of one data set.
+INTRINSICS = Argument(
+    "--intrinsics",
+    type=Path,
+    metavar="K.txt",
+    help="the camera's 3x3 intrinsic matrix in pixels (lines 'fx 0 cx', '0 fy cy', '0 0 1'): DATA is then seen by "
+    "that perspective camera, whatever its folder says (a DiLiGenT folder's own K.txt is read without it); until the "
+    "pinhole tracer and perspective integration, every step takes its orthographic stand-in at the object's distance, "
+    "and says so",
 )
 
 #: The images to leave out of the commands that take many data sets: of all, or of one by name.

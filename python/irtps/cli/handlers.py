@@ -31,6 +31,7 @@ from irtps.io.image_selection import exclusions_by_name, format_images_fitted
 from irtps.irt.folder import load_reconstruction, save_reconstruction
 from irtps.irt.reconstruct import load_and_reconstruct
 from irtps.model.metrics import evaluate, format_metrics
+from irtps.model.scene import orthographic_scene
 from irtps.model.options import (
     ClusterOptions,
     ReconstructOptions,
@@ -60,9 +61,10 @@ def run_render(args: argparse.Namespace) -> None:
     options = from_arguments(RenderOptions, args)
     check_output(args.out, scene_object_inputs(args.dataset), force=args.force)
     scene, height, albedo, mask = load_scene_object(args.dataset)
+    traced = orthographic_scene(scene, str(args.dataset))
     start = time.perf_counter()
     rendering = render(
-        scene,
+        traced,
         height,
         albedo,
         mask,
@@ -72,11 +74,13 @@ def run_render(args: argparse.Namespace) -> None:
         progress=not args.quiet,
     )
     seconds = time.perf_counter() - start
+    zc = None if scene.camera.optical_center is None else scene.camera.optical_center[2]
     truth = GroundTruth(
         height=np.where(mask, height, 0),
-        normal=height_to_normals(height, mask, scene.camera.pixel_size),
+        normal=height_to_normals(height, mask, traced.camera.orthographic_pixel_size),
         albedo=albedo,
         direct=rendering.direct,
+        depth=None if zc is None else np.where(mask, zc - height, 0),  # contract §1b: z = zc - d
     )
     dataset = Dataset(scene=scene, images=rendering.images, mask=mask, gt=truth)
     record = {"command": "render", "source": str(resolve_path(args.dataset)), **options.to_dict()}
@@ -118,9 +122,14 @@ def _robust_line(asked: str, used: str | None, share: float | None) -> str:
 def run_reconstruct(args: argparse.Namespace) -> None:
     """``irtps reconstruct``: reconstruct one data set and report the run."""
     options = from_arguments(ReconstructOptions, args)
-    check_output(args.out, dataset_inputs(args.data, exclude_images=args.exclude_images), force=args.force)
+    inputs = dataset_inputs(args.data, exclude_images=args.exclude_images, intrinsics=args.intrinsics)
+    check_output(args.out, inputs, force=args.force)
     dataset, result = load_and_reconstruct(
-        args.data, options=options, progress=not args.quiet, exclude_images=args.exclude_images
+        args.data,
+        options=options,
+        progress=not args.quiet,
+        exclude_images=args.exclude_images,
+        intrinsics=args.intrinsics,
     )
     save_reconstruction(result, args.out, source=str(resolve_path(args.data)))
     if not args.quiet:

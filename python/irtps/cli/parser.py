@@ -15,6 +15,7 @@ from irtps.cli.arguments import (
     CLUSTER,
     EXCLUDE_IMAGES,
     EXCLUDE_IMAGES_BY_NAME,
+    INTRINSICS,
     RECONSTRUCT,
     RENDER,
     SYNTH,
@@ -107,7 +108,8 @@ COMMANDS = (
     Command(
         "reconstruct",
         help="recover normals, albedo, a height map and a mesh from a data set",
-        description="Reconstruct the object of DATA (contract layout, or DiLiGenT layout, detected) and write OUT: "
+        description="Reconstruct the object of DATA (contract layout, or DiLiGenT layout, detected; its camera "
+        "orthographic, or perspective: scene.json's, a DiLiGenT folder's K.txt or --intrinsics) and write OUT: "
         "normal.exr (R, G, B = nx, ny, nz), albedo.exr, height.exr, mask.png, mesh.ply (the height field with "
         "per-vertex albedo colour and normals), mesh.obj (the same mesh for any viewer) and run.json (parameters, "
         "timings, versions, the data set's path, the placement, the robust mode used and the lobe share that auto "
@@ -128,11 +130,12 @@ COMMANDS = (
             "irtps reconstruct metal_capture --out metal --robust lobe",
             "irtps reconstruct rig_capture --out rig --method irtps --albedo-scale 0.8",
             "irtps reconstruct bearPNG --out bear --exclude-images 1-20",
+            "irtps reconstruct capture --out capture_ps --intrinsics capture/K.txt",
         ),
         run=handlers.run_reconstruct,
         arguments=(Argument("data", type=Path, help="data set folder"),),
         output=Output("output folder", quiet="no progress bar or summary"),
-        options=(EXCLUDE_IMAGES, RECONSTRUCT),
+        options=(EXCLUDE_IMAGES, INTRINSICS, RECONSTRUCT),
     ),
     Command(
         "batch",
