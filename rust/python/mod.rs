@@ -17,18 +17,18 @@ use pyo3::exceptions::{PyMemoryError, PyValueError};
 use pyo3::prelude::*;
 use rayon::prelude::*;
 
-use crate::denoise::{denoise as core_denoise, Surface};
 use crate::error::Error;
-use crate::image_io::{self, Image};
+use crate::integrate::sparse_cholesky::SparseCholesky as CoreSparseCholesky;
+use crate::io::{self, Image};
 use crate::memory::{try_collect, try_vec};
 use crate::ps::{
     check_lights as core_check_lights, photometric_stereo as core_ps,
     tukey_with_lobe_check as core_tukey_with_lobe_check, PsOutput, PsSettings, Robust,
 };
+use crate::render::denoise::{denoise as core_denoise, Surface};
+use crate::render::residual::{compare as core_compare, Observed, RenderedPlanes};
 use crate::render::{RenderSettings, Renderer as CoreRenderer};
-use crate::residual::{compare as core_compare, Observed, RenderedPlanes};
 use crate::scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
-use crate::sparse_cholesky::SparseCholesky as CoreSparseCholesky;
 
 /// Rays a parallel task of `Renderer.intersect` traces as one batch.
 const RAYS_PER_TASK: usize = 4096;
@@ -100,7 +100,7 @@ fn renamed(err: Error, field: &str, argument: &str) -> Error {
 /// Reads an OpenEXR file: float32 (H, W, 3) for R, G, B or (H, W) for a single Y channel.
 #[pyfunction]
 fn read_exr(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArrayDyn<f32>>> {
-    let image = py.detach(|| image_io::read_exr(&path)).map_err(to_py)?;
+    let image = py.detach(|| io::read_exr(&path)).map_err(to_py)?;
     image_to_array(py, image)
 }
 
@@ -108,14 +108,14 @@ fn read_exr(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArrayDyn<f32>
 #[pyfunction]
 fn write_exr(py: Python<'_>, path: PathBuf, array: PyReadonlyArrayDyn<'_, f32>) -> PyResult<()> {
     let image = array_to_image(&array, "array")?;
-    py.detach(|| image_io::write_exr(&path, &image))
+    py.detach(|| io::write_exr(&path, &image))
         .map_err(|e| to_py(renamed(e, "image", "array")))
 }
 
 /// Reads an 8- or 16-bit PNG: (values / (2^bits − 1) as float32, (H, W) or (H, W, 3); bits).
 #[pyfunction]
 fn read_png(py: Python<'_>, path: PathBuf) -> PyResult<(Bound<'_, PyArrayDyn<f32>>, u8)> {
-    let (image, bits) = py.detach(|| image_io::read_png(&path)).map_err(to_py)?;
+    let (image, bits) = py.detach(|| io::read_png(&path)).map_err(to_py)?;
     Ok((image_to_array(py, image)?, bits))
 }
 
@@ -128,16 +128,14 @@ fn write_png(
     bit_depth: u8,
 ) -> PyResult<()> {
     let image = array_to_image(&array, "array")?;
-    py.detach(|| image_io::write_png(&path, &image, bit_depth))
+    py.detach(|| io::write_png(&path, &image, bit_depth))
         .map_err(|e| to_py(renamed(e, "image", "array")))
 }
 
 /// Reads EXR/PNG images in parallel into one float32 (K, H, W, 3) array.
 #[pyfunction]
 fn read_images(py: Python<'_>, paths: Vec<PathBuf>) -> PyResult<Bound<'_, PyArrayDyn<f32>>> {
-    let (width, height, data) = py
-        .detach(|| image_io::read_image_stack(&paths))
-        .map_err(to_py)?;
+    let (width, height, data) = py.detach(|| io::read_image_stack(&paths)).map_err(to_py)?;
     let array = Array::from_shape_vec(IxDyn(&[paths.len(), height, width, 3]), data)
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(array.into_pyarray(py))
@@ -629,7 +627,7 @@ fn photometric_stereo<'py>(
         robust,
         shadow_fraction,
         saturation,
-        lobe_rounds: lobe_rounds.unwrap_or(crate::lobe::LOBE_ROUNDS),
+        lobe_rounds: lobe_rounds.unwrap_or(crate::ps::lobe::LOBE_ROUNDS),
     };
     let out = py
         .detach(|| core_ps(data, mask_data, &lights, &settings))
@@ -732,7 +730,7 @@ fn tukey_with_lobe_check<'py>(
         robust: Robust::Tukey,
         shadow_fraction,
         saturation,
-        lobe_rounds: crate::lobe::LOBE_ROUNDS,
+        lobe_rounds: crate::ps::lobe::LOBE_ROUNDS,
     };
     let (fit, flags) = py
         .detach(|| {
@@ -1049,6 +1047,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(denoise_indirect, m)?)?;
     m.add_class::<Renderer>()?;
     m.add_class::<SparseCholesky>()?;
-    m.add("MAX_IMAGE_PIXELS", image_io::MAX_IMAGE_PIXELS)?;
+    m.add("MAX_IMAGE_PIXELS", io::MAX_IMAGE_PIXELS)?;
     Ok(())
 }

@@ -13,12 +13,16 @@ use glam::{vec3a, Vec3A};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::geometry::Mesh;
-use crate::light_cache::LightCache;
 use crate::memory::{check_available, try_collect, try_vec};
+use crate::render::light_cache::LightCache;
 use crate::sampler::{cosine_hemisphere, hash, low_discrepancy_4d, unit_float, Rng};
 use crate::scene::{check_albedo, validate_lights, Camera, Frame, Light, Rgb, Scene};
-use crate::tracer::Tracer;
+use crate::trace::mesh::Mesh;
+use crate::trace::Tracer;
+
+pub mod denoise;
+pub mod light_cache;
+pub mod residual;
 
 /// Bytes per camera pixel that building a scene takes at its peak, with room to spare: the
 /// mesh (a vertex and two triangles a pixel, their normals and albedo), the height-field

@@ -2,7 +2,7 @@
 //! triangulation, the skirt under its boundary, the floor and the Cornell-box walls.
 //!
 //! Large flat surfaces are tessellated to about a pixel so that per-vertex light caching
-//! (see [`crate::light_cache`]) resolves shadows on them.
+//! (see [`crate::render::light_cache`]) resolves shadows on them.
 
 use std::sync::Arc;
 

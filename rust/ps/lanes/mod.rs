@@ -1,6 +1,6 @@
 //! Values side by side in the widest vector registers the CPU has, for code that applies
-//! the same arithmetic to several pixels ([`crate::tukey`]) or to several lights of one
-//! pixel ([`crate::lobe`]): eight in 256-bit registers, sixteen in 512-bit ones.
+//! the same arithmetic to several pixels ([`crate::ps::tukey`]) or to several lights of one
+//! pixel ([`crate::ps::lobe`]): eight in 256-bit registers, sixteen in 512-bit ones.
 //!
 //! Such code is generic over an [`Isa`] of `W` lanes and is compiled once per instruction
 //! set: with [`Portable`] (the `wide` crate: two SSE2 halves on x86-64, whatever the target

@@ -1,7 +1,7 @@
 //! Photometric stereo for glossy and metallic objects: a Lambertian base plus one specular
 //! lobe per pixel.
 //!
-//! Each pixel starts from its Tukey fit ([`crate::tukey`]) and fits its channel-summed
+//! Each pixel starts from its Tukey fit ([`crate::ps::tukey`]) and fits its channel-summed
 //! observations with `b_k = [n·l_k]₊ (a + c (n·h_k)^p)`: `h_k` is the half vector between
 //! light k and the view direction (the camera's +z, distant), `a ≥ 0` the diffuse albedo and
 //! `c ≥ 0` the lobe's height (a Blinn-Phong lobe on a Lambertian base; `c = 0` is the
@@ -23,15 +23,15 @@
 //! A pixel whose Tukey fit has too few observations, or lights fewer than [`LOBE_MIN_LIT`]
 //! unsaturated ones, keeps that fit.
 //!
-//! A pixel's lights are taken [`LANES`] at a time in vector registers ([`crate::lanes`]: AVX2
+//! A pixel's lights are taken [`LANES`] at a time in vector registers ([`crate::ps::lanes`]: AVX2
 //! where the CPU has it, chosen at run time), with the same bits in each instruction set.
 
 use glam::Vec3;
 
 use crate::error::Result;
-use crate::lanes::{Floats, Ints, Isa, Portable};
+use crate::ps::lanes::{Floats, Ints, Isa, Portable};
+use crate::ps::trim::{gather, Lights, Scratch, LANES, MAD_TO_SIGMA, SATURATED};
 use crate::ps::{fit_masked, flag, PixelFit, PsOutput};
-use crate::robust_ps::{gather, Lights, Scratch, LANES, MAD_TO_SIGMA, SATURATED};
 
 /// The lobe exponents tried, as powers of two: `p = 2^s` for `s` in `0..LOBE_EXPONENTS`
 /// (1 to 128: lobes from about 60° to about 6° wide at half height).
@@ -39,7 +39,7 @@ pub const LOBE_EXPONENTS: u32 = 8;
 /// Rounds of (a, c) fit and normal step per exponent and start (at most: a fit whose step
 /// settles ends sooner), unless the settings ask for others.
 pub const LOBE_ROUNDS: usize = 15;
-/// Tukey's biweight constant of the lobe fit, in robust scales (as [`crate::tukey::TUKEY_SCALES`]).
+/// Tukey's biweight constant of the lobe fit, in robust scales (as [`crate::ps::tukey::TUKEY_SCALES`]).
 pub const LOBE_SCALES: f32 = 2.5;
 /// Fewest unsaturated observations that the Tukey normal lights for a lobe to be tried: one
 /// more than the lobe fit's five unknowns (the normal's two, `a`, `c` and the exponent), so
@@ -77,7 +77,7 @@ pub(crate) fn fit_pixels(
     let job = Job::new(images, lights, rounds, out);
     let work = || Box::new((Scratch::default(), Work::default()));
     #[cfg(target_arch = "x86_64")]
-    if let Some(avx2) = crate::lanes::Avx2::detect() {
+    if let Some(avx2) = crate::ps::lanes::Avx2::detect() {
         // SAFETY: `detect` found AVX2 and FMA.
         return fit_masked(mask, TILE, out, work, |state, tile, fits| unsafe {
             job.fit_tile_avx2(avx2, state, tile, fits)
@@ -162,7 +162,7 @@ impl<'a> Job<'a> {
     #[target_feature(enable = "avx2,fma")]
     fn fit_tile_avx2(
         &self,
-        isa: crate::lanes::Avx2,
+        isa: crate::ps::lanes::Avx2,
         state: &mut (Scratch, Work),
         tile: &[usize],
         fits: &mut Vec<(usize, PixelFit)>,
@@ -1074,7 +1074,7 @@ mod tests {
             flags: vec![flag::MASKED_OUT; n],
             used: vec![0; n],
         };
-        crate::tukey::fit_pixels(&images, &vec![true; n], &lights, 0.05, &mut out).unwrap();
+        crate::ps::tukey::fit_pixels(&images, &vec![true; n], &lights, 0.05, &mut out).unwrap();
         let job = Job::new(&images, &lights, LOBE_ROUNDS, &out);
         let pixels: Vec<usize> = (0..n).collect();
         let mut state = (Scratch::default(), Work::default());
@@ -1082,7 +1082,7 @@ mod tests {
         job.fit_tile(Portable, &mut state, &pixels, &mut portable);
         let mut all = vec![portable];
         #[cfg(target_arch = "x86_64")]
-        if let Some(avx2) = crate::lanes::Avx2::detect() {
+        if let Some(avx2) = crate::ps::lanes::Avx2::detect() {
             let mut fits = Vec::new();
             // SAFETY: `detect` found AVX2 and FMA.
             unsafe { job.fit_tile_avx2(avx2, &mut state, &pixels, &mut fits) };

@@ -1,5 +1,5 @@
 //! Rank trimming, the per-pixel robust fit that needs each pixel's observations together,
-//! and what it shares with the Tukey fit of [`crate::tukey`].
+//! and what it shares with the Tukey fit of [`crate::ps::tukey`].
 //!
 //! The object's pixels are taken in tiles of [`TILE`]; a tile's observations are gathered
 //! pixel-major (each pixel's channel-summed `b` of every light, then its RGB for the

@@ -27,9 +27,11 @@ use std::sync::Arc;
 use glam::{Vec3A, Vec4};
 use rayon::prelude::*;
 
-use crate::escape_cone::{escape_cones, escape_slopes};
-use crate::geometry::{BlockSide, HeightFieldGrid, Mesh, NO_TRIANGLE};
-use crate::tracer::Hit;
+use crate::trace::height_field::escape_cone::{escape_cones, escape_slopes};
+use crate::trace::mesh::{BlockSide, HeightFieldGrid, Mesh, NO_TRIANGLE};
+use crate::trace::Hit;
+
+mod escape_cone;
 
 /// A height range (of a block, or of the whole field). Nothing is `min = max = +∞`, which
 /// every ray passes below.
@@ -1305,7 +1307,7 @@ mod tests {
         for t in 0..mesh.triangles.len() {
             if !matches!(
                 mesh.kinds[t],
-                crate::geometry::SurfaceKind::Object | crate::geometry::SurfaceKind::Skirt
+                crate::trace::mesh::SurfaceKind::Object | crate::trace::mesh::SurfaceKind::Skirt
             ) {
                 continue;
             }
@@ -1428,7 +1430,8 @@ mod tests {
                 );
                 if let Some((t, d)) = expected {
                     hits += 1;
-                    skirt_hits += usize::from(mesh.kinds[t] == crate::geometry::SurfaceKind::Skirt);
+                    skirt_hits +=
+                        usize::from(mesh.kinds[t] == crate::trace::mesh::SurfaceKind::Skirt);
                     assert!(
                         !accel.occluded::<false>(origin, direction, d * 0.999)
                             && !accel.occluded::<true>(origin, direction, d * 0.999)
@@ -1452,7 +1455,7 @@ mod tests {
             let mesh = Mesh::from_scene(&scene);
             let accel = HeightFieldAccel::new(&mesh).expect("a height-field mesh has a grid");
             let object: Vec<usize> = (0..mesh.triangles.len())
-                .filter(|&t| mesh.kinds[t] == crate::geometry::SurfaceKind::Object)
+                .filter(|&t| mesh.kinds[t] == crate::trace::mesh::SurfaceKind::Object)
                 .collect();
             let mut rng = Rng::new(seed);
             let mut hits = 0;
@@ -1505,7 +1508,7 @@ mod tests {
             let mesh = Mesh::from_scene(&scene);
             let accel = HeightFieldAccel::new(&mesh).expect("a height-field mesh has a grid");
             let object: Vec<usize> = (0..mesh.triangles.len())
-                .filter(|&t| mesh.kinds[t] == crate::geometry::SurfaceKind::Object)
+                .filter(|&t| mesh.kinds[t] == crate::trace::mesh::SurfaceKind::Object)
                 .collect();
             let (lo, hi) = accel.bounds();
             let span = hi - lo;

@@ -10,9 +10,9 @@
 //! pixel, the observations in shadow (whose summed `b` is below `shadow_fraction` of that
 //! pixel's brightest) and re-solves from the rest when at least 3 non-coplanar lights
 //! remain; otherwise it keeps the full fit and flags the pixel. The Tukey (default) and trim
-//! modes fit each pixel from its own observations ([`crate::tukey`], [`crate::robust_ps`]);
+//! modes fit each pixel from its own observations ([`crate::ps::tukey`], [`crate::ps::trim`]);
 //! the lobe mode refits the Tukey fit with a specular lobe where one explains the
-//! observations better ([`crate::lobe`]).
+//! observations better ([`crate::ps::lobe`]).
 //!
 //! The plain and threshold fits run over tiles of pixels, streaming through each image's rows
 //! of the tile (twice in threshold mode: once for each pixel's brightest, once to
@@ -27,8 +27,13 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::memory::{try_vec, try_with_capacity};
-use crate::robust_ps::Lights;
+use crate::ps::trim::Lights;
 use crate::scene::Light;
+
+mod lanes;
+pub mod lobe;
+pub mod trim;
+pub mod tukey;
 
 /// Pixels per tile.
 const TILE: usize = 256;
@@ -43,14 +48,14 @@ pub enum Robust {
     None,
     /// Drop shadowed (below `shadow_fraction` of the pixel's brightest) and saturated ones.
     Threshold,
-    /// Keep those between the darkest 40 % and the brightest 20 % ([`crate::robust_ps::TRIM_DARKEST`],
-    /// [`crate::robust_ps::TRIM_BRIGHTEST`]), saturated ones counted as brightest and dropped.
+    /// Keep those between the darkest 40 % and the brightest 20 % ([`crate::ps::trim::TRIM_DARKEST`],
+    /// [`crate::ps::trim::TRIM_BRIGHTEST`]), saturated ones counted as brightest and dropped.
     Trim,
     /// From the threshold fit, re-weight by Tukey's biweight of the residuals
-    /// ([`crate::tukey::TUKEY_SCALES`]).
+    /// ([`crate::ps::tukey::TUKEY_SCALES`]).
     Tukey,
     /// From the Tukey fit, a Lambertian base plus one specular lobe per pixel, re-weighted
-    /// by Tukey's biweight ([`crate::lobe`]): for glossy and metallic objects.
+    /// by Tukey's biweight ([`crate::ps::lobe`]): for glossy and metallic objects.
     Lobe,
 }
 
@@ -65,7 +70,7 @@ pub struct PsSettings {
     /// In every robust mode, raw values at or above this level (in any channel) are saturated.
     pub saturation: Option<f32>,
     /// In the lobe mode, the rounds of each exponent's fit from each start (at least 1):
-    /// [`crate::lobe::LOBE_ROUNDS`] by default, fewer for a quicker look at which pixels
+    /// [`crate::ps::lobe::LOBE_ROUNDS`] by default, fewer for a quicker look at which pixels
     /// take a lobe.
     pub lobe_rounds: usize,
 }
@@ -76,7 +81,7 @@ impl Default for PsSettings {
             robust: Robust::Tukey,
             shadow_fraction: 0.05,
             saturation: None,
-            lobe_rounds: crate::lobe::LOBE_ROUNDS,
+            lobe_rounds: crate::ps::lobe::LOBE_ROUNDS,
         }
     }
 }
@@ -91,7 +96,7 @@ pub mod flag {
     pub const DARK: u8 = 2;
     /// Outside the mask.
     pub const MASKED_OUT: u8 = 3;
-    /// Lobe mode: fitted with a specular lobe ([`crate::lobe`]); the albedo is the diffuse
+    /// Lobe mode: fitted with a specular lobe ([`crate::ps::lobe`]); the albedo is the diffuse
     /// term's.
     pub const LOBE: u8 = 4;
 }
@@ -217,14 +222,24 @@ fn fit_checked(
     let mut out = PsOutput::new(mask.len())?;
     let per_pixel = Lights::new(&fit.directions, &fit.scale, &fit.saturated_b, gram);
     match settings.robust {
-        Robust::Tukey => {
-            crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out)?
-        }
+        Robust::Tukey => crate::ps::tukey::fit_pixels(
+            images,
+            mask,
+            &per_pixel,
+            settings.shadow_fraction,
+            &mut out,
+        )?,
         Robust::Lobe => {
-            crate::tukey::fit_pixels(images, mask, &per_pixel, settings.shadow_fraction, &mut out)?;
-            crate::lobe::fit_pixels(images, mask, &per_pixel, settings.lobe_rounds, &mut out)?;
+            crate::ps::tukey::fit_pixels(
+                images,
+                mask,
+                &per_pixel,
+                settings.shadow_fraction,
+                &mut out,
+            )?;
+            crate::ps::lobe::fit_pixels(images, mask, &per_pixel, settings.lobe_rounds, &mut out)?;
         }
-        Robust::Trim => crate::robust_ps::fit_pixels(images, mask, &per_pixel, &mut out)?,
+        Robust::Trim => crate::ps::trim::fit_pixels(images, mask, &per_pixel, &mut out)?,
         Robust::None | Robust::Threshold => return Ok(fit.streamed(images, mask, out)),
     }
     Ok(out)

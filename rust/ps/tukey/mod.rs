@@ -13,7 +13,7 @@
 //! of each of K images per pixel. The pixels of a chunk go through `W` lanes, structure of
 //! arrays (one value of each lane per light), so that the residuals, weights and sums of
 //! every lane are computed by the same vector instructions (16 lanes in AVX-512 registers,
-//! or 8 in AVX2 and FMA ones, where the CPU has them, see [`crate::lanes`]; the weights and
+//! or 8 in AVX2 and FMA ones, where the CPU has them, see [`crate::ps::lanes`]; the weights and
 //! their sums in one pass of fused multiply-adds). A pixel's own loops over its lights run
 //! 8 lights side by side whatever `W` is, so that its results are the same bits in every
 //! instruction set. A lane whose pixel has settled is refilled with the next
@@ -31,9 +31,9 @@ use std::ops::{BitAnd, BitXor};
 use glam::{Mat3, Vec3};
 
 use crate::error::Result;
-use crate::lanes::{Floats, Ints, Isa, Portable};
+use crate::ps::lanes::{Floats, Ints, Isa, Portable};
+use crate::ps::trim::{full_fit, solved, Lights, LANES, MAD_TO_SIGMA, SATURATED};
 use crate::ps::{fit_masked, flag, PixelFit, PsOutput};
-use crate::robust_ps::{full_fit, solved, Lights, LANES, MAD_TO_SIGMA, SATURATED};
 
 /// Tukey's biweight constant, in robust scales: an observation whose residual is beyond
 /// 2.5 scales carries no weight. Below the 4.685 of 95 % Gaussian efficiency, because the
@@ -86,7 +86,7 @@ pub(crate) fn fit_pixels(
     };
     #[cfg(target_arch = "x86_64")]
     {
-        if let Some(avx512) = crate::lanes::Avx512::detect() {
+        if let Some(avx512) = crate::ps::lanes::Avx512::detect() {
             // SAFETY: `detect` found AVX-512F, AVX2 and FMA.
             return fit_masked(
                 mask,
@@ -96,7 +96,7 @@ pub(crate) fn fit_pixels(
                 |machine, chunk, fits| unsafe { machine.run_avx512(avx512, &source, chunk, fits) },
             );
         }
-        if let Some(avx2) = crate::lanes::Avx2::detect() {
+        if let Some(avx2) = crate::ps::lanes::Avx2::detect() {
             // SAFETY: `detect` found AVX2 and FMA.
             return fit_masked(
                 mask,
@@ -550,7 +550,7 @@ impl Machine<8> {
     #[target_feature(enable = "avx2,fma")]
     fn run_avx2(
         &mut self,
-        isa: crate::lanes::Avx2,
+        isa: crate::ps::lanes::Avx2,
         source: &Source,
         chunk: &[usize],
         fits: &mut Vec<(usize, PixelFit)>,
@@ -566,7 +566,7 @@ impl Machine<16> {
     #[target_feature(enable = "avx512f,avx2,fma")]
     fn run_avx512(
         &mut self,
-        isa: crate::lanes::Avx512,
+        isa: crate::ps::lanes::Avx512,
         source: &Source,
         chunk: &[usize],
         fits: &mut Vec<(usize, PixelFit)>,
@@ -813,11 +813,11 @@ mod tests {
     fn median_keys_match_a_sort_for_ties_gaps_and_guesses_on_either_side() {
         check_median_keys(Portable);
         #[cfg(target_arch = "x86_64")]
-        if let Some(avx2) = crate::lanes::Avx2::detect() {
+        if let Some(avx2) = crate::ps::lanes::Avx2::detect() {
             check_median_keys(avx2);
         }
         #[cfg(target_arch = "x86_64")]
-        if let Some(avx512) = crate::lanes::Avx512::detect() {
+        if let Some(avx512) = crate::ps::lanes::Avx512::detect() {
             check_median_keys(avx512);
         }
     }
@@ -836,8 +836,8 @@ mod tests {
     fn wider_registers() -> Vec<Registers> {
         #[cfg(target_arch = "x86_64")]
         {
-            let avx2 = crate::lanes::Avx2::detect().map(|_| Registers::Avx2);
-            let avx512 = crate::lanes::Avx512::detect().map(|_| Registers::Avx512);
+            let avx2 = crate::ps::lanes::Avx2::detect().map(|_| Registers::Avx2);
+            let avx512 = crate::ps::lanes::Avx512::detect().map(|_| Registers::Avx512);
             avx2.into_iter().chain(avx512).collect()
         }
         #[cfg(not(target_arch = "x86_64"))]
@@ -914,7 +914,7 @@ mod tests {
             #[cfg(target_arch = "x86_64")]
             Registers::Avx2 => unsafe {
                 Machine::new(&lights).run_avx2(
-                    crate::lanes::Avx2::detect().expect("AVX2"),
+                    crate::ps::lanes::Avx2::detect().expect("AVX2"),
                     &source,
                     &pixels,
                     &mut fits,
@@ -924,7 +924,7 @@ mod tests {
             #[cfg(target_arch = "x86_64")]
             Registers::Avx512 => unsafe {
                 Machine::new(&lights).run_avx512(
-                    crate::lanes::Avx512::detect().expect("AVX-512"),
+                    crate::ps::lanes::Avx512::detect().expect("AVX-512"),
                     &source,
                     &pixels,
                     &mut fits,

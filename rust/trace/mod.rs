@@ -12,8 +12,11 @@ use obvhs::rt_triangle::RtTriangle;
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
 
-use crate::geometry::{Mesh, SurfaceKind, NO_PANEL};
-use crate::height_field_accel::HeightFieldAccel;
+use crate::trace::height_field::HeightFieldAccel;
+use crate::trace::mesh::{Mesh, SurfaceKind, NO_PANEL};
+
+pub mod height_field;
+pub mod mesh;
 
 /// The closest intersection of a ray with the mesh.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -557,7 +560,7 @@ fn make_ray(origin: Vec3A, direction: Vec3A, t_max: f32) -> Ray {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::SurfaceKind;
+    use crate::trace::mesh::SurfaceKind;
     use glam::vec3a;
 
     fn one_triangle() -> Mesh {
@@ -571,7 +574,7 @@ mod tests {
             triangles: vec![[0, 1, 2]],
             normals: vec![Vec3A::Z],
             kinds: vec![SurfaceKind::Object],
-            panel_of: vec![crate::geometry::NO_PANEL],
+            panel_of: vec![crate::trace::mesh::NO_PANEL],
             ..Mesh::default()
         }
     }
