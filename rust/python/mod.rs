@@ -100,7 +100,9 @@ fn renamed(err: Error, field: &str, argument: &str) -> Error {
 /// Reads an OpenEXR file: float32 (H, W, 3) for R, G, B or (H, W) for a single Y channel.
 #[pyfunction]
 fn read_exr(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArrayDyn<f32>>> {
-    let image = py.detach(|| io::read_exr(&path)).map_err(to_py)?;
+    let image = py
+        .detach(|| io::exr_image::read_exr(&path))
+        .map_err(to_py)?;
     image_to_array(py, image)
 }
 
@@ -108,14 +110,16 @@ fn read_exr(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArrayDyn<f32>
 #[pyfunction]
 fn write_exr(py: Python<'_>, path: PathBuf, array: PyReadonlyArrayDyn<'_, f32>) -> PyResult<()> {
     let image = array_to_image(&array, "array")?;
-    py.detach(|| io::write_exr(&path, &image))
+    py.detach(|| io::exr_image::write_exr(&path, &image))
         .map_err(|e| to_py(renamed(e, "image", "array")))
 }
 
 /// Reads an 8- or 16-bit PNG: (values / (2^bits − 1) as float32, (H, W) or (H, W, 3); bits).
 #[pyfunction]
 fn read_png(py: Python<'_>, path: PathBuf) -> PyResult<(Bound<'_, PyArrayDyn<f32>>, u8)> {
-    let (image, bits) = py.detach(|| io::read_png(&path)).map_err(to_py)?;
+    let (image, bits) = py
+        .detach(|| io::png_image::read_png(&path))
+        .map_err(to_py)?;
     Ok((image_to_array(py, image)?, bits))
 }
 
@@ -128,14 +132,16 @@ fn write_png(
     bit_depth: u8,
 ) -> PyResult<()> {
     let image = array_to_image(&array, "array")?;
-    py.detach(|| io::write_png(&path, &image, bit_depth))
+    py.detach(|| io::png_image::write_png(&path, &image, bit_depth))
         .map_err(|e| to_py(renamed(e, "image", "array")))
 }
 
 /// Reads EXR/PNG images in parallel into one float32 (K, H, W, 3) array.
 #[pyfunction]
 fn read_images(py: Python<'_>, paths: Vec<PathBuf>) -> PyResult<Bound<'_, PyArrayDyn<f32>>> {
-    let (width, height, data) = py.detach(|| io::read_image_stack(&paths)).map_err(to_py)?;
+    let (width, height, data) = py
+        .detach(|| io::stack::read_image_stack(&paths))
+        .map_err(to_py)?;
     let array = Array::from_shape_vec(IxDyn(&[paths.len(), height, width, 3]), data)
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(array.into_pyarray(py))
