@@ -7,8 +7,9 @@
 //! the direct radiance leaving its (b+1)-th vertex.
 //!
 //! This module is the [`Renderer`]; beside it: [`light_cache`], the direct light of every
-//! light at once; [`residual`], a rendering compared with the images; [`denoise`], the
-//! filter of an inter-reflection estimate along the surface.
+//! light at once; [`intersect`], the closest hits of batches of rays in world units;
+//! [`residual`], a rendering compared with the images; [`denoise`], the filter of an
+//! inter-reflection estimate along the surface.
 
 use std::ops::Range;
 use std::sync::Arc;
@@ -25,6 +26,7 @@ use crate::trace::mesh::Mesh;
 use crate::trace::Tracer;
 
 pub mod denoise;
+pub mod intersect;
 pub mod light_cache;
 pub mod residual;
 
