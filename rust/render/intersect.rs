@@ -23,7 +23,7 @@ pub struct BatchHits {
 impl Renderer {
     /// Closest hits of the rays from `origins` along `directions` (x, y, z rows, world units,
     /// finite), traced on `threads` threads (rayon's pool, all cores, if `None`) in tasks of
-    /// [`RAYS_PER_TASK`] rays. Refuses, by argument name, rows of different counts, a zero
+    /// a few thousand rays. Refuses, by argument name, rows of different counts, a zero
     /// direction and no thread.
     pub fn intersect(
         &self,

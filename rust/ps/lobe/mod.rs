@@ -210,7 +210,7 @@ struct Work {
     /// `[n·l]₊` and `[n·l]₊ (n·h)^p` of the current normal.
     diffuse: Vec<Group>,
     specular: Vec<Group>,
-    /// `n·h` of the current normal (at least [`NH_MIN`]).
+    /// `n·h` of the current normal (at least [`NH_MIN`](model::NH_MIN)).
     nh: Vec<Group>,
     /// Bits of the absolute residuals, the lit observations' packed at the front (a slot per
     /// padded light), for their median.

@@ -72,8 +72,8 @@ pub(super) fn lanes_of<F: Floats<W>, const W: usize, const N: usize>(
 }
 
 /// Tukey's weight of an observation whose absolute residual has the bits `key`, for the
-/// scale `inverse` (see [`Machine::residuals`]): 0 where `key` is [`UNLIT`], a NaN that no
-/// comparison holds for.
+/// scale `inverse` (see [`Machine::residuals`](super::machine::Machine::residuals)): 0
+/// where `key` is [`UNLIT`](super::UNLIT), a NaN that no comparison holds for.
 #[inline(always)]
 pub(super) fn tukey_weight<V: Isa<W>, const W: usize>(
     isa: V,

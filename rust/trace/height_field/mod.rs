@@ -199,7 +199,7 @@ pub struct HeightFieldAccel {
     field: Range,
     /// Corners of the field's box, widened by the slack in x and y.
     field_box: (Vec3A, Vec3A),
-    /// [`escape_cones`] of each block, four quadrants a block (which rays from it meet
+    /// [`escape_cones`](escape_cone::escape_cones) of each block, four quadrants a block (which rays from it meet
     /// nothing beyond its ring), as indices into `escape_slopes`.
     escape: Vec<u8>,
     escape_slopes: [f32; 256],
