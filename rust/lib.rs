@@ -3,32 +3,34 @@
 //!
 //! The crate builds and tests without Python; the `python` feature adds the pyo3 bindings
 //! (module `irtps._core`).
+//!
+//! The modules, each importing only those above it (`python` any of them):
+//! - [`error`], [`memory`]: the core's errors, and allocations that fail as errors;
+//! - [`sampler`]: the renderer's random numbers (also the tests' and benches');
+//! - [`scene`]: the scene description of the data-set contract and its working frame;
+//! - [`io`]: EXR and PNG images;
+//! - [`ps`]: photometric stereo, a module per robust mode;
+//! - [`integrate`]: the sparse Cholesky factorisation that normal integration solves with;
+//! - [`trace`]: the scene's triangles and the ray queries over them;
+//! - [`render`]: the forward renderer and its light cache, the comparison of a rendering
+//!   with the images, and the filter of its inter-reflection estimate;
+//! - `python` (feature `python`): the bindings, conversions only.
 
-pub mod denoise;
 pub mod error;
-mod escape_cone;
-pub mod geometry;
-pub mod height_field_accel;
-pub mod image_io;
-mod lanes;
-pub mod light_cache;
-pub mod lobe;
+pub mod integrate;
+pub mod io;
 pub mod memory;
 pub mod ps;
 pub mod render;
-pub mod residual;
-pub mod robust_ps;
 pub mod sampler;
 pub mod scene;
-pub mod sparse_cholesky;
-pub mod tracer;
-pub mod tukey;
+pub mod trace;
 
 #[cfg(feature = "python")]
 mod python;
 
 pub use error::{Error, Result};
-pub use geometry::{Mesh, SurfaceKind};
 pub use render::{RenderSettings, Renderer};
 pub use scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
-pub use tracer::{Hit, Tracer};
+pub use trace::mesh::{Mesh, SurfaceKind};
+pub use trace::{Hit, Tracer};

@@ -310,6 +310,25 @@ fn resolvable(field: &str, v: f64, place: impl FnOnce() -> String) -> Result<f32
     Err(Error::input(field, format!("lies{at} {:.3e} pixel sizes from the object: the core's float32 geometry resolves at most {MAX_FRAME_EXTENT:e}", v.abs())))
 }
 
+/// The lights of rows `directions` and `irradiance`: light k has row k of each. Refuses,
+/// naming `irradiance`, rows of different counts.
+pub fn lights_from_rows(directions: &[[f32; 3]], irradiance: &[Rgb]) -> Result<Vec<Light>> {
+    if directions.len() != irradiance.len() {
+        return Err(Error::input(
+            "irradiance",
+            "needs one row per light direction",
+        ));
+    }
+    Ok(directions
+        .iter()
+        .zip(irradiance)
+        .map(|(&direction, &irradiance)| Light {
+            direction: Vec3A::from(direction),
+            irradiance,
+        })
+        .collect())
+}
+
 /// Checks that every light has a unit direction pointing up (z > 0) and a finite,
 /// non-negative irradiance.
 pub fn validate_lights(lights: &[Light]) -> Result<()> {

@@ -13,9 +13,9 @@ use std::f32::consts::PI;
 use glam::Vec3A;
 use rayon::prelude::*;
 
-use crate::geometry::{Mesh, Panel, NO_PANEL};
 use crate::scene::{Light, Rgb};
-use crate::tracer::Tracer;
+use crate::trace::mesh::{Mesh, Panel, NO_PANEL};
+use crate::trace::Tracer;
 
 /// Light visibility at the cache points, plus the light parameters needed to shade with it.
 #[derive(Clone)]

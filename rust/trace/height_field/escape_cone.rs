@@ -1,10 +1,10 @@
 //! Escape cones of a height field's blocks: for each block and each quadrant of directions,
 //! how steeply a ray must rise from it to clear every triangle beyond the block's ring of
-//! 3×3 blocks (see [`crate::height_field_accel`]).
+//! 3×3 blocks (see [`crate::trace::height_field`]).
 
 use rayon::prelude::*;
 
-use crate::geometry::HeightFieldGrid;
+use crate::trace::mesh::HeightFieldGrid;
 
 /// Escape slopes (squared) that [`escape_cones`] rounds up to: 0, then a geometric series
 /// from 1e-6 to 1e6 (slopes 1e-3 to 1e3, 5.6 % apart), then +∞ (no escape).

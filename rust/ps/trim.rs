@@ -1,5 +1,4 @@
-//! Rank trimming, the per-pixel robust fit that needs each pixel's observations together,
-//! and what it shares with the Tukey fit of [`crate::tukey`].
+//! Rank trimming, the per-pixel robust fit that needs each pixel's observations together.
 //!
 //! The object's pixels are taken in tiles of [`TILE`]; a tile's observations are gathered
 //! pixel-major (each pixel's channel-summed `b` of every light, then its RGB for the
@@ -10,7 +9,10 @@
 use glam::{Mat3, Vec3};
 
 use crate::error::Result;
-use crate::ps::{finish, fit_masked, flag, PixelFit, PsOutput, COPLANAR_RATIO};
+use crate::ps::kernel::{
+    finish, fit_masked, flag, full_fit, gather, solved, Lights, PixelFit, PsOutput, Scratch, LANES,
+    SATURATED,
+};
 
 /// The trim mode drops this fraction of each pixel's darkest observations...
 pub const TRIM_DARKEST: f32 = 0.4;
@@ -18,80 +20,6 @@ pub const TRIM_DARKEST: f32 = 0.4;
 pub const TRIM_BRIGHTEST: f32 = 0.2;
 /// Pixels per tile: a tile's observations stay in the core's caches.
 const TILE: usize = 64;
-/// Lights summed side by side.
-pub(crate) const LANES: usize = 8;
-
-/// The lights, structure of arrays, padded with zeros to a multiple of [`LANES`].
-pub(crate) struct Lights {
-    /// Number of real lights.
-    pub count: usize,
-    /// x, y, z of each direction.
-    pub direction: [Vec<f32>; 3],
-    /// xx, xy, xz, yy, yz, zz of each direction.
-    pub outer: [Vec<f32>; 6],
-    /// π / E_kc of each light, a row per channel.
-    pub scale: [Vec<f32>; 3],
-    /// Raw saturation level times π / E_kc of each light (∞ when off), a row per channel.
-    pub saturated_b: [Vec<f32>; 3],
-    /// Σ l lᵀ over every light.
-    gram: Mat3,
-}
-
-impl Lights {
-    /// From unit `directions`, `scale` = π / E and the saturated level of `b` per light.
-    pub fn new(
-        directions: &[Vec3],
-        scale: &[[f32; 3]],
-        saturated_b: &[[f32; 3]],
-        gram: Mat3,
-    ) -> Lights {
-        let padded = directions.len().div_ceil(LANES) * LANES;
-        let row = |values: &mut dyn Iterator<Item = f32>| -> Vec<f32> {
-            values.chain(std::iter::repeat(0.0)).take(padded).collect()
-        };
-        let component = |f: &dyn Fn(Vec3) -> f32| row(&mut directions.iter().map(|&l| f(l)));
-        let channel =
-            |per_light: &[[f32; 3]], c: usize| row(&mut per_light.iter().map(|values| values[c]));
-        Lights {
-            count: directions.len(),
-            direction: [
-                component(&|l| l.x),
-                component(&|l| l.y),
-                component(&|l| l.z),
-            ],
-            outer: [
-                component(&|l| l.x * l.x),
-                component(&|l| l.x * l.y),
-                component(&|l| l.x * l.z),
-                component(&|l| l.y * l.y),
-                component(&|l| l.y * l.z),
-                component(&|l| l.z * l.z),
-            ],
-            scale: std::array::from_fn(|c| channel(scale, c)),
-            saturated_b: std::array::from_fn(|c| channel(saturated_b, c)),
-            gram,
-        }
-    }
-
-    pub(crate) fn padded(&self) -> usize {
-        self.direction[0].len()
-    }
-
-    pub(crate) fn direction(&self, k: usize) -> Vec3 {
-        Vec3::new(
-            self.direction[0][k],
-            self.direction[1][k],
-            self.direction[2][k],
-        )
-    }
-}
-
-/// Channel-summed `b` of a saturated observation: so large that its residual gives it no
-/// weight, finite so that a zero weight times it adds nothing.
-pub(crate) const SATURATED: f32 = f32::MAX;
-/// Median absolute deviation to the standard deviation of a normal distribution: the robust
-/// scale of the Tukey and lobe fits.
-pub(crate) const MAD_TO_SIGMA: f32 = 1.4826;
 
 /// One pixel's observations, pixel-major.
 struct Pixel<'a> {
@@ -99,16 +27,6 @@ struct Pixel<'a> {
     grey: &'a [f32],
     /// RGB `b` of each light.
     rgb: &'a [[f32; 3]],
-}
-
-/// A tile's working memory.
-#[derive(Default)]
-pub(crate) struct Scratch {
-    /// Channel-summed `b` of each pixel, per padded light ([`SATURATED`] when saturated).
-    pub grey: Vec<f32>,
-    /// RGB `b` of each pixel, per light.
-    pub rgb: Vec<[f32; 3]>,
-    work: Work,
 }
 
 /// One pixel's working memory, one value per (padded) light.
@@ -132,11 +50,12 @@ pub(crate) fn fit_pixels(
         mask,
         TILE,
         out,
-        || Box::new(Scratch::default()),
-        |scratch, tile, fits| {
+        || Box::new((Scratch::default(), Work::default())),
+        |state, tile, fits| {
+            let (scratch, work) = &mut **state;
             gather(images, n, tile, lights, scratch);
             let padded = lights.padded();
-            let Scratch { grey, rgb, work } = &mut **scratch;
+            let Scratch { grey, rgb } = scratch;
             for (i, &p) in tile.iter().enumerate() {
                 let pixel = Pixel {
                     grey: &grey[i * padded..][..padded],
@@ -146,38 +65,6 @@ pub(crate) fn fit_pixels(
             }
         },
     )
-}
-
-/// Copies the tile's observations into `scratch`, pixel-major.
-pub(crate) fn gather(
-    images: &[f32],
-    n: usize,
-    tile: &[usize],
-    lights: &Lights,
-    scratch: &mut Scratch,
-) {
-    let (count, padded) = (lights.count, lights.padded());
-    scratch.grey.clear();
-    scratch.grey.resize(tile.len() * padded, 0.0);
-    scratch.rgb.resize(tile.len() * count, [0.0; 3]);
-    for k in 0..count {
-        let (s, sat) = (
-            lights.scale.each_ref().map(|row| row[k]),
-            lights.saturated_b.each_ref().map(|row| row[k]),
-        );
-        let image = &images[k * n * 3..][..n * 3];
-        for (i, &pixel) in tile.iter().enumerate() {
-            let raw = &image[pixel * 3..pixel * 3 + 3];
-            let b = [raw[0] * s[0], raw[1] * s[1], raw[2] * s[2]];
-            scratch.rgb[i * count + k] = b;
-            let unsaturated = b[0] < sat[0] && b[1] < sat[1] && b[2] < sat[2];
-            scratch.grey[i * padded + k] = if unsaturated {
-                b[0] + b[1] + b[2]
-            } else {
-                SATURATED
-            };
-        }
-    }
 }
 
 /// The weighted sums of the normal's fit, Σ w l lᵀ and Σ w l b (channel sum), over the
@@ -211,29 +98,6 @@ fn weighted_sums(pixel: &Pixel, lights: &Lights, weight: &[f32]) -> (Mat3, Vec3)
     (gram, Vec3::new(sum(&rhs[0]), sum(&rhs[1]), sum(&rhs[2])))
 }
 
-/// `g = G⁻¹ r` when at least `fewest` weighted observations fix it, their lights not
-/// (nearly) coplanar.
-pub(crate) fn solved(gram: Mat3, rhs: Vec3, count: usize, fewest: usize) -> Option<Vec3> {
-    if count < fewest || !well_posed(gram) {
-        return None;
-    }
-    let g = gram.inverse() * rhs;
-    (g.is_finite() && g != Vec3::ZERO).then_some(g)
-}
-
-/// Whether the smallest eigenvalue λ₁ of the Gram matrix `gram` is at least
-/// [`COPLANAR_RATIO`] times its largest λ₃, by a test without the eigenvalues: λ₁ ≥
-/// det / m₂ (m₂ = λ₁λ₂ + λ₁λ₃ + λ₂λ₃, the sum of its principal 2×2 minors) and λ₃ ≤ trace, so
-/// det ≥ ratio · trace · m₂ is enough (and at most 9 times stricter than needed).
-fn well_posed(gram: Mat3) -> bool {
-    let a = gram.to_cols_array_2d();
-    let trace = a[0][0] + a[1][1] + a[2][2];
-    let minors = a[0][0] * a[1][1] - a[0][1] * a[1][0] + a[0][0] * a[2][2] - a[0][2] * a[2][0]
-        + a[1][1] * a[2][2]
-        - a[1][2] * a[2][1];
-    gram.determinant() >= COPLANAR_RATIO * trace * minors && trace > 0.0
-}
-
 /// Normal and albedo of a pixel whose RGB `b` of each light is `rgb`, from its final
 /// `weights`, light by light (Σ w l lᵀ = `gram`).
 pub(crate) fn weighted_fit(
@@ -265,27 +129,6 @@ pub(crate) fn weighted_fit(
             used: count as u16,
         },
         None => PixelFit::dark(count as u16),
-    }
-}
-
-/// Plain least squares on every observation (RGB `b` of each light `rgb`), saturated ones
-/// included: the fit kept when a robust selection leaves too few.
-pub(crate) fn full_fit(rgb: &[[f32; 3]], lights: &Lights) -> PixelFit {
-    let mut rhs = [Vec3::ZERO; 3];
-    for (k, b) in rgb.iter().enumerate() {
-        let l = lights.direction(k);
-        for c in 0..3 {
-            rhs[c] += l * b[c];
-        }
-    }
-    match finish(lights.gram, rhs) {
-        Some((normal, albedo)) => PixelFit {
-            normal,
-            albedo,
-            flag: flag::FULL_FIT,
-            used: lights.count as u16,
-        },
-        None => PixelFit::dark(lights.count as u16),
     }
 }
 
