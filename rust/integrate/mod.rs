@@ -2,4 +2,5 @@
 //! least-squares integrators of `irtps.geometry.integrate` solve with
 //! ([`sparse_cholesky`]).
 
+pub mod bilateral;
 pub mod sparse_cholesky;

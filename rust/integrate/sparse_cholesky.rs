@@ -65,15 +65,44 @@ impl SparseCholesky {
             )),
             e => Error::input(name, format!("symbolic Cholesky analysis failed: {e:?}")),
         })?;
-        let mut values = try_vec(
+        let values = try_vec(
             &format!("{name}: a Cholesky factor of {} values", symbolic.len_val()),
             symbolic.len_val(),
             0.0,
         )?;
+        let mut factor = SparseCholesky { symbolic, values };
+        factor.factor_numeric(name, matrix)?;
+        Ok(factor)
+    }
+
+    /// Factors again a matrix of the same sparsity pattern as the one this factor was made
+    /// from (the same `indptr` and `indices`) with new values `data`, reusing the symbolic
+    /// analysis: the re-weighted systems of an iteratively re-weighted least-squares
+    /// solve.
+    pub fn refactor(
+        &mut self,
+        name: &str,
+        indptr: &[usize],
+        indices: &[usize],
+        data: &[f64],
+    ) -> Result<()> {
+        let n = self.dim();
+        check_compressed(name, n, indptr, indices, data)?;
+        let structure = SymbolicSparseColMatRef::new_checked(n, n, indptr, None, indices);
+        self.factor_numeric(name, SparseColMatRef::new(structure, data))
+    }
+
+    /// The numeric `L Lᵀ` factorisation of `matrix` into `self.values`.
+    fn factor_numeric(
+        &mut self,
+        name: &str,
+        matrix: SparseColMatRef<'_, usize, f64>,
+    ) -> Result<()> {
         // On the calling thread only: each thread that runs a dense kernel takes a workspace
         // of its own (see `check_dense_kernel_workspace`), and the supernodes of an
         // integration's Laplacian are too small for threads to pay.
         let par = Par::Seq;
+        let symbolic = &self.symbolic;
         let workspace = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
         let mut scratch = MemBuffer::try_new(workspace).map_err(|_| {
             Error::memory(
@@ -83,11 +112,11 @@ impl SparseCholesky {
         })?;
         check_dense_kernel_workspace(name)?;
         symbolic
-            .factorize_numeric_llt(&mut values, matrix, Side::Upper, LltRegularization::default(), par, MemStack::new(&mut scratch), Default::default())
+            .factorize_numeric_llt(&mut self.values, matrix, Side::Upper, LltRegularization::default(), par, MemStack::new(&mut scratch), Default::default())
             .map_err(|LltError::NonPositivePivot { index }| {
                 Error::input(name, format!("matrix is not positive definite (non-positive pivot at elimination step {index})"))
             })?;
-        Ok(SparseCholesky { symbolic, values })
+        Ok(())
     }
 
     /// The matrix's dimension n.
