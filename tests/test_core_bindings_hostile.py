@@ -1,4 +1,4 @@
-"""Hostile inputs to every binding of the compiled core (`irtps._core`, rust/python.rs).
+"""Hostile inputs to every binding of the compiled core (`irtps._core`, rust/python/).
 
 Empty arrays, zero-sized dimensions, NaN and infinities where values must be finite,
 out-of-range indices and wrong dtypes must each end in a clean Python exception naming the
@@ -33,6 +33,11 @@ def _nan(shape, dtype=F32):
 
 def _renderer():
     return _core.Renderer(HEIGHT, MASK, ALBEDO, 1.0, LIGHTS, IRRADIANCE)
+
+
+def _bilateral(normals=None, mask=MASK, intrinsics=None, sharpness=2.0, max_iterations=10, tolerance=1e-4):
+    normals = np.broadcast_to(np.array([0, 0, 1], F32), (H, W, 3)).copy() if normals is None else normals
+    return lambda: _core.integrate_bilateral(normals, mask, intrinsics, sharpness, max_iterations, tolerance)
 
 
 def _cholesky():
@@ -190,6 +195,15 @@ CASES = [
     ("solve-empty", lambda: _cholesky().solve(np.zeros(0)), "b"),
     ("solve-nan", lambda: _cholesky().solve(np.array([np.nan])), "b"),
     ("solve-float32", lambda: _cholesky().solve(np.ones(1, F32)), "b"),
+    # integrate_bilateral
+    ("bilateral-nan-normal", _bilateral(normals=_nan((H, W, 3))), "normals"),
+    ("bilateral-normals-shape", _bilateral(normals=np.zeros((H, W + 1, 3), F32)), "normals"),
+    ("bilateral-float64", _bilateral(normals=np.zeros((H, W, 3))), "normals"),
+    ("bilateral-focal-0", _bilateral(intrinsics=(0.0, 1.0, 1.0, 1.0)), "intrinsics"),
+    ("bilateral-nan-centre", _bilateral(intrinsics=(1.0, 1.0, np.nan, 1.0)), "intrinsics"),
+    ("bilateral-sharpness-nan", _bilateral(sharpness=np.nan), "sharpness"),
+    ("bilateral-tolerance-negative", _bilateral(tolerance=-1.0), "tolerance"),
+    ("bilateral-iterations-negative", _bilateral(max_iterations=-1), "max_iterations"),
 ]
 
 

@@ -415,7 +415,7 @@ def test_a_share_is_decided_only_clear_of_the_line():
 
 
 def test_flag_values_are_those_the_core_writes():
-    """`irtps.ps.fit`'s flags name the constants of rust/ps.rs `mod flag`, which the binding
+    """`irtps.ps.fit`'s flags name the constants of rust/ps/kernel.rs `mod flag`, which the binding
     does not export: a masked-out, a fitted and a dark (no light) pixel, straight from the core."""
     lights = np.array([[0, 0, 1], [0.6, 0, 0.8], [0, 0.6, 0.8], [-0.6, 0, 0.8]], np.float32)
     images = np.zeros((4, 1, 3, 3), np.float32)

@@ -1,4 +1,4 @@
-"""Types of the compiled core (rust/python.rs): image I/O, photometric stereo, the renderer,
+"""Types of the compiled core (rust/python/): image I/O, photometric stereo, the renderer,
 the sparse Cholesky factorisation.
 
 Errors about an input arrive as `irtps.errors.ArgumentError` (an argument) or
@@ -30,6 +30,7 @@ __all__ = [
     "denoise_indirect",
     "Renderer",
     "SparseCholesky",
+    "integrate_bilateral",
     "MAX_IMAGE_PIXELS",
 ]
 
@@ -194,3 +195,17 @@ class SparseCholesky:
 
     def solve(self, b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """The solution x of ``A x = b`` for a float64 (n,) right-hand side."""
+
+def integrate_bilateral(
+    normals: _F32,
+    mask: npt.NDArray[np.bool_],
+    intrinsics: tuple[float, float, float, float] | None = None,
+    sharpness: float = 2.0,
+    max_iterations: int = 150,
+    tolerance: float = 1e-4,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint8], int, bool]:
+    """The surface of float32 (H, W, 3) `normals` at bool (H, W) `mask`'s pixels that keeps its
+    depth discontinuities: float64 (H, W) log depth along the optical axis for a pinhole
+    `intrinsics` (fx, fy, cx, cy), else heights in pixel units (NaN outside the mask); uint8
+    (H, W) cut edges (1: to the right neighbour, 2: to the pixel below); the re-weighted
+    solves done; whether they converged."""

@@ -1,11 +1,86 @@
-//! Normal integration's sparse Cholesky factorisation.
+//! Normal integration: the sparse Cholesky factorisation, and the discontinuity-preserving
+//! integration.
 
-use numpy::{PyArray1, PyReadonlyArray1};
+use numpy::ndarray::Array2;
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
+use crate::integrate::bilateral::{
+    integrate_bilateral as core_integrate_bilateral, BilateralSettings, Projection,
+};
 use crate::integrate::sparse_cholesky::SparseCholesky as CoreSparseCholesky;
 
+use super::convert::flat;
 use super::errors::{argument_error, to_py};
+
+/// The surface of the float32 (H, W, 3) `normals` at the bool (H, W) `mask`'s pixels that
+/// keeps its depth discontinuities (the core's `integrate::bilateral`): float64 (H, W) log
+/// depth along the optical axis for a pinhole `intrinsics` (fx, fy, cx, cy), else heights in
+/// pixel units, NaN outside the mask; uint8 (H, W) cut edges (1: to the right neighbour, 2:
+/// to the pixel below); the re-weighted solves done; whether they converged.
+#[pyfunction]
+#[pyo3(signature = (normals, mask, intrinsics=None, sharpness=2.0, max_iterations=150, tolerance=1e-4))]
+#[allow(clippy::type_complexity)]
+pub(super) fn integrate_bilateral<'py>(
+    py: Python<'py>,
+    normals: PyReadonlyArray3<'_, f32>,
+    mask: PyReadonlyArray2<'_, bool>,
+    intrinsics: Option<(f64, f64, f64, f64)>,
+    sharpness: f64,
+    max_iterations: usize,
+    tolerance: f64,
+) -> PyResult<(
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<u8>>,
+    usize,
+    bool,
+)> {
+    let (height, width) = mask.as_array().dim();
+    if normals.as_array().dim() != (height, width, 3) {
+        return Err(argument_error(
+            "normals",
+            format!(
+                "shape {:?} for a {height}x{width} mask (expected (H, W, 3))",
+                normals.as_array().shape()
+            ),
+        ));
+    }
+    let normal_values = flat(&normals, "normals")?;
+    let mask_values = flat(&mask, "mask")?;
+    let projection = match intrinsics {
+        Some((fx, fy, cx, cy)) => Projection::Perspective { fx, fy, cx, cy },
+        None => Projection::Orthographic,
+    };
+    let settings = BilateralSettings {
+        sharpness,
+        max_iterations,
+        tolerance,
+    };
+    let surface = py
+        .detach(|| {
+            core_integrate_bilateral(
+                &normal_values,
+                &mask_values,
+                height,
+                width,
+                projection,
+                settings,
+            )
+        })
+        .map_err(to_py)?;
+    let shaped = |e: numpy::ndarray::ShapeError| PyValueError::new_err(e.to_string());
+    let values = Array2::from_shape_vec((height, width), surface.values).map_err(shaped)?;
+    let cuts = Array2::from_shape_vec((height, width), surface.cuts).map_err(shaped)?;
+    Ok((
+        values.into_pyarray(py),
+        cuts.into_pyarray(py),
+        surface.iterations,
+        surface.converged,
+    ))
+}
 
 /// Non-negative int64 indices as `usize`, or an error naming `name`.
 fn indices_of(array: &PyReadonlyArray1<'_, i64>, name: &str) -> PyResult<Vec<usize>> {

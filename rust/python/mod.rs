@@ -7,7 +7,8 @@
 //! The modules: `errors`, the exception of each core error; `convert`, the conversions that
 //! several bindings share; then a module per domain: `io` (image files), `ps` (photometric
 //! stereo), `render` (the renderer and its ray queries), `estimate` (the inter-reflection
-//! estimate compared and filtered), `integrate` (the sparse Cholesky factorisation).
+//! estimate compared and filtered), `integrate` (the sparse Cholesky factorisation and the
+//! discontinuity-preserving integration).
 
 use pyo3::exceptions::PyMemoryError;
 use pyo3::prelude::*;
@@ -46,6 +47,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(estimate::denoise_indirect, m)?)?;
     m.add_class::<render::Renderer>()?;
     m.add_class::<integrate::SparseCholesky>()?;
+    m.add_function(wrap_pyfunction!(integrate::integrate_bilateral, m)?)?;
     m.add("MAX_IMAGE_PIXELS", crate::io::MAX_IMAGE_PIXELS)?;
     Ok(())
 }

@@ -36,6 +36,7 @@ from irtps._shared.checks import (
     document_choices,
 )
 from irtps.errors import ArgumentError
+from irtps.geometry.bilateral_integration import integrate_bilateral
 from irtps.geometry.footprint_integration import integrate_footprint
 from irtps.geometry.least_squares_integration import IRLS_INNER_TOLERANCE, LeastSquaresProblem
 from irtps.geometry.spectral_integration import integrate_dct, integrate_fc
@@ -97,11 +98,12 @@ def integrate_normals(
     mask=None,
     *,
     pixel_size: float = 1.0,
-    method: str = "ls",
+    method: str | None = None,
     robust_weight: str = "huber",
     max_slope: float = 10.0,
     iterations: int = 5,
     tolerance: float | None = None,
+    intrinsics=None,
 ) -> np.ndarray:
     """Heights from a normal map by normal integration.
 
@@ -140,6 +142,11 @@ def integrate_normals(
         creases sharp (a V-groove's bottom is not blunted), which matters when the surface
         is rendered again, as in IRT-PS. Set up once per mask as ``"ls"`` is, factored up
         to 100 k pixels as well (the factor's fill-in is larger than ``"ls"``'s).
+    ``"bilateral"``
+        Keeps depth discontinuities (occluding contours), which the methods above join with
+        a ramp: each pixel weighs its one-sided slope equations by how well each side agrees
+        with it (`irtps.geometry.bilateral_integration`). The only method for a pinhole
+        camera (`intrinsics`), and its default.
     ``"dct"``
         Full rectangle only (`mask` all true or None): the same least-squares problem,
         whose normal equations are the Poisson equation with Neumann boundary, solved
@@ -158,9 +165,9 @@ def integrate_normals(
         (H, W) bool, the object's pixels; default: every pixel. Each 4-connected component
         of the mask is integrated on its own (it has its own free constant).
     pixel_size : float
-        World size of a pixel; heights are in the same unit.
-    method : str
-        See above.
+        World size of a pixel; heights are in the same unit (ignored with `intrinsics`).
+    method : str, optional
+        See above; default ``"ls"``, or ``"bilateral"`` with `intrinsics`.
     robust_weight : str
         Weight function of ``"mestimator"`` (ignored by the other methods).
     max_slope : float
@@ -179,12 +186,18 @@ def integrate_normals(
         on smooth surfaces; 1e-4 for ``"mestimator"``, whose own error (the outliers'
         residual influence) is far larger than that. The intermediate re-weighted solves
         of ``"mestimator"`` stop at ``max(tolerance, 1e-3)``.
+    intrinsics : array_like, optional
+        A pinhole camera's 3×3 matrix in pixels (contract §1b: pixel (i, j) centred at image
+        point (j + ½, i + ½)): the normals are integrated into the depth along the optical
+        axis instead of heights, with ``"bilateral"``.
 
     Returns
     -------
     numpy.ndarray
         float32 (H, W) heights, 0 outside the mask. They are *centred*: the mean height of
-        each 4-connected component of the mask is 0. Use
+        each 4-connected component of the mask is 0. With `intrinsics`: the depth along the
+        optical axis, each 4-connected component scaled to a median depth of 1 (normals fix
+        a pinhole's depth only up to scale), NaN outside the mask. Use
         :func:`irtps.geometry.boundary.place_height` to put the object on the floor as the
         contract (§6) asks.
 
@@ -212,13 +225,22 @@ def integrate_normals(
     >>> round(float(z[0, 1] - z[0, 0]), 4), round(float(z[0, 0] - z[1, 0]), 4)
     (1.0, 0.5)
     """
+    if method is None:
+        method = "ls" if intrinsics is None else "bilateral"
+    check_choice("method", method, METHODS)
+    if intrinsics is not None and method != "bilateral":
+        raise ArgumentError(
+            "method",
+            f"{method!r} integrates heights seen orthographically: a pinhole camera (intrinsics) takes 'bilateral'",
+        )
+    if method == "bilateral":
+        return integrate_bilateral(normals, mask, intrinsics=intrinsics, pixel_size=pixel_size).surface
     normals, mask = _check_normals_mask(normals, mask)
     pixel_size = check_positive("pixel_size", pixel_size)
     max_slope = check_positive("max_slope", max_slope)
     if tolerance is None:
         tolerance = _DEFAULT_TOLERANCE.get(method, 1e-5)
     tolerance = check_positive("tolerance", tolerance)
-    check_choice("method", method, METHODS)
     iterations = check_integer("iterations", iterations, 0)
     if method == "mestimator":
         check_choice("robust_weight", robust_weight, ROBUST_WEIGHTS)

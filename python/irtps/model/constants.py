@@ -13,7 +13,7 @@ ROBUST_MODES = ("tukey", "lobe", "threshold", "trim", "none")
 ROBUST_CHOICES = ("auto", *ROBUST_MODES)
 
 #: Methods of normal integration (`irtps.geometry.integrate.integrate_normals`).
-INTEGRATION_METHODS = ("ls", "mestimator", "footprint", "dct", "fc")
+INTEGRATION_METHODS = ("ls", "mestimator", "footprint", "bilateral", "dct", "fc")
 
 MAX_IMAGE_PIXELS = _core.MAX_IMAGE_PIXELS
 """The largest image irtps reads or makes, in pixels (width x height): 2^27."""

@@ -293,7 +293,8 @@ class ReconstructOptions(_Options):
     )
     integration: str | None = _option(
         None,
-        "normal integration (default ls for ps, footprint for irtps)",
+        "normal integration (default ls for ps, footprint for irtps); bilateral keeps depth discontinuities "
+        "(occluding contours) that the others join with a ramp",
         str,
         choices=INTEGRATION_METHODS,
         optional=True,

@@ -26,7 +26,7 @@ from irtps.model.scene import irradiance_problem
 # The robust modes (and "auto"), declared by the model (the options list them).
 from irtps.model.constants import ROBUST_CHOICES, ROBUST_MODES
 
-# The values of `PsResult.flags`, as the core writes them: the constants of ``rust/ps.rs``
+# The values of `PsResult.flags`, as the core writes them: the constants of ``rust/ps/kernel.rs``
 # ``mod flag``, under the same names (the binding does not export them;
 # tests/test_ps.py checks them against what the core writes).
 #: The flag of the pixels fitted as asked (with every mode but the lobe's).

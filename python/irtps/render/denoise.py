@@ -4,7 +4,7 @@ Each IRT-PS pass estimates the light that reaches the camera after bounces by tr
 camera paths, and its Monte-Carlo noise goes straight into the corrected images and the
 next normals. The light a surface receives after bounces (its irradiance) changes slowly
 along a smooth surface, so a pixel's estimate can borrow from its neighbours': the filter
-(`irtps._core.denoise_indirect`, rust/denoise.rs) estimates each pixel's irradiance from the
+(`irtps._core.denoise_indirect`, rust/render/denoise.rs) estimates each pixel's irradiance from the
 3×3 pixels around it on the same surface, as their weighted light over their weighted albedo
 (weighted by their distance, by how far their normal turns from the pixel's and by their
 distance from its tangent plane, so that a crease or a step keeps its sides apart), and

@@ -1,0 +1,106 @@
+"""Depth from normals on a real object with ground-truth depth: DiLiGenT reading (issue 46).
+
+For each integration, from DiLiGenT's ground-truth normals and from the normals that
+``irtps reconstruct`` fits (its default photometric stereo): the depth error by BiNI's
+protocol (MADE: the estimate scaled by the median of ``depth_gt / estimate`` over the mask,
+then the mean absolute difference in mm where the truth is known) and the median time of
+``--runs`` calls after one warm-up call. Integrations:
+
+- ``bilateral``: ``irtps.integrate_normals(normals, mask, intrinsics=K)``, the pinhole
+  camera's discontinuity-preserving integration (log depth);
+- ``ls``, ``mestimator``, ``footprint``: the orthographic methods, their heights turned into
+  depths as an orthographic camera at the object's median true depth would see them (pixel
+  size = that depth / fx), which is what a user without the pinhole gets.
+
+BiNI's figures on the same data (k = 2, perspective, run on the 2-core development machine
+from the same normals) are in ../shared/data/diligent/README.md: 0.221 mm in 0.97 s from the
+true normals, 3.30 mm from irtps's; BiNI is GPL and is not run here.
+
+Usage::
+
+    python benches/depth_bench.py [--data ../shared/data/diligent/readingPNG] [--runs 5] [--json PATH]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import scipy.io
+
+import irtps
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "diligent" / "readingPNG"
+METHODS = ("bilateral", "ls", "mestimator", "footprint")
+
+
+def made(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
+    """BiNI's mean absolute depth error after the median-ratio scale."""
+    known = mask & np.isfinite(truth) & np.isfinite(estimate) & (estimate > 0)
+    scale = np.median(truth[known] / estimate[known])
+    return float(np.abs(scale * estimate[known] - truth[known]).mean())
+
+
+def integrate(method: str, normals: np.ndarray, mask: np.ndarray, K: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Depth along the optical axis from `normals` by `method` (see the module)."""
+    if method == "bilateral":
+        return irtps.integrate_normals(normals, mask, intrinsics=K)
+    distance = float(np.nanmedian(depth[mask]))
+    height = irtps.integrate_normals(normals, mask, pixel_size=distance / K[0, 0], method=method)
+    return np.where(mask, distance - height, np.nan)
+
+
+def timed(method: str, normals, mask, K, depth, runs: int) -> tuple[float, np.ndarray]:
+    """Median seconds of `runs` calls after one warm-up call, and the last result."""
+    result = integrate(method, normals, mask, K, depth)
+    seconds = []
+    for _ in range(runs):
+        start = time.perf_counter()
+        result = integrate(method, normals, mask, K, depth)
+        seconds.append(time.perf_counter() - start)
+    return statistics.median(seconds), result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--data", type=Path, default=SHARED, help="a DiLiGenT object with K.txt and depth_gt.npz")
+    parser.add_argument("--runs", type=int, default=5)
+    parser.add_argument("--json", type=Path, help="also write the rows as JSON")
+    args = parser.parse_args()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", irtps.IrtpsWarning)
+        dataset = irtps.load_dataset(args.data)
+        fitted = irtps.reconstruct(dataset).normals
+    K = np.loadtxt(args.data / "K.txt")
+    depth = np.load(args.data / "depth_gt.npz")["depth_gt"].astype(np.float64)
+    truth = scipy.io.loadmat(args.data / "Normal_gt.mat")["Normal_gt"].astype(np.float32)
+    mask = dataset.mask
+    rows = []
+    print(f"{args.data.name}: {int(mask.sum())} pixels; MADE in mm, median of {args.runs} after a warm-up")
+    print(f"{'method':<12} {'true normals':>14} {'time':>8} {'irtps normals':>14} {'time':>8}")
+    for method in METHODS:
+        true_seconds, from_truth = timed(method, truth, mask, K, depth, args.runs)
+        fitted_seconds, from_fit = timed(method, fitted, mask, K, depth, args.runs)
+        row = {
+            "method": method,
+            "made_true_normals_mm": made(from_truth, depth, mask),
+            "seconds_true_normals": true_seconds,
+            "made_irtps_normals_mm": made(from_fit, depth, mask),
+            "seconds_irtps_normals": fitted_seconds,
+        }
+        rows.append(row)
+        print(
+            f"{method:<12} {row['made_true_normals_mm']:>14.3f} {true_seconds:>7.3f}s "
+            f"{row['made_irtps_normals_mm']:>14.3f} {fitted_seconds:>7.3f}s"
+        )
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=2) + "\n", encoding="utf-8")
+
+
+if __name__ == "__main__":
+    main()
