@@ -106,7 +106,7 @@ def random_lights(
 def mitsuba_dataset(mi, variant: str, keywords: dict, seed: int, changes: dict | None = None) -> Dataset:
     """The case's object and surroundings under random lights, with `changes` (see
     `MITSUBA_VARIATIONS`), rendered by Mitsuba."""
-    from mitsuba_compare import MitsubaScene
+    from mitsuba_scene import MitsubaScene
 
     from irtps.render.renderer import make_renderer, render
 
@@ -167,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
     if args.renderer == "mitsuba":
-        from mitsuba_compare import import_mitsuba
+        from mitsuba_scene import import_mitsuba
 
         mi, _, usable = import_mitsuba(["llvm_ad_rgb", "scalar_rgb"], threads=2)
         if not usable:

@@ -38,7 +38,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from mitsuba_compare import MitsubaScene, import_mitsuba
+from mitsuba_scene import MitsubaScene, import_mitsuba
 from ps_accuracy import COLUMNS, mode_errors
 
 import irtps

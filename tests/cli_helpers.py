@@ -51,3 +51,8 @@ def tree(root) -> dict:
             else:
                 state[key] = ("folder", None)
     return state
+
+
+def snapshot(folder):
+    """Every file under `folder`, by its relative path, with its bytes."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}

@@ -2,125 +2,45 @@
 
 Every malformed input must end with exit status 2 and one line ``irtps: error: ...``
 naming the offending file or field, no traceback, and no output: neither OUT nor a
-temporary folder is left behind. The inputs that irtps accepts on purpose (negative
-pixels, saturated pixels) are checked for their documented behaviour, and interrupted
-runs (Ctrl-C, SIGTERM, a full disk) for leaving the previous output intact.
+temporary folder is left behind (the fixtures are damaged by tests/damage.py). Inputs
+accepted on purpose (negative, saturated pixels) keep their documented behaviour.
 """
 
 import json
 import shutil
-import signal
-import struct
 import subprocess
 import sys
-import zlib
 from pathlib import Path
 
 import numpy as np
 import pytest
-from irtps import DatasetError, _core
+from irtps import _core
 from irtps.cli.main import main
 
-from cli_helpers import interruptible, saturate
+from cli_helpers import saturate, snapshot
+from damage import (
+    ball_image,
+    claim_exr_size,
+    claim_png_size,
+    coplanar_diligent,
+    edit_exr,
+    edit_run_text,
+    edit_scene,
+    edit_scene_text,
+    light_directions,
+    out_under_a_file,
+    rename_exr_channel,
+    replace_line,
+    set_pixels,
+    truncate,
+    two_lights,
+    write_png,
+)
 
 DATA = Path(__file__).parent / "data"
 MITSUBA = DATA / "mitsuba_small" / "cap_cornell"  # 96x96, 3 lights, floor and Cornell box
 BALL = DATA / "diligent_ball_small"  # DiLiGenT layout, 48x44, 8 lights, 16-bit PNG
 SIZE = 96
-
-
-# Damage done to a copy of a fixture folder ----------------------------------------
-
-
-def _edit_scene(folder, edit):
-    scene = json.loads((folder / "scene.json").read_text())
-    edit(scene)
-    (folder / "scene.json").write_text(json.dumps(scene))
-
-
-def _edit_exr(path, edit):
-    image = _core.read_exr(str(path))
-    edit(image)
-    _core.write_exr(str(path), image)
-
-
-def _set_pixels(value, where=(slice(3, 5), slice(4, 6))):
-    return lambda image: image.__setitem__(where, value)
-
-
-def _directions(*directions):
-    def edit(scene):
-        for light, direction in zip(scene["lights"], directions, strict=True):
-            light["direction"] = direction
-
-    return edit
-
-
-def _edit_scene_text(folder, edit):
-    (folder / "scene.json").write_text(edit((folder / "scene.json").read_text()))
-
-
-def _edit_run_text(folder, edit):
-    text = (folder / "run.json").read_text()
-    assert edit(text) != text
-    (folder / "run.json").write_text(edit(text))
-
-
-def _two_lights(folder):
-    _edit_scene(folder, lambda scene: scene.update(lights=scene["lights"][:2]))
-    (folder / "images" / "002.exr").unlink()
-
-
-def _truncate(path, keep):
-    path.write_bytes(path.read_bytes()[:keep])
-
-
-def _rename_exr_channel(path, old, new):
-    """Rename a channel in the header of an EXR file (same length, so the file stays valid)."""
-    data = path.read_bytes()
-    start = data.index(b"chlist")
-    at = data.index(old + b"\0", start)
-    path.write_bytes(data[:at] + new + data[at + len(old) :])
-
-
-def _claim_exr_size(path, width, height):
-    """Rewrite the data window of an EXR header to claim width x height pixels."""
-    data = bytearray(path.read_bytes())
-    window = data.index(b"dataWindow\0box2i\0") + len(b"dataWindow\0box2i\0") + 4
-    data[window + 8 : window + 16] = struct.pack("<ii", width - 1, height - 1)
-    path.write_bytes(bytes(data))
-
-
-def _claim_png_size(path, width, height):
-    """Rewrite the IHDR of a PNG to claim width x height pixels (with a valid CRC)."""
-    data = bytearray(path.read_bytes())
-    data[16:24] = struct.pack(">II", width, height)
-    data[29:33] = struct.pack(">I", zlib.crc32(bytes(data[12:29])))
-    path.write_bytes(bytes(data))
-
-
-def _ball_image(folder, index):
-    return folder / (folder / "filenames.txt").read_text().split()[index]
-
-
-def _write_png(path, array, bits=8):
-    _core.write_png(str(path), np.asarray(array, dtype=np.float32), bits)
-
-
-def _replace_line(path, number, text):
-    lines = path.read_text().splitlines()
-    lines[number - 1] = text
-    path.write_text("\n".join(lines) + "\n")
-
-
-def _coplanar_diligent(folder):
-    lines = ["0.6 0 0.8", "-0.6 0 0.8", "0 0 1", "0.28 0 0.96"] * 2
-    (folder / "light_directions.txt").write_text("\n".join(lines) + "\n")
-
-
-def _out_under_a_file(tmp_path):
-    (tmp_path / "blocker").write_text("a file, not a folder")
-    return tmp_path / "blocker" / "out"
 
 
 # The matrix ------------------------------------------------------------------------
@@ -172,7 +92,7 @@ CASES = {
     "listed DiLiGenT image missing": (
         "reconstruct",
         "ball",
-        lambda f: _ball_image(f, 5).unlink(),
+        lambda f: ball_image(f, 5).unlink(),
         [],
         ["{data}/052.png: missing (listed on line 6 of filenames.txt)"],
     ),
@@ -194,14 +114,14 @@ CASES = {
     "camera disagrees with images": (
         "reconstruct",
         "mitsuba",
-        lambda f: _edit_scene(f, lambda s: s["camera"].update(width=95)),
+        lambda f: edit_scene(f, lambda s: s["camera"].update(width=95)),
         [],
         ["{data}/images/000.exr: size 96x96 does not match the camera in scene.json (95x96)"],
     ),
     "mask of another size": (
         "render",
         "mitsuba",
-        lambda f: _write_png(f / "mask.png", np.ones((SIZE, SIZE + 1))),
+        lambda f: write_png(f / "mask.png", np.ones((SIZE, SIZE + 1))),
         [],
         ["{data}/mask.png: size 97x96 does not match the images (96x96)"],
     ),
@@ -216,21 +136,21 @@ CASES = {
     "NaN pixel": (
         "reconstruct",
         "mitsuba",
-        lambda f: _edit_exr(f / "images" / "001.exr", _set_pixels(np.nan)),
+        lambda f: edit_exr(f / "images" / "001.exr", set_pixels(np.nan)),
         [],
         ["{data}/images/001.exr: non-finite value NaN at row 3, column 4"],
     ),
     "infinite true height": (
         "render",
         "mitsuba",
-        lambda f: _edit_exr(f / "gt" / "height.exr", _set_pixels(np.inf)),
+        lambda f: edit_exr(f / "gt" / "height.exr", set_pixels(np.inf)),
         [],
         ["{data}/gt/height.exr: non-finite value inf at row 3, column 4"],
     ),
     "NaN reconstructed normals": (
         "evaluate",
         "reconstruction",
-        lambda f: _edit_exr(f / "normal.exr", _set_pixels(np.nan)),
+        lambda f: edit_exr(f / "normal.exr", set_pixels(np.nan)),
         ["--gt", str(BALL)],
         ["{data}/normal.exr: non-finite value nan at row 3, column 4"],
     ),
@@ -238,37 +158,37 @@ CASES = {
     "every image black": (
         "reconstruct",
         "mitsuba",
-        lambda f: [_edit_exr(f / "images" / f"{k:03d}.exr", _set_pixels(0.0, ...)) for k in range(3)],
+        lambda f: [edit_exr(f / "images" / f"{k:03d}.exr", set_pixels(0.0, ...)) for k in range(3)],
         [],
         ["{data}: every image is black on the object"],
     ),
     "true albedo above 1": (
         "render",
         "mitsuba",
-        lambda f: _edit_exr(f / "gt" / "albedo.exr", _set_pixels(1.5, (48, 50))),
+        lambda f: edit_exr(f / "gt" / "albedo.exr", set_pixels(1.5, (48, 50))),
         [],
         ["{data}/gt/albedo.exr: albedo 1.5 at row 48, column 50 of the mask is outside [0, 1]"],
     ),
     # too few or coplanar lights
-    "two lights": ("reconstruct", "mitsuba", _two_lights, [], ["{data}/scene.json: lights has 2 lights"]),
+    "two lights": ("reconstruct", "mitsuba", two_lights, [], ["{data}/scene.json: lights has 2 lights"]),
     "coplanar lights": (
         "reconstruct",
         "mitsuba",
-        lambda f: _edit_scene(f, _directions([0.6, 0.0, 0.8], [-0.6, 0.0, 0.8], [0.0, 0.0, 1.0])),
+        lambda f: edit_scene(f, light_directions([0.6, 0.0, 0.8], [-0.6, 0.0, 0.8], [0.0, 0.0, 1.0])),
         [],
         ["{data}: lights: directions are (nearly) coplanar"],
     ),
     "coplanar DiLiGenT lights": (
         "reconstruct",
         "ball",
-        _coplanar_diligent,
+        coplanar_diligent,
         [],
         ["{data}: lights: directions are (nearly) coplanar"],
     ),
     "light without irradiance": (
         "reconstruct",
         "mitsuba",
-        lambda f: _edit_scene(f, lambda s: s["lights"][1].update(irradiance=[0.0, 0.0, 0.0])),
+        lambda f: edit_scene(f, lambda s: s["lights"][1].update(irradiance=[0.0, 0.0, 0.0])),
         [],
         ["{data}: lights[1].irradiance: must be positive in every channel"],
     ),
@@ -276,7 +196,7 @@ CASES = {
     "overflowing DiLiGenT intensity": (
         "reconstruct",
         "ball",
-        lambda f: _replace_line(f / "light_intensities.txt", 2, "1e308 1e308 1e308"),
+        lambda f: replace_line(f / "light_intensities.txt", 2, "1e308 1e308 1e308"),
         [],
         [
             "{data}/light_intensities.txt: line 2: light intensity has channel 0 = 1e+308, out of range: expected 0 or a number from 1e-09 to 1e+09"
@@ -285,14 +205,14 @@ CASES = {
     "vanishing DiLiGenT intensity": (
         "reconstruct",
         "ball",
-        lambda f: _replace_line(f / "light_intensities.txt", 1, "1 1e-40 1"),
+        lambda f: replace_line(f / "light_intensities.txt", 1, "1 1e-40 1"),
         ["--method", "irtps"],
         ["{data}/light_intensities.txt: line 1: light intensity has channel 1 = 1e-40, out of range"],
     ),
     "overflowing scene irradiance": (
         "render",
         "mitsuba",
-        lambda f: _edit_scene(f, lambda s: s["lights"][2].update(irradiance=[1.0, 1e308, 1.0])),
+        lambda f: edit_scene(f, lambda s: s["lights"][2].update(irradiance=[1.0, 1e308, 1.0])),
         [],
         ["{data}/scene.json: lights[2].irradiance has channel 1 = 1e+308, out of range"],
     ),
@@ -300,14 +220,14 @@ CASES = {
     "non-unit light direction": (
         "reconstruct",
         "mitsuba",
-        lambda f: _edit_scene(f, lambda s: s["lights"][1].update(direction=[0.0, 0.0, 1.1])),
+        lambda f: edit_scene(f, lambda s: s["lights"][1].update(direction=[0.0, 0.0, 1.1])),
         [],
         ["{data}/scene.json: lights[1].direction is not a unit vector (norm 1.1)"],
     ),
     "downward light": (
         "render",
         "mitsuba",
-        lambda f: _edit_scene(f, lambda s: s["lights"][2].update(direction=[0.0, 0.6, -0.8])),
+        lambda f: edit_scene(f, lambda s: s["lights"][2].update(direction=[0.0, 0.6, -0.8])),
         [],
         ["{data}/scene.json: lights[2].direction must point toward the camera side (z > 0)"],
     ),
@@ -315,7 +235,7 @@ CASES = {
     "light grazing below float32": (
         "reconstruct",
         "mitsuba",
-        lambda f: _edit_scene(f, lambda s: s["lights"][0].update(direction=[1.0, 0.0, 1e-50])),
+        lambda f: edit_scene(f, lambda s: s["lights"][0].update(direction=[1.0, 0.0, 1e-50])),
         [],
         [
             "{data}/scene.json: lights[0].direction must point toward the camera side (z > 0), got z = 1e-50, which is 0 in float32"
@@ -324,7 +244,7 @@ CASES = {
     "DiLiGenT light grazing below float32": (
         "reconstruct",
         "ball",
-        lambda f: _replace_line(f / "light_directions.txt", 3, "0 1 1e-300"),
+        lambda f: replace_line(f / "light_directions.txt", 3, "0 1 1e-300"),
         [],
         [
             "{data}/light_directions.txt: line 3: light direction must point toward the camera side (z > 0), got z = 1e-300, which is 0"
@@ -334,14 +254,14 @@ CASES = {
     "empty mask": (
         "reconstruct",
         "mitsuba",
-        lambda f: _write_png(f / "mask.png", np.zeros((SIZE, SIZE))),
+        lambda f: write_png(f / "mask.png", np.zeros((SIZE, SIZE))),
         [],
         ["{data}/mask.png: the mask is empty"],
     ),
     "empty reconstruction mask": (
         "evaluate",
         "reconstruction",
-        lambda f: _write_png(f / "mask.png", np.zeros((44, 48))),
+        lambda f: write_png(f / "mask.png", np.zeros((44, 48))),
         ["--gt", str(BALL)],
         ["{data}/mask.png: the mask is empty"],
     ),
@@ -356,21 +276,21 @@ CASES = {
     "truncated EXR": (
         "reconstruct",
         "mitsuba",
-        lambda f: _truncate(f / "images" / "001.exr", 20_000),
+        lambda f: truncate(f / "images" / "001.exr", 20_000),
         [],
         ["{data}/images/001.exr: not a readable OpenEXR file"],
     ),
     "EXR with other channels": (
         "render",
         "mitsuba",
-        lambda f: _rename_exr_channel(f / "gt" / "albedo.exr", b"R", b"S"),
+        lambda f: rename_exr_channel(f / "gt" / "albedo.exr", b"R", b"S"),
         [],
         ["{data}/gt/albedo.exr: channels", "expected R, G, B (optionally A) or a single Y"],
     ),
     "truncated 16-bit PNG": (
         "reconstruct",
         "ball",
-        lambda f: _truncate(_ball_image(f, 1), 3000),
+        lambda f: truncate(ball_image(f, 1), 3000),
         [],
         ["{data}/009.png: corrupt PNG data"],
     ),
@@ -378,14 +298,14 @@ CASES = {
     "camera width as a string": (
         "reconstruct",
         "mitsuba",
-        lambda f: _edit_scene(f, lambda s: s["camera"].update(width="96")),
+        lambda f: edit_scene(f, lambda s: s["camera"].update(width="96")),
         [],
         ["{data}/scene.json: camera.width must be a positive integer, got the string '96'"],
     ),
     "lights as an object": (
         "render",
         "mitsuba",
-        lambda f: _edit_scene(f, lambda s: s.update(lights={"0": s["lights"][0]})),
+        lambda f: edit_scene(f, lambda s: s.update(lights={"0": s["lights"][0]})),
         [],
         ["{data}/scene.json: lights must be an array, got an object"],
     ),
@@ -393,14 +313,14 @@ CASES = {
     "scene format of 10 million characters": (
         "reconstruct",
         "mitsuba",
-        lambda f: _edit_scene(f, lambda s: s.update(format="x" * 10_000_000)),
+        lambda f: edit_scene(f, lambda s: s.update(format="x" * 10_000_000)),
         [],
         ["{data}/scene.json: format is 'xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx...': unknown format"],
     ),
     "unknown field of a million characters": (
         "render",
         "mitsuba",
-        lambda f: _edit_scene(f, lambda s: s["camera"].update({"y" * 1_000_000: 1})),
+        lambda f: edit_scene(f, lambda s: s["camera"].update({"y" * 1_000_000: 1})),
         [],
         ["{data}/scene.json: camera has an unknown field 'yyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyy...'"],
     ),
@@ -429,21 +349,21 @@ CASES = {
     "camera width of 5000 digits": (
         "reconstruct",
         "mitsuba",
-        lambda f: _edit_scene_text(f, lambda text: text.replace('"width": 96', '"width": ' + "9" * 5000)),
+        lambda f: edit_scene_text(f, lambda text: text.replace('"width": 96', '"width": ' + "9" * 5000)),
         [],
         ["{data}/scene.json: line ", ": a number with 5000 digits; at most 40 are accepted"],
     ),
     "render: camera width of 5000 digits": (
         "render",
         "mitsuba",
-        lambda f: _edit_scene_text(f, lambda text: text.replace('"width": 96', '"width": ' + "9" * 5000)),
+        lambda f: edit_scene_text(f, lambda text: text.replace('"width": 96', '"width": ' + "9" * 5000)),
         [],
         ["{data}/scene.json: line ", ": a number with 5000 digits"],
     ),
     "run.json pixel size of 5000 digits": (
         "report",
         "reconstruction",
-        lambda f: _edit_run_text(f, lambda text: text.replace('"pixel_size": 1.0', '"pixel_size": ' + "9" * 5000)),
+        lambda f: edit_run_text(f, lambda text: text.replace('"pixel_size": 1.0', '"pixel_size": ' + "9" * 5000)),
         [],
         ["{data}/run.json: line ", ": a number with 5000 digits"],
     ),
@@ -486,28 +406,28 @@ CASES = {
     "absurd camera": (
         "render",
         "mitsuba",
-        lambda f: ((f / "mask.png").unlink(), _edit_scene(f, lambda s: s["camera"].update(width=10**7, height=10**7))),
+        lambda f: ((f / "mask.png").unlink(), edit_scene(f, lambda s: s["camera"].update(width=10**7, height=10**7))),
         [],
         ["{data}/scene.json: camera size 10000000x10000000 exceeds the largest supported image"],
     ),
     "EXR header claiming an absurd size": (
         "reconstruct",
         "mitsuba",
-        lambda f: _claim_exr_size(f / "images" / "002.exr", 1 << 20, 1 << 20),
+        lambda f: claim_exr_size(f / "images" / "002.exr", 1 << 20, 1 << 20),
         [],
         ["{data}/images/002.exr: size 1048576x1048576 exceeds the largest supported image"],
     ),
     "PNG header claiming an absurd size": (
         "reconstruct",
         "ball",
-        lambda f: _claim_png_size(_ball_image(f, 2), 10_000, 10_000),
+        lambda f: claim_png_size(ball_image(f, 2), 10_000, 10_000),
         [],
         ["{data}/021.png: corrupt PNG: its header claims 10000x10000 pixels, more than its"],
     ),
     "absurd pixel size": (
         "reconstruct",
         "mitsuba",
-        lambda f: _edit_scene(f, lambda s: s["camera"].update(pixel_size=1e308)),
+        lambda f: edit_scene(f, lambda s: s["camera"].update(pixel_size=1e308)),
         [],
         ["{data}/scene.json: camera.pixel_size 1e+308 is out of range: expected a number from 1e-09 to 1e+09"],
     ),
@@ -544,7 +464,7 @@ CASES = {
         "reconstruct",
         "mitsuba",
         None,
-        ["--out", _out_under_a_file],
+        ["--out", out_under_a_file],
         ["--out {tmp}/blocker/out: cannot be made: {tmp}/blocker is not a folder"],
     ),
     "output is the input": (
@@ -590,10 +510,6 @@ def _prepare(name, tmp_path, reconstruction):
     return [command, str(data), *extra, *outside, "--quiet"], data, out
 
 
-def _snapshot(folder):
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
-
-
 def test_the_matrix_has_at_least_30_cases():
     assert len(CASES) >= 30
 
@@ -601,7 +517,7 @@ def test_the_matrix_has_at_least_30_cases():
 @pytest.mark.parametrize("name", list(CASES))
 def test_malformed_input_is_a_clear_error_with_no_output(name, tmp_path, reconstruction, capsys):
     argv, data, out = _prepare(name, tmp_path, reconstruction)
-    before = _snapshot(tmp_path)
+    before = snapshot(tmp_path)
     assert main(argv) == 2
     captured = capsys.readouterr()
     assert captured.out == ""
@@ -610,7 +526,7 @@ def test_malformed_input_is_a_clear_error_with_no_output(name, tmp_path, reconst
     for part in CASES[name][4]:
         assert part.format(data=data, tmp=tmp_path) in captured.err, captured.err
     assert "Traceback" not in captured.err
-    assert _snapshot(tmp_path) == before  # no output, no temporary folder, inputs untouched
+    assert snapshot(tmp_path) == before  # no output, no temporary folder, inputs untouched
     if out is not None and out not in (data, tmp_path):
         assert not out.exists()
 
@@ -645,8 +561,8 @@ def test_negative_pixels_are_clipped_to_zero_with_a_warning(tmp_path, capsys):
     data, clipped = tmp_path / "data", tmp_path / "clipped"
     shutil.copytree(MITSUBA, data)
     shutil.copytree(MITSUBA, clipped)
-    _edit_exr(data / "images" / "001.exr", _set_pixels(-0.25, (slice(40, 50), slice(40, 50))))
-    _edit_exr(clipped / "images" / "001.exr", _set_pixels(0.0, (slice(40, 50), slice(40, 50))))
+    edit_exr(data / "images" / "001.exr", set_pixels(-0.25, (slice(40, 50), slice(40, 50))))
+    edit_exr(clipped / "images" / "001.exr", set_pixels(0.0, (slice(40, 50), slice(40, 50))))
     assert main(["reconstruct", str(data), "--out", str(tmp_path / "out"), "--quiet"]) == 0
     warning = capsys.readouterr().err
     assert warning == f"irtps: warning: {data}/images/001.exr: 300 negative values (down to -0.25) clipped to 0\n"
@@ -682,73 +598,3 @@ def test_saturated_png_pixels_are_reported_when_not_robust(tmp_path, capsys):
     assert capsys.readouterr().err.endswith(
         "are saturated (a channel at or above 1); used as they are (robust mode none)\n"
     )
-
-
-# Interrupted runs -------------------------------------------------------------------
-
-
-EARLIER_RUN = '{"format": "irtps.run/1", "earlier": true}'
-
-
-@pytest.fixture
-def previous_output(tmp_path):
-    """An output folder from an earlier run, which a failed run must leave as it is."""
-    out = tmp_path / "out"
-    out.mkdir()
-    (out / "run.json").write_text(EARLIER_RUN)
-    return out
-
-
-def _fail_on_third_exr(monkeypatch, error):
-    real, calls = _core.write_exr, []
-
-    def write_exr(path, array):
-        calls.append(path)
-        if len(calls) == 3:
-            raise error
-        real(path, array)
-
-    monkeypatch.setattr(_core, "write_exr", write_exr)
-    return calls
-
-
-def test_ctrl_c_while_writing_leaves_the_previous_output(tmp_path, previous_output, monkeypatch, capsys):
-    calls = _fail_on_third_exr(monkeypatch, KeyboardInterrupt())
-    assert main(["reconstruct", str(BALL), "--out", str(previous_output), "--quiet"]) == 130
-    assert len(calls) == 3 and calls[0].startswith(str(tmp_path / ".out.tmp-"))
-    assert capsys.readouterr().err == "irtps: interrupted; no partial output was left\n"
-    assert _snapshot(tmp_path) == {"out/run.json": EARLIER_RUN.encode()}
-
-
-def test_a_full_disk_while_writing_leaves_the_previous_output(tmp_path, previous_output, monkeypatch, capsys):
-    full = DatasetError(
-        "out/normal.exr: could not write OpenEXR (No space left on device (os error 28))"
-    )  # as the core says it
-    calls = _fail_on_third_exr(monkeypatch, full)
-    assert main(["reconstruct", str(BALL), "--out", str(previous_output), "--quiet"]) == 2
-    assert len(calls) == 3
-    assert capsys.readouterr().err == f"irtps: error: {full}\n"
-    assert _snapshot(tmp_path) == {"out/run.json": EARLIER_RUN.encode()}
-
-
-@pytest.mark.parametrize("signum, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
-def test_a_killed_process_leaves_the_previous_output(tmp_path, previous_output, signum, status):
-    command = [
-        sys.executable,
-        "-m",
-        "irtps.cli",
-        "render",
-        str(MITSUBA),
-        "--out",
-        str(previous_output),
-        "--samples",
-        "8192",
-    ]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=interruptible)
-    assert process.stderr.read(1)  # the progress bar has started: rendering is under way
-    process.send_signal(signum)
-    _, err = process.communicate(timeout=120)
-    assert process.returncode == status
-    assert b"irtps: interrupted; no partial output was left\n" in err
-    assert b"Traceback" not in err
-    assert _snapshot(tmp_path) == {"out/run.json": EARLIER_RUN.encode()}
