@@ -35,7 +35,8 @@ from irtps.ps.fit import FLAGS
 #: Indirect images written at once, one per core up to 4 (on 2 cores, 2 writers take 0.7 of
 #: one writer's time).
 _EXR_WRITERS = max(1, min(4, os.cpu_count() or 1))
-#: What a reconstruction folder holds (`save_reconstruction`); ``indirect`` for IRT-PS only.
+#: What a reconstruction folder holds (`save_reconstruction`); ``indirect`` for IRT-PS only,
+#: ``depth.exr`` and ``discontinuities.png`` for a pinhole camera only.
 RECONSTRUCTION_FILES = (
     "normal.exr",
     "albedo.exr",
@@ -45,6 +46,8 @@ RECONSTRUCTION_FILES = (
     "mesh.obj",
     "run.json",
     "indirect",
+    "depth.exr",
+    "discontinuities.png",
 )
 #: An image name's stem that can name its file in ``indirect/``: plain, not hidden.
 _PLAIN_STEM = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
@@ -62,7 +65,9 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
     and, for IRT-PS, ``indirect/`` (for each image fitted, the estimate of
     its inter-reflected light that the chosen pass removed, with the surroundings' light in the
     edge pixels, `irtps.render.surroundings`, named as `indirect_file_names` says; none when that
-    is pass 0).
+    is pass 0). With a pinhole camera also ``depth.exr`` (Y: the depth along the optical axis,
+    0 outside the mask; `Reconstruction.depth`) and ``discontinuities.png`` (8-bit: 1 at both
+    pixels of each edge that is a depth discontinuity, 0 elsewhere).
 
     Parameters
     ----------
@@ -86,6 +91,10 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
         write_exr(folder / "albedo.exr", result.albedo)
         write_exr(folder / "height.exr", result.height)
         write_png(folder / "mask.png", result.mask.astype(np.float32), bit_depth=8)
+        if result.depth is not None:
+            write_exr(folder / "depth.exr", result.depth)
+        if result.discontinuities is not None:
+            write_png(folder / "discontinuities.png", _edge_pixels(result.discontinuities), bit_depth=8)
         vertices, faces, colors, normals = height_field_mesh(
             result.height, result.mask, result.pixel_size, albedo=result.albedo, normals=result.normals
         )
@@ -125,6 +134,16 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
                     )
                 )
         (folder / "run.json").write_text(json.dumps(run, indent=2))
+
+
+def _edge_pixels(discontinuities: np.ndarray) -> np.ndarray:
+    """float32 (H, W): 1 at both pixels of each edge marked in the bool (H, W, 2) map of
+    edges to the right neighbour and to the pixel below, 0 elsewhere."""
+    right, down = discontinuities[..., 0], discontinuities[..., 1]
+    marked = right | down
+    marked[:, 1:] |= right[:, :-1]
+    marked[1:] |= down[:-1]
+    return marked.astype(np.float32)
 
 
 def indirect_file_names(image_names: Sequence[str], count: int) -> list[str]:

@@ -20,7 +20,9 @@ from irtps.ps.image_agreement import ImageAgreement, image_agreement
 from irtps.irt.interreflection import check_traceable, remove_interreflections
 from irtps.irt.loop_state import Iteration
 from irtps.model.options import ReconstructOptions
+from irtps.model.camera import Camera
 from irtps.model.scene import orthographic_scene
+from irtps.geometry.bilateral_integration import integrate_bilateral
 from irtps.irt.pipeline import (
     dataset_lobe_share,
     fit_photometric_stereo,
@@ -95,6 +97,14 @@ class Reconstruction:
         With ``correct_brightness``: float64 (K,), the factor each light's irradiance was
         scaled by before the fit (its image's brightness against a first fit; 1 where not
         known).
+    depth : numpy.ndarray or None
+        With a pinhole camera: float32 (H, W) depth along the optical axis, 0 outside the
+        mask, integrated from ``normals`` through the pinhole so that it keeps its
+        discontinuities (`irtps.geometry.bilateral_integration`), scaled to the median depth
+        of the placed heights below the optical centre (normals fix it only up to scale).
+    discontinuities : numpy.ndarray or None
+        With ``depth``: bool (H, W, 2), the edges to the right neighbour (``[..., 0]``) and
+        to the pixel below (``[..., 1]``) that are depth discontinuities.
     """
 
     normals: np.ndarray
@@ -116,6 +126,8 @@ class Reconstruction:
     excluded_images: tuple[str, ...] = ()
     image_agreement: ImageAgreement | None = None
     irradiance_factors: np.ndarray | None = None
+    depth: np.ndarray | None = None
+    discontinuities: np.ndarray | None = None
 
     @property
     def indirect(self) -> np.ndarray | None:
@@ -209,6 +221,7 @@ def reconstruct(
     if method is not None:
         settings["method"] = method
     options = ReconstructOptions.build(options, **settings)
+    camera = dataset.scene.camera
     dataset = _orthographic(dataset)
     options = resolve_options(dataset, options)
     _check_input(dataset, options.saturation, options.robust)
@@ -238,6 +251,8 @@ def reconstruct(
         options, share = _chosen(options, loop.first_fit, share)
         with timed(timings, "image_agreement"):
             agreement = _image_agreement(dataset, loop.first_fit, options.saturation)
+        with timed(timings, "depth"):
+            depth, discontinuities = _pinhole_depth(camera, loop.fit.normals, dataset.mask, loop.height)
         return Reconstruction(
             normals=loop.fit.normals,
             albedo=loop.albedo,
@@ -258,6 +273,8 @@ def reconstruct(
             excluded_images=dataset.excluded_images,
             image_agreement=agreement,
             irradiance_factors=factors,
+            depth=depth,
+            discontinuities=discontinuities,
         )
     # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
     if first is None:
@@ -265,6 +282,8 @@ def reconstruct(
     timings.update(first.timings)
     with timed(timings, "image_agreement"):
         agreement = _image_agreement(dataset, first.fit, options.saturation)
+    with timed(timings, "depth"):
+        depth, discontinuities = _pinhole_depth(camera, first.fit.normals, dataset.mask, first.height)
     return Reconstruction(
         normals=first.fit.normals,
         albedo=first.fit.albedo,
@@ -282,6 +301,8 @@ def reconstruct(
         excluded_images=dataset.excluded_images,
         image_agreement=agreement,
         irradiance_factors=factors,
+        depth=depth,
+        discontinuities=discontinuities,
     )
 
 
@@ -346,6 +367,23 @@ def load_and_reconstruct(
     result = reconstruct(dataset, **options)
     result.timings = {"load": loaded, **result.timings}
     return dataset, result
+
+
+def _pinhole_depth(
+    camera: Camera, normals: np.ndarray, mask: np.ndarray, height: np.ndarray
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """With a pinhole `camera`: the depth along its axis that `normals` give through it
+    (`irtps.geometry.bilateral_integration`), 0 outside `mask`, scaled to the median depth of
+    the placed `height` below the optical centre (median 1 where the camera has none), and
+    its discontinuities; else (None, None)."""
+    if camera.projection != "perspective":
+        return None, None
+    integrated = integrate_bilateral(normals, mask, intrinsics=camera.intrinsics())
+    depth = integrated.surface
+    scale = 1.0
+    if camera.optical_center is not None:
+        scale = float(np.median(camera.optical_center[2] - height[mask])) / float(np.median(depth[mask]))
+    return np.where(mask, depth * np.float32(scale), 0).astype(np.float32), integrated.discontinuities
 
 
 def _orthographic(dataset: Dataset) -> Dataset:
