@@ -251,8 +251,7 @@ def reconstruct(
         options, share = _chosen(options, loop.first_fit, share)
         with timed(timings, "image_agreement"):
             agreement = _image_agreement(dataset, loop.first_fit, options.saturation)
-        with timed(timings, "depth"):
-            depth, discontinuities = _pinhole_depth(camera, loop.fit.normals, dataset.mask, loop.height)
+        depth, discontinuities = _pinhole_depth(camera, loop.fit.normals, dataset.mask, loop.height, timings)
         return Reconstruction(
             normals=loop.fit.normals,
             albedo=loop.albedo,
@@ -282,8 +281,7 @@ def reconstruct(
     timings.update(first.timings)
     with timed(timings, "image_agreement"):
         agreement = _image_agreement(dataset, first.fit, options.saturation)
-    with timed(timings, "depth"):
-        depth, discontinuities = _pinhole_depth(camera, first.fit.normals, dataset.mask, first.height)
+    depth, discontinuities = _pinhole_depth(camera, first.fit.normals, dataset.mask, first.height, timings)
     return Reconstruction(
         normals=first.fit.normals,
         albedo=first.fit.albedo,
@@ -370,15 +368,16 @@ def load_and_reconstruct(
 
 
 def _pinhole_depth(
-    camera: Camera, normals: np.ndarray, mask: np.ndarray, height: np.ndarray
+    camera: Camera, normals: np.ndarray, mask: np.ndarray, height: np.ndarray, timings: dict[str, float]
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """With a pinhole `camera`: the depth along its axis that `normals` give through it
     (`irtps.geometry.bilateral_integration`), 0 outside `mask`, scaled to the median depth of
     the placed `height` below the optical centre (median 1 where the camera has none), and
-    its discontinuities; else (None, None)."""
+    its discontinuities, timed in `timings` as ``"depth"``; else (None, None)."""
     if camera.projection != "perspective":
         return None, None
-    integrated = integrate_bilateral(normals, mask, intrinsics=camera.intrinsics())
+    with timed(timings, "depth"):
+        integrated = integrate_bilateral(normals, mask, intrinsics=camera.intrinsics())
     depth = integrated.surface
     scale = 1.0
     if camera.optical_center is not None:
