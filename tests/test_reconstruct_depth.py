@@ -7,10 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 import irtps
 from irtps import _core
 from irtps.cli.main import main
+from irtps.io.mesh import pinhole_mesh
 
 DATA = Path(__file__).parent / "data"
 PINHOLE = DATA / "mitsuba_persp_small" / "cap_persp_cornell"
@@ -54,3 +56,21 @@ def test_the_command_writes_depth_and_discontinuities_for_a_pinhole_only(pinhole
     assert main(["reconstruct", str(ORTHOGRAPHIC), "--out", str(tmp_path / "flat"), "--quiet"]) == 0
     assert not (tmp_path / "flat" / "depth.exr").exists()
     assert not (tmp_path / "flat" / "discontinuities.png").exists()
+
+
+def test_the_pinhole_mesh_stands_on_the_rays_and_leaves_cut_blocks_out(pinhole):
+    dataset, result = pinhole
+    camera, mask = dataset.scene.camera, dataset.mask
+    vertices, faces, _, _ = pinhole_mesh(result.depth, mask, camera)
+    rays = camera.ray_directions()
+    # Every vertex is a pixel's point on its centre ray, at its depth along the axis (§1b).
+    depth_of_vertex = camera.optical_center[2] - vertices[:, 2]
+    assert np.allclose(sorted(depth_of_vertex), sorted(result.depth[mask]), rtol=1e-5)
+    assert np.allclose(rays[..., 2], -1.0)
+    # A cut edge takes out the two 2x2 blocks it belongs to (four triangles inside the mask).
+    cut = np.zeros((*mask.shape, 2), bool)
+    rows, columns = np.nonzero(ndimage.binary_erosion(mask, np.ones((3, 3), bool)))
+    row, column = rows[len(rows) // 2], columns[len(columns) // 2]
+    cut[row, column, 1] = True  # the edge from (row, column) down to (row + 1, column)
+    _, fewer, _, _ = pinhole_mesh(result.depth, mask, camera, cut)
+    assert len(faces) - len(fewer) == 4

@@ -22,6 +22,7 @@ Conventions of the files, for MeshLab, Blender and other viewers:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -30,8 +31,9 @@ from irtps._shared.checks import check_array, check_finite, check_image, check_m
 from irtps._shared.atomic import atomic_write_bytes
 from irtps.errors import ArgumentError
 from irtps.geometry.surface import meshed_blocks
+from irtps.model.camera import Camera
 
-__all__ = ["height_field_mesh", "write_obj", "write_ply"]
+__all__ = ["height_field_mesh", "pinhole_mesh", "write_obj", "write_ply"]
 
 
 def height_field_mesh(
@@ -95,21 +97,114 @@ def height_field_mesh(
     normals = None if normals is None else check_image("normals", normals, mask, finite=False)
     s = check_positive("pixel_size", pixel_size)
 
+    def positions(i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        check_finite("height", height, used)
+        x = (j + 0.5 - cols / 2.0) * s
+        y = (rows / 2.0 - i - 0.5) * s
+        return np.stack([x, y, height[used]], axis=1)
+
     block = meshed_blocks(mask)
-    used = np.zeros_like(mask)
+    used = _used_pixels(block)
+    return _grid_mesh(block, used, positions, albedo, normals)
+
+
+def pinhole_mesh(
+    depth: np.ndarray,
+    mask: np.ndarray,
+    camera: Camera,
+    discontinuities: np.ndarray | None = None,
+    albedo: np.ndarray | None = None,
+    normals: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Triangulate a depth map seen through a pinhole, in world coordinates, without bridging
+    its depth discontinuities.
+
+    Each pixel's point lies on its centre ray at its depth along the optical axis (contract
+    §1b: ``P = optical_center + depth · ray``); the 2×2 blocks of object pixels make two
+    triangles each, as `height_field_mesh`'s, except the blocks that a discontinuity crosses
+    (one of their four edges marked in `discontinuities`), which would be walls across the jump.
+
+    Parameters
+    ----------
+    depth : numpy.ndarray
+        (H, W) depth along the optical axis, world units.
+    mask : numpy.ndarray
+        (H, W) bool, the object's pixels.
+    camera : Camera
+        A perspective camera with its optical centre.
+    discontinuities : numpy.ndarray, optional
+        bool (H, W, 2): the edges to the right neighbour and to the pixel below that are
+        depth discontinuities (`irtps.geometry.bilateral_integration`).
+    albedo, normals : numpy.ndarray, optional
+        As for `height_field_mesh`.
+
+    Returns
+    -------
+    vertices, faces, colors, vertex_normals
+        As for `height_field_mesh`; faces counter-clockwise seen from the camera.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from irtps.model.camera import Camera
+    >>> camera = Camera(2, 2, projection="perspective", fx=2.0, fy=2.0, cx=1.0, cy=1.0,
+    ...                 optical_center=(0.0, 0.0, 10.0))
+    >>> v, f, _, _ = pinhole_mesh(np.full((2, 2), 4.0), np.ones((2, 2), bool), camera)
+    >>> v.tolist()
+    [[-1.0, 1.0, 6.0], [1.0, 1.0, 6.0], [-1.0, -1.0, 6.0], [1.0, -1.0, 6.0]]
+    >>> cut = np.zeros((2, 2, 2), bool); cut[0, 0, 0] = True
+    >>> pinhole_mesh(np.full((2, 2), 4.0), np.ones((2, 2), bool), camera, cut)[1].shape
+    (0, 3)
+    """
+    depth = check_array("depth", depth, (None, None))
+    mask = check_mask(mask, depth.shape, match="depth")
+    albedo = None if albedo is None else check_image("albedo", albedo, mask, finite=False)
+    normals = None if normals is None else check_image("normals", normals, mask, finite=False)
+    if camera.optical_center is None:
+        raise ArgumentError("camera", "a pinhole mesh needs a perspective camera with its optical centre")
+    rays = camera.ray_directions()
+    if rays.shape[:2] != depth.shape:
+        raise ArgumentError(
+            "camera",
+            f"sees {rays.shape[1]}x{rays.shape[0]} pixels, the depth map has {depth.shape[1]}x{depth.shape[0]}",
+        )
+    block = meshed_blocks(mask)
+    if discontinuities is not None:
+        cut = check_array("discontinuities", discontinuities, (*depth.shape, 2)).astype(bool)
+        right, down = cut[..., 0], cut[..., 1]
+        block &= ~(right[:-1, :-1] | right[1:, :-1] | down[:-1, :-1] | down[:-1, 1:])
+    used = _used_pixels(block)
+
+    def positions(i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        check_finite("depth", depth, used)
+        return np.asarray(camera.optical_center, dtype=np.float64) + depth[i, j][:, None] * rays[i, j]
+
+    return _grid_mesh(block, used, positions, albedo, normals)
+
+
+def _used_pixels(block: np.ndarray) -> np.ndarray:
+    """The pixels of an (H-1, W-1) map of meshed 2×2 blocks: those a triangle uses."""
+    used = np.zeros((block.shape[0] + 1, block.shape[1] + 1), dtype=bool)
     used[:-1, :-1] |= block
     used[1:, :-1] |= block
     used[:-1, 1:] |= block
     used[1:, 1:] |= block
+    return used
 
-    index = np.full(height.shape, -1, dtype=np.int64)
+
+def _grid_mesh(
+    block: np.ndarray,
+    used: np.ndarray,
+    positions: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    albedo: np.ndarray | None,
+    normals: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """The mesh of the meshed 2×2 `block`s over a pixel grid: vertices at `positions(i, j)` of
+    the `used` pixels (row-major), two triangles per block, vertex colours and normals."""
+    index = np.full(used.shape, -1, dtype=np.int64)
     index[used] = np.arange(int(used.sum()))
     i, j = np.nonzero(used)
-    check_finite("height", height, used)
-    z = height[used]
-    x = (j + 0.5 - cols / 2.0) * s
-    y = (rows / 2.0 - i - 0.5) * s
-    vertices = np.stack([x, y, z], axis=1).astype(np.float32)
+    vertices = positions(i, j).astype(np.float32)
 
     bi, bj = np.nonzero(block)
     first = np.stack([index[bi, bj], index[bi + 1, bj], index[bi, bj + 1]], axis=1)

@@ -28,7 +28,7 @@ from irtps._shared.records import RUN, stamp
 from irtps.errors import ArgumentError, DatasetError
 from irtps.io.dataset import read_albedo_map, read_height_map, read_normal_map
 from irtps.io.imageio import read_mask, write_exr, write_png
-from irtps.io.mesh import height_field_mesh, write_obj, write_ply
+from irtps.io.mesh import height_field_mesh, pinhole_mesh, write_obj, write_ply
 from irtps.irt.reconstruct import Reconstruction
 from irtps.ps.fit import FLAGS
 
@@ -58,7 +58,8 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
 
     Files: ``normal.exr`` (R, G, B = nx, ny, nz), ``albedo.exr``, ``height.exr`` (Y),
     ``mask.png``, ``mesh.ply`` (binary; the height field with per-vertex albedo colour and
-    normals), ``mesh.obj`` (the same vertices, triangles and normals as Wavefront OBJ text,
+    normals; with a pinhole camera, the depth map's points in world coordinates, without the
+    blocks that a discontinuity crosses: `irtps.io.mesh.pinhole_mesh`), ``mesh.obj`` (the same vertices, triangles and normals as Wavefront OBJ text,
     see `irtps.io.mesh`), ``run.json`` (parameters, pixel size, timings, versions, source,
     placement, IRT-PS history with each pass's residual, the pass chosen, the images fitted,
     how each agrees with the fit, those left out, and the factors of ``correct_brightness``)
@@ -95,9 +96,19 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             write_exr(folder / "depth.exr", result.depth)
         if result.discontinuities is not None:
             write_png(folder / "discontinuities.png", _edge_pixels(result.discontinuities), bit_depth=8)
-        vertices, faces, colors, normals = height_field_mesh(
-            result.height, result.mask, result.pixel_size, albedo=result.albedo, normals=result.normals
-        )
+        if result.depth is not None and result.camera is not None:
+            vertices, faces, colors, normals = pinhole_mesh(
+                result.depth,
+                result.mask,
+                result.camera,
+                result.discontinuities,
+                albedo=result.albedo,
+                normals=result.normals,
+            )
+        else:
+            vertices, faces, colors, normals = height_field_mesh(
+                result.height, result.mask, result.pixel_size, albedo=result.albedo, normals=result.normals
+            )
         write_ply(folder / "mesh.ply", vertices, faces, colors=colors, normals=normals)
         write_obj(folder / "mesh.obj", vertices, faces, normals=normals)
         run = {

@@ -105,6 +105,8 @@ class Reconstruction:
     discontinuities : numpy.ndarray or None
         With ``depth``: bool (H, W, 2), the edges to the right neighbour (``[..., 0]``) and
         to the pixel below (``[..., 1]``) that are depth discontinuities.
+    camera : Camera or None
+        The data set's camera (a pinhole's own, not its orthographic stand-in's).
     """
 
     normals: np.ndarray
@@ -128,6 +130,7 @@ class Reconstruction:
     irradiance_factors: np.ndarray | None = None
     depth: np.ndarray | None = None
     discontinuities: np.ndarray | None = None
+    camera: Camera | None = None
 
     @property
     def indirect(self) -> np.ndarray | None:
@@ -274,6 +277,7 @@ def reconstruct(
             irradiance_factors=factors,
             depth=depth,
             discontinuities=discontinuities,
+            camera=camera,
         )
     # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
     if first is None:
@@ -301,6 +305,7 @@ def reconstruct(
         irradiance_factors=factors,
         depth=depth,
         discontinuities=discontinuities,
+        camera=camera,
     )
 
 
