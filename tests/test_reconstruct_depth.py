@@ -13,6 +13,7 @@ import irtps
 from irtps import _core
 from irtps.cli.main import main
 from irtps.io.mesh import pinhole_mesh
+from irtps.report.build import build_report
 
 DATA = Path(__file__).parent / "data"
 PINHOLE = DATA / "mitsuba_persp_small" / "cap_persp_cornell"
@@ -53,7 +54,10 @@ def test_the_command_writes_depth_and_discontinuities_for_a_pinhole_only(pinhole
     assert np.array_equal(_core.read_exr(str(tmp_path / "pinhole" / "depth.exr")), result.depth)
     edges, bits = _core.read_png(str(tmp_path / "pinhole" / "discontinuities.png"))
     assert bits == 8 and edges.shape[:2] == result.depth.shape and set(np.unique(edges)) <= {0.0, 1.0}
+    figures = {figure.name: figure for figure in build_report(tmp_path / "pinhole").figures}
+    assert f"{int((edges > 0).sum())} pixels on an edge" in figures["discontinuities"].caption
     assert main(["reconstruct", str(ORTHOGRAPHIC), "--out", str(tmp_path / "flat"), "--quiet"]) == 0
+    assert "discontinuities" not in [figure.name for figure in build_report(tmp_path / "flat").figures]
     assert not (tmp_path / "flat" / "depth.exr").exists()
     assert not (tmp_path / "flat" / "discontinuities.png").exists()
 

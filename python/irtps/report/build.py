@@ -32,7 +32,7 @@ from irtps.errors import DatasetError, IrtpsError
 from irtps.model.metrics import ErrorMaps, Metrics, error_maps, evaluate
 from irtps.report.figures import agreement_png, convergence_png, error_map_png, image_png
 from irtps.ps.image_agreement import ImageAgreement
-from irtps.io.imageio import read_exr
+from irtps.io.imageio import read_exr, read_png
 from irtps._shared.guarded import shown
 from irtps._shared.output_rule import check_output
 from irtps._shared.paths import folder_problem
@@ -163,6 +163,8 @@ def build_report(run_dir: str | Path, *, truth: str | Path | None = None) -> Rep
         _albedo_figure(albedo[window], shown),
         _shading_figure(height[window], shown, record, report.notes),
     ]
+    if (folder / "discontinuities.png").exists():
+        report.figures.append(_discontinuity_figure(folder / "discontinuities.png", normals, mask, window))
     indirect = _indirect_figure(folder / "indirect", mask, window)
     if indirect is not None:
         report.figures.append(indirect)
@@ -258,6 +260,28 @@ def _shading_figure(height: np.ndarray, mask: np.ndarray, record: dict, notes: l
     )
     return ReportFigure(
         "shading", "Shaded height field", caption, image_png(hillshade(height, mask, pixel_size), "Shaded height field")
+    )
+
+
+def _discontinuity_figure(
+    path: Path, normals: np.ndarray, mask: np.ndarray, window: tuple[slice, slice]
+) -> ReportFigure:
+    """The normals, dimmed, with the pixels of the depth discontinuities in red."""
+    values, _ = read_png(path)
+    if values.shape[:2] != mask.shape:
+        raise DatasetError(
+            f"{path}: {values.shape[1]}x{values.shape[0]} pixels, the reconstruction has {mask.shape[1]}x{mask.shape[0]}"
+        )
+    edges = (values.reshape(*mask.shape, -1) > 0).any(axis=-1) & mask
+    rgb = 0.35 + 0.4 * normal_to_rgb(normals, mask)
+    rgb[edges] = (0.9, 0.1, 0.1)
+    caption = (
+        "The depth discontinuities (discontinuities.png) that the integration through the pinhole kept, in red, over "
+        f"the normals dimmed: {int(edges.sum())} pixels on an edge across which the depth jumps (occluding contours). "
+        "The mesh leaves the 2x2 blocks that they cross out, rather than joining the two sides with a wall."
+    )
+    return ReportFigure(
+        "discontinuities", "Depth discontinuities", caption, image_png(rgb[window], "Depth discontinuities")
     )
 
 
