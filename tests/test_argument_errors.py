@@ -12,6 +12,7 @@ import pytest
 import irtps
 from irtps import _core
 from irtps.errors import ArgumentError
+from irtps.model.camera import Camera
 from irtps.model.options import OptionError
 from irtps.render.synth import synthesize
 
@@ -20,6 +21,7 @@ ARRAY_MODULES = [
     "report.display",
     "model.metrics",
     "report.figures",
+    "geometry.bilateral_integration",
     "geometry.boundary",
     "geometry.integrate",
     "irt.interreflection",
@@ -87,6 +89,11 @@ CASES = {
     "irtps.irt.interreflection.check_traceable": (lambda f: f({"mask": MASK}), "dataset: "),
     "irtps.geometry.surface.meshed_blocks": (lambda f: f(np.zeros(4, bool)), "mask: "),
     "irtps.io.mesh.height_field_mesh": (lambda f: f(HEIGHT, MASK, albedo=ALBEDO[:3]), "albedo: "),
+    "irtps.io.mesh.pinhole_mesh": (lambda f: f(HEIGHT, MASK, Camera(4, 4, pixel_size=1.0)), "camera: "),
+    "irtps.geometry.bilateral_integration.integrate_bilateral": (
+        lambda f: f(NORMALS, MASK, intrinsics=np.eye(3)[:2]),
+        "intrinsics: ",
+    ),
     "irtps.io.mesh.write_ply": (lambda f: f("unused.ply", np.zeros((3, 3)), np.array([[0, 1, 5]])), "faces: "),
     "irtps.io.mesh.write_obj": (lambda f: f("unused.obj", np.zeros((3, 2)), np.zeros((0, 3), int)), "vertices: "),
     "irtps.render.residual.compared_observations": (
