@@ -252,51 +252,31 @@ def reconstruct(
         with timed(timings, "irtps"):
             loop = remove_interreflections(dataset, options, progress=progress)
         options, share = _chosen(options, loop.first_fit, share)
-        with timed(timings, "image_agreement"):
-            agreement = _image_agreement(dataset, loop.first_fit, options.saturation)
-        depth, discontinuities = _pinhole_depth(camera, loop.fit.normals, dataset.mask, loop.height, timings)
-        return Reconstruction(
-            normals=loop.fit.normals,
-            albedo=loop.albedo,
-            height=loop.height,
-            mask=dataset.mask,
-            flags=loop.fit.flags,
-            pixel_size=dataset.scene.camera.orthographic_pixel_size,
-            timings=timings,
-            parameters=parameters,
-            object_indirect=loop.indirect,
-            history=loop.history,
-            placement=loop.placement,
-            chosen=loop.chosen,
-            albedo_scale=loop.albedo_scale,
-            lobe_share=share,
-            robust_used=options.robust,
-            image_names=dataset.names,
-            excluded_images=dataset.excluded_images,
-            image_agreement=agreement,
-            irradiance_factors=factors,
-            depth=depth,
-            discontinuities=discontinuities,
-            camera=camera,
-        )
-    # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
-    if first is None:
-        first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
-    timings.update(first.timings)
+        fit, first_fit, albedo, height = loop.fit, loop.first_fit, loop.albedo, loop.height
+        placement, albedo_scale = loop.placement, loop.albedo_scale
+        indirect, history, chosen = loop.indirect, loop.history, loop.chosen
+    else:
+        # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
+        if first is None:
+            first = reconstruction_pass(dataset, dataset.images, options, progress=progress)
+        timings.update(first.timings)
+        fit = first_fit = first.fit
+        albedo, height, placement, albedo_scale = first.fit.albedo, first.height, first.placement, first.albedo_scale
+        indirect, history, chosen = None, [], None
     with timed(timings, "image_agreement"):
-        agreement = _image_agreement(dataset, first.fit, options.saturation)
-    depth, discontinuities = _pinhole_depth(camera, first.fit.normals, dataset.mask, first.height, timings)
+        agreement = _image_agreement(dataset, first_fit, options.saturation)
+    depth, discontinuities = _pinhole_depth(camera, fit.normals, dataset.mask, height, timings)
     return Reconstruction(
-        normals=first.fit.normals,
-        albedo=first.fit.albedo,
-        height=first.height,
+        normals=fit.normals,
+        albedo=albedo,
+        height=height,
         mask=dataset.mask,
-        flags=first.fit.flags,
+        flags=fit.flags,
         pixel_size=dataset.scene.camera.orthographic_pixel_size,
         timings=timings,
         parameters=parameters,
-        placement=first.placement,
-        albedo_scale=first.albedo_scale,
+        placement=placement,
+        albedo_scale=albedo_scale,
         lobe_share=share,
         robust_used=options.robust,
         image_names=dataset.names,
@@ -306,6 +286,9 @@ def reconstruct(
         depth=depth,
         discontinuities=discontinuities,
         camera=camera,
+        object_indirect=indirect,
+        history=history,
+        chosen=chosen,
     )
 
 
