@@ -63,6 +63,7 @@ fn scene(n: usize) -> Scene {
             width: n,
             height: n,
             pixel_size: 1.0,
+            pinhole: None,
         },
         surface: HeightField {
             height,

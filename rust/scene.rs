@@ -1,5 +1,5 @@
-//! The scene description of the data-set contract (`irtps.scene/1`): orthographic camera,
-//! height-field object, optional floor and Cornell box, distant lights.
+//! The scene description of the data-set contract (`irtps.scene/1`): orthographic or pinhole
+//! camera, height-field object, optional floor and Cornell box, distant lights.
 
 use glam::Vec3A;
 
@@ -8,29 +8,74 @@ use crate::error::{Error, Result};
 /// Linear RGB triple.
 pub type Rgb = [f32; 3];
 
-/// Orthographic camera looking along −z; pixel (i, j) is centred at
-/// `x = (j + 0.5 − W/2)·s`, `y = (H/2 − i − 0.5)·s`.
+/// The camera, looking along −z: orthographic, or a pinhole (contract §1b).
+///
+/// Orthographic: pixel (i, j) is centred at `x = (j + 0.5 − W/2)·s`, `y = (H/2 − i − 0.5)·s`
+/// with `s` the pixel size. Pinhole: rays leave its optical centre through each pixel's
+/// footprint on the image plane; `pixel_size` is then the world size of a pixel at the depth
+/// of the object's base, the scale at which the core builds the skirt, caches the panels'
+/// light and sets its tolerances.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Camera {
     pub width: usize,
     pub height: usize,
     pub pixel_size: f32,
+    /// The pinhole, or None for an orthographic camera.
+    pub pinhole: Option<Pinhole>,
+}
+
+/// A pinhole at world `(0, 0, center_z)`: image x along world +x, image rows along world −y;
+/// image position (`u`, `v`) = (column, row) looks along `((u − cx)/fx, −(v − cy)/fy, −1)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pinhole {
+    /// Focal lengths, pixels.
+    pub fx: f32,
+    pub fy: f32,
+    /// Principal point, pixels.
+    pub cx: f32,
+    pub cy: f32,
+    /// Height of the optical centre, world units.
+    pub center_z: f32,
 }
 
 impl Camera {
     /// World (x, y) of the continuous image position (`row`, `col`), where pixel (i, j)
-    /// covers `[i, i+1) × [j, j+1)`.
-    pub fn image_to_world(&self, row: f32, col: f32) -> (f32, f32) {
-        let s = self.pixel_size;
-        (
-            (col - self.width as f32 / 2.0) * s,
-            (self.height as f32 / 2.0 - row) * s,
-        )
+    /// covers `[i, i+1) × [j, j+1)`: for a pinhole, on the plane at height `z`.
+    pub fn image_to_world(&self, row: f32, col: f32, z: f32) -> (f32, f32) {
+        match self.pinhole {
+            None => {
+                let s = self.pixel_size;
+                (
+                    (col - self.width as f32 / 2.0) * s,
+                    (self.height as f32 / 2.0 - row) * s,
+                )
+            }
+            Some(p) => {
+                let depth = p.center_z - z;
+                ((col - p.cx) / p.fx * depth, -(row - p.cy) / p.fy * depth)
+            }
+        }
     }
 
-    /// World (x, y) of the centre of pixel (`row`, `col`).
-    pub fn pixel_center(&self, row: usize, col: usize) -> (f32, f32) {
-        self.image_to_world(row as f32 + 0.5, col as f32 + 0.5)
+    /// The point at height `z` that the centre of pixel (`row`, `col`) sees.
+    pub fn surface_point(&self, row: usize, col: usize, z: f32) -> Vec3A {
+        let (x, y) = self.image_to_world(row as f32 + 0.5, col as f32 + 0.5, z);
+        Vec3A::new(x, y, z)
+    }
+
+    /// The camera ray through image position (`row`, `col`): its origin (for an orthographic
+    /// camera, at height `orthographic_z`) and unit direction.
+    pub fn ray(&self, row: f32, col: f32, orthographic_z: f32) -> (Vec3A, Vec3A) {
+        match self.pinhole {
+            None => {
+                let (x, y) = self.image_to_world(row, col, orthographic_z);
+                (Vec3A::new(x, y, orthographic_z), -Vec3A::Z)
+            }
+            Some(p) => (
+                Vec3A::new(0.0, 0.0, p.center_z),
+                Vec3A::new((col - p.cx) / p.fx, -(row - p.cy) / p.fy, -1.0).normalize(),
+            ),
+        }
     }
 
     /// Number of pixels.
@@ -104,6 +149,23 @@ impl Scene {
                 format!("{} is not a positive number", c.pixel_size),
             ));
         }
+        if let Some(p) = &c.pinhole {
+            if !(p.fx.is_finite() && p.fx > 0.0 && p.fy.is_finite() && p.fy > 0.0) {
+                return Err(Error::input(
+                    "camera.fx",
+                    format!(
+                        "focal lengths {} and {} must be positive numbers",
+                        p.fx, p.fy
+                    ),
+                ));
+            }
+            if !(p.cx.is_finite() && p.cy.is_finite() && p.center_z.is_finite()) {
+                return Err(Error::input(
+                    "camera.cx",
+                    "the principal point and the optical centre must be finite",
+                ));
+            }
+        }
         let n = c.pixel_count();
         let s = &self.surface;
         for (field, len) in [
@@ -128,6 +190,18 @@ impl Scene {
                     format!("non-finite value at pixel {}", describe_pixel(p, c)),
                 ));
             }
+            if let Some(pinhole) = &c.pinhole {
+                if h >= pinhole.center_z {
+                    return Err(Error::input(
+                        "height",
+                        format!(
+                            "{h} at pixel {} is not below the optical centre (z = {})",
+                            describe_pixel(p, c),
+                            pinhole.center_z
+                        ),
+                    ));
+                }
+            }
             check_albedo(&format!("albedo at pixel {}", describe_pixel(p, c)), rgb)?;
         }
         if let Some(f) = &self.floor {
@@ -135,6 +209,18 @@ impl Scene {
                 return Err(Error::input("floor.height", "is not finite"));
             }
             check_albedo("floor.albedo", &f.albedo)?;
+        }
+        if let Some(pinhole) = &c.pinhole {
+            if self.base_height() >= pinhole.center_z {
+                return Err(Error::input(
+                    "camera.optical_center",
+                    format!(
+                        "z = {} is not above the floor (z = {})",
+                        pinhole.center_z,
+                        self.base_height()
+                    ),
+                ));
+            }
         }
         if let Some(b) = &self.cornell_box {
             let finite =
@@ -278,8 +364,20 @@ impl Frame {
             }
             None => None,
         };
+        let pinhole = match scene.camera.pinhole {
+            Some(p) => Some(Pinhole {
+                center_z: resolvable(
+                    "camera.optical_center",
+                    self.local_z(p.center_z),
+                    String::new,
+                )?,
+                ..p
+            }),
+            None => None,
+        };
         let camera = Camera {
             pixel_size: 1.0,
+            pinhole,
             ..scene.camera
         };
         Ok(Scene {

@@ -113,6 +113,10 @@ CASES = {
         "samples: ",
     ),
     "irtps.geometry.surface.height_to_normals": (lambda f: f(HEIGHT, WRONG), "mask: "),
+    "irtps.geometry.surface.depth_to_normals": (
+        lambda f: f(HEIGHT, MASK, Camera(*HEIGHT.shape[::-1], 1.0)),
+        "camera: ",
+    ),
     "irtps.geometry.surface.footprint_normals": (lambda f: f(HEIGHT, MASK, pixel_size=-1.0), "pixel_size: "),
     "irtps.geometry.surface.surface_albedo": (lambda f: f(ALBEDO[:, :2], HEIGHT, MASK), "albedo_ps: "),
     "irtps.ps.fit.photometric_stereo": (

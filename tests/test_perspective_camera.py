@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import ndimage
 from cli_helpers import refused
 
 import irtps
@@ -20,7 +21,17 @@ from irtps.io.dataset_files import dataset_inputs
 from irtps.io.diligent import diligent_ground_truth_inputs, load_diligent_ground_truth
 from irtps.io.intrinsics import read_intrinsics, with_intrinsics
 from irtps.model.camera import intrinsics_problem
-from irtps.model.scene import load_scene, orthographic_scene, parse_scene, scene_to_dict, write_scene
+from irtps.geometry.boundary import mask_boundary
+from irtps.geometry.placement import raised
+from irtps.irt.pipeline import pinhole_relief
+from irtps.model.scene import (
+    STAND_IN_WARNING,
+    load_scene,
+    orthographic_scene,
+    parse_scene,
+    scene_to_dict,
+    write_scene,
+)
 
 DATA = Path(__file__).resolve().parent / "data"
 FIXTURE = DATA / "mitsuba_persp_small" / "cap_persp_cornell"
@@ -30,7 +41,7 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 MITSUBA = SHARED / "mitsuba"
 needs_shared = pytest.mark.skipif(not MITSUBA.is_dir(), reason="shared Mitsuba scenes not available")
 #: The start of the warning of every step that runs on a perspective camera's stand-in.
-STAND_IN = "the perspective camera is traced as an orthographic camera of pixel size"
+STAND_IN = STAND_IN_WARNING
 #: DiLiGenT's intrinsics of readingPNG (612x512 images).
 DILIGENT_K = "3772.08 0 305.875\n0 3759.01 255.125\n0 0 1\n"
 
@@ -97,7 +108,11 @@ def test_a_perspective_camera_has_no_pixel_size_nor_fixed_pixel_centres():
 def test_the_stand_in_has_the_pixel_footprint_at_the_depth_given():
     camera = _perspective(fx=2.0, fy=8.0)
     stand_in = camera.orthographic_stand_in(12.0)
-    assert stand_in == Camera(4, 3, 3.0)  # 12 / sqrt(2 * 8)
+    assert stand_in == Camera(4, 3, 3.0, pinhole=camera)  # 12 / sqrt(2 * 8)
+    with pytest.raises(DatasetError, match=r"Camera\.pinhole is .*: expected the perspective camera of a 4x3 image"):
+        Camera(4, 3, 3.0, pinhole=Camera(4, 3, 3.0))
+    with pytest.raises(DatasetError, match="Camera.pinhole is given: only an orthographic stand-in has it"):
+        dataclasses.replace(camera, pinhole=camera)
     for depth in (0.0, -1.0, math.nan, "1"):
         with pytest.raises(irtps.ArgumentError, match="depth: expected a positive finite number"):
             camera.orthographic_stand_in(depth)
@@ -258,17 +273,21 @@ def test_a_perspective_data_set_is_reconstructed_on_its_stand_in_with_one_warnin
     assert error < 10.0
 
 
-def test_rendering_a_perspective_scene_warns_and_uses_the_stand_in():
+def test_rendering_a_perspective_scene_traces_through_its_pinhole_without_a_warning():
+    # A level plate 6 below a pinhole at 16 looks the same from every pixel: a stand-in
+    # would see it too; its edge and the floor beside it are where the pinhole shows.
     scene = _scene(_perspective(width=8, height=8, fx=8.0, fy=8.0, cx=4.0, cy=4.0, zc=16.0))
-    with pytest.warns(IrtpsWarning, match=f"the scene rendered: {STAND_IN} 2 "):
-        rendering = irtps.render(
-            scene, np.zeros((8, 8)), np.full((8, 8, 3), 0.5), np.ones((8, 8), bool), bounces=1, samples=2
-        )
+    mask = np.zeros((8, 8), bool)
+    mask[2:6, 2:6] = True
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rendering = irtps.render(scene, np.where(mask, 10.0, 0.0), np.full((8, 8, 3), 0.5), mask, bounces=0)
     assert rendering.direct.shape == (3, 8, 8, 3)
     with pytest.warns(
         IrtpsWarning, match="2 \\(its pixel footprint at the object's base, 16 from the optical centre\\)"
     ):
-        assert orthographic_scene(scene, "x").camera == Camera(8, 8, 2.0)
+        stand_in = orthographic_scene(scene, "x").camera
+    assert stand_in == Camera(8, 8, 2.0, pinhole=scene.camera)
 
 
 def test_a_stand_in_beyond_the_range_of_pixel_sizes_is_refused():
@@ -330,7 +349,7 @@ def test_intrinsics_keep_the_units_of_an_orthographic_data_set(tmp_path):
     assert (camera.projection, camera.fx, camera.cx) == ("perspective", 100.0, 48.0)
     assert camera.optical_center == (0.0, 0.0, data.scene.floor.height + 1.0 * 100.0)  # pixel size 1 at the floor
     with pytest.warns(IrtpsWarning, match=f"{STAND_IN} 1 "):
-        assert orthographic_scene(data.scene, "x").camera == Camera(96, 96, 1.0)
+        assert orthographic_scene(data.scene, "x").camera == Camera(96, 96, 1.0, pinhole=camera)
 
 
 # DiLiGenT's K.txt and depth_gt.npz
@@ -351,18 +370,23 @@ def test_a_diligent_folder_with_k_is_perspective_at_the_scale_it_had(ball):
     assert (camera.fx, camera.fy, camera.cx, camera.cy) == (3772.08, 3759.01, 23.5, 22.25)
     assert camera.optical_center == (0.0, 0.0, f)
     with pytest.warns(IrtpsWarning, match=STAND_IN):
-        assert orthographic_scene(perspective.scene, "ball").camera == orthographic.scene.camera  # pixel size 1 exactly
+        stand_in = orthographic_scene(perspective.scene, "ball").camera
+    assert stand_in == dataclasses.replace(orthographic.scene.camera, pinhole=camera)  # pixel size 1 exactly
     assert ball / "K.txt" in dataset_inputs(ball)
 
 
-def test_a_diligent_folder_reconstructs_as_before_but_for_the_warning(ball):
+def test_a_diligent_folder_reconstructs_the_same_normals_and_its_height_through_the_pinhole(ball):
     before = irtps.reconstruct(irtps.load_dataset(ball))
     _write_k(ball, "3772.08 0 23.5\n0 3759.01 22.25\n0 0 1\n")
     with pytest.warns(IrtpsWarning, match=STAND_IN):
         after = irtps.reconstruct(irtps.load_dataset(ball))
-    for name in ("normals", "albedo", "height", "mask", "flags"):
+    for name in ("normals", "albedo", "mask", "flags"):
         np.testing.assert_array_equal(getattr(after, name), getattr(before, name))
     assert after.pixel_size == before.pixel_size == 1.0
+    # The same normals integrated along the pinhole's rays: the ball, 1/300 of the distance
+    # across, differs from its orthographic integration by under 1 % of its height.
+    difference = np.abs(after.height - before.height)[before.mask]
+    assert 0 < difference.max() < 0.01 * before.height.max()
 
 
 def test_a_diligent_k_for_other_images_is_refused(ball):
@@ -504,3 +528,52 @@ def test_diligent_reading_is_perspective_with_its_depth():
     assert camera.optical_center == (0.0, 0.0, camera.focal_length)
     depth = data.gt.depth
     assert depth.shape == (512, 612) and 1490 < np.nanmin(depth[data.mask]) < np.nanmax(depth) < 1580
+
+
+# IRT-PS's relief through a pinhole
+
+
+@pytest.mark.parametrize("method", ["ls", "footprint"])
+def test_the_pinhole_relief_of_a_tilted_plane_stands_on_it_along_the_rays(method):
+    camera = _perspective(width=24, height=20, fx=30.0, fy=32.0, cx=11.3, cy=10.6, zc=50.0)
+    normal = np.array([0.3, -0.2, 1.0]) / np.linalg.norm([0.3, -0.2, 1.0])
+    rays = camera.ray_directions()
+    depth = normal @ (np.array([0.0, 0.0, 10.0]) - camera.optical_center) / (rays @ normal)
+    truth = camera.optical_center[2] - depth  # the plane through (0, 0, 10), contract §1b
+    mask = np.zeros((20, 24), bool)
+    mask[3:17, 4:21] = True
+    scene = _scene(camera.orthographic_stand_in(50.0))
+    relief = pinhole_relief(scene, np.broadcast_to(normal, (20, 24, 3)), mask, method)
+    base = float(np.median(truth[mask_boundary(mask)]))
+    height = raised(relief, mask, base, scene)
+    np.testing.assert_allclose(height[mask], truth[mask], atol=5e-3)  # 1e-4 of the depth
+    # The orthographic stand-in's integration of the same normals bends the plane.
+    flat = irtps.integrate_normals(np.broadcast_to(normal, (20, 24, 3)), mask, pixel_size=50.0 / camera.focal_length)
+    flat = irtps.place_height(flat, mask, base_height=base)
+    assert np.abs(flat - truth)[mask].max() > 0.1
+
+
+# irtps synth --camera perspective
+
+
+def test_synth_makes_a_pinhole_data_set_whose_direct_images_fit_its_true_normals(tmp_path):
+    out = tmp_path / "cap"
+    argv = ["synth", "cap", "--size", "32", "--lights", "6", "--camera", "perspective", "--bounces", "1"]
+    assert main([*argv, "--samples", "4", "--out", str(out), "--quiet"]) == 0
+    data = irtps.load_dataset(out)
+    camera, mask, truth = data.scene.camera, data.mask, data.gt
+    assert (camera.projection, camera.fx, camera.cx, camera.optical_center) == ("perspective", 38.4, 16.0, (0, 0, 38.4))
+    np.testing.assert_allclose(truth.depth[mask], 38.4 - truth.height[mask], atol=1e-5)
+    # The direct images, rendered through the pinhole, are those of the depth map's normals
+    # (away from the rim), within the footprint's averaging over a curved 32-pixel cap (an
+    # orthographic synth's images agree with its normals within 1.3 degrees); the normals of
+    # the same heights seen orthographically are twice as far.
+    fit = irtps.photometric_stereo(truth.direct, data.scene.light_directions, data.scene.light_irradiance, mask)
+    inner = ndimage.binary_erosion(mask, iterations=2)
+
+    def mean_angle(normals):
+        cosine = np.clip((fit.normals * normals).sum(axis=-1)[inner], -1.0, 1.0)
+        return float(np.degrees(np.arccos(cosine)).mean())
+
+    assert mean_angle(truth.normal) < 1.5
+    assert mean_angle(irtps.height_to_normals(truth.height, mask)) > 2 * mean_angle(truth.normal)

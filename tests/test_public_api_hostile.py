@@ -17,6 +17,7 @@ MASK = np.ones((4, 4), bool)
 NORMALS = np.dstack([np.zeros((4, 4)), np.zeros((4, 4)), np.ones((4, 4))])
 HEIGHT = np.zeros((4, 4))
 NAN = float("nan")
+PINHOLE = irtps.Camera(4, 4, projection="perspective", fx=4.0, fy=4.0, cx=2.0, cy=2.0, optical_center=(0, 0, 10))
 
 
 def _dataset():
@@ -111,6 +112,13 @@ CASES = [
     # choose_robust
     ("choose_robust", lambda f: f("0.5"), irtps.ArgumentError, "share: "),
     ("choose_robust", lambda f: f(NAN), irtps.ArgumentError, "share: "),
+    # depth_to_normals
+    ("depth_to_normals", lambda f: f(HEIGHT + 5, MASK, irtps.Camera(4, 4, 1.0)), irtps.ArgumentError, "camera: "),
+    ("depth_to_normals", lambda f: f(HEIGHT + 5, MASK, "pinhole"), irtps.ArgumentError, "camera: "),
+    ("depth_to_normals", lambda f: f(np.zeros((3, 4)), MASK, PINHOLE), irtps.ArgumentError, "depth: "),
+    ("depth_to_normals", lambda f: f(np.full((4, 4), NAN), MASK, PINHOLE), irtps.ArgumentError, "depth: "),
+    ("depth_to_normals", lambda f: f(HEIGHT - 1, MASK, PINHOLE), irtps.ArgumentError, "depth: "),
+    ("depth_to_normals", lambda f: f(HEIGHT + 5, MASK[:2], PINHOLE), irtps.ArgumentError, "mask: "),
     # height_to_normals
     ("height_to_normals", lambda f: f(np.full((4, 4), NAN), MASK), irtps.ArgumentError, "height: "),
     ("height_to_normals", lambda f: f(np.zeros((0, 4)), np.zeros((0, 4), bool)), irtps.ArgumentError, "height: "),

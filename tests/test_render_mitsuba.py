@@ -17,11 +17,6 @@ SMALL = Path(__file__).parent / "data" / "mitsuba_small"
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mitsuba"
 #: Why the scene reader refuses a shared scene of lights or surroundings it does not read yet.
 NOT_READ_YET = "a rig's point lights and mesh surroundings: not read yet, issue 48"
-#: Why the rendering of a shared perspective scene does not match its reference yet.
-NOT_TRACED_YET = (
-    "a perspective camera is traced as its orthographic stand-in at the object's base: the pinhole tracer is "
-    "issue 46's next step"
-)
 
 
 def _expected_failure(folder: Path) -> tuple[type[Exception], str] | None:
@@ -29,8 +24,6 @@ def _expected_failure(folder: Path) -> tuple[type[Exception], str] | None:
     scene = json.loads((folder / "scene.json").read_text())
     if any("type" in light for light in scene["lights"]) or scene["environment"]["type"] == "mesh":
         return DatasetError, NOT_READ_YET
-    if scene["camera"]["projection"] == "perspective":
-        return AssertionError, NOT_TRACED_YET
     return None
 
 

@@ -18,7 +18,7 @@ from irtps.irt.reconstruct import Reconstruction, reconstruct
 from irtps._shared.records import irtps_version
 from irtps.render.renderer import Rendering, render, render_indirect
 from irtps.model.scene import Camera, CornellBox, Floor, Light, Scene, load_scene
-from irtps.geometry.surface import height_to_normals
+from irtps.geometry.surface import depth_to_normals, height_to_normals
 from irtps.render.synth import synthesize
 
 del _evaluate_subpackage
@@ -43,6 +43,7 @@ __all__ = [
     "__version__",
     "angular_error_deg",
     "choose_robust",
+    "depth_to_normals",
     "evaluate",
     "exclude_images",
     "height_to_normals",

@@ -113,7 +113,8 @@ def denoise_indirect(
 @final
 class Renderer:
     """A scene made ready for rendering and ray queries: height-field object, optional floor
-    and Cornell box, distant lights."""
+    and Cornell box, distant lights; an orthographic camera, or a pinhole ``(fx, fy, cx, cy,
+    zc)`` whose ``pixel_size`` is a pixel's world size at the depth of the object's base."""
 
     def __new__(
         cls,
@@ -125,6 +126,7 @@ class Renderer:
         light_irradiance: _F32,
         floor: Floor | None = None,
         cornell_box: CornellBox | None = None,
+        pinhole: tuple[float, float, float, float, float] | None = None,
     ) -> Renderer: ...
     def with_reflectance(self, albedo: _F32, light_irradiance: _F32) -> Renderer:
         """The same scene with the object's albedo (H, W, 3) and each light's irradiance

@@ -11,7 +11,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::render::{RenderSettings, Renderer as CoreRenderer};
-use crate::scene::{Camera, CornellBox, Floor, HeightField, Rgb, Scene};
+use crate::scene::{Camera, CornellBox, Floor, HeightField, Pinhole, Rgb, Scene};
 
 use super::convert::{flat, lights_from, rows_of_3};
 use super::errors::{argument_error, renamed, to_py};
@@ -83,7 +83,9 @@ struct BoxArgs {
 ///
 /// Parameters: `height` (H, W) float32, `mask` (H, W) bool, `albedo` (H, W, 3) float32,
 /// `pixel_size`, `light_directions` (K, 3), `light_irradiance` (K, 3), `floor` an
-/// `irtps.scene.Floor` or None, `cornell_box` an `irtps.scene.CornellBox` or None.
+/// `irtps.scene.Floor` or None, `cornell_box` an `irtps.scene.CornellBox` or None, `pinhole`
+/// None (orthographic) or `(fx, fy, cx, cy, zc)` of a pinhole camera at `(0, 0, zc)`, whose
+/// `pixel_size` is then a pixel's world size at the depth of the object's base.
 #[pyclass(frozen, module = "irtps._core")]
 pub(super) struct Renderer {
     inner: CoreRenderer,
@@ -92,7 +94,7 @@ pub(super) struct Renderer {
 #[pymethods]
 impl Renderer {
     #[new]
-    #[pyo3(signature = (height, mask, albedo, pixel_size, light_directions, light_irradiance, floor=None, cornell_box=None))]
+    #[pyo3(signature = (height, mask, albedo, pixel_size, light_directions, light_irradiance, floor=None, cornell_box=None, pinhole=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -104,6 +106,7 @@ impl Renderer {
         light_irradiance: PyReadonlyArray2<'_, f32>,
         floor: Option<FloorArgs>,
         cornell_box: Option<BoxArgs>,
+        pinhole: Option<(f32, f32, f32, f32, f32)>,
     ) -> PyResult<Renderer> {
         let (h, w) = (height.shape()[0], height.shape()[1]);
         if mask.shape() != [h, w] {
@@ -133,6 +136,13 @@ impl Renderer {
                 width: w,
                 height: h,
                 pixel_size,
+                pinhole: pinhole.map(|(fx, fy, cx, cy, center_z)| Pinhole {
+                    fx,
+                    fy,
+                    cx,
+                    cy,
+                    center_z,
+                }),
             },
             surface,
             floor: floor.map(|floor| Floor {

@@ -14,7 +14,7 @@
 use std::ops::Range;
 use std::sync::Arc;
 
-use glam::{vec3a, Vec3A};
+use glam::Vec3A;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
@@ -341,18 +341,17 @@ impl Renderer {
         let path_count = if s.bounces > 0 { s.samples } else { 0 };
         for sample in 0..path_count.max(s.direct_samples) {
             let q = low_discrepancy_4d(sample as u32, shift);
-            let (x, y) = self
-                .camera
-                .image_to_world(row as f32 + q[1], col as f32 + q[0]);
-            let origin = vec3a(x, y, self.camera_z);
-            let Some(hit) = self.tracer.closest_hit(origin, -Vec3A::Z, f32::INFINITY) else {
+            let (origin, dir) =
+                self.camera
+                    .ray(row as f32 + q[1], col as f32 + q[0], self.camera_z);
+            let Some(hit) = self.tracer.closest_hit(origin, dir, f32::INFINITY) else {
                 continue;
             };
             let n = self.mesh.normals[hit.triangle];
-            if n.z <= 0.0 {
+            if n.dot(dir) >= 0.0 {
                 continue;
             }
-            let point = origin - Vec3A::Z * hit.t;
+            let point = origin + dir * hit.t;
             let albedo = self.mesh.albedo_at(hit.triangle, hit.u, hit.v);
             if sample < s.direct_samples {
                 let weight = [1.0 / s.direct_samples as f32; 3];

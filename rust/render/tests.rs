@@ -1,23 +1,35 @@
 //! Tests of the renderer.
 
 use super::*;
-use crate::scene::HeightField;
+use crate::scene::{HeightField, Pinhole};
+use glam::vec3a;
 use std::f32::consts::PI;
 
 fn tilted_plate(size: usize, albedo: Rgb) -> Scene {
     let height = (0..size * size)
         .map(|p| 0.25 * (p % size) as f32 + 3.0)
         .collect();
-    Scene {
-        camera: Camera {
+    object_alone(
+        Camera {
             width: size,
             height: size,
             pixel_size: 1.0,
+            pinhole: None,
         },
+        height,
+        albedo,
+    )
+}
+
+/// The object of heights `height` and a uniform `albedo`, every pixel masked, alone.
+fn object_alone(camera: Camera, height: Vec<f32>, albedo: Rgb) -> Scene {
+    let pixels = camera.pixel_count();
+    Scene {
+        camera,
         surface: HeightField {
             height,
-            mask: vec![true; size * size],
-            albedo: vec![albedo; size * size],
+            mask: vec![true; pixels],
+            albedo: vec![albedo; pixels],
         },
         floor: None,
         cornell_box: None,
@@ -339,4 +351,92 @@ fn rows_out_of_range_are_an_error_naming_rows() {
         .unwrap_err()
         .to_string()
         .starts_with("rows"));
+}
+
+/// The plane `z = slope · x + 2` seen through a pinhole 40 units above it: each pixel's
+/// height is where its centre ray meets the plane, so every vertex lies on it.
+fn plane_through_a_pinhole(size: usize, slope: f32, albedo: Rgb) -> Scene {
+    let pinhole = Pinhole {
+        fx: 30.0,
+        fy: 32.0,
+        cx: size as f32 / 2.0 + 0.7,
+        cy: size as f32 / 2.0 - 0.4,
+        center_z: 40.0,
+    };
+    let height = (0..size * size)
+        .map(|p| {
+            // z = slope · k (zc − z) + 2 with x = k (zc − z) along the ray.
+            let k = ((p % size) as f32 + 0.5 - pinhole.cx) / pinhole.fx;
+            (slope * k * pinhole.center_z + 2.0) / (1.0 + slope * k)
+        })
+        .collect();
+    object_alone(
+        Camera {
+            width: size,
+            height: size,
+            pixel_size: (pinhole.center_z - 2.0) / pinhole.fx,
+            pinhole: Some(pinhole),
+        },
+        height,
+        albedo,
+    )
+}
+
+#[test]
+fn a_pinhole_sees_the_object_where_its_rays_meet_the_surface() {
+    let slope = 0.4;
+    let scene = plane_through_a_pinhole(9, slope, [0.5; 3]);
+    let light = Light {
+        direction: Vec3A::Z,
+        irradiance: [1.0; 3],
+    };
+    let renderer = Renderer::new(&scene, &[light]).unwrap();
+    let (camera, frame) = (renderer.camera(), renderer.frame());
+    for (row, col) in [(1.3, 1.6), (4.5, 5.2), (7.1, 2.9), (6.8, 7.4)] {
+        let (origin, dir) = camera.ray(row, col, 0.0);
+        let hit = renderer
+            .tracer()
+            .closest_hit(origin, dir, f32::INFINITY)
+            .unwrap();
+        let seen = frame.to_world(origin + dir * hit.t);
+        // On the plane, and on the ray through (row, col) of the world camera.
+        assert!((seen.z - (slope * seen.x + 2.0)).abs() <= 1e-4, "{seen:?}");
+        let (x, y) = scene.camera.image_to_world(row, col, seen.z);
+        assert!(
+            (x - seen.x).abs().max((y - seen.y).abs()) <= 1e-4,
+            "{seen:?} vs ({x}, {y})"
+        );
+    }
+}
+
+#[test]
+fn direct_light_on_a_tilted_plane_seen_through_a_pinhole_is_lamberts_law() {
+    let (slope, albedo) = (0.4, [0.8, 0.5, 0.25]);
+    let scene = plane_through_a_pinhole(8, slope, albedo);
+    let light = Light {
+        direction: vec3a(-0.3, 0.2, 0.9).normalize(),
+        irradiance: [PI, 2.0, 1.0],
+    };
+    let renderer = Renderer::new(&scene, &[light]).unwrap();
+    let settings = RenderSettings {
+        bounces: 0,
+        samples: 0,
+        direct_samples: 16,
+        seed: 0,
+        split_bounces: true,
+        cached_direct: false,
+    };
+    let image = renderer.render_rows(0..8, &settings).unwrap();
+    let cosine = vec3a(-slope, 0.0, 1.0).normalize().dot(light.direction);
+    // Pixels whose footprint lies inside the mesh (between the outer pixel centres).
+    for (row, col) in [(1, 1), (3, 5), (6, 2), (5, 6)] {
+        for c in 0..3 {
+            let expected = albedo[c] * light.irradiance[c] * cosine / PI;
+            let got = image[(row * 8 + col) * 3 + c];
+            assert!(
+                (got - expected).abs() <= 1e-4 * expected,
+                "pixel ({row}, {col}): {got} vs {expected}"
+            );
+        }
+    }
 }

@@ -55,6 +55,7 @@ fn the_avx2_traversal_agrees_with_the_portable_one() {
             width: 24,
             height: 24,
             pixel_size: 1.0,
+            pinhole: None,
         },
         surface: crate::scene::HeightField {
             height: (0..576)
@@ -104,6 +105,7 @@ fn a_batch_gets_the_same_hits_as_one_ray_at_a_time() {
             width: 20,
             height: 16,
             pixel_size: 0.5,
+            pinhole: None,
         },
         surface: crate::scene::HeightField {
             height: (0..320)

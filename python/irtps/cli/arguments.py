@@ -166,9 +166,9 @@ INTRINSICS = Argument(
     type=Path,
     metavar="K.txt",
     help="the camera's 3x3 intrinsic matrix in pixels (lines 'fx 0 cx', '0 fy cy', '0 0 1'): DATA is then seen by "
-    "that perspective camera, whatever its folder says (a DiLiGenT folder's own K.txt is read without it); until the "
-    "pinhole tracer and perspective integration, every step takes its orthographic stand-in at the object's distance, "
-    "and says so",
+    "that perspective camera, whatever its folder says (a DiLiGenT folder's own K.txt is read without it); renderings "
+    "trace through the pinhole, and the steps that take a pixel size use its orthographic stand-in at the object's "
+    "distance, and say so",
 )
 
 #: The images to leave out of the commands that take many data sets: of all, or of one by name.

@@ -23,7 +23,7 @@ from irtps.batch.summary import SUMMARY_JSON, SUMMARY_MARKDOWN, summary_table, w
 from irtps.errors import DatasetError, IrtpsError
 from irtps.evaluate.table import comparison_table, format_table, method_names
 from irtps.geometry.placement import format_placement
-from irtps.geometry.surface import height_to_normals
+from irtps.geometry.surface import depth_to_normals, height_to_normals
 from irtps.io.dataset import Dataset, GroundTruth, load_dataset, load_ground_truth, load_scene_object
 from irtps.io.dataset_files import dataset_inputs, scene_object_inputs
 from irtps.io.dataset_writer import save_dataset
@@ -31,7 +31,6 @@ from irtps.io.image_selection import exclusions_by_name, format_images_fitted
 from irtps.irt.folder import load_reconstruction, save_reconstruction
 from irtps.irt.reconstruct import load_and_reconstruct
 from irtps.model.metrics import evaluate, format_metrics
-from irtps.model.scene import orthographic_scene
 from irtps.model.options import (
     ClusterOptions,
     ReconstructOptions,
@@ -61,10 +60,9 @@ def run_render(args: argparse.Namespace) -> None:
     options = from_arguments(RenderOptions, args)
     check_output(args.out, scene_object_inputs(args.dataset), force=args.force)
     scene, height, albedo, mask = load_scene_object(args.dataset)
-    traced = orthographic_scene(scene, str(args.dataset))
     start = time.perf_counter()
     rendering = render(
-        traced,
+        scene,
         height,
         albedo,
         mask,
@@ -74,13 +72,14 @@ def run_render(args: argparse.Namespace) -> None:
         progress=not args.quiet,
     )
     seconds = time.perf_counter() - start
-    zc = None if scene.camera.optical_center is None else scene.camera.optical_center[2]
+    camera = scene.camera
+    if camera.optical_center is None:
+        depth, normal = None, height_to_normals(height, mask, camera.orthographic_pixel_size)
+    else:
+        depth = np.where(mask, camera.optical_center[2] - height, 0)  # contract §1b: z = zc - d
+        normal = depth_to_normals(depth, mask, camera)
     truth = GroundTruth(
-        height=np.where(mask, height, 0),
-        normal=height_to_normals(height, mask, traced.camera.orthographic_pixel_size),
-        albedo=albedo,
-        direct=rendering.direct,
-        depth=None if zc is None else np.where(mask, zc - height, 0),  # contract §1b: z = zc - d
+        height=np.where(mask, height, 0), normal=normal, albedo=albedo, direct=rendering.direct, depth=depth
     )
     dataset = Dataset(scene=scene, images=rendering.images, mask=mask, gt=truth)
     record = {"command": "render", "source": str(resolve_path(args.dataset)), **options.to_dict()}

@@ -2,6 +2,7 @@
 
 Normals fix a height field only up to a constant. `irtps.render.placement.estimate_placement`
 finds that constant from the floor around the object in the images (it renders the floor);
+`raised` stands a relief at a base height (through a pinhole, along the camera's rays);
 where nothing in the data fixes it, `fallback_placement` gives contract §6's: the median
 height of the mask boundary on the floor. `spread_lights` picks the few well-spread lights
 that a rendering of the floor (or the albedo's scale) needs.
@@ -15,7 +16,7 @@ import numpy as np
 
 from irtps.model.scene import Scene
 
-__all__ = ["Placement", "fallback_placement", "floor_height", "format_placement", "spread_lights"]
+__all__ = ["Placement", "fallback_placement", "floor_height", "format_placement", "raised", "spread_lights"]
 
 
 @dataclass(frozen=True)
@@ -66,6 +67,37 @@ def format_placement(placement: Placement | dict) -> str:
     if fields["source"] == "given":
         return f"{height}, as given"
     return f"{height} (the floor)" + (f": {fields['reason']}" if fields.get("reason") else "")
+
+
+def raised(relief: np.ndarray, mask: np.ndarray, base_height: float, scene: Scene) -> np.ndarray:
+    """`relief` stood with the median of its mask boundary at `base_height`: float32, 0
+    outside `mask`.
+
+    `relief` has its boundary median at 0. For an orthographic camera the object moves up
+    rigidly: ``relief + base_height``. Seen through a pinhole (a perspective camera's
+    orthographic stand-in, `irtps.model.camera.Camera.orthographic_stand_in`), the normals fix
+    the depth map only up to a scale: `relief` is the shape at the stand-in's depth
+    (``zc - scene.base_height``), and standing it higher moves it along the camera's rays
+    toward the optical centre, which scales it by ``(zc - base_height) / (zc - scene.base_height)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from irtps import Camera, Scene
+    >>> relief, mask = np.array([[0.0, 2.0]]), np.ones((1, 2), bool)
+    >>> raised(relief, mask, 5.0, Scene(Camera(2, 1, 1.0), [])).tolist()
+    [[5.0, 7.0]]
+    >>> pinhole = Camera(2, 1, projection="perspective", fx=20.0, fy=20.0, cx=1.0, cy=0.5,
+    ...                  optical_center=(0.0, 0.0, 20.0))
+    >>> raised(relief, mask, 10.0, Scene(pinhole.orthographic_stand_in(20.0), [])).tolist()
+    [[10.0, 11.0]]
+    """
+    pinhole = scene.camera.pinhole
+    scale = 1.0
+    if pinhole is not None:
+        center = pinhole.center_z
+        scale = (center - base_height) / (center - scene.base_height)
+    return np.where(mask, relief * scale + base_height, 0).astype(np.float32)
 
 
 def fallback_placement(scene: Scene, reason: str | None = None) -> Placement:

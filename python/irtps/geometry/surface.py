@@ -1,10 +1,12 @@
-"""Surface quantities derived from a height field (contract §2)."""
+"""Surface quantities derived from a height field (contract §2) or a depth map (§1b)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from irtps._shared.checks import check_array, check_finite, check_mask, check_positive
+from irtps._shared.checks import check_array, check_finite, check_instance, check_mask, check_positive
+from irtps.errors import ArgumentError
+from irtps.model.camera import Camera
 
 
 def height_to_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 1.0) -> np.ndarray:
@@ -40,6 +42,64 @@ def height_to_normals(height: np.ndarray, mask: np.ndarray, pixel_size: float = 
     dz_dcol = _masked_derivative(height, mask, axis=1)
     dz_drow = _masked_derivative(height, mask, axis=0)
     normals = _unit_normals(dz_dcol / pixel_size, dz_drow / pixel_size)
+    normals[~mask] = 0.0
+    return normals.astype(np.float32)
+
+
+def depth_to_normals(depth: np.ndarray, mask: np.ndarray, camera: Camera) -> np.ndarray:
+    """Unit normals of the surface a perspective camera sees at `depth` (contract §1b).
+
+    Each object pixel's point lies on its centre ray at its depth along the optical axis;
+    the normal is the cross product of the points' central differences along the columns
+    and (upward) along the rows, between masked neighbours, one-sided where only one
+    neighbour is masked, facing the camera.
+
+    Parameters
+    ----------
+    depth : numpy.ndarray
+        (H, W) depth along the optical axis, world units.
+    mask : numpy.ndarray
+        (H, W) bool, the object's pixels.
+    camera : irtps.model.camera.Camera
+        A perspective camera of the same image size.
+
+    Returns
+    -------
+    numpy.ndarray
+        float32 (H, W, 3) unit normals; 0 outside the mask and at a pixel with no masked
+        neighbour along a row or a column.
+
+    Raises
+    ------
+    ArgumentError
+        For an orthographic camera (`height_to_normals` takes its heights), a camera of
+        another size, or a depth that is not finite and positive on the mask.
+
+    Examples
+    --------
+    A plane at constant depth faces the camera along +z wherever it is seen.
+
+    >>> import numpy as np
+    >>> camera = Camera(4, 4, projection="perspective", fx=4.0, fy=4.0, cx=2.0, cy=2.0,
+    ...                 optical_center=(0.0, 0.0, 10.0))
+    >>> n = depth_to_normals(np.full((4, 4), 6.0), np.ones((4, 4), bool), camera)
+    >>> (np.round(n[0, 3], 6) + 0.0).tolist()
+    [0.0, 0.0, 1.0]
+    """
+    check_instance("camera", camera, Camera)
+    if camera.projection != "perspective":
+        raise ArgumentError("camera", "is orthographic: its normals come from heights (height_to_normals)")
+    depth = check_array("depth", depth, (camera.height, camera.width), match="the camera")
+    mask = check_mask(mask, depth.shape, match="depth")
+    check_finite("depth", depth, mask)
+    if (depth[mask] <= 0).any():
+        raise ArgumentError("depth", "must be positive on the mask (the object lies in front of the camera)")
+    points = np.asarray(camera.optical_center) + depth[..., None] * camera.ray_directions()
+    along_col = np.stack([_masked_derivative(points[..., c], mask, axis=1) for c in range(3)], axis=-1)
+    up_rows = -np.stack([_masked_derivative(points[..., c], mask, axis=0) for c in range(3)], axis=-1)
+    normals = np.cross(along_col, up_rows)
+    length = np.linalg.norm(normals, axis=-1, keepdims=True)
+    normals = np.where(length > 0, normals / np.where(length > 0, length, 1.0), 0.0)
     normals[~mask] = 0.0
     return normals.astype(np.float32)
 

@@ -15,11 +15,12 @@ from contextlib import contextmanager
 
 import numpy as np
 
+from irtps.errors import ArgumentError
 from irtps.model.data import Dataset
 from irtps.geometry.integrate import integrate_normals
 from irtps.geometry.boundary import place_height
 from irtps.model.options import OptionError, ReconstructOptions
-from irtps.geometry.placement import Placement, fallback_placement
+from irtps.geometry.placement import Placement, fallback_placement, raised
 from irtps.ps.fit import MASKED_OUT, PsResult, lobe_share, photometric_stereo
 from irtps.render.radiometry import AlbedoScale, absolute_scale, estimate_albedo_scale, scaled_albedo, scaled_scene
 from irtps.render.placement import PRECISION_PIXELS, estimate_placement
@@ -142,7 +143,7 @@ def reconstruction_pass(
         relief=relief,
         albedo=albedo,
         placement=placement,
-        height=placed(relief, mask, placement),
+        height=placed(relief, mask, placement, dataset.scene),
         albedo_scale=albedo_scale,
         timings=timings,
     )
@@ -282,13 +283,46 @@ def fitted_observations(dataset: Dataset, options: ReconstructOptions) -> np.nda
 
 
 def surface_relief(dataset: Dataset, normals: np.ndarray, options: ReconstructOptions) -> np.ndarray:
-    """The height map of `normals`, integrated (``options.integration``), with the median
-    of its mask's boundary at 0: float32, 0 outside the mask."""
+    """The height map of `normals`, integrated (``options.integration``), with the median of
+    its mask's boundary at 0: float32, 0 outside the mask. Through the pinhole of a
+    perspective camera's stand-in, the same integration of the depth's logarithm
+    (`pinhole_relief`), whose relief stands along the camera's rays
+    (`irtps.geometry.placement.raised`)."""
     mask = dataset.mask
+    if dataset.scene.camera.pinhole is not None:
+        return pinhole_relief(dataset.scene, normals, mask, options.integration_method)
     height = integrate_normals(
         normals, mask, pixel_size=dataset.scene.camera.orthographic_pixel_size, method=options.integration_method
     )
     return np.where(mask, place_height(height, mask, base_height=0.0), 0).astype(np.float32)
+
+
+def pinhole_relief(scene: Scene, normals: np.ndarray, mask: np.ndarray, method: str | None) -> np.ndarray:
+    """The relief of the depth map that `normals` give through the pinhole of `scene`'s
+    orthographic stand-in.
+
+    Along pixel (i, j)'s centre ray ``r = ((j + ½ - cx)/fx, -(i + ½ - cy)/fy, -1)`` the depth
+    d of a surface of normal n has ``∂ log d/∂j = -nx / (fx n·r)`` and ``∂ log d/∂i =
+    ny / (fy n·r)``: the logarithm of the depth is a height field of those slopes over the
+    pixel grid, integrated by `method` (`irtps.geometry.integrate.integrate_normals`; n·r
+    kept below -1e-3, a surface seen edge-on, and the slopes within 10 pixel footprints per
+    footprint). The relief is the depth map at the stand-in's depth ``D = zc -
+    scene.base_height``: ``D * (1 - d / d_b)``, with ``d_b`` the geometric median of the depths
+    of the part's boundary, so that it stands at 0 as `place_height` puts it. Float32, 0
+    outside `mask`."""
+    pinhole = scene.camera.pinhole
+    if pinhole is None:
+        raise ArgumentError("scene", "its camera is not the orthographic stand-in of a perspective camera")
+    fx, fy, _, _ = pinhole.intrinsics()[[0, 1, 0, 1], [0, 1, 2, 2]]
+    unit = normals / np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-12)
+    facing = np.minimum((unit * pinhole.ray_directions()).sum(axis=-1), -1e-3)
+    slope_j, slope_i = -unit[..., 0] / (fx * facing), unit[..., 1] / (fy * facing)
+    # A height field z over pixels of size 1 has the normal (-dz/dj, dz/di, 1) (y is up).
+    log_normals = np.stack([-slope_j, slope_i, np.ones_like(slope_j)], axis=-1)
+    log_depth = integrate_normals(log_normals, mask, method=method, max_slope=10.0 / pinhole.focal_length)
+    log_ratio = place_height(np.where(mask, log_depth, 0.0), mask, base_height=0.0)
+    reference = pinhole.center_z - scene.base_height
+    return np.where(mask, reference * -np.expm1(log_ratio), 0).astype(np.float32)
 
 
 def place_surface(
@@ -366,7 +400,9 @@ def scale_and_place(
         albedo,
         dataclasses.replace(options, base_height="boundary") if options.base_height == "auto" else options,
     )
-    scale = resolve_albedo_scale(dataset, placed(relief, dataset.mask, provisional), albedo, usable, options, seed=seed)
+    scale = resolve_albedo_scale(
+        dataset, placed(relief, dataset.mask, provisional, dataset.scene), albedo, usable, options, seed=seed
+    )
     if options.base_height != "auto":
         return scale, provisional
     return scale, place_surface(dataset, relief, albedo, options, seed=seed, albedo_scale=scale)
@@ -402,6 +438,7 @@ def rendered_as(scene: Scene, albedo: np.ndarray, albedo_scale: AlbedoScale | No
     return scaled_scene(scene, albedo_scale.factor), scaled_albedo(albedo, albedo_scale.factor)
 
 
-def placed(relief: np.ndarray, mask: np.ndarray, placement: Placement) -> np.ndarray:
-    """`relief` raised to `placement` inside the mask: float32, 0 outside."""
-    return np.where(mask, relief + np.float32(placement.base_height), 0).astype(np.float32)
+def placed(relief: np.ndarray, mask: np.ndarray, placement: Placement, scene: Scene) -> np.ndarray:
+    """`relief` raised to `placement` inside the mask (`irtps.geometry.placement.raised`):
+    float32, 0 outside."""
+    return raised(relief, mask, placement.base_height, scene)

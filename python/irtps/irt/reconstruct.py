@@ -53,8 +53,8 @@ class Reconstruction:
     flags : numpy.ndarray
         uint8 (H, W) per-pixel photometric-stereo flags (see `irtps.ps.fit.FLAGS`).
     pixel_size : float
-        World size of a pixel (of a perspective camera's orthographic stand-in, for now:
-        `irtps.model.scene.orthographic_scene`).
+        World size of a pixel (of a perspective camera's orthographic stand-in at the
+        object's base: `irtps.model.scene.orthographic_scene`).
     timings : dict
         Seconds spent in each stage.
     parameters : dict
@@ -201,9 +201,10 @@ def reconstruct(
     Warns
     -----
     IrtpsWarning
-        For a perspective camera, that it is taken as its orthographic stand-in
-        (`irtps.model.scene.orthographic_scene`: until the pinhole tracer and perspective
-        integration, every step runs on it; ``pixel_size`` is then the stand-in's).
+        For a perspective camera, that the steps that take a pixel size use its
+        orthographic stand-in (`irtps.model.scene.orthographic_scene`; ``pixel_size`` is
+        then the stand-in's), while renderings trace through the pinhole and IRT-PS
+        integrates along its rays.
         When observations are saturated, with their count; when most of the object's pixels
         reflect a broad specular lobe and the robust mode asked for is neither ``"auto"`` nor
         ``"lobe"``, advising the lobe mode (`Reconstruction.lobe_share`).

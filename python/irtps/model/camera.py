@@ -50,6 +50,10 @@ class Camera:
     optical_center : tuple of float or None
         Perspective: the pinhole, the world point ``(0, 0, zc)``; None for an orthographic
         camera.
+    pinhole : Camera or None
+        An orthographic stand-in's perspective camera (`orthographic_stand_in`): the steps
+        that fit, integrate and place orthographically take the stand-in's pixel size, and
+        the renderer traces through this pinhole. None otherwise.
 
     Raises
     ------
@@ -58,7 +62,9 @@ class Camera:
         camera without ``pixel_size`` or with a perspective field; a perspective camera with
         ``pixel_size``, without one of its fields, with a focal length that is not a positive
         finite number, a principal point more than `PRINCIPAL_POINT_MARGIN` image sizes
-        outside the image (`intrinsics_problem`), or an optical centre off the z axis.
+        outside the image (`intrinsics_problem`), or an optical centre off the z axis; a
+        ``pinhole`` on a perspective camera, or one that is not a perspective camera of the
+        same image size.
 
     Examples
     --------
@@ -68,8 +74,8 @@ class Camera:
     ...                 optical_center=(0.0, 0.0, 10.0))
     >>> camera.ray_directions()[0, 0].tolist()
     [-0.1875, 0.0625, -1.0]
-    >>> camera.orthographic_stand_in(4.0)
-    Camera(width=4, height=2, pixel_size=0.5)
+    >>> camera.orthographic_stand_in(4.0).pixel_size
+    0.5
     """
 
     width: int
@@ -81,6 +87,7 @@ class Camera:
     cx: float | None = None
     cy: float | None = None
     optical_center: tuple[float, float, float] | None = None
+    pinhole: Camera | None = None
 
     def __post_init__(self) -> None:
         if self.projection not in PROJECTIONS:
@@ -92,7 +99,19 @@ class Camera:
             given = [name for name, value in perspective.items() if value is not None]
             if given:
                 raise DatasetError(f"Camera.{given[0]} is given: only a perspective camera has it")
+            pinhole = self.pinhole
+            if pinhole is not None and not (
+                isinstance(pinhole, Camera)
+                and pinhole.projection == "perspective"
+                and (pinhole.width, pinhole.height) == (self.width, self.height)
+            ):
+                raise DatasetError(
+                    f"Camera.pinhole is {pinhole!r}: expected the perspective camera of a {self.width}x{self.height} "
+                    "image that this orthographic camera stands in for"
+                )
             return
+        if self.pinhole is not None:
+            raise DatasetError("Camera.pinhole is given: only an orthographic stand-in has it")
         if self.pixel_size is not None:
             raise DatasetError("Camera.pixel_size is given: a perspective camera has none (it has fx, fy, cx, cy)")
         missing = [name for name, value in perspective.items() if value is None]
@@ -113,7 +132,9 @@ class Camera:
 
     def __repr__(self) -> str:
         if self.projection == "orthographic":
-            fields = {"width": self.width, "height": self.height, "pixel_size": self.pixel_size}
+            fields: dict[str, object] = {"width": self.width, "height": self.height, "pixel_size": self.pixel_size}
+            if self.pinhole is not None:
+                fields["pinhole"] = self.pinhole
         else:
             names = ("width", "height", "projection", *_INTRINSICS, "optical_center")
             fields = {name: getattr(self, name) for name in names}
@@ -135,6 +156,20 @@ class Camera:
                 "is perspective: this step traces or integrates orthographically only (give it the camera's orthographic_stand_in)",
             )
         return self.pixel_size
+
+    @property
+    def center_z(self) -> float:
+        """A perspective camera's optical centre height ``zc`` (`optical_center` is
+        ``(0, 0, zc)``).
+
+        Raises
+        ------
+        ArgumentError
+            For an orthographic camera.
+        """
+        if self.optical_center is None:
+            raise ArgumentError("camera", "is orthographic: it has no optical centre (a perspective camera has)")
+        return self.optical_center[2]
 
     @property
     def focal_length(self) -> float:
@@ -202,8 +237,9 @@ class Camera:
         """The orthographic camera that matches this one at `depth` along the optical axis:
         the same image size, and a pixel size of ``depth / focal_length`` (a pixel's footprint
         at that depth). The principal point and the difference between ``fx`` and ``fy`` are
-        left out: it is an approximation, for the steps that trace or integrate only
-        orthographically. An orthographic camera is its own stand-in.
+        left out: it is an approximation, for the steps that fit, integrate or place only
+        orthographically; its `pinhole` is this camera, through which renderings trace. An
+        orthographic camera is its own stand-in.
 
         Raises
         ------
@@ -214,7 +250,7 @@ class Camera:
             return self
         if not (isinstance(depth, (int, float, np.floating, np.integer)) and math.isfinite(depth) and depth > 0):
             raise ArgumentError("depth", f"expected a positive finite number, got {depth!r}")
-        return Camera(self.width, self.height, float(depth) / self.focal_length)
+        return Camera(self.width, self.height, float(depth) / self.focal_length, pinhole=self)
 
     def _intrinsics(self, what: str) -> tuple[float, float, float, float]:
         """fx, fy, cx, cy of a perspective camera; `ArgumentError` naming `what` for an

@@ -412,6 +412,13 @@ class SynthOptions(_Options):
     albedo: str = _option("uniform", "albedo pattern", str, choices=("uniform", "textured"))
     environment: str = _option("cornell", "surroundings", str, choices=("cornell", "none"))
     floor: bool | None = _option(None, "a floor (default: only with the box)", bool, optional=True)
+    camera: str = _option(
+        "orthographic",
+        "projection: orthographic (pixel size 1), or perspective (a pinhole about 45 degrees across: focal length 1.2 "
+        "times the size in pixels, its optical centre where a pixel is 1 wide on the floor)",
+        str,
+        choices=("orthographic", "perspective"),
+    )
     base: float | None = _option(
         None,
         "height of the object's boundary above the floor, pixel sizes, with vertical sides down to the floor (default: the shape's own)",

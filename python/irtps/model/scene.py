@@ -202,11 +202,16 @@ def parse_scene(obj: object, source: str = "scene.json") -> Scene:
     )
 
 
+#: What the warning of `orthographic_scene` says, up to the stand-in's pixel size.
+STAND_IN_WARNING = "the perspective camera is fitted, integrated and placed as an orthographic camera of pixel size"
+
+
 def orthographic_scene(scene: Scene, where: str) -> Scene:
-    """The scene as the steps that trace or integrate only orthographically see it.
+    """The scene as the steps that fit, integrate or place only orthographically see it.
 
     `scene` itself when its camera is orthographic. For a perspective camera, the same scene
-    seen by the camera's orthographic stand-in (`irtps.model.camera.Camera.orthographic_stand_in`)
+    seen by the camera's orthographic stand-in (`irtps.model.camera.Camera.orthographic_stand_in`,
+    whose renderings trace through the pinhole)
     at the depth of the object's base: the optical centre's height minus `Scene.base_height`
     (the floor's, or 0), a pixel size of that depth over the focal length; with an
     `IrtpsWarning` that says so. (A camera given by its intrinsics alone, DiLiGenT's ``K.txt``,
@@ -230,6 +235,28 @@ def orthographic_scene(scene: Scene, where: str) -> Scene:
     IrtpsWarning
         For a perspective camera, naming `where`, the stand-in's pixel size and depth.
     """
+    stand_in = stand_in_scene(scene, where)
+    if stand_in is not scene:
+        depth = scene.camera.center_z - scene.base_height
+        warnings.warn(
+            f"{where}: {STAND_IN_WARNING} {stand_in.camera.pixel_size:.6g} (its pixel footprint at the object's base, "
+            f"{depth:g} from the optical centre); renderings trace through the pinhole",
+            IrtpsWarning,
+            stacklevel=3,
+        )
+    return stand_in
+
+
+def stand_in_scene(scene: Scene, where: str) -> Scene:
+    """`orthographic_scene` without its warning: the renderer's view of a perspective scene
+    (it traces through the stand-in's `pinhole` and sets its tolerances by the stand-in's
+    pixel size).
+
+    Raises
+    ------
+    DatasetError
+        As `orthographic_scene`.
+    """
     camera = scene.camera
     if camera.optical_center is None:
         return scene
@@ -241,13 +268,6 @@ def orthographic_scene(scene: Scene, where: str) -> Scene:
             f"(depth {depth:g} over focal length {camera.focal_length:g}), out of range: expected "
             f"{MIN_PIXEL_SIZE:g} to {MAX_PIXEL_SIZE:g}"
         )
-    warnings.warn(
-        f"{where}: the perspective camera is traced as an orthographic camera of pixel size {stand_in.pixel_size:.6g} "
-        f"(its pixel footprint at the object's base, {depth:g} from the optical centre): the pinhole tracer and "
-        "perspective integration are not there yet",
-        IrtpsWarning,
-        stacklevel=3,
-    )
     return dataclasses.replace(scene, camera=stand_in)
 
 

@@ -20,7 +20,7 @@ import dataclasses
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from irtps.geometry.placement import Placement, fallback_placement, floor_height, spread_lights
+from irtps.geometry.placement import Placement, fallback_placement, floor_height, raised, spread_lights
 from irtps.model.scene import Scene
 from irtps.render.renderer import make_renderer
 
@@ -139,7 +139,7 @@ def estimate_placement(
     pixel_list = floor_pixels.tolist()
 
     def floor_residual(offset: float, path_seed: int = seed) -> float:
-        renderer = make_renderer(scene, np.where(mask, relief + offset, 0.0), albedo, mask)
+        renderer = make_renderer(scene, raised(relief, mask, offset, scene), albedo, mask)
         planes = renderer.render_pixels(pixel_list, bounces, PATH_SAMPLES, DIRECT_SAMPLES, path_seed, False)
         return float(np.abs(planes.sum(axis=0) - observed)[usable].sum()) / scale
 
@@ -214,8 +214,23 @@ def _coarse(
     coarse_albedo = blocks(albedo * mask[..., None], 0).sum(axis=(1, 3)) / weight[..., None]
     coarse_images = blocks(images, 1).mean(axis=(2, 4), dtype=np.float32)
     coarse_unsaturated = blocks(unsaturated, 1).all(axis=(2, 4))
+    pinhole = scene.camera.pinhole
+    if pinhole is not None:  # coarse pixel (I, J) spans u in [left + J f, left + (J + 1) f)
+        pinhole = dataclasses.replace(
+            pinhole,
+            width=size[1],
+            height=size[0],
+            fx=pinhole.fx / factor,
+            fy=pinhole.fy / factor,
+            cx=(pinhole.cx - left) / factor,
+            cy=(pinhole.cy - top) / factor,
+        )
     camera = dataclasses.replace(
-        scene.camera, width=size[1], height=size[0], pixel_size=scene.camera.orthographic_pixel_size * factor
+        scene.camera,
+        width=size[1],
+        height=size[0],
+        pixel_size=scene.camera.orthographic_pixel_size * factor,
+        pinhole=pinhole,
     )
     coarse_scene = dataclasses.replace(scene, camera=camera)
     return (

@@ -12,7 +12,8 @@ from irtps._shared.checks import check_array, check_finite, check_instance, chec
 from irtps.errors import ArgumentError
 from irtps.model.options import RenderOptions
 from irtps._shared.resources import check_memory
-from irtps.model.scene import Scene, orthographic_scene
+from irtps.model.camera import Camera
+from irtps.model.scene import Scene, stand_in_scene
 
 #: Footprint samples per pixel for the direct image (stratified; shadows are traced exactly).
 DEFAULT_DIRECT_SAMPLES = 64
@@ -59,8 +60,9 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
     Parameters
     ----------
     scene : Scene
-        Camera, lights, floor and environment. A perspective camera is traced as its
-        orthographic stand-in (`irtps.model.scene.orthographic_scene`, which warns).
+        Camera, lights, floor and environment. A perspective camera, or an orthographic
+        stand-in for one (`irtps.model.scene.orthographic_scene`), is traced through its
+        pinhole (contract §1b: each pixel's surface point on its rays, at its height).
     height : numpy.ndarray
         (H, W) heights of the object above the floor, world units.
     albedo : numpy.ndarray
@@ -81,8 +83,9 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
         If the light visibility cache (about ``4 * K * H * W`` bytes) would need more
         memory than is available.
     """
-    scene = orthographic_scene(check_instance("scene", scene, Scene), "the scene rendered")
+    scene = stand_in_scene(check_instance("scene", scene, Scene), "the scene rendered")
     camera = scene.camera
+    pinhole = camera.pinhole
     check_memory(
         _CACHE_BYTES_PER_PIXEL * len(scene.lights) * camera.height * camera.width,
         f"lights: {len(scene.lights)} lights of {camera.width}x{camera.height} images (light visibility cache)",
@@ -102,7 +105,14 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
         scene.light_irradiance.astype(np.float32),
         scene.floor,
         scene.environment,
+        None if pinhole is None else _pinhole_arguments(pinhole),
     )
+
+
+def _pinhole_arguments(pinhole: Camera) -> tuple[float, float, float, float, float]:
+    """``(fx, fy, cx, cy, zc)`` of a perspective camera, as the core's renderer takes them."""
+    k = pinhole.intrinsics()
+    return float(k[0, 0]), float(k[1, 1]), float(k[0, 2]), float(k[1, 2]), pinhole.center_z
 
 
 def render_memory_bytes(lights: int, size: tuple[int, int], bounces: int) -> int:
@@ -159,9 +169,9 @@ def render(
     Parameters
     ----------
     scene : Scene
-        Camera, lights, floor and environment. A perspective camera is traced as its
-        orthographic stand-in (`irtps.model.scene.orthographic_scene`, which warns): the
-        pinhole tracer is still to come.
+        Camera, lights, floor and environment. A perspective camera, or an orthographic
+        stand-in for one (`irtps.model.scene.orthographic_scene`), is traced through its
+        pinhole (contract §1b).
     height, albedo, mask : numpy.ndarray
         The object: (H, W) heights, (H, W, 3) albedo, (H, W) bool mask.
     bounces : int

@@ -14,7 +14,7 @@ from irtps.geometry.boundary import place_height
 from irtps.model.options import OptionError, RenderOptions, SynthOptions
 from irtps.render.renderer import Rendering, check_render_memory, render
 from irtps.model.scene import Camera, CornellBox, Floor, Light, Scene
-from irtps.geometry.surface import height_to_normals
+from irtps.geometry.surface import depth_to_normals, height_to_normals
 
 #: Wall colours of the classic Cornell box (red left, green right), as in the shared renders.
 CORNELL_ALBEDO = {
@@ -146,6 +146,24 @@ def make_albedo(mask: np.ndarray, pattern: str, rng: np.random.Generator, colour
     return np.where(mask[..., None], albedo, 0.0).astype(np.float32)
 
 
+#: A synthetic pinhole's focal length, in image sizes: about 45° across the image.
+PINHOLE_FOCAL_SIZES = 1.2
+
+
+def synthetic_camera(size: int, projection: str) -> Camera:
+    """The camera of a synthetic scene of `size` pixels a side: orthographic with pixel size
+    1, or a pinhole on the image's centre with focal length `PINHOLE_FOCAL_SIZES` image sizes,
+    its optical centre as high above the floor (z = 0) as that focal length in pixels, where
+    a pixel is then 1 wide."""
+    if projection == "orthographic":
+        return Camera(size, size, 1.0)
+    focal = PINHOLE_FOCAL_SIZES * size
+    center = size / 2.0
+    return Camera(
+        size, size, projection="perspective", fx=focal, fy=focal, cx=center, cy=center, optical_center=(0, 0, focal)
+    )
+
+
 def synthesize(
     shape: str,
     *,
@@ -155,6 +173,7 @@ def synthesize(
     environment: str = "cornell",
     floor: bool | None = None,
     base: float | None = None,
+    camera: str = "orthographic",
     bounces: int = 4,
     samples: int = 256,
     seed: int = 0,
@@ -181,6 +200,13 @@ def synthesize(
         Height of the object's boundary (the median over its mask's edge) above the floor,
         in pixel sizes; its sides run vertically down to the floor (contract §2). By
         default, the shape's own (about 1 for the cap, 0.1–0.3 of `size` for the others).
+    camera : str
+        ``"orthographic"`` (pixel size 1) or ``"perspective"``: a pinhole on the image's
+        centre with focal length ``1.2 * size`` pixels (about 45° across), its optical centre
+        ``1.2 * size`` above the floor, where a pixel is then 1 wide (`PINHOLE_FOCAL_SIZES`).
+        Each object pixel's surface point lies on its centre ray at its height (contract
+        §1b); the ground truth adds the depth, and the normals are the depth map's
+        (`irtps.depth_to_normals`).
     bounces, samples, seed, progress
         As for `irtps.render`.
 
@@ -198,7 +224,9 @@ def synthesize(
     (3, 16, 16, 3)
     """
     check_choice("shape", shape, SHAPES)
-    SynthOptions(size=size, lights=lights, albedo=albedo, environment=environment, floor=floor, base=base)
+    SynthOptions(
+        size=size, lights=lights, albedo=albedo, environment=environment, floor=floor, base=base, camera=camera
+    )
     RenderOptions(bounces=bounces, samples=samples, seed=seed)
     check_render_memory(lights, (size, size), bounces)
     rng = np.random.default_rng(seed)
@@ -218,15 +246,18 @@ def synthesize(
         a = CORNELL_ALBEDO
         box = CornellBox((-half, half), (-half, half), 0.5 * size, a["left"], a["right"], a["back"], a["front"])
     scene = Scene(
-        camera=Camera(size, size, 1.0),
+        camera=synthetic_camera(size, camera),
         lights=tuple(ring_lights(lights)),
         floor=Floor(0.0, (0.8, 0.8, 0.8)) if has_floor else None,
         environment=box,
     )
     albedo_map = make_albedo(mask, albedo, rng)
     rendering = render(scene, height, albedo_map, mask, bounces=bounces, samples=samples, seed=seed, progress=progress)
-    truth = GroundTruth(
-        height=height, normal=height_to_normals(height, mask), albedo=albedo_map, direct=rendering.direct
-    )
+    if scene.camera.optical_center is None:
+        depth, normal = None, height_to_normals(height, mask)
+    else:
+        depth = np.where(mask, scene.camera.optical_center[2] - height, 0).astype(np.float32)
+        normal = depth_to_normals(depth, mask, scene.camera)
+    truth = GroundTruth(height=height, normal=normal, albedo=albedo_map, direct=rendering.direct, depth=depth)
     dataset = Dataset(scene=scene, images=rendering.images, mask=mask, gt=truth, source=f"synth:{shape}")
     return dataset, rendering

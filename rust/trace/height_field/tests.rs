@@ -27,6 +27,7 @@ fn ragged_scene(w: usize, h: usize, seed: u64) -> Scene {
             width: w,
             height: h,
             pixel_size: 0.7,
+            pinhole: None,
         },
         surface: HeightField {
             height,

@@ -117,10 +117,9 @@ impl Mesh {
                     || block(ii, jj - 1)
                     || block(ii, jj);
                 if used {
-                    let (x, y) = cam.pixel_center(i, j);
                     let p = i * w + j;
                     self.pixel_vertex[p] = self.add_vertex(
-                        vec3a(x, y, surface.height[p]),
+                        cam.surface_point(i, j, surface.height[p]),
                         surface.albedo[p],
                         p as u32,
                     );
@@ -129,7 +128,11 @@ impl Mesh {
         }
         let pixel_vertex = self.pixel_vertex.clone();
         let v = |i: usize, j: usize| pixel_vertex[i * w + j];
-        let up = Vec3A::Z;
+        // Facing +z, or for a pinhole its optical centre (the blocks' winding faces it).
+        let facing = |mesh: &Mesh, corner: u32| match cam.pinhole {
+            None => Vec3A::Z,
+            Some(p) => vec3a(0.0, 0.0, p.center_z) - mesh.positions[corner as usize],
+        };
         let (bw, bh) = (w.saturating_sub(1), h.saturating_sub(1));
         let mut block_triangles = vec![NO_TRIANGLE; bw * bh];
         let mut on_grid = true;
@@ -139,8 +142,8 @@ impl Mesh {
                     let first = self.triangles.len();
                     let t1 = [v(i, j), v(i + 1, j), v(i, j + 1)];
                     let t2 = [v(i, j + 1), v(i + 1, j), v(i + 1, j + 1)];
-                    self.add_triangle(t1, up, SurfaceKind::Object, NO_PANEL);
-                    self.add_triangle(t2, up, SurfaceKind::Object, NO_PANEL);
+                    self.add_triangle(t1, facing(self, t1[0]), SurfaceKind::Object, NO_PANEL);
+                    self.add_triangle(t2, facing(self, t2[2]), SurfaceKind::Object, NO_PANEL);
                     // Only a degenerate pixel size drops a block's triangle; the grid then
                     // cannot stand for the mesh.
                     on_grid &= self.triangles.len() == first + 2;
@@ -188,12 +191,13 @@ impl Mesh {
         }
         skirt.retain(|edge| !edge.triangles.is_empty());
         skirt.sort_by_key(|edge| edge.block);
-        if on_grid && bw > 0 && bh > 0 {
+        // A pinhole's vertices are not on a grid: its blocks go to the BVH.
+        if on_grid && bw > 0 && bh > 0 && cam.pinhole.is_none() {
             self.grid = Some(Arc::new(HeightFieldGrid {
                 width: w,
                 height: h,
-                xs: (0..w).map(|j| cam.pixel_center(0, j).0).collect(),
-                ys: (0..h).map(|i| cam.pixel_center(i, 0).1).collect(),
+                xs: (0..w).map(|j| cam.surface_point(0, j, base).x).collect(),
+                ys: (0..h).map(|i| cam.surface_point(i, 0, base).y).collect(),
                 z: surface.height.clone(),
                 base,
                 block_triangles,
@@ -323,12 +327,13 @@ impl Mesh {
         self.panels[id].unbounded = true;
     }
 
-    /// The part of an unbounded floor whose light is cached: the camera's view and the
-    /// object's longest likely shadows (three times its height) around it.
+    /// The part of an unbounded floor whose light is cached: the camera's view of the floor
+    /// and the object's longest likely shadows (three times its height) around it.
     fn near_floor_extent(&self, scene: &Scene) -> ((f32, f32), (f32, f32)) {
         let cam = &scene.camera;
-        let (x0, y1) = cam.image_to_world(0.0, 0.0);
-        let (x1, y0) = cam.image_to_world(cam.height as f32, cam.width as f32);
+        let base = scene.base_height();
+        let (x0, y1) = cam.image_to_world(0.0, 0.0, base);
+        let (x1, y0) = cam.image_to_world(cam.height as f32, cam.width as f32, base);
         let top = self
             .positions
             .iter()

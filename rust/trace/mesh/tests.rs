@@ -11,6 +11,7 @@ pub(crate) fn flat_scene(w: usize, h: usize, z: f32, mask: impl Fn(usize, usize)
             width: w,
             height: h,
             pixel_size: 1.0,
+            pinhole: None,
         },
         surface: HeightField {
             height: vec![z; n],
@@ -36,8 +37,9 @@ fn height_field_follows_the_contract_triangulation() {
     let expect: Vec<Vec3A> = [(0, 0), (1, 0), (0, 1)]
         .iter()
         .map(|&(i, j)| {
-            let (x, y) = scene.camera.pixel_center(i, j);
-            vec3a(x, y, scene.surface.height[i * 3 + j])
+            scene
+                .camera
+                .surface_point(i, j, scene.surface.height[i * 3 + j])
         })
         .collect();
     for c in expect {
