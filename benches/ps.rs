@@ -88,7 +88,9 @@ fn bench(c: &mut Criterion) {
             ..Default::default()
         };
         group.bench_function(name, |b| {
-            b.iter(|| black_box(photometric_stereo(&images, &mask, &lights, &settings).unwrap()))
+            b.iter(|| {
+                black_box(photometric_stereo(&images, &mask, &lights, &settings, None).unwrap())
+            })
         });
     }
     group.finish();
@@ -102,7 +104,7 @@ fn bench(c: &mut Criterion) {
         ..Default::default()
     };
     group.bench_function("lobe", |b| {
-        b.iter(|| black_box(photometric_stereo(&images, &mask, &lights, &settings).unwrap()))
+        b.iter(|| black_box(photometric_stereo(&images, &mask, &lights, &settings, None).unwrap()))
     });
     group.finish();
 }

@@ -31,6 +31,6 @@ mod python;
 
 pub use error::{Error, Result};
 pub use render::{RenderSettings, Renderer};
-pub use scene::{Camera, CornellBox, Floor, HeightField, Light, Rgb, Scene};
+pub use scene::{Camera, CornellBox, Floor, HeightField, Light, Pinhole, Rgb, Scene};
 pub use trace::mesh::{Mesh, SurfaceKind};
 pub use trace::{Hit, Tracer};

@@ -577,3 +577,38 @@ def test_synth_makes_a_pinhole_data_set_whose_direct_images_fit_its_true_normals
 
     assert mean_angle(truth.normal) < 1.5
     assert mean_angle(irtps.height_to_normals(truth.height, mask)) > 2 * mean_angle(truth.normal)
+
+
+# The lobe fit through a pinhole
+
+
+def test_the_lobe_fit_takes_each_pixels_own_view_through_a_pinhole():
+    # Glossy pixels (Blinn-Phong, exponent 32) of a wide pinhole's image, rendered here with
+    # the half vector of each pixel's own view: fitted from those views, the normals come
+    # back; from a distant camera's, the highlights pull them off.
+    camera = _perspective(width=8, height=6, fx=6.0, fy=6.0, cx=4.0, cy=3.0, zc=10.0)
+    rows, cols = np.mgrid[0:6, 0:8]
+    normals = np.stack([0.4 * np.sin(0.7 * cols), 0.4 * np.cos(1.3 * rows), np.ones((6, 8))], axis=-1)
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    polar, azimuth = np.meshgrid(np.radians([15, 30, 45, 60]), np.radians(np.arange(12) * 30.0))
+    lights = np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)], -1)
+    lights = lights.reshape(-1, 3)
+    views = camera.view_directions()
+    half = lights[:, None, None] + views[None]
+    half /= np.linalg.norm(half, axis=-1, keepdims=True)
+    lit = np.clip(np.einsum("kc,hwc->khw", lights, normals), 0, None)
+    lobe = 4.0 * np.clip((half * normals[None]).sum(-1), 0, None) ** 32
+    images = (lit * (0.3 + lobe))[..., None] * np.ones(3)
+    irradiance = np.full((len(lights), 3), np.pi)
+
+    def mean_error(views):
+        fit = irtps.photometric_stereo(images, lights, irradiance, robust="lobe", views=views)
+        return float(np.degrees(np.arccos(np.clip((fit.normals * normals).sum(-1), -1, 1))).mean())
+
+    own = mean_error(views)
+    assert own < 0.1
+    assert mean_error(None) > 10 * own
+    with pytest.raises(
+        irtps.ArgumentError, match=r"views: .* at row 0, column 0 is not a unit vector toward the camera"
+    ):
+        irtps.photometric_stereo(images, lights, irradiance, views=-views)

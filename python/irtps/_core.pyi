@@ -67,6 +67,7 @@ def photometric_stereo(
     shadow_fraction: float = 0.05,
     saturation: float | None = None,
     lobe_rounds: int | None = None,
+    views: _F32 | None = None,
 ) -> tuple[_F32, _F32, npt.NDArray[np.uint8], npt.NDArray[np.uint16]]:
     """(normals (H, W, 3), albedo (H, W, 3), flags (H, W), observations used (H, W)) of
     C-contiguous float32 images (K, H, W, 3); `lobe_rounds`, the lobe mode's most rounds per
@@ -81,6 +82,7 @@ def tukey_with_lobe_check(
     shadow_fraction: float,
     saturation: float | None,
     check_rounds: int,
+    views: _F32 | None = None,
 ) -> tuple[tuple[_F32, _F32, npt.NDArray[np.uint8], npt.NDArray[np.uint16]], npt.NDArray[np.uint8]]:
     """The Tukey fit of `images` (as `photometric_stereo`'s) and, on the same threads, the
     lobe fit with `check_rounds` rounds of the pixels `check` (flat indices into `mask`):

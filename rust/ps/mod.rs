@@ -128,17 +128,21 @@ pub fn check_lights(lights: &[Light]) -> Result<Mat3> {
 }
 
 /// Fits normals and albedo to `images` laid out `(K, pixels, 3)` (row-major images, RGB
-/// interleaved) for the pixels where `mask` is true.
+/// interleaved) for the pixels where `mask` is true. `views` holds, per pixel, the unit
+/// direction from its surface point toward the camera (a pinhole's differs pixel by pixel),
+/// which the lobe mode's half vectors take; None: a distant camera along +z.
 pub fn photometric_stereo(
     images: &[f32],
     mask: &[bool],
     lights: &[Light],
     settings: &PsSettings,
+    views: Option<&[[f32; 3]]>,
 ) -> Result<PsOutput> {
     let gram = check_lights(lights)?;
     check_images(images, mask, lights.len())?;
     check_settings(settings)?;
-    fit_checked(images, mask, lights, gram, settings)
+    check_views(views, mask.len())?;
+    fit_checked(images, mask, lights, gram, settings, views)
 }
 
 /// `photometric_stereo` of inputs already checked (`gram` from `check_lights`): what the
@@ -149,6 +153,7 @@ fn fit_checked(
     lights: &[Light],
     gram: Mat3,
     settings: &PsSettings,
+    views: Option<&[[f32; 3]]>,
 ) -> Result<PsOutput> {
     let saturation = settings
         .saturation
@@ -166,7 +171,14 @@ fn fit_checked(
         Robust::Tukey => tukey::fit_pixels(images, mask, &per_pixel, shadow_fraction, &mut out)?,
         Robust::Lobe => {
             tukey::fit_pixels(images, mask, &per_pixel, shadow_fraction, &mut out)?;
-            lobe::fit_pixels(images, mask, &per_pixel, settings.lobe_rounds, &mut out)?;
+            lobe::fit_pixels(
+                images,
+                mask,
+                &per_pixel,
+                settings.lobe_rounds,
+                views,
+                &mut out,
+            )?;
         }
         Robust::Trim => trim::fit_pixels(images, mask, &per_pixel, &mut out)?,
         Robust::None | Robust::Threshold => {
@@ -241,13 +253,39 @@ fn check_settings(settings: &PsSettings) -> Result<()> {
     Ok(())
 }
 
+/// Refuses `views` that are not one unit vector toward the camera (z > 0) per pixel.
+fn check_views(views: Option<&[[f32; 3]]>, pixels: usize) -> Result<()> {
+    let Some(views) = views else {
+        return Ok(());
+    };
+    if views.len() != pixels {
+        return Err(Error::input(
+            "views",
+            format!("{} directions for {pixels} pixels", views.len()),
+        ));
+    }
+    if let Some(p) = views.iter().position(|&[x, y, z]| {
+        let length = (x * x + y * y + z * z).sqrt();
+        !(z > 0.0 && (length - 1.0).abs() <= 1e-3)
+    }) {
+        return Err(Error::input(
+            "views",
+            format!(
+                "{:?} at pixel {p} is not a unit vector toward the camera (z > 0)",
+                views[p]
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The auto mode's two fits at once: `images` where `mask` is true in the Tukey mode (the
 /// fit `settings` ask for, whatever their robust mode), and beside it, on the same threads,
 /// the pixels `check` (indices into `mask`, in any order) in the lobe mode with
 /// `check_rounds` rounds, the look at which pixels take a specular lobe that decides whether
 /// the object wants the lobe mode. Returns the Tukey fit and the flag of each pixel of
 /// `check`. The check's few pixels take the threads that the Tukey fit leaves idle, instead
-/// of a call of their own before it.
+/// of a call of their own before it. `views` as for [`photometric_stereo`].
 pub fn tukey_with_lobe_check(
     images: &[f32],
     mask: &[bool],
@@ -255,6 +293,7 @@ pub fn tukey_with_lobe_check(
     lights: &[Light],
     settings: &PsSettings,
     check_rounds: usize,
+    views: Option<&[[f32; 3]]>,
 ) -> Result<(PsOutput, Vec<u8>)> {
     let n = mask.len();
     if let Some(&pixel) = check.iter().find(|&&pixel| pixel >= n) {
@@ -277,13 +316,14 @@ pub fn tukey_with_lobe_check(
     };
     if check.is_empty() {
         return Ok((
-            photometric_stereo(images, mask, lights, &tukey)?,
+            photometric_stereo(images, mask, lights, &tukey, views)?,
             Vec::new(),
         ));
     }
     let gram = check_lights(lights)?;
     check_images(images, mask, lights.len())?;
     check_settings(&tukey)?;
+    check_views(views, n)?;
     let look = || {
         let observed: Vec<f32> = images
             .chunks_exact(3 * n)
@@ -293,9 +333,21 @@ pub fn tukey_with_lobe_check(
                     .flat_map(move |&pixel| image[3 * pixel..3 * pixel + 3].iter().copied())
             })
             .collect();
-        photometric_stereo(&observed, &vec![true; check.len()], lights, &lobe)
+        let seen: Option<Vec<[f32; 3]>> =
+            views.map(|views| check.iter().map(|&pixel| views[pixel]).collect());
+        fit_checked(
+            &observed,
+            &vec![true; check.len()],
+            lights,
+            gram,
+            &lobe,
+            seen.as_deref(),
+        )
     };
-    let (fit, looked) = rayon::join(|| fit_checked(images, mask, lights, gram, &tukey), look);
+    let (fit, looked) = rayon::join(
+        || fit_checked(images, mask, lights, gram, &tukey, views),
+        look,
+    );
     Ok((fit?, looked?.flags))
 }
 

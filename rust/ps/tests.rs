@@ -50,6 +50,7 @@ fn recovers_normal_and_albedo_exactly_without_shadows() {
                 robust,
                 ..Default::default()
             },
+            None,
         )
         .unwrap();
         assert!(
@@ -83,6 +84,7 @@ fn robust_mode_ignores_attached_shadows() {
             robust: Robust::None,
             ..Default::default()
         },
+        None,
     )
     .unwrap();
     assert!((Vec3::from(plain.normals[0]) - normal).length() > 1e-2);
@@ -95,6 +97,7 @@ fn robust_mode_ignores_attached_shadows() {
                 robust,
                 ..Default::default()
             },
+            None,
         )
         .unwrap();
         assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5);
@@ -137,6 +140,7 @@ fn tukey_mode_sets_aside_soft_shadows_and_highlights_that_the_threshold_keeps() 
                 robust,
                 ..Default::default()
             },
+            None,
         )
         .unwrap();
         (
@@ -173,6 +177,7 @@ fn trim_mode_keeps_the_middle_of_each_pixels_observations() {
             robust: Robust::Trim,
             ..Default::default()
         },
+        None,
     )
     .unwrap();
     assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5);
@@ -220,8 +225,8 @@ fn every_mode_fits_a_pixel_alike_whichever_other_pixels_the_mask_holds() {
             ..Default::default()
         };
         let (all, part) = (
-            photometric_stereo(&images, &every, &ls, &settings).unwrap(),
-            photometric_stereo(&images, &some, &ls, &settings).unwrap(),
+            photometric_stereo(&images, &every, &ls, &settings, None).unwrap(),
+            photometric_stereo(&images, &some, &ls, &settings, None).unwrap(),
         );
         assert!(
             all.flags.iter().all(|&f| f != flag::MASKED_OUT),
@@ -231,7 +236,7 @@ fn every_mode_fits_a_pixel_alike_whichever_other_pixels_the_mask_holds() {
             let alone: Vec<f32> = (0..ls.len())
                 .flat_map(|k| images[(k * pixels + p) * 3..][..3].to_vec())
                 .collect();
-            let one = photometric_stereo(&alone, &[true], &ls, &settings).unwrap();
+            let one = photometric_stereo(&alone, &[true], &ls, &settings, None).unwrap();
             assert_eq!(
                 (one.normals[0], one.albedo[0], one.used[0]),
                 (all.normals[p], all.albedo[p], all.used[p]),
@@ -283,6 +288,7 @@ fn too_few_or_coplanar_lights_are_errors() {
 fn dark_and_masked_pixels_are_flagged() {
     let ls = lights(&[[0.0, 0.0, 1.0], [0.5, 0.1, 0.8], [-0.3, 0.4, 0.8]]);
     let images = vec![0.0; 3 * 2 * 3];
-    let out = photometric_stereo(&images, &[true, false], &ls, &PsSettings::default()).unwrap();
+    let out =
+        photometric_stereo(&images, &[true, false], &ls, &PsSettings::default(), None).unwrap();
     assert_eq!(out.flags, vec![flag::DARK, flag::MASKED_OUT]);
 }

@@ -2,7 +2,8 @@
 
 use numpy::ndarray::{Array, IxDyn};
 use numpy::{
-    IntoPyArray, PyArray1, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray4, PyUntypedArrayMethods,
+    IntoPyArray, PyArray1, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArray4,
+    PyUntypedArrayMethods,
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -13,7 +14,7 @@ use crate::ps::{
 };
 use crate::scene::Light;
 
-use super::convert::lights_from;
+use super::convert::{flat, lights_from};
 use super::errors::{argument_error, to_py};
 
 /// Checks lights for photometric stereo: at least 3, not (nearly) coplanar, irradiance
@@ -37,9 +38,11 @@ type PsArrays<'py> = (
 /// Calibrated Lambertian photometric stereo on C-contiguous float32 images (K, H, W, 3):
 /// (normals (H, W, 3), albedo (H, W, 3), flags (H, W) uint8, observations used (H, W) uint16).
 /// `robust` is "none", "threshold", "trim", "tukey" or "lobe"; `lobe_rounds` the lobe mode's
-/// most rounds per exponent and start (at least 1; its 15 by default).
+/// most rounds per exponent and start (at least 1; its 15 by default); `views` None (the
+/// lobe's half vectors look from a distant camera along +z) or (H, W, 3) float32, each
+/// pixel's unit direction toward the camera (a pinhole's).
 #[pyfunction]
-#[pyo3(signature = (images, mask, light_directions, light_irradiance, robust="tukey", shadow_fraction=0.05, saturation=None, lobe_rounds=None))]
+#[pyo3(signature = (images, mask, light_directions, light_irradiance, robust="tukey", shadow_fraction=0.05, saturation=None, lobe_rounds=None, views=None))]
 #[allow(clippy::too_many_arguments)]
 pub(super) fn photometric_stereo<'py>(
     py: Python<'py>,
@@ -51,6 +54,7 @@ pub(super) fn photometric_stereo<'py>(
     shadow_fraction: f32,
     saturation: Option<f32>,
     lobe_rounds: Option<usize>,
+    views: Option<PyReadonlyArray3<'_, f32>>,
 ) -> PyResult<PsArrays<'py>> {
     let robust = match robust {
         "none" => Robust::None,
@@ -77,10 +81,36 @@ pub(super) fn photometric_stereo<'py>(
         saturation,
         lobe_rounds: lobe_rounds.unwrap_or(crate::ps::lobe::LOBE_ROUNDS),
     };
+    let views = views_of(views.as_ref(), &shape)?;
     let out = py
-        .detach(|| core_ps(data, mask_data, &lights, &settings))
+        .detach(|| core_ps(data, mask_data, &lights, &settings, views.as_deref()))
         .map_err(to_py)?;
     ps_arrays(py, out, shape[1], shape[2])
+}
+
+/// Each pixel's direction toward the camera from a (H, W, 3) array matching the images'
+/// (K, H, W, 3) `shape`.
+fn views_of(
+    views: Option<&PyReadonlyArray3<'_, f32>>,
+    shape: &[usize],
+) -> PyResult<Option<Vec<[f32; 3]>>> {
+    let Some(views) = views else {
+        return Ok(None);
+    };
+    if views.shape() != [shape[1], shape[2], 3] {
+        return Err(argument_error(
+            "views",
+            format!(
+                "shape {:?} does not match the images' {:?} x 3",
+                views.shape(),
+                &shape[1..3]
+            ),
+        ));
+    }
+    let values = flat(views, "views")?;
+    Ok(Some(
+        values.chunks_exact(3).map(|v| [v[0], v[1], v[2]]).collect(),
+    ))
 }
 
 /// The inputs of a photometric-stereo call, checked against each other.
@@ -152,10 +182,10 @@ fn ps_arrays(py: Python<'_>, out: PsOutput, h: usize, w: usize) -> PyResult<PsAr
 
 /// The auto mode's fits at once: [`photometric_stereo`] of `images` in the Tukey mode and,
 /// on the same threads, of the pixels `check` (flat indices into the mask) in the lobe mode
-/// with `check_rounds` rounds. Returns the Tukey fit's arrays and the flag of each pixel of
-/// `check`.
+/// with `check_rounds` rounds (seen along `views`, as for [`photometric_stereo`]). Returns
+/// the Tukey fit's arrays and the flag of each pixel of `check`.
 #[pyfunction]
-#[pyo3(signature = (images, mask, check, light_directions, light_irradiance, shadow_fraction, saturation, check_rounds))]
+#[pyo3(signature = (images, mask, check, light_directions, light_irradiance, shadow_fraction, saturation, check_rounds, views=None))]
 #[allow(clippy::too_many_arguments)]
 pub(super) fn tukey_with_lobe_check<'py>(
     py: Python<'py>,
@@ -167,6 +197,7 @@ pub(super) fn tukey_with_lobe_check<'py>(
     shadow_fraction: f32,
     saturation: Option<f32>,
     check_rounds: usize,
+    views: Option<PyReadonlyArray3<'_, f32>>,
 ) -> PyResult<(PsArrays<'py>, Bound<'py, PyArray1<u8>>)> {
     let PsInputs {
         shape,
@@ -180,9 +211,18 @@ pub(super) fn tukey_with_lobe_check<'py>(
         saturation,
         lobe_rounds: crate::ps::lobe::LOBE_ROUNDS,
     };
+    let views = views_of(views.as_ref(), &shape)?;
     let (fit, flags) = py
         .detach(|| {
-            core_tukey_with_lobe_check(data, mask_data, &check, &lights, &settings, check_rounds)
+            core_tukey_with_lobe_check(
+                data,
+                mask_data,
+                &check,
+                &lights,
+                &settings,
+                check_rounds,
+                views.as_deref(),
+            )
         })
         .map_err(to_py)?;
     Ok((

@@ -196,7 +196,16 @@ def dataset_lobe_share(dataset: Dataset, options: ReconstructOptions) -> float:
         dataset.mask,
         shadow_fraction=options.shadow_fraction,
         saturation=options.saturation,
+        views=camera_views(scene),
     )
+
+
+def camera_views(scene: Scene) -> np.ndarray | None:
+    """Each pixel's direction toward the camera when it sees through a pinhole (its own, or
+    its orthographic stand-in's: `irtps.model.camera.Camera.view_directions`), else None (a
+    distant camera along +z)."""
+    viewer = scene.camera.pinhole or scene.camera
+    return None if viewer.projection == "orthographic" else viewer.view_directions()
 
 
 def with_chosen_robust(options: ReconstructOptions, fit: PsResult) -> ReconstructOptions:
@@ -223,9 +232,12 @@ def fit_photometric_stereo(
     `progress`: a progress bar for the lobe mode's fit of (K, H, W, 3) images (asked for, or chosen by
     ``"auto"``), the one slow enough to want one (`irtps.ps.fit.photometric_stereo`)."""
     scene, mask = dataset.scene, dataset.mask
+    views = camera_views(scene)
     # (K, N, 3) observations are fitted as one row of N pixels, every one in the mask.
-    fitted, fitted_mask = (
-        (images, mask) if images.ndim == 4 else (images[:, None], np.ones((1, images.shape[1]), dtype=bool))
+    fitted, fitted_mask, fitted_views = (
+        (images, mask, views)
+        if images.ndim == 4
+        else (images[:, None], np.ones((1, images.shape[1]), dtype=bool), None if views is None else views[mask][None])
     )
     fit = photometric_stereo(
         fitted,
@@ -235,6 +247,7 @@ def fit_photometric_stereo(
         robust=options.robust,
         shadow_fraction=options.shadow_fraction,
         saturation=options.saturation,
+        views=fitted_views,
         progress=progress and options.robust in ("lobe", "auto") and images.ndim == 4,
     )
     if images.ndim == 4:

@@ -209,6 +209,18 @@ class Camera:
             rays[..., 1] = (-(np.arange(self.height) + 0.5 - cy) / fy)[:, None]
         return rays
 
+    def view_directions(self) -> np.ndarray:
+        """The unit direction from each pixel's surface point toward the camera.
+
+        Returns
+        -------
+        numpy.ndarray
+            float64 (height, width, 3): perspective, each pixel's centre ray reversed and
+            normalised (`ray_directions`); orthographic, ``(0, 0, 1)`` for every pixel.
+        """
+        rays = -self.ray_directions()
+        return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+
     def pixel_centers(self) -> tuple[np.ndarray, np.ndarray]:
         """World coordinates of the pixel centres of an orthographic camera.
 

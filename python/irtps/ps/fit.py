@@ -135,6 +135,7 @@ def photometric_stereo(
     robust: str = "auto",
     shadow_fraction: float = 0.05,
     saturation: float | None = None,
+    views: np.ndarray | None = None,
     progress: bool = False,
 ) -> PsResult:
     """Fit a normal and an RGB albedo per pixel to images under known distant lights.
@@ -195,6 +196,10 @@ def photometric_stereo(
         Shadow threshold of the threshold mode (and the Tukey mode's start).
     saturation : float, optional
         Raw value at or above which an observation is saturated.
+    views : numpy.ndarray, optional
+        (H, W, 3) unit direction from each pixel's surface point toward the camera, which
+        the lobe mode's half vectors take (`irtps.model.camera.Camera.view_directions`: a
+        pinhole's turn pixel by pixel); default a distant camera along +z.
     progress : bool
         Show a progress bar on standard error (from half a second on): the fit runs in
         bands of rows, each pixel's fit the same as in one call. For the lobe mode, which
@@ -208,8 +213,8 @@ def photometric_stereo(
     ------
     ArgumentError
         Fewer than 3 lights, coplanar lights, shapes that disagree, a
-        ``shadow_fraction`` outside [0, 1), a ``saturation`` that is not positive or an
-        unknown ``robust`` mode.
+        ``shadow_fraction`` outside [0, 1), a ``saturation`` that is not positive, an
+        unknown ``robust`` mode, or `views` that are not unit vectors toward the camera.
 
     Examples
     --------
@@ -227,12 +232,31 @@ def photometric_stereo(
     mask = np.ascontiguousarray(check_mask(mask, images.shape[1:3], match="images"))
     check_images_finite("images", images, mask)
     check_choice("robust", robust, ROBUST_CHOICES)
+    views = _checked_views(views, images.shape[1:3])
     if robust == "auto":
-        return _fit_auto(images, mask, light_directions, light_irradiance, shadow_fraction, saturation, progress)
+        return _fit_auto(images, mask, light_directions, light_irradiance, shadow_fraction, saturation, views, progress)
     settings = _core_settings(images, light_directions, light_irradiance, robust, shadow_fraction, saturation)
     if not progress:
-        return PsResult(*_core.photometric_stereo(images, mask, *settings))
-    return _fit_in_bands(images, mask, settings)
+        return PsResult(*_core.photometric_stereo(images, mask, *settings, views=views))
+    return _fit_in_bands(images, mask, settings, views)
+
+
+def _checked_views(views, size: tuple[int, int]) -> np.ndarray | None:
+    """`views` as C-contiguous float32 (H, W, 3) of images of `size`, or None; an
+    `ArgumentError` naming them unless each is a unit vector toward the camera (z > 0)."""
+    if views is None:
+        return None
+    views = np.ascontiguousarray(check_array("views", views, (*size, 3), dtype=np.float32, match="the images"))
+    check_finite("views", views)
+    length = np.linalg.norm(views, axis=-1)
+    bad = (np.abs(length - 1) > 1e-3) | (views[..., 2] <= 0)
+    if bad.any():
+        row, column = np.argwhere(bad)[0]
+        raise ArgumentError(
+            "views",
+            f"{views[row, column].tolist()} at row {row}, column {column} is not a unit vector toward the camera (z > 0)",
+        )
+    return views
 
 
 def _fit_auto(
@@ -242,6 +266,7 @@ def _fit_auto(
     light_irradiance: np.ndarray,
     shadow_fraction: float,
     saturation: float | None,
+    views: np.ndarray | None,
     progress: bool,
 ) -> PsResult:
     """`photometric_stereo` of float32 `images` with ``robust="auto"``: the Tukey fit and,
@@ -259,10 +284,11 @@ def _fit_auto(
         shadow_fraction,
         saturation,
         LOBE_CHECK_ROUNDS,
+        views=views,
     )
     check.record(flags)
     while not check.done(stop_early=True):
-        check.fit_next(images, settings)
+        check.fit_next(images, settings, views)
     chosen = choose_robust(check.share)
     if chosen == "tukey":
         return PsResult(*tukey, robust_used=chosen, lobe_share=check.share)
@@ -274,6 +300,7 @@ def _fit_auto(
         robust=chosen,
         shadow_fraction=shadow_fraction,
         saturation=saturation,
+        views=views,
         progress=progress,
     )
     return dataclasses.replace(fit, robust_used=chosen, lobe_share=check.share)
@@ -307,9 +334,9 @@ def _core_settings(
 PROGRESS_BANDS = 50
 
 
-def _fit_in_bands(images: np.ndarray, mask: np.ndarray, settings: _CoreSettings) -> PsResult:
-    """`_core.photometric_stereo` of `images` and `mask` with `settings`, band of rows by band
-    of rows under a progress bar (counting the mask's pixels), joined."""
+def _fit_in_bands(images: np.ndarray, mask: np.ndarray, settings: _CoreSettings, views: np.ndarray | None) -> PsResult:
+    """`_core.photometric_stereo` of `images` and `mask` with `settings` and `views`, band of
+    rows by band of rows under a progress bar (counting the mask's pixels), joined."""
     rows = images.shape[1]
     band = -(-rows // PROGRESS_BANDS)
     parts = []
@@ -318,7 +345,10 @@ def _fit_in_bands(images: np.ndarray, mask: np.ndarray, settings: _CoreSettings)
             rows_here = slice(start, min(start + band, rows))
             parts.append(
                 _core.photometric_stereo(
-                    np.ascontiguousarray(images[:, rows_here]), np.ascontiguousarray(mask[rows_here]), *settings
+                    np.ascontiguousarray(images[:, rows_here]),
+                    np.ascontiguousarray(mask[rows_here]),
+                    *settings,
+                    views=None if views is None else np.ascontiguousarray(views[rows_here]),
                 )
             )
             bar.update(int(mask[rows_here].sum()))
@@ -423,6 +453,7 @@ def lobe_share(
     stop_early: bool = True,
     shadow_fraction: float = 0.05,
     saturation: float | None = None,
+    views: np.ndarray | None = None,
 ) -> float:
     """The share of the object's pixels that the lobe mode's fit, cut short, gives a
     specular lobe.
@@ -451,7 +482,7 @@ def lobe_share(
     stop_early : bool
         Stop once the share is clearly on one side of `LOBE_ADVISED`; ``False`` measures it
         on all `sample` pixels.
-    shadow_fraction, saturation
+    shadow_fraction, saturation, views
         As for `photometric_stereo`.
 
     Returns
@@ -478,9 +509,10 @@ def lobe_share(
     if isinstance(sample, bool) or not (isinstance(sample, (int, np.integer)) and sample >= 1):
         raise ArgumentError("sample", f"{sample!r} is not a positive integer")
     settings = _core_settings(images, light_directions, light_irradiance, "lobe", shadow_fraction, saturation)
+    views = _checked_views(views, images.shape[1:3])
     check = _LobeCheck(mask, int(sample))
     while not check.done(stop_early):
-        check.fit_next(images, settings)
+        check.fit_next(images, settings, views)
     return check.share
 
 
@@ -499,16 +531,19 @@ class _LobeCheck:
             return True
         return stop_early and self.fitted > 0 and share_is_decided(self.lobes, self.fitted)
 
-    def fit_next(self, images: np.ndarray, settings: _CoreSettings) -> None:
-        """Fit the next batch's pixels of `images` in the lobe mode with `LOBE_CHECK_ROUNDS`
-        rounds, the other `_core.photometric_stereo` arguments `settings`, and count them."""
+    def fit_next(self, images: np.ndarray, settings: _CoreSettings, views: np.ndarray | None = None) -> None:
+        """Fit the next batch's pixels of `images` (seen along `views`) in the lobe mode with
+        `LOBE_CHECK_ROUNDS` rounds, the other `_core.photometric_stereo` arguments
+        `settings`, and count them."""
         rows, cols = self._next()
         observed = np.ascontiguousarray(
             images[:, rows, cols][:, None], dtype=np.float32
         )  # (K, 1, N, 3): one row of pixels
-        self.record(
-            _core.photometric_stereo(observed, np.ones(observed.shape[1:3], bool), *settings, LOBE_CHECK_ROUNDS)[2][0]
-        )
+        seen = None if views is None else np.ascontiguousarray(views[rows, cols][None])
+        flags = _core.photometric_stereo(
+            observed, np.ones(observed.shape[1:3], bool), *settings, LOBE_CHECK_ROUNDS, views=seen
+        )[2][0]
+        self.record(flags)
 
     def next_indices(self, width: int) -> list[int]:
         """The flat indices of the next batch's pixels, in images `width` pixels wide, for a

@@ -9,7 +9,7 @@ use crate::ps::lanes::{Floats, Isa};
 
 use super::model::{lobe_scales, residual, shading, summed, NH_MIN};
 use super::weights::{loss, reweight};
-use super::{grouped, Job, LobeFit, Work};
+use super::{grouped, HalfVectors, Job, LobeFit, Work};
 
 /// Longest step of the normal per round (about 11°).
 const STEP_MAX: f32 = 0.2;
@@ -32,12 +32,13 @@ pub(super) fn tangents(n: Vec3) -> (Vec3, Vec3) {
 pub(super) fn fit_exponent<V: Isa<LANES>>(
     isa: V,
     job: &Job,
+    half: &HalfVectors,
     from: Vec3,
     shift: u32,
     reach: f32,
     work: &mut Work,
 ) -> LobeFit {
-    let (lights, half) = (job.lights, &job.half);
+    let lights = job.lights;
     let p = (1u32 << shift) as f32;
     let mut n = from;
     work.weight.copy_from_slice(&work.usable);

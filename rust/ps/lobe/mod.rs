@@ -3,7 +3,8 @@
 //!
 //! Each pixel starts from its Tukey fit ([`crate::ps::tukey`]) and fits its channel-summed
 //! observations with `b_k = [n·l_k]₊ (a + c (n·h_k)^p)`: `h_k` is the half vector between
-//! light k and the view direction (the camera's +z, distant), `a ≥ 0` the diffuse albedo and
+//! light k and the view direction (the camera's +z when it is distant, the pixel's own
+//! direction toward a pinhole), `a ≥ 0` the diffuse albedo and
 //! `c ≥ 0` the lobe's height (a Blinn-Phong lobe on a Lambertian base; `c = 0` is the
 //! Lambertian fit). For each exponent p of [`LOBE_EXPONENTS`] and from two starts, the Tukey
 //! normal and the half vector of the pixel's brightest observation, it alternates the linear
@@ -67,16 +68,18 @@ const TILE: usize = 32;
 /// Refits every pixel where `mask` is true and whose Tukey fit in `out` is usable, from
 /// `images` laid out `(K, pixels, 3)`, with a diffuse term and a specular lobe, each
 /// exponent fitted for at most `rounds` rounds from each start, in the widest registers the
-/// CPU has (the same results in each).
+/// CPU has (the same results in each). The half vectors look from each pixel's direction
+/// toward the camera in `views`, or without them from a distant camera along +z.
 pub(crate) fn fit_pixels(
     images: &[f32],
     mask: &[bool],
     lights: &Lights,
     rounds: usize,
+    views: Option<&[[f32; 3]]>,
     out: &mut PsOutput,
 ) -> Result<()> {
-    let job = Job::new(images, lights, rounds, out);
-    let work = || Box::new((Scratch::default(), Work::default()));
+    let job = Job::new(images, lights, rounds, views, out);
+    let work = || Box::new((Scratch::default(), Work::default(), HalfVectors::default()));
     #[cfg(target_arch = "x86_64")]
     if let Some(avx2) = crate::ps::lanes::Avx2::detect() {
         // SAFETY: `detect` found AVX2 and FMA.
@@ -96,7 +99,10 @@ struct Job<'a> {
     /// Pixels per image.
     n: usize,
     lights: &'a Lights,
+    /// The half vectors of a distant camera along +z.
     half: HalfVectors,
+    /// Each pixel's direction toward the camera, where it is not the distant +z.
+    views: Option<&'a [[f32; 3]]>,
     /// Most rounds of each exponent's fit.
     rounds: usize,
     /// Each pixel's Tukey normal, channel-summed albedo and flag.
@@ -105,7 +111,13 @@ struct Job<'a> {
 
 impl<'a> Job<'a> {
     /// The lobe fit of `images` from the Tukey fits in `out`.
-    fn new(images: &'a [f32], lights: &'a Lights, rounds: usize, out: &PsOutput) -> Job<'a> {
+    fn new(
+        images: &'a [f32],
+        lights: &'a Lights,
+        rounds: usize,
+        views: Option<&'a [[f32; 3]]>,
+        out: &PsOutput,
+    ) -> Job<'a> {
         let starts = out
             .normals
             .iter()
@@ -117,7 +129,8 @@ impl<'a> Job<'a> {
             images,
             n: out.flags.len(),
             lights,
-            half: HalfVectors::new(lights),
+            half: HalfVectors::toward(lights, Vec3::Z),
+            views,
             rounds,
             starts,
         }
@@ -128,7 +141,7 @@ impl<'a> Job<'a> {
     fn fit_tile<V: Isa<LANES>>(
         &self,
         isa: V,
-        (scratch, work): &mut (Scratch, Work),
+        (scratch, work, pixel_half): &mut (Scratch, Work, HalfVectors),
         tile: &[usize],
         fits: &mut Vec<(usize, PixelFit)>,
     ) {
@@ -140,9 +153,17 @@ impl<'a> Job<'a> {
             let grey = &scratch.grey[i * padded..][..padded];
             let rgb = &scratch.rgb[i * lights.count..][..lights.count];
             let fit = if start_flag == flag::OK {
+                let half = match self.views {
+                    None => &self.half,
+                    Some(views) => {
+                        pixel_half.fill(lights, Vec3::from(views[p]));
+                        &*pixel_half
+                    }
+                };
                 refit(
                     isa,
                     self,
+                    half,
                     grey,
                     rgb,
                     (Vec3::from(start), start_albedo),
@@ -164,7 +185,7 @@ impl<'a> Job<'a> {
     fn fit_tile_avx2(
         &self,
         isa: crate::ps::lanes::Avx2,
-        state: &mut (Scratch, Work),
+        state: &mut (Scratch, Work, HalfVectors),
         tile: &[usize],
         fits: &mut Vec<(usize, PixelFit)>,
     ) {
@@ -172,21 +193,31 @@ impl<'a> Job<'a> {
     }
 }
 
-/// Each light's half vector with the view direction (0, 0, 1), padded like [`Lights`], in
-/// groups of [`LANES`] lights.
+/// Each light's half vector with a view direction, padded like [`Lights`], in groups of
+/// [`LANES`] lights.
+#[derive(Default)]
 struct HalfVectors([Vec<Group>; 3]);
 
 impl HalfVectors {
-    fn new(lights: &Lights) -> HalfVectors {
-        let mut half: [Vec<Group>; 3] =
-            std::array::from_fn(|_| vec![[0.0; LANES]; lights.padded() / LANES]);
+    /// The half vectors of `lights` with the unit direction `view` toward the camera.
+    fn toward(lights: &Lights, view: Vec3) -> HalfVectors {
+        let mut half = HalfVectors::default();
+        half.fill(lights, view);
+        half
+    }
+
+    /// Sets these to the half vectors of `lights` with `view`, reusing their memory.
+    fn fill(&mut self, lights: &Lights, view: Vec3) {
+        for axis in &mut self.0 {
+            axis.clear();
+            axis.resize(lights.padded() / LANES, [0.0; LANES]);
+        }
         for k in 0..lights.count {
-            let h = (lights.direction(k) + Vec3::Z).normalize_or_zero();
-            for (axis, value) in half.iter_mut().zip(h.to_array()) {
+            let h = (lights.direction(k) + view).normalize_or_zero();
+            for (axis, value) in self.0.iter_mut().zip(h.to_array()) {
                 axis[k / LANES][k % LANES] = value;
             }
         }
-        HalfVectors(half)
     }
 
     #[inline(always)]
@@ -256,12 +287,13 @@ struct LobeFit {
 fn refit<V: Isa<LANES>>(
     isa: V,
     job: &Job,
+    half: &HalfVectors,
     grey: &[f32],
     rgb: &[[f32; 3]],
     start: (Vec3, f32),
     work: &mut Work,
 ) -> Option<PixelFit> {
-    let (lights, half) = (job.lights, &job.half);
+    let lights = job.lights;
     let groups = lights.padded() / LANES;
     for v in [
         &mut work.b,
@@ -312,7 +344,7 @@ fn refit<V: Isa<LANES>>(
             continue;
         }
         for shift in 0..LOBE_EXPONENTS {
-            let fit = fit_exponent(isa, job, from, shift, reach, work);
+            let fit = fit_exponent(isa, job, half, from, shift, reach, work);
             if fit.cost + margin < best.as_ref().map_or(start_cost, |b| b.cost) {
                 work.best_weight.copy_from_slice(&work.weight);
                 best = Some(fit);

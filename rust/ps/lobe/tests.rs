@@ -53,6 +53,25 @@ fn fit_glossy_with(
     exponent: i32,
     settings: PsSettings,
 ) -> crate::error::Result<crate::ps::PsOutput> {
+    let (images, lights) = glossy_images(normals, rho, height, exponent, None);
+    photometric_stereo(
+        &images,
+        &vec![true; normals.len()],
+        &lights,
+        &settings,
+        None,
+    )
+}
+
+/// The images of [`fit_glossy`]'s pixels and their lights, pixel p seen from `views[p]`,
+/// or from a distant camera along +z.
+fn glossy_images(
+    normals: &[Vec3],
+    rho: [f32; 3],
+    height: f32,
+    exponent: i32,
+    views: Option<&[[f32; 3]]>,
+) -> (Vec<f32>, Vec<Light>) {
     let directions = ring_lights();
     let lights: Vec<Light> = directions
         .iter()
@@ -63,14 +82,69 @@ fn fit_glossy_with(
         .collect();
     let mut images = Vec::new();
     for &l in &directions {
-        let h = (l + Vec3::Z).normalize();
-        for &n in normals {
+        for (p, &n) in normals.iter().enumerate() {
+            let toward = views.map_or(Vec3::Z, |views| Vec3::from(views[p]));
+            let h = (l + toward).normalize();
             let nl = n.dot(l).max(0.0);
             let lobe = height * n.dot(h).max(0.0).powi(exponent);
             images.extend(rho.map(|r| nl * (r + lobe)));
         }
     }
-    photometric_stereo(&images, &vec![true; normals.len()], &lights, &settings)
+    (images, lights)
+}
+
+/// The directions toward a pinhole 64° across (fx = 8, principal point (5, 2)) from the
+/// pixels of an image 10 wide: up to 32° from the axis.
+fn pinhole_views(count: usize) -> Vec<[f32; 3]> {
+    (0..count)
+        .map(|p| {
+            let (i, j) = ((p / 10) as f32, (p % 10) as f32);
+            Vec3::new(-(j + 0.5 - 5.0) / 8.0, (i + 0.5 - 2.0) / 8.0, 1.0)
+                .normalize()
+                .to_array()
+        })
+        .collect()
+}
+
+#[test]
+fn pixels_seen_through_a_pinhole_take_the_half_vectors_of_their_own_views() {
+    let (normals, views) = (tilted(40), pinhole_views(40));
+    let (images, lights) = glossy_images(&normals, [0.2, 0.3, 0.4], 4.0, 32, Some(&views));
+    let settings = PsSettings {
+        robust: Robust::Lobe,
+        ..PsSettings::default()
+    };
+    let fit = |views| {
+        let out = photometric_stereo(&images, &vec![true; 40], &lights, &settings, views).unwrap();
+        let errors = normals.iter().zip(&out.normals);
+        errors.map(|(&n, &m)| angle_deg(m, n)).sum::<f32>() / 40.0
+    };
+    let (own, distant) = (fit(Some(&views)), fit(None));
+    assert!(own < 0.05, "mean error {own}° with each pixel's view");
+    assert!(
+        distant > 10.0 * own,
+        "{distant}° from afar: the test shows nothing"
+    );
+}
+
+#[test]
+fn views_that_are_not_one_unit_vector_per_pixel_are_refused() {
+    let normals = tilted(40);
+    let (images, lights) = glossy_images(&normals, [0.2; 3], 4.0, 32, None);
+    let settings = PsSettings {
+        robust: Robust::Lobe,
+        ..PsSettings::default()
+    };
+    let mut bad = pinhole_views(40);
+    bad[7] = [0.0, 0.0, -1.0];
+    for (views, problem) in [
+        (pinhole_views(39), "39 directions for 40 pixels"),
+        (bad, "at pixel 7 is not a unit vector toward the camera"),
+    ] {
+        let refused =
+            photometric_stereo(&images, &vec![true; 40], &lights, &settings, Some(&views));
+        assert!(refused.unwrap_err().to_string().contains(problem));
+    }
 }
 
 fn tilted(count: usize) -> Vec<Vec3> {
@@ -203,7 +277,8 @@ fn the_auto_modes_check_beside_the_tukey_fit_is_each_fit_alone() {
     let check = [3, 10, 11, 40, 59, 2];
     let settings = PsSettings::default();
     let (fit, flags) =
-        crate::ps::tukey_with_lobe_check(&images, &mask, &check, &lights, &settings, 5).unwrap();
+        crate::ps::tukey_with_lobe_check(&images, &mask, &check, &lights, &settings, 5, None)
+            .unwrap();
     assert_eq!(
         fit,
         photometric_stereo(
@@ -213,7 +288,8 @@ fn the_auto_modes_check_beside_the_tukey_fit_is_each_fit_alone() {
             &PsSettings {
                 robust: Robust::Tukey,
                 ..settings
-            }
+            },
+            None
         )
         .unwrap()
     );
@@ -234,6 +310,7 @@ fn the_auto_modes_check_beside_the_tukey_fit_is_each_fit_alone() {
             lobe_rounds: 5,
             ..settings
         },
+        None,
     )
     .unwrap();
     assert_eq!(flags, alone.flags);
@@ -242,9 +319,10 @@ fn the_auto_modes_check_beside_the_tukey_fit_is_each_fit_alone() {
         check.map(|p| p % 2 == 0),
         "the glossy pixels take a lobe, the matte ones none"
     );
-    let outside = crate::ps::tukey_with_lobe_check(&images, &mask, &[60], &lights, &settings, 5)
-        .unwrap_err()
-        .to_string();
+    let outside =
+        crate::ps::tukey_with_lobe_check(&images, &mask, &[60], &lights, &settings, 5, None)
+            .unwrap_err()
+            .to_string();
     assert!(
         outside.starts_with("check: pixel 60 is outside"),
         "{outside}"
@@ -297,6 +375,7 @@ fn pixels_with_few_lit_observations_keep_the_tukey_fit() {
                 robust,
                 ..PsSettings::default()
             },
+            None,
         )
         .unwrap()
     };
@@ -352,9 +431,9 @@ fn fits_in_every_instruction_set(count: usize) -> Vec<Vec<(usize, PixelFit)>> {
         used: vec![0; n],
     };
     crate::ps::tukey::fit_pixels(&images, &vec![true; n], &lights, 0.05, &mut out).unwrap();
-    let job = Job::new(&images, &lights, LOBE_ROUNDS, &out);
+    let job = Job::new(&images, &lights, LOBE_ROUNDS, None, &out);
     let pixels: Vec<usize> = (0..n).collect();
-    let mut state = (Scratch::default(), Work::default());
+    let mut state = (Scratch::default(), Work::default(), HalfVectors::default());
     let mut portable = Vec::new();
     job.fit_tile(Portable, &mut state, &pixels, &mut portable);
     let mut all = vec![portable];
