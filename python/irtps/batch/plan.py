@@ -1,4 +1,5 @@
-"""The data sets of a batch: the name of each one's output folder and the images it leaves out."""
+"""The data sets of a batch: the name of each one's output folder, the images it leaves out
+and the intrinsics file that gives it a perspective camera."""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ from irtps._shared.paths import resolve_path
 from irtps.batch.summary import SUMMARY_JSON, SUMMARY_MARKDOWN
 from irtps.errors import ArgumentError
 from irtps.io.image_selection import parse_image_list
+from irtps.io.intrinsics import read_intrinsics
 
-__all__ = ["dataset_exclusions", "output_names"]
+__all__ = ["dataset_exclusions", "dataset_intrinsics", "output_names"]
 
 
 def output_names(paths: Sequence[str | Path]) -> list[str]:
@@ -64,3 +66,27 @@ def dataset_exclusions(
         if images is not None:
             parse_image_list(images)
     return {name: exclude_images.get(name) for name in names}
+
+
+def dataset_intrinsics(
+    intrinsics: str | Path | Mapping[str, str | Path | None] | None, names: list[str]
+) -> dict[str, str | None]:
+    """Each data set's intrinsics file (`irtps.batch.run.reconstruct_many`'s ``intrinsics``),
+    as an absolute path, each file read and checked (`irtps.io.intrinsics.read_intrinsics`,
+    which raises a `DatasetError` naming it)."""
+    if intrinsics is None or isinstance(intrinsics, (str, Path)):
+        chosen: dict[str, str | Path | None] = dict.fromkeys(names, intrinsics)
+    elif isinstance(intrinsics, Mapping):
+        unknown = sorted(set(intrinsics) - set(names), key=str)
+        if unknown:
+            raise ArgumentError("intrinsics", f"{unknown[0]!r} is none of the data sets ({', '.join(names)})")
+        chosen = {name: intrinsics.get(name) for name in names}
+    else:
+        raise ArgumentError(
+            "intrinsics",
+            f"expected a K.txt path or a mapping of data set names to paths, got {type(intrinsics).__name__}",
+        )
+    files = {name: None if path is None else str(resolve_path(path)) for name, path in chosen.items()}
+    for path in {path for path in files.values() if path is not None}:
+        read_intrinsics(path)
+    return files

@@ -9,6 +9,7 @@ from irtps._shared.paths import resolve_path
 from irtps.errors import IrtpsError
 from irtps.io.dataset_files import dataset_image_names
 from irtps.io.image_selection import select_images
+from irtps.io.intrinsics import Intrinsics, read_intrinsics
 from irtps.irt.folder import indirect_file_names, load_reconstruction, load_run_record
 from irtps.model.options import ReconstructOptions
 
@@ -16,10 +17,15 @@ __all__ = ["complete_output"]
 
 
 def complete_output(
-    destination: str, source: str, options: ReconstructOptions, exclude_images: str | None
+    destination: str,
+    source: str,
+    options: ReconstructOptions,
+    exclude_images: str | None,
+    intrinsics: str | None = None,
 ) -> tuple | None:
     """The normals, albedo, height and mask of a complete output folder of `source` made
-    with `options`, leaving out the images of `exclude_images` (see
+    with `options`, leaving out the images of `exclude_images`, with the intrinsics file
+    `intrinsics` (or none) and its camera as it reads now (see
     `irtps.batch.task.reconstruct_to_folder`), and its recorded robust mode, or None."""
     folder = Path(destination)
     try:
@@ -28,12 +34,14 @@ def complete_output(
         meshes = all(_nonempty_file(folder / name) for name in ("mesh.ply", "mesh.obj"))
         indirect = not record.get("chosen_pass") or _complete_indirect(folder / "indirect", record.get("images", []))
         excluded = select_images(dataset_image_names(source), exclude_images, where=source).excluded
+        camera = None if intrinsics is None else read_intrinsics(intrinsics)
     except (IrtpsError, OSError):
         return None
     same_run = (
         record["source"] == str(resolve_path(source))
         and _same_options(record["parameters"], options)
         and tuple(record.get("excluded_images", ())) == excluded
+        and _same_intrinsics(record, intrinsics, camera)
     )
     return (maps, record.get("robust_used")) if same_run and meshes and indirect else None
 
@@ -45,6 +53,17 @@ def _complete_indirect(folder: Path, images: list[str]) -> bool:
     files = {file.name: file for file in folder.iterdir()}
     expected = indirect_file_names(images, len(images) if images else len(files))
     return bool(files) and files.keys() == set(expected) and all(map(_nonempty_file, files.values()))
+
+
+def _same_intrinsics(record: dict, intrinsics: str | None, camera: Intrinsics | None) -> bool:
+    """Whether a ``run.json`` was made with the intrinsics file `intrinsics` (or none), whose
+    focal lengths and principal point (`camera`, as read now) its camera has."""
+    if record.get("intrinsics") != (None if intrinsics is None else str(resolve_path(intrinsics))):
+        return False
+    if camera is None:
+        return True
+    recorded = record.get("camera") or {}
+    return all(recorded.get(name) == getattr(camera, name) for name in ("fx", "fy", "cx", "cy"))
 
 
 def _nonempty_file(path: Path) -> bool:

@@ -33,7 +33,7 @@ from pathlib import Path
 
 from irtps._shared.paths import resolve_path
 from irtps.batch.cluster import import_distributed, local_cluster, quiet_logging
-from irtps.batch.plan import dataset_exclusions, output_names
+from irtps.batch.plan import dataset_exclusions, dataset_intrinsics, output_names
 from irtps.batch.result import BatchResult, describe_error
 from irtps.batch.task import reconstruct_to_folder
 from irtps.batch.task_warnings import issue_warnings
@@ -52,6 +52,7 @@ def reconstruct_many(
     progress: bool = False,
     resume: bool = False,
     exclude_images: str | Mapping[str, str | None] | None = None,
+    intrinsics: str | Path | Mapping[str, str | Path | None] | None = None,
     **settings,
 ) -> list[BatchResult]:
     """Reconstruct many data set folders on a Dask cluster, each into ``out/NAME/``.
@@ -104,6 +105,12 @@ def reconstruct_many(
         or a list (or None) per data set's ``NAME`` (`output_names`; a name left out leaves
         out nothing), e.g. ``{"bearPNG": "1-20"}``. A list that names none of a data set's
         images fails that data set alone.
+    intrinsics : str, pathlib.Path or mapping, optional
+        A ``K.txt`` that gives the data sets a perspective camera (`irtps.load_dataset`): one
+        for every data set, or one (or None) per ``NAME``, e.g. ``{"readingPNG":
+        "reading/K.txt"}``. Each file is read and checked here, before anything runs; one
+        whose principal point does not fit a data set's images fails that data set alone.
+        Recorded in each ``run.json``, which `resume` compares.
     **settings
         Fields of `ReconstructOptions` that replace those of `options`, e.g.
         ``method="irtps"``.
@@ -118,7 +125,11 @@ def reconstruct_many(
     ArgumentError
         Before anything runs: no data set, an option unknown or out of range
         (`irtps.model.options.OptionError`), a malformed list of images to leave out or one for
-        a ``NAME`` that is none of the data sets'.
+        a ``NAME`` that is none of the data sets', intrinsics for a ``NAME`` that is none of
+        them.
+    DatasetError
+        Before anything runs: an intrinsics file that is missing or not a 3x3 intrinsic
+        matrix (`irtps.io.intrinsics.read_intrinsics`).
     IrtpsError
         Before anything runs: dask not installed.
 
@@ -146,6 +157,7 @@ def reconstruct_many(
     folder = resolve_path(out)
     names = output_names(sources)
     exclusions = dataset_exclusions(exclude_images, names)
+    cameras = dataset_intrinsics(intrinsics, names)
     with _using(client) as active, _lost_workers(active) as lost:
         pending = {
             active.submit(
@@ -155,6 +167,7 @@ def reconstruct_many(
                 options,
                 resume=resume,
                 exclude_images=exclusions[name],
+                intrinsics=cameras[name],
                 pure=False,
                 priority=-index,
             ): (name, source)

@@ -35,6 +35,7 @@ def reconstruct_to_folder(
     *,
     resume: bool = False,
     exclude_images: str | None = None,
+    intrinsics: str | None = None,
 ) -> BatchResult:
     """Reconstruct one data set folder into an output folder: the task of a batch.
 
@@ -46,7 +47,8 @@ def reconstruct_to_folder(
     evaluated against the ground truth, if any): its ``run.json``, written last by
     `irtps.save_reconstruction`, is valid and records the same data set folder and the
     same options (an option left unset, resolved for each data set, matches any value)
-    and left out the images that `exclude_images` names, no other; its normal, albedo and
+    and left out the images that `exclude_images` names, no other, with the intrinsics file
+    `intrinsics` (or none) and the camera it gives now; its normal, albedo and
     height maps and its mask read back, all of one size; its two meshes are files that are
     not empty; and when the chosen IRT-PS pass is not pass 0, ``indirect/`` holds a file for
     each image fitted (`irtps.irt.folder.indirect_file_names`), none empty. Any other output
@@ -64,6 +66,8 @@ def reconstruct_to_folder(
         Keep a complete output folder (status ``"reused"``) instead of replacing it.
     exclude_images : str, optional
         Images of the data set to leave out, not read (`irtps.load_dataset`).
+    intrinsics : str, optional
+        A ``K.txt`` that gives the data set a perspective camera (`irtps.load_dataset`).
 
     Returns
     -------
@@ -80,12 +84,14 @@ def reconstruct_to_folder(
     start = time.perf_counter()
     with _TASKS.running(), recorded_warnings() as recorded:
         try:
-            kept = complete_output(destination, source, options, exclude_images) if resume else None
+            kept = complete_output(destination, source, options, exclude_images, intrinsics) if resume else None
             if kept is None:
                 status = "ok"
-                dataset, result = load_and_reconstruct(source, options=options, exclude_images=exclude_images)
+                dataset, result = load_and_reconstruct(
+                    source, options=options, exclude_images=exclude_images, intrinsics=intrinsics
+                )
                 with _TASKS.writing():
-                    save_reconstruction(result, destination, source=str(resolve_path(source)))
+                    save_reconstruction(result, destination, source=str(resolve_path(source)), intrinsics=intrinsics)
                 gt, normals, albedo, height, mask = (
                     dataset.gt,
                     result.normals,

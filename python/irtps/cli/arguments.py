@@ -25,6 +25,7 @@ __all__ = [
     "EXCLUDE_IMAGES",
     "EXCLUDE_IMAGES_BY_NAME",
     "INTRINSICS",
+    "INTRINSICS_BY_NAME",
     "RECONSTRUCT",
     "RENDER",
     "SYNTH",
@@ -179,6 +180,17 @@ EXCLUDE_IMAGES_BY_NAME = Argument(
     default=[],
     help="images to leave out (not read), as for 'irtps reconstruct': LIST for every DATA, NAME=LIST for the DATA "
     "named NAME (its folder's name, as in the summary: bearPNG=1-20); repeat it for more, a data set's lists are joined",
+)
+
+#: The perspective cameras of the commands that take many data sets: of all, or of one by name.
+INTRINSICS_BY_NAME = Argument(
+    "--intrinsics",
+    metavar="[NAME=]K.txt",
+    action="append",
+    default=[],
+    help="the camera's 3x3 intrinsic matrix in pixels, as for 'irtps reconstruct': K.txt for every DATA, "
+    "NAME=K.txt for the DATA named NAME (its folder's name, as in the summary), which takes it instead; each file "
+    "is checked before anything runs, and recorded in run.json (--resume reconstructs again when it changed)",
 )
 
 #: How to reconstruct, the options of IRT-PS in a group of their own.

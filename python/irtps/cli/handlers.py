@@ -28,6 +28,7 @@ from irtps.io.dataset import Dataset, GroundTruth, load_dataset, load_ground_tru
 from irtps.io.dataset_files import dataset_inputs, scene_object_inputs
 from irtps.io.dataset_writer import save_dataset
 from irtps.io.image_selection import exclusions_by_name, format_images_fitted
+from irtps.io.intrinsics import intrinsics_by_name
 from irtps.irt.folder import load_reconstruction, save_reconstruction
 from irtps.irt.reconstruct import load_and_reconstruct
 from irtps.model.metrics import evaluate, format_metrics
@@ -130,7 +131,7 @@ def run_reconstruct(args: argparse.Namespace) -> None:
         exclude_images=args.exclude_images,
         intrinsics=args.intrinsics,
     )
-    save_reconstruction(result, args.out, source=str(resolve_path(args.data)))
+    save_reconstruction(result, args.out, source=str(resolve_path(args.data)), intrinsics=args.intrinsics)
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
         print(f"reconstructed {args.data} ({options.method}; {stages}) -> {args.out}")
@@ -171,8 +172,14 @@ def run_reconstruct(args: argparse.Namespace) -> None:
 def run_batch(args: argparse.Namespace) -> None:
     """``irtps batch``: reconstruct many data sets on a Dask cluster, with a summary."""
     options, cluster_options = from_arguments(ReconstructOptions, args), from_arguments(ClusterOptions, args)
-    exclusions = exclusions_by_name(args.exclude_images, output_names(args.data))
-    check_output(args.out, _batch_inputs(args.data, exclusions), force=args.force or _holds_batch_outputs(args.out))
+    names = output_names(args.data)
+    exclusions = exclusions_by_name(args.exclude_images, names)
+    intrinsics = intrinsics_by_name(args.intrinsics, names)
+    check_output(
+        args.out,
+        _batch_inputs(args.data, exclusions, intrinsics),
+        force=args.force or _holds_batch_outputs(args.out),
+    )
     if args.force and os.path.lexists(args.out) and not args.out.is_dir():
         args.out.unlink()  # OUT is a folder that the data sets' folders go into, not replaced as a whole
     if cluster_options.scheduler is None:
@@ -189,6 +196,7 @@ def run_batch(args: argparse.Namespace) -> None:
             progress=not args.quiet,
             resume=args.resume,
             exclude_images=exclusions,
+            intrinsics=intrinsics,
         )
     write_summary(results, args.out, settings=options.to_dict())
     print(summary_table(results), end="")
@@ -203,15 +211,18 @@ def run_batch(args: argparse.Namespace) -> None:
         )
 
 
-def _batch_inputs(folders: list[Path], exclusions: dict[str, str | None]) -> list[Path]:
+def _batch_inputs(
+    folders: list[Path], exclusions: dict[str, str | None], intrinsics: dict[str, Path | None]
+) -> list[Path]:
     """Every file and folder that a batch reads (`irtps.io.dataset_files.dataset_inputs`); of a data
-    set that cannot be read, its folder (its task fails as it reads, writing nothing)."""
+    set that cannot be read, its folder and its intrinsics file (its task fails as it reads,
+    writing nothing)."""
     inputs: list[Path] = []
-    for folder, images in zip(folders, exclusions.values(), strict=True):
+    for folder, images, camera in zip(folders, exclusions.values(), intrinsics.values(), strict=True):
         try:
-            inputs += dataset_inputs(folder, exclude_images=images)
+            inputs += dataset_inputs(folder, exclude_images=images, intrinsics=camera)
         except IrtpsError:
-            inputs.append(folder)
+            inputs += [folder] if camera is None else [folder, camera]
     return inputs
 
 
@@ -280,15 +291,16 @@ def run_table(args: argparse.Namespace) -> None:
     options = from_arguments(TableOptions, args)
     names = output_names(args.data)
     exclusions = exclusions_by_name(args.exclude_images, names)
+    intrinsics = intrinsics_by_name(args.intrinsics, names)
     if args.out is not None:
         inputs = [
             path
             for folder, name in zip(args.data, names, strict=True)
-            for path in dataset_inputs(folder, exclude_images=exclusions[name])
+            for path in dataset_inputs(folder, exclude_images=exclusions[name], intrinsics=intrinsics[name])
         ]
         check_output(args.out, inputs, force=args.force)
     datasets = [
-        (name, load_dataset(folder, exclude_images=exclusions[name]))
+        (name, load_dataset(folder, exclude_images=exclusions[name], intrinsics=intrinsics[name]))
         for name, folder in zip(names, args.data, strict=True)
     ]
     if args.out is None:

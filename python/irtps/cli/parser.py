@@ -16,6 +16,7 @@ from irtps.cli.arguments import (
     EXCLUDE_IMAGES,
     EXCLUDE_IMAGES_BY_NAME,
     INTRINSICS,
+    INTRINSICS_BY_NAME,
     RECONSTRUCT,
     RENDER,
     SYNTH,
@@ -158,6 +159,7 @@ COMMANDS = (
         examples=(
             "irtps batch shared/data/diligent/*PNG --out diligent_ps",
             "irtps batch shared/data/diligent/*PNG --out diligent_ps --exclude-images bearPNG=1-20",
+            "irtps batch capture_a capture_b --out runs --intrinsics rig/K.txt --intrinsics capture_b=other/K.txt",
             "irtps batch scenes/* --out runs --method irtps --bounces 2 --workers 2 --threads-per-worker 4",
             "irtps batch /shared/scenes/* --out /shared/runs --method irtps --scheduler tcp://head-node:8786",
             "irtps batch scenes/* --out runs --method irtps --bounces 2 --resume   # after an interrupted run",
@@ -167,7 +169,7 @@ COMMANDS = (
         output=Output(
             "folder for one reconstruction folder per data set and the summary", quiet="no progress bar", resume=True
         ),
-        options=(EXCLUDE_IMAGES_BY_NAME, RECONSTRUCT, CLUSTER),
+        options=(EXCLUDE_IMAGES_BY_NAME, INTRINSICS_BY_NAME, RECONSTRUCT, CLUSTER),
     ),
     Command(
         "evaluate",
@@ -233,7 +235,7 @@ COMMANDS = (
         run=handlers.run_table,
         arguments=(Argument("data", type=Path, nargs="+", help="data set folders with ground truth"),),
         output=Output("folder for table.md and table.json", quiet="no progress bar", required=False),
-        options=(EXCLUDE_IMAGES_BY_NAME, TABLE),
+        options=(EXCLUDE_IMAGES_BY_NAME, INTRINSICS_BY_NAME, TABLE),
     ),
     Command(
         "demo",

@@ -23,13 +23,14 @@ import numpy as np
 from irtps._shared.atomic import atomic_output_dir
 from irtps._shared.checks import check_path
 from irtps._shared.guarded import read_json
-from irtps._shared.paths import check_file, check_folder
+from irtps._shared.paths import check_file, check_folder, resolve_path
 from irtps._shared.records import RUN, stamp
 from irtps.errors import ArgumentError, DatasetError
 from irtps.io.dataset import read_albedo_map, read_height_map, read_normal_map
 from irtps.io.imageio import read_mask, write_exr, write_png
 from irtps.io.mesh import height_field_mesh, pinhole_mesh, write_obj, write_ply
 from irtps.irt.reconstruct import Reconstruction
+from irtps.model.scene import camera_to_dict
 from irtps.ps.fit import FLAGS
 
 #: Indirect images written at once, one per core up to 4 (on 2 cores, 2 writers take 0.7 of
@@ -53,7 +54,9 @@ RECONSTRUCTION_FILES = (
 _PLAIN_STEM = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
 
 
-def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str | None = None) -> None:
+def save_reconstruction(
+    result: Reconstruction, path: str | Path, *, source: str | None = None, intrinsics: str | Path | None = None
+) -> None:
     """Write a reconstruction folder atomically.
 
     Files: ``normal.exr`` (R, G, B = nx, ny, nz), ``albedo.exr``, ``height.exr`` (Y),
@@ -77,6 +80,9 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
         The output folder; replaced only once everything is written.
     source : str, optional
         The input data set, recorded in ``run.json``.
+    intrinsics : str or pathlib.Path, optional
+        The ``K.txt`` that gave the data set its camera (``--intrinsics``), recorded in
+        ``run.json`` (as an absolute path, beside the camera as ``scene.json`` holds it).
 
     Raises
     ------
@@ -118,6 +124,8 @@ def save_reconstruction(result: Reconstruction, path: str | Path, *, source: str
             "source": source,
             "parameters": result.parameters,
             "pixel_size": result.pixel_size,
+            "camera": None if result.camera is None else camera_to_dict(result.camera),
+            "intrinsics": None if intrinsics is None else str(resolve_path(intrinsics)),
             "timings_s": result.timings,
             "flags": {name: int((result.flags[result.mask] == value).sum()) for value, name in FLAGS.items()},
             "placement": None if result.placement is None else result.placement.to_dict(),
@@ -246,6 +254,8 @@ _OPTIONAL_RUN_FIELDS = {
     "excluded_images": (list,),
     "image_agreement": (dict, type(None)),
     "irradiance_factors": (list, type(None)),
+    "camera": (dict, type(None)),
+    "intrinsics": (str, type(None)),
 }
 _HISTORY_FIELDS = {
     "index": (int,),

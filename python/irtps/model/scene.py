@@ -285,7 +285,7 @@ def scene_to_dict(scene: Scene) -> dict:
     """
     return {
         "format": FORMAT,
-        "camera": _camera_to_dict(scene.camera),
+        "camera": camera_to_dict(scene.camera),
         "lights": [
             {"direction": _floats(light.direction), "irradiance": _floats(light.irradiance)} for light in scene.lights
         ],
@@ -432,7 +432,9 @@ def _optical_center_problem(zc: float, base_height: float) -> str:
     return f"is at height {zc:g}, not above the object's base ({base_height:g}: the floor, or 0 without one)"
 
 
-def _camera_to_dict(camera: Camera) -> dict:
+def camera_to_dict(camera: Camera) -> dict:
+    """The JSON object of a camera, as ``scene.json`` holds it (contract §1, §1b); an
+    orthographic stand-in's is its own (orthographic) one."""
     size = {"width": int(camera.width), "height": int(camera.height)}
     if camera.pixel_size is not None:
         return {"projection": "orthographic", **size, "pixel_size": float(camera.pixel_size)}
