@@ -3,7 +3,8 @@
 The shared Mitsuba scenes are few, and scenes made the same way but not shared decide
 whether IRT-PS generalises. This renders stand-ins with irtps's own renderer (80×80 pixels,
 12 lights, 4 bounces, 256 paths a pixel): raised boundaries, textured albedo, a floor with
-and without a Cornell box, no floor. For each it prints classic PS's and IRT-PS's mean
+and without a Cornell box, no floor, and each shape filling the frame (``fill``: its edges
+leave the image, no floor or wall in view). For each it prints classic PS's and IRT-PS's mean
 angular error (defaults, as ``irtps reconstruct``), and the share of the gap to the floor
 (classic PS on the direct-only images) that IRT-PS closes.
 
@@ -19,7 +20,7 @@ scenes. Before a case is used, Mitsuba's direct images must agree with irtps's w
 
 Usage::
 
-    python benches/irtps_synthetic.py [--renderer irtps|mitsuba] [--json synthetic.json]
+    python benches/irtps_synthetic.py [--renderer irtps|mitsuba] [--only TEXT ...] [--json synthetic.json]
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ import irtps
 from irtps.model.data import Dataset, GroundTruth
 from irtps.errors import IrtpsWarning
 from irtps.model.scene import Light
+from irtps.render.synth import SHAPES
 
 #: (label, synthesize keywords)
 CASES = [
@@ -51,6 +53,14 @@ CASES = [
     ("grooves, textured, no floor", {"shape": "grooves", "albedo": "textured", "environment": "none"}),
     ("pedestal, floor only, base 16", {"shape": "pedestal", "environment": "none", "floor": True, "base": 16.0}),
     ("cavity, Cornell, base 20", {"shape": "cavity", "environment": "cornell", "base": 20.0}),
+    *(
+        (f"{shape}, fills the frame, Cornell", {"shape": shape, "environment": "cornell", "fill": True})
+        for shape in SHAPES
+    ),
+    *(
+        (f"{shape}, fills the frame, no floor", {"shape": shape, "environment": "none", "fill": True})
+        for shape in ("relief", "grooves")
+    ),
 ]
 
 
@@ -164,6 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         default="irtps",
         help="which renderer makes the images (default: irtps)",
     )
+    parser.add_argument("--only", nargs="+", metavar="TEXT", help="the cases whose label holds one of these")
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
     if args.renderer == "mitsuba":
@@ -178,6 +189,8 @@ def main(argv: list[str] | None = None) -> int:
     cases = [(label, keywords, {}) for label, keywords in CASES]
     if args.renderer == "mitsuba":
         cases += MITSUBA_VARIATIONS
+    if args.only:
+        cases = [case for case in cases if any(text in case[0] for text in args.only)]
     for index, (label, keywords, changes) in enumerate(cases):
         if args.renderer == "mitsuba":
             dataset = mitsuba_dataset(mi, usable[0], keywords, seed=1000 * (index + 1), changes=changes)

@@ -92,6 +92,42 @@ def test_the_residual_falls_as_the_error_falls():
     )
 
 
+@pytest.mark.parametrize("shape", ["cavity", "grooves", "pedestal"])
+def test_an_object_that_fills_the_frame_is_placed_by_the_walls_light_on_it(shape):
+    # No floor pixel in view: the estimate comes from the object's own pixels, which the
+    # walls and floor light differently at each height, from the true shape and the albedo
+    # photometric stereo fits (too bright where inter-reflections add light: refitted).
+    data, _ = synthesize(shape, size=40, lights=8, bounces=2, samples=32, fill=True)
+    assert data.mask.all()
+    true = _boundary_median(data)
+    relief = np.where(data.mask, data.gt.height - true, 0.0)
+    fitted = irtps.photometric_stereo(data.images, data.scene.light_directions, data.scene.light_irradiance)
+    albedo = np.clip(fitted.albedo, 0.0, 1.0)  # as IRT-PS renders it
+    placement = estimate_placement(data.scene, relief, albedo, data.mask, data.images, bounces=2)
+    assert placement.source == "object" and placement.object_pixels == 40 * 40
+    assert placement.reason == "the mask covers the whole image: no floor is visible"
+    assert abs(placement.base_height - true) <= 0.05 * data.gt.height.max()
+
+
+def test_irtps_on_an_object_that_fills_a_cornell_box_beats_its_fallback_placement():
+    data, _ = synthesize("cavity", size=40, lights=8, bounces=2, samples=32, fill=True)
+    estimated = irtps.reconstruct(data, "irtps", bounces=2, samples=32, iterations=3)
+    assert estimated.placement.source == "object"
+    assert abs(estimated.placement.base_height - _boundary_median(data)) <= 0.05 * data.gt.height.max()
+    fallback = irtps.reconstruct(data, "irtps", bounces=2, samples=32, iterations=3, base_height="boundary")
+    error = {
+        name: irtps.evaluate(mask=r.mask, normals=r.normals, gt=data.gt).normal_mean_angular_deg
+        for name, r in (("estimated", estimated), ("fallback", fallback))
+    }
+    assert error["estimated"] < 0.5 * error["fallback"], error
+
+
+def test_without_anything_around_a_filling_object_the_fallback_says_why():
+    data, _ = synthesize("relief", size=32, lights=6, bounces=1, samples=8, fill=True, environment="none")
+    placement = irtps.reconstruct(data).placement
+    assert placement.source == "boundary" and "no floor in scene.json" in placement.reason
+
+
 def test_without_a_floor_the_fallback_is_used_and_recorded(tmp_path):
     data, _ = synthesize("cavity", size=32, lights=6, environment="none", floor=False, bounces=1, samples=8)
     result = irtps.reconstruct(data)

@@ -28,15 +28,22 @@ class Placement:
     base_height : float
         World units, the height the median of the mask boundary is placed at.
     source : str
-        ``"images"`` (estimated from the floor), ``"boundary"`` (contract §6's fallback:
-        the floor's height) or ``"given"`` (by the user).
+        ``"images"`` (estimated from the floor around the object), ``"object"`` (estimated
+        from the object's own pixels, which the light of the floor and walls reaches
+        differently at each height: where no floor is in view), ``"boundary"`` (contract
+        §6's fallback: the floor's height) or ``"given"`` (by the user).
     reason : str or None
-        Why the fallback was used, when it was used without being asked for.
+        Why the fallback was used, when it was used without being asked for; why the floor
+        did not place an object placed from its own pixels.
     floor_residual : float or None
         Estimated: relative mean absolute difference between the rendered and the observed
         floor at `base_height`.
     floor_pixels : int
-        Floor pixels compared (0 when not estimated).
+        Floor pixels compared (0 when not estimated from the floor).
+    object_residual : float or None
+        Estimated from the object: the same difference over its pixels.
+    object_pixels : int
+        Object pixels compared (0 when not estimated from the object).
     """
 
     base_height: float
@@ -44,6 +51,8 @@ class Placement:
     reason: str | None = None
     floor_residual: float | None = None
     floor_pixels: int = 0
+    object_residual: float | None = None
+    object_pixels: int = 0
 
     def to_dict(self) -> dict:
         """JSON-ready fields."""
@@ -59,11 +68,19 @@ def format_placement(placement: Placement | dict) -> str:
     'boundary at height 20.04, estimated from the floor around the object (6224 floor pixels, residual 0.0610)'
     >>> format_placement(Placement(base_height=0.0, source="boundary", reason="no floor in scene.json"))
     'boundary at height 0 (the floor): no floor in scene.json'
+    >>> format_placement(Placement(base_height=38.2, source="object", reason="no floor is visible",
+    ...                            object_residual=0.0712, object_pixels=6400))
+    "boundary at height 38.2, estimated from the surroundings' light on the object (6400 object pixels, residual 0.0712): no floor is visible"
     """
     fields = placement.to_dict() if isinstance(placement, Placement) else placement
     height = f"boundary at height {fields['base_height']:.4g}"
     if fields["source"] == "images":
         return f"{height}, estimated from the floor around the object ({fields['floor_pixels']} floor pixels, residual {fields['floor_residual']:.4f})"
+    if fields["source"] == "object":
+        return (
+            f"{height}, estimated from the surroundings' light on the object ({fields['object_pixels']} object pixels, "
+            f"residual {fields['object_residual']:.4f})" + (f": {fields['reason']}" if fields.get("reason") else "")
+        )
     if fields["source"] == "given":
         return f"{height}, as given"
     return f"{height} (the floor)" + (f": {fields['reason']}" if fields.get("reason") else "")

@@ -364,7 +364,10 @@ def place_surface(
         scene, albedo = rendered_as(scene, albedo, albedo_scale)
     if previous is not None:
         radius = PLACEMENT_SEARCH_CHANGES * shape_change
-        if previous.source != "images" or radius < PRECISION_PIXELS * scene.camera.orthographic_pixel_size:
+        if (
+            previous.source not in ("images", "object")
+            or radius < PRECISION_PIXELS * scene.camera.orthographic_pixel_size
+        ):
             return previous
         return estimate_placement(
             scene,

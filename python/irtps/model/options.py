@@ -412,6 +412,12 @@ class SynthOptions(_Options):
     albedo: str = _option("uniform", "albedo pattern", str, choices=("uniform", "textured"))
     environment: str = _option("cornell", "surroundings", str, choices=("cornell", "none"))
     floor: bool | None = _option(None, "a floor (default: only with the box)", bool, optional=True)
+    fill: bool = _option(
+        False,
+        "the object fills the frame: the shape made twice as large and its middle seen, its edges leaving the image "
+        "(no floor or wall in view)",
+        bool,
+    )
     camera: str = _option(
         "orthographic",
         "projection: orthographic (pixel size 1), or perspective (a pinhole about 45 degrees across: focal length 1.2 "

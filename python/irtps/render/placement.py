@@ -28,8 +28,8 @@ __all__ = ["estimate_placement"]
 
 #: Offsets tried by the coarse scan (evenly spaced over the range, ends included).
 SCAN_POINTS = 9
-#: Floor pixels rendered per offset at most (on a regular grid over the visible floor).
-MAX_FLOOR_PIXELS = 16384
+#: Pixels rendered per offset at most (on a regular grid over the visible floor, or the object).
+MAX_COMPARED_PIXELS = 16384
 #: Camera paths per floor pixel for the inter-reflected light, and footprint samples for
 #: the direct light; the same random numbers at every offset, so the scan is smooth.
 PATH_SAMPLES = 16
@@ -110,11 +110,8 @@ def estimate_placement(
     >>> placement.source, round(placement.base_height)
     ('images', 6)
     """
-    if scene.floor is None:
+    if scene.floor is None and scene.environment is None:
         return fallback_placement(scene, "no floor in scene.json: nothing in the images fixes the object's height")
-    floor_pixels = _floor_pixels(mask)
-    if floor_pixels.size == 0:
-        return fallback_placement(scene, "the mask covers the whole image: no floor is visible")
     chosen = spread_lights(scene.light_directions, MAX_LIGHTS)
     scene = dataclasses.replace(scene, lights=tuple(scene.lights[k] for k in chosen))
     images = np.asarray(images, dtype=np.float32)[chosen]
@@ -125,52 +122,88 @@ def estimate_placement(
     )
     mask = np.asarray(mask, dtype=bool)
     relief = np.where(mask, np.asarray(height, dtype=np.float64), 0.0)
-    scene, relief, albedo, mask, images, unsaturated = _coarse(
-        scene, relief, np.asarray(albedo, dtype=np.float64), mask, images, unsaturated
-    )
-    floor_pixels = _floor_pixels(mask)
-    if floor_pixels.size == 0:
-        return fallback_placement(scene, "the mask covers nearly the whole image: no floor is visible")
-    observed = images.reshape(len(images), -1, 3)[:, floor_pixels]
-    usable = np.broadcast_to(unsaturated.reshape(len(images), -1, 1)[:, floor_pixels], observed.shape)
-    scale = float(np.abs(observed[usable]).sum())
-    if scale <= 0:
-        return fallback_placement(scene, "the floor is black in every image: nothing fixes the object's height")
-    pixel_list = floor_pixels.tolist()
+    coarse = _Compared(*_coarse(scene, relief, np.asarray(albedo, dtype=np.float64), mask, images, unsaturated))
+    why_not_floor = coarse.why_not_floor()
+    if why_not_floor is None:
+        placement = coarse.search("floor", bounces, seed, near, radius)
+        if placement.source == "images" or scene.environment is None:
+            return placement
+        why_not_floor = placement.reason
+    if near is not None and near.source != "object":
+        return fallback_placement(scene, why_not_floor)
+    placement = coarse.search("object", bounces, seed, near, radius)
+    if placement.source == "object":
+        return dataclasses.replace(placement, reason=why_not_floor)
+    return fallback_placement(scene, f"{why_not_floor}, and {placement.reason}")
 
-    def floor_residual(offset: float, path_seed: int = seed) -> float:
-        renderer = make_renderer(scene, raised(relief, mask, offset, scene), albedo, mask)
-        planes = renderer.render_pixels(pixel_list, bounces, PATH_SAMPLES, DIRECT_SAMPLES, path_seed, False)
-        return float(np.abs(planes.sum(axis=0) - observed)[usable].sum()) / scale
 
-    low = floor_height(scene)
-    high = low + _height_range(scene)
-    precision = PRECISION_PIXELS * scene.camera.orthographic_pixel_size
-    if near is not None:
-        bracket = (max(low, near.base_height - radius), min(high, near.base_height + radius))
-        result = minimize_scalar(floor_residual, bounds=bracket, method="bounded", options={"xatol": precision})
-        return Placement(
-            base_height=float(result.x),
-            source="images",
-            floor_residual=float(result.fun),
-            floor_pixels=int(floor_pixels.size),
+class _Compared:
+    """The (coarse) scene, reconstruction and observations that a placement is searched with."""
+
+    def __init__(self, scene, relief, albedo, mask, images, unsaturated) -> None:
+        self.scene, self.relief, self.albedo, self.mask = scene, relief, albedo, mask
+        self.images, self.unsaturated = images, unsaturated
+
+    def why_not_floor(self) -> str | None:
+        """Why the floor cannot place the object, or None."""
+        if self.scene.floor is None:
+            return "no floor in scene.json"
+        if self.mask.all():
+            return "the mask covers the whole image: no floor is visible"
+        return None
+
+    def search(self, evidence: str, bounces: int, seed: int, near: Placement | None, radius: float) -> Placement:
+        """The offset whose rendering of the `evidence` (``"floor"``: the pixels around the
+        object; ``"object"``: its own, lit by the surroundings too) matches the observations
+        best: a scan of every height, or Brent's method within `radius` of `near`; the
+        fallback, with its reason, where they do not change with the offset."""
+        scene, mask = self.scene, self.mask
+        pixels = _grid_pixels(~mask if evidence == "floor" else mask)
+        what = "the floor" if evidence == "floor" else "the object"
+        observed = self.images.reshape(len(self.images), -1, 3)[:, pixels]
+        usable = np.broadcast_to(self.unsaturated.reshape(len(self.images), -1, 1)[:, pixels], observed.shape)
+        scale = float(np.abs(observed[usable]).sum())
+        if scale <= 0:
+            return fallback_placement(scene, f"{what} is black in every image: nothing fixes the object's height")
+        pixel_list = pixels.tolist()
+
+        def residual(offset: float, path_seed: int = seed) -> float:
+            renderer = make_renderer(scene, raised(self.relief, mask, offset, scene), self.albedo, mask)
+            planes = renderer.render_pixels(pixel_list, bounces, PATH_SAMPLES, DIRECT_SAMPLES, path_seed, False)
+            rendered = planes.sum(axis=0)
+            if evidence == "object":
+                rendered = rendered * _albedo_refit(rendered, observed, usable)
+            return float(np.abs(rendered - observed)[usable].sum()) / scale
+
+        def found(offset: float, value: float) -> Placement:
+            if evidence == "floor":
+                return Placement(offset, "images", floor_residual=value, floor_pixels=int(pixels.size))
+            return Placement(offset, "object", object_residual=value, object_pixels=int(pixels.size))
+
+        low = floor_height(scene)
+        high = low + _height_range(scene)
+        precision = PRECISION_PIXELS * scene.camera.orthographic_pixel_size
+        if near is not None:
+            bracket = (max(low, near.base_height - radius), min(high, near.base_height + radius))
+            result = minimize_scalar(residual, bounds=bracket, method="bounded", options={"xatol": precision})
+            return found(float(result.x), float(result.fun))
+        scan = np.linspace(low, high, SCAN_POINTS)
+        values = [residual(offset) for offset in scan]
+        best = int(np.argmin(values))
+        step = scan[1] - scan[0]
+        bracket = (max(low, scan[best] - step), min(high, scan[best] + step))
+        result = minimize_scalar(residual, bounds=bracket, method="bounded", options={"xatol": precision})
+        offset, value = (
+            (float(result.x), float(result.fun)) if result.fun <= values[best] else (float(scan[best]), values[best])
         )
-    scan = np.linspace(low, high, SCAN_POINTS)
-    values = [floor_residual(offset) for offset in scan]
-    best = int(np.argmin(values))
-    step = scan[1] - scan[0]
-    bracket = (max(low, scan[best] - step), min(high, scan[best] + step))
-    result = minimize_scalar(floor_residual, bounds=bracket, method="bounded", options={"xatol": precision})
-    offset, residual = (
-        (float(result.x), float(result.fun)) if result.fun <= values[best] else (float(scan[best]), values[best])
-    )
-    noise = abs(floor_residual(offset, seed + 1) - residual)
-    if max(values) - residual <= SIGNIFICANCE * noise:
-        return fallback_placement(
-            scene,
-            "the floor looks the same whatever the object's height (no shadow or light of the object falls on it)",
-        )
-    return Placement(base_height=offset, source="images", floor_residual=residual, floor_pixels=int(floor_pixels.size))
+        noise = abs(residual(offset, seed + 1) - value)
+        if max(values) - value <= SIGNIFICANCE * noise:
+            return fallback_placement(
+                scene,
+                f"{what} looks the same whatever the object's height"
+                + (" (no shadow or light of the object falls on it)" if evidence == "floor" else ""),
+            )
+        return found(offset, value)
 
 
 def _coarse(
@@ -249,9 +282,20 @@ def _height_range(scene: Scene) -> float:
     return max(camera.width, camera.height) * camera.orthographic_pixel_size
 
 
-def _floor_pixels(mask: np.ndarray) -> np.ndarray:
-    """Row-major indices of the pixels outside the mask, on a regular grid of at most
-    `MAX_FLOOR_PIXELS`."""
-    pixels = np.flatnonzero(~np.asarray(mask, dtype=bool))
-    step = max(1, -(-pixels.size // MAX_FLOOR_PIXELS))
+def _albedo_refit(rendered: np.ndarray, observed: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """Per pixel and channel, the least-squares scale of `rendered` (K, N, 3) to `observed`
+    over the `usable` lights (1 where nothing is rendered): what the object's albedo would
+    be for the rendering to match. Photometric stereo's albedo takes in the inter-reflected
+    light it does not model; refitted, the object's pixels compare the way the light changes
+    from image to image, which the surroundings' light on the object shapes, not its level."""
+    weights = np.where(usable, rendered, 0.0)
+    energy = (weights * rendered).sum(axis=0)
+    return np.where(energy > 0, (weights * observed).sum(axis=0) / np.where(energy > 0, energy, 1.0), 1.0)
+
+
+def _grid_pixels(selected: np.ndarray) -> np.ndarray:
+    """Row-major indices of the `selected` pixels, on a regular grid of at most
+    `MAX_COMPARED_PIXELS`."""
+    pixels = np.flatnonzero(np.asarray(selected, dtype=bool))
+    step = max(1, -(-pixels.size // MAX_COMPARED_PIXELS))
     return pixels[::step]

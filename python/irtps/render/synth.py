@@ -146,6 +146,23 @@ def make_albedo(mask: np.ndarray, pattern: str, rng: np.random.Generator, colour
     return np.where(mask[..., None], albedo, 0.0).astype(np.float32)
 
 
+#: A filling shape (`synthesize`'s ``fill``) is made for an image this many times as large.
+FILL_SCALE = 2
+
+
+def filled(shape: str, size: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """`shape` made for an image `FILL_SCALE` times as large, its middle `size` × `size`
+    pixels: (height, mask), the mask every pixel (each shape's mask reaches beyond the
+    middle's corners at that scale)."""
+    height, mask = SHAPES[shape](FILL_SCALE * size, rng)
+    start = (FILL_SCALE * size - size) // 2
+    middle = (slice(start, start + size),) * 2
+    height, mask = height[middle], mask[middle]
+    if not mask.all():
+        raise ArgumentError("fill", f"the {shape} does not fill a {size}x{size} frame")
+    return height, mask
+
+
 #: A synthetic pinhole's focal length, in image sizes: about 45° across the image.
 PINHOLE_FOCAL_SIZES = 1.2
 
@@ -173,6 +190,7 @@ def synthesize(
     environment: str = "cornell",
     floor: bool | None = None,
     base: float | None = None,
+    fill: bool = False,
     camera: str = "orthographic",
     bounces: int = 4,
     samples: int = 256,
@@ -200,6 +218,11 @@ def synthesize(
         Height of the object's boundary (the median over its mask's edge) above the floor,
         in pixel sizes; its sides run vertically down to the floor (contract §2). By
         default, the shape's own (about 1 for the cap, 0.1–0.3 of `size` for the others).
+    fill : bool
+        The object fills the frame: the shape is made for an image `FILL_SCALE` times as
+        large and the middle `size` × `size` pixels are seen, every one on the object, its
+        edges leaving the image (its skirt stands at the image's border). No floor or wall
+        is then in view, and placement falls back to the boundary unless `base` is given.
     camera : str
         ``"orthographic"`` (pixel size 1) or ``"perspective"``: a pinhole on the image's
         centre with focal length ``1.2 * size`` pixels (about 45° across), its optical centre
@@ -225,12 +248,19 @@ def synthesize(
     """
     check_choice("shape", shape, SHAPES)
     SynthOptions(
-        size=size, lights=lights, albedo=albedo, environment=environment, floor=floor, base=base, camera=camera
+        size=size,
+        lights=lights,
+        albedo=albedo,
+        environment=environment,
+        floor=floor,
+        base=base,
+        fill=fill,
+        camera=camera,
     )
     RenderOptions(bounces=bounces, samples=samples, seed=seed)
     check_render_memory(lights, (size, size), bounces)
     rng = np.random.default_rng(seed)
-    height, mask = SHAPES[shape](size, rng)
+    height, mask = filled(shape, size, rng) if fill else SHAPES[shape](size, rng)
     if base is not None:
         height = place_height(height, mask, base_height=base, per_component=False)
         if height[mask].min() < 0:
