@@ -115,7 +115,7 @@ fn pixels_seen_through_a_pinhole_take_the_half_vectors_of_their_own_views() {
         ..PsSettings::default()
     };
     let fit = |views| {
-        let out = photometric_stereo(&images, &vec![true; 40], &lights, &settings, views).unwrap();
+        let out = photometric_stereo(&images, &[true; 40], &lights, &settings, views).unwrap();
         let errors = normals.iter().zip(&out.normals);
         errors.map(|(&n, &m)| angle_deg(m, n)).sum::<f32>() / 40.0
     };
@@ -141,8 +141,7 @@ fn views_that_are_not_one_unit_vector_per_pixel_are_refused() {
         (pinhole_views(39), "39 directions for 40 pixels"),
         (bad, "at pixel 7 is not a unit vector toward the camera"),
     ] {
-        let refused =
-            photometric_stereo(&images, &vec![true; 40], &lights, &settings, Some(&views));
+        let refused = photometric_stereo(&images, &[true; 40], &lights, &settings, Some(&views));
         assert!(refused.unwrap_err().to_string().contains(problem));
     }
 }
