@@ -18,8 +18,8 @@ reflectance and irradiance of the albedo scale estimated at pass 0 (`irtps.rende
 The estimate Eₜ moves toward each new rendering by a step that adapts to how the loop
 converges (a secant estimate of its contraction): above 1 where the estimates converge
 slowly in one direction, below 1 where they oscillate (`irtps.irt.relaxation`). The loop stops
-after two passes in a row whose residual does not fall below the best so far beyond its
-Monte-Carlo noise.
+when the residual has not fallen beyond its Monte-Carlo noise over the last two passes (from
+the pass two before the last to the last: a single noisy or over-relaxed pass does not stop it).
 
 The loop's state between two passes is a `irtps.irt.loop_state.LoopState`; each step estimates
 the inter-reflections and updates the images with the two strategies of `irtps.irt.update`.
@@ -112,8 +112,8 @@ def remove_interreflections(
           ``"boundary"`` or a number as for `irtps.reconstruct`;
         - ``relaxation``: ``"auto"`` adapts the step toward each new estimate (see the
           module); a number in (0, 2) fixes it (1 takes each new estimate whole);
-        - ``early_stop``: stop after two passes in a row whose residual does not fall
-          below the best so far by twice its Monte-Carlo noise;
+        - ``early_stop``: stop when the residual has not fallen over the last two passes
+          by twice its Monte-Carlo noise (`irtps.irt.loop_state.LoopState.stalled_out`);
         - ``denoise``: filter each estimate along the surface before subtracting it
           (`irtps.render.denoise.denoise_indirect`);
         - ``update``: ``"original"``: Aₜ₊₁ = A₀ − Eₜ − Sₜ (default; Sₜ the surroundings'

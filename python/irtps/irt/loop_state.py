@@ -18,14 +18,21 @@ from irtps.irt.relaxation import AdaptiveStep
 from irtps.ps.fit import PsResult
 from irtps.render.residual import Residual
 
-__all__ = ["PATIENCE", "SIGNIFICANCE", "BestPass", "Iteration", "LoopState"]
+__all__ = ["SIGNIFICANCE", "TREND", "BestPass", "Iteration", "LoopState", "within_noise"]
 
-#: A pass improves on the best so far when its residual is lower by this many standard
-#: deviations of its Monte-Carlo noise.
+#: Two residuals differ when they are this many standard deviations of their Monte-Carlo
+#: noise (combined) apart.
 SIGNIFICANCE = 2.0
-#: The loop stops after this many passes in a row that do not improve on the best (one
-#: is not enough: an over-relaxed step can raise the residual once on the way down).
-PATIENCE = 2
+#: The loop stops when the residual has not fallen, beyond its noise, over this many passes
+#: (from the pass this many before the last to the last): one pass is not enough, as an
+#: over-relaxed step can raise the residual once on the way down.
+TREND = 2
+
+
+def within_noise(residual: Residual, other: Residual) -> bool:
+    """Whether `residual` is no higher than `other` beyond `SIGNIFICANCE` times their combined
+    Monte-Carlo noise."""
+    return residual.object <= other.object + SIGNIFICANCE * float(np.hypot(residual.noise, other.noise))
 
 
 @dataclass
@@ -101,9 +108,9 @@ class LoopState:
         How much of each edge pixel the surroundings' correction covers
         (`irtps.render.surroundings`), for the next pass's placement.
     best : BestPass or None
-        The pass with the lowest residual so far.
-    stalled : int
-        Passes in a row that did not improve on the best beyond their noise.
+        The pass of the lowest residual so far.
+    residuals : list of Residual
+        Every pass's residual.
     history : list of Iteration
         Every pass's record.
     first_fit : PsResult or None
@@ -121,20 +128,20 @@ class LoopState:
     subtracted: np.ndarray | None = None
     coverage: np.ndarray | None = None
     best: BestPass | None = None
-    stalled: int = 0
+    residuals: list[Residual] = field(default_factory=list)
     history: list[Iteration] = field(default_factory=list)
     first_fit: PsResult | None = None
 
     def judge(self, index: int, current: Pass, residual: Residual) -> None:
-        """Record pass `index`'s `residual`: the best pass so far, and whether it improved on
-        the one before beyond `SIGNIFICANCE` times its noise."""
-        best = self.best
-        improved = best is None or residual.object < best.residual.object - SIGNIFICANCE * residual.noise
-        self.stalled = 0 if improved else self.stalled + 1
-        if best is None or residual.object < best.residual.object:
+        """Record pass `index`'s `residual`; the pass chosen so far is the one of the lowest
+        residual."""
+        self.residuals.append(residual)
+        if self.best is None or residual.object < self.best.residual.object:
             self.best = BestPass(residual, index, current, self.subtracted)
 
     @property
     def stalled_out(self) -> bool:
-        """`PATIENCE` passes in a row have not improved on the best."""
-        return self.stalled == PATIENCE
+        """The residual has not fallen beyond its noise over the last `TREND` passes."""
+        if len(self.residuals) <= TREND:
+            return False
+        return within_noise(self.residuals[-1 - TREND], self.residuals[-1])

@@ -339,7 +339,7 @@ class ReconstructOptions(_Options):
     )
     early_stop: bool = _option(
         True,
-        "stop after two passes in a row whose residual does not fall below the best beyond its Monte-Carlo noise",
+        "stop when the residual has not fallen over the last two passes beyond its Monte-Carlo noise",
         bool,
         group="IRT-PS",
     )
