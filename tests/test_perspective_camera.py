@@ -565,9 +565,8 @@ def test_synth_makes_a_pinhole_data_set_whose_direct_images_fit_its_true_normals
     assert (camera.projection, camera.fx, camera.cx, camera.optical_center) == ("perspective", 38.4, 16.0, (0, 0, 38.4))
     np.testing.assert_allclose(truth.depth[mask], 38.4 - truth.height[mask], atol=1e-5)
     # The direct images, rendered through the pinhole, are those of the depth map's normals
-    # (away from the rim), within the footprint's averaging over a curved 32-pixel cap (an
-    # orthographic synth's images agree with its normals within 1.3 degrees); the normals of
-    # the same heights seen orthographically are twice as far.
+    # (away from the rim), within the footprint's averaging over a curved 32-pixel cap; the
+    # normals of the same heights seen orthographically are twice as far.
     fit = irtps.photometric_stereo(truth.direct, data.scene.light_directions, data.scene.light_irradiance, mask)
     inner = ndimage.binary_erosion(mask, iterations=2)
 

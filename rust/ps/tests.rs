@@ -25,6 +25,15 @@ fn render(normal: Vec3, albedo: [f32; 3], lights: &[Light]) -> Vec<f32> {
         .collect()
 }
 
+/// The fit of one pixel's `images` under `ls` in the robust mode `robust`, a distant camera.
+fn fit_one(images: &[f32], ls: &[Light], robust: Robust) -> PsOutput {
+    let settings = PsSettings {
+        robust,
+        ..Default::default()
+    };
+    photometric_stereo(images, &[true], ls, &settings, None).unwrap()
+}
+
 #[test]
 fn recovers_normal_and_albedo_exactly_without_shadows() {
     let ls = lights(&[
@@ -42,17 +51,7 @@ fn recovers_normal_and_albedo_exactly_without_shadows() {
         Robust::Tukey,
         Robust::Lobe,
     ] {
-        let out = photometric_stereo(
-            &images,
-            &[true],
-            &ls,
-            &PsSettings {
-                robust,
-                ..Default::default()
-            },
-            None,
-        )
-        .unwrap();
+        let out = fit_one(&images, &ls, robust);
         assert!(
             (Vec3::from(out.normals[0]) - normal).length() < 1e-5,
             "{robust:?} {:?}",
@@ -76,30 +75,10 @@ fn robust_mode_ignores_attached_shadows() {
     ]);
     let normal = Vec3::new(0.6, 0.2, 0.8).normalize(); // the last light is behind it
     let images = render(normal, [0.5; 3], &ls);
-    let plain = photometric_stereo(
-        &images,
-        &[true],
-        &ls,
-        &PsSettings {
-            robust: Robust::None,
-            ..Default::default()
-        },
-        None,
-    )
-    .unwrap();
+    let plain = fit_one(&images, &ls, Robust::None);
     assert!((Vec3::from(plain.normals[0]) - normal).length() > 1e-2);
     for robust in [Robust::Threshold, Robust::Tukey] {
-        let out = photometric_stereo(
-            &images,
-            &[true],
-            &ls,
-            &PsSettings {
-                robust,
-                ..Default::default()
-            },
-            None,
-        )
-        .unwrap();
+        let out = fit_one(&images, &ls, robust);
         assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5);
         assert_eq!(out.used[0], 5);
     }
@@ -132,17 +111,7 @@ fn tukey_mode_sets_aside_soft_shadows_and_highlights_that_the_threshold_keeps() 
         images[k * 3..k * 3 + 3].iter_mut().for_each(|v| *v += 0.8); // highlights
     }
     let error = |robust| {
-        let out = photometric_stereo(
-            &images,
-            &[true],
-            &ls,
-            &PsSettings {
-                robust,
-                ..Default::default()
-            },
-            None,
-        )
-        .unwrap();
+        let out = fit_one(&images, &ls, robust);
         (
             (Vec3::from(out.normals[0]).dot(normal))
                 .clamp(-1.0, 1.0)
@@ -169,17 +138,7 @@ fn trim_mode_keeps_the_middle_of_each_pixels_observations() {
     for &k in &order[19..] {
         images[k * 3..k * 3 + 3].iter_mut().for_each(|v| *v += 1.0);
     }
-    let out = photometric_stereo(
-        &images,
-        &[true],
-        &ls,
-        &PsSettings {
-            robust: Robust::Trim,
-            ..Default::default()
-        },
-        None,
-    )
-    .unwrap();
+    let out = fit_one(&images, &ls, Robust::Trim);
     assert!((Vec3::from(out.normals[0]) - normal).length() < 1e-5);
     assert_eq!(out.used[0], 24 - 10 - 5);
 }
