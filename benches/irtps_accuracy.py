@@ -28,7 +28,7 @@ import warnings
 from pathlib import Path
 
 import irtps
-from irtps.errors import IrtpsWarning
+from irtps.errors import DatasetError, IrtpsWarning
 from irtps.model.options import ReconstructOptions
 from irtps.model.scene import orthographic_scene
 from irtps.irt.pipeline import fit_photometric_stereo, resolve_options, with_chosen_robust
@@ -71,6 +71,10 @@ def measure(path: Path, passes: int | None, settings: dict) -> dict:
         "worse_than_classic_deg": irtps_error - classic,
         "passes": len(result.history),
         "chosen_pass": result.chosen,
+        "stop": None if result.stop is None else result.stop.reason,
+        "correction": None
+        if result.stop is None or result.stop.correction is None
+        else result.stop.correction.to_dict(),
         "placement": result.placement.to_dict(),
         "residuals": [step.residual["object"] for step in result.history],
         "seconds": seconds,
@@ -108,24 +112,28 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no data sets under {args.shared}", file=sys.stderr)
         return 1
     rows = []
-    print("| data | classic PS | IRT-PS | floor | gap closed | passes (chosen) | placement | seconds |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| data | classic PS | IRT-PS | floor | gap closed | passes (chosen) | stop | placement | seconds |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for path in paths:
         settings = ({} if args.samples is None else {"samples": args.samples}) | (
             {"denoise": False} if args.no_denoise else {}
         )
-        row = measure(path, args.passes, settings)
+        try:
+            row = measure(path, args.passes, settings)
+        except DatasetError as err:
+            print(f"| {path.name} | refused: {err} | | | | | | | |", flush=True)
+            continue
         rows.append(row)
         floor = "n/a" if row["floor_deg"] is None else f"{row['floor_deg']:.2f}°"
         closed = "n/a" if row["gap_closed"] is None else f"{100 * row['gap_closed']:.1f} %"
         placement = f"{row['placement']['base_height']:.2f} ({row['placement']['source']})"
         print(
-            f"| {row['data']} | {row['classic_deg']:.3f}° | {row['irtps_deg']:.3f}° | {floor} | {closed} | {row['passes']} ({row['chosen_pass']}) | {placement} | {row['seconds']:.1f} |",
+            f"| {row['data']} | {row['classic_deg']:.3f}° | {row['irtps_deg']:.3f}° | {floor} | {closed} | {row['passes']} ({row['chosen_pass']}) | {row['stop']} | {placement} | {row['seconds']:.1f} |",
             flush=True,
         )
         if f"error_{args.passes}_passes_deg" in row:
             print(
-                f"|   | {args.passes} passes: {row[f'error_{args.passes}_passes_deg']:.3f}° | at most 5: {row['error_at_most_5_passes_deg']:.3f}° | | | | | |",
+                f"|   | {args.passes} passes: {row[f'error_{args.passes}_passes_deg']:.3f}° | at most 5: {row['error_at_most_5_passes_deg']:.3f}° | | | | | | |",
                 flush=True,
             )
     if args.json:

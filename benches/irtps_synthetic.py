@@ -184,8 +184,8 @@ def main(argv: list[str] | None = None) -> int:
         if not usable:
             sys.exit("no usable Mitsuba variant")
     rows = []
-    print("| case | classic PS | IRT-PS | floor | gap closed |")
-    print("|---|---|---|---|---|")
+    print("| case | classic PS | IRT-PS | floor | gap closed | stop | first turn / noise (medians) |")
+    print("|---|---|---|---|---|---|---|")
     cases = [(label, keywords, {}) for label, keywords in CASES]
     if args.renderer == "mitsuba":
         cases += MITSUBA_VARIATIONS
@@ -203,10 +203,24 @@ def main(argv: list[str] | None = None) -> int:
         corrected = angular_error(dataset, result.normals)
         floor = floor_error(dataset)
         closed = (classic - corrected) / (classic - floor)
+        stop = result.stop
+        correction = None if stop is None or stop.correction is None else stop.correction.to_dict()
         rows.append(
-            {"case": label, "classic_deg": classic, "irtps_deg": corrected, "floor_deg": floor, "gap_closed": closed}
+            {
+                "case": label,
+                "classic_deg": classic,
+                "irtps_deg": corrected,
+                "floor_deg": floor,
+                "gap_closed": closed,
+                "stop": None if stop is None else stop.reason,
+                "correction": correction,
+            }
         )
-        print(f"| {label} | {classic:.2f}° | {corrected:.2f}° | {floor:.2f}° | {100 * closed:.1f} % |", flush=True)
+        turn = "n/a" if correction is None else f"{correction['change_deg']:.2f}° / {correction['noise_deg']:.2f}°"
+        print(
+            f"| {label} | {classic:.2f}° | {corrected:.2f}° | {floor:.2f}° | {100 * closed:.1f} % | {stop.reason if stop else 'n/a'} | {turn} |",
+            flush=True,
+        )
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))
     return 0

@@ -459,3 +459,22 @@ def test_an_exr_data_window_is_placed_in_its_display_window(tmp_path):
     np.testing.assert_array_equal(
         read_exr(path), np.concatenate([image[:, 1:], np.zeros((3, 1, 3), np.float32)], axis=1)
     )
+
+
+@pytest.mark.parametrize("compression, code", [("zip", 3), ("rle", 1)])
+def test_exr_compression_is_as_asked_and_lossless(tmp_path, compression, code):
+    image = np.zeros((40, 30, 3), np.float32)
+    image[10:20, 5:25] = np.random.default_rng(0).random((10, 20, 3), dtype=np.float32)
+    path = tmp_path / f"{compression}.exr"
+    write_exr(path, image, compression)
+    np.testing.assert_array_equal(read_exr(path), image)
+    # OpenEXR's header: attribute "compression" of type "compression", 1 byte (1 RLE, 3 ZIP).
+    header = path.read_bytes()[:1000]
+    marker = b"compression\x00compression\x00\x01\x00\x00\x00"
+    assert header[header.index(marker) + len(marker)] == code
+
+
+def test_an_unknown_exr_compression_is_named(tmp_path):
+    with pytest.raises(ArgumentError, match="compression"):
+        write_exr(tmp_path / "x.exr", np.zeros((2, 2, 3)), "piz")
+    assert not (tmp_path / "x.exr").exists()

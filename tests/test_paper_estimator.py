@@ -52,7 +52,9 @@ def test_paper_estimate_is_the_scaled_colour_for_every_light():
 
 def test_the_loop_runs_the_paper_estimator_and_rejects_bad_depths():
     data, _ = irtps.synthesize("cap", size=24, lights=6, environment="cornell", bounces=2, samples=16, seed=5)
-    result = remove_interreflections(data, bounces=2, iterations=2, estimator="paper", update="previous")
+    result = remove_interreflections(
+        data, bounces=2, iterations=2, estimator="paper", update="previous", early_stop=False
+    )
     assert len(result.history) == 3 and result.indirect.shape == (len(data.images), data.mask.sum(), 3)
     with pytest.raises(IrtpsError, match="bounces"):
         remove_interreflections(data, bounces=4, estimator="paper")

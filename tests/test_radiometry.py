@@ -142,3 +142,32 @@ def test_irtps_under_relative_irradiance_does_as_well_as_under_absolute():
     assert abs(relative.placement.base_height - 12.0) <= 0.03 * truth.gt.height.max()
     # measured 2.99 against 3.00 (classic PS 6.26)
     assert error(relative) <= error(absolute) + 0.2 < error(classic)
+
+
+def test_the_search_s_polynomial_in_the_factor_is_the_rendering_where_it_holds():
+    # An object alone, reflectance × f and irradiance / f: the direct light stays, bounce b
+    # scales as f^b, so one rendering gives every unclipped factor's; it must match the
+    # renderer run at that factor (the same camera paths).
+    from irtps.render.radiometry import _BouncePowers, scaled_albedo, scaled_scene
+    from irtps.render.renderer import make_renderer
+
+    data, _ = synthesize("cavity", size=24, lights=4, bounces=3, samples=32, environment="none", seed=2)
+    albedo = data.gt.albedo * 3.0  # fitted albedo in units of a third of the irradiance
+    renderer = make_renderer(data.scene, data.gt.height, np.clip(albedo, 0, 1), data.mask)
+    pixels = np.flatnonzero(data.mask).tolist()
+
+    def rendered(factor: float, seed: int) -> np.ndarray:
+        scaled = renderer.with_reflectance(
+            scaled_albedo(albedo, factor), scaled_scene(data.scene, factor).light_irradiance.astype(np.float32)
+        )
+        return scaled.render_pixels(pixels, 3, 16, 4, seed, True)
+
+    powers = _BouncePowers.of(data.scene, albedo[data.mask], rendered, 7)
+    assert powers is not None and powers.unclipped == pytest.approx(1 / albedo[data.mask].max())
+    for factor in (0.3 * powers.unclipped, powers.unclipped):
+        expected = rendered(factor, 7)
+        assert np.abs(powers.at(factor) - expected).max() <= 1e-5 * np.abs(expected).max()
+        assert np.abs(expected[1:]).max() > 0.01 * np.abs(expected[0]).max()  # bounces count here
+    assert powers.at(1.5 * powers.unclipped) is None  # reflectance clipped at 1: render it
+    with_floor = dataclasses.replace(data.scene, floor=irtps.Floor(height=0.0, albedo=(0.5, 0.5, 0.5)))
+    assert _BouncePowers.of(with_floor, albedo[data.mask], rendered, 7) is None

@@ -43,8 +43,8 @@ MAX_IMAGE_PIXELS: int
 def read_exr(path: _Path) -> _F32:
     """float32 (H, W, 3) for R, G, B or (H, W) for a single Y channel."""
 
-def write_exr(path: _Path, array: _F32) -> None:
-    """A float32 (H, W) array as a Y channel or (H, W, 3) as R, G, B."""
+def write_exr(path: _Path, array: _F32, compression: str = "zip") -> None:
+    """A float32 (H, W) array as a Y channel or (H, W, 3) as R, G, B; ``"zip"`` or ``"rle"``."""
 
 def read_png(path: _Path) -> tuple[_F32, int]:
     """(values / (2^bits − 1), (H, W) or (H, W, 3); bits) of an 8- or 16-bit PNG."""

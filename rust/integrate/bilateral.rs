@@ -25,7 +25,7 @@
 //! before left it, and makes every system positive definite.
 
 use crate::error::{Error, Result};
-use crate::integrate::sparse_cholesky::SparseCholesky;
+use crate::integrate::sparse_cholesky::{Factorisation, SparseCholesky};
 use crate::memory::try_vec;
 
 /// Weight, relative to each pixel's own stiffness, of the pull toward the previous
@@ -159,12 +159,13 @@ pub fn integrate_bilateral(
         assemble(&system, &weights, &z, &mut data, &mut rhs);
         match factor.as_mut() {
             None => {
-                factor = Some(SparseCholesky::factor(
+                factor = Some(SparseCholesky::factor_with(
                     "integration",
                     count,
                     &system.indptr,
                     &system.indices,
                     &data,
+                    Factorisation::Supernodal,
                 )?)
             }
             Some(factor) => {

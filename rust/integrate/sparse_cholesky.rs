@@ -8,7 +8,10 @@
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::{LltError, LltRegularization};
-use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky};
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky,
+};
+use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::FaerError;
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
@@ -26,6 +29,18 @@ fn check_dense_kernel_workspace(name: &str) -> Result<()> {
         &format!("{name}: the workspace of the dense matrix kernels"),
         dense_kernel_workspace_bytes(),
     )
+}
+
+/// How [`SparseCholesky::factor_with`] factors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Factorisation {
+    /// Simplicial or supernodal, as faer's estimate of the flops prefers.
+    Auto,
+    /// Supernodal whatever that estimate: for a factor refactored many times
+    /// ([`SparseCholesky::refactor`], an iteratively re-weighted solve), whose dense
+    /// supernode kernels make each numeric factorisation faster than the simplicial one on
+    /// a grid's Laplacian.
+    Supernodal,
 }
 
 /// The `L Lᵀ` factorisation of a sparse symmetric positive definite matrix.
@@ -50,6 +65,18 @@ impl SparseCholesky {
         indices: &[usize],
         data: &[f64],
     ) -> Result<Self> {
+        Self::factor_with(name, n, indptr, indices, data, Factorisation::Auto)
+    }
+
+    /// [`SparseCholesky::factor`] with the method `method`.
+    pub fn factor_with(
+        name: &str,
+        n: usize,
+        indptr: &[usize],
+        indices: &[usize],
+        data: &[f64],
+        method: Factorisation,
+    ) -> Result<Self> {
         check_compressed(name, n, indptr, indices, data)?;
         let structure = SymbolicSparseColMatRef::new_checked(n, n, indptr, None, indices);
         let matrix = SparseColMatRef::new(structure, data);
@@ -57,7 +84,13 @@ impl SparseCholesky {
             structure,
             Side::Upper,
             Default::default(),
-            Default::default(),
+            CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: match method {
+                    Factorisation::Auto => SupernodalThreshold::AUTO,
+                    Factorisation::Supernodal => SupernodalThreshold::FORCE_SUPERNODAL,
+                },
+                ..Default::default()
+            },
         )
         .map_err(|e| match e {
             FaerError::OutOfMemory => Error::memory_of_unknown_size(format!(
@@ -266,6 +299,41 @@ mod tests {
         factor.solve_in_place("b", &mut rhs, 2).unwrap();
         for (got, want) in rhs.iter().zip(x1.iter().chain(&x2)) {
             assert!((got - want).abs() < 1e-12, "{got} != {want}");
+        }
+    }
+
+    #[test]
+    fn the_supernodal_factor_solves_and_refactors_as_the_default_one() {
+        let n = 300;
+        let (indptr, indices, data) = tridiagonal(n, 2.5);
+        let x: Vec<f64> = (0..n).map(|i| (i as f64 * 0.07).cos()).collect();
+        let mut default = SparseCholesky::factor("laplacian", n, &indptr, &indices, &data).unwrap();
+        let mut supernodal = SparseCholesky::factor_with(
+            "laplacian",
+            n,
+            &indptr,
+            &indices,
+            &data,
+            Factorisation::Supernodal,
+        )
+        .unwrap();
+        let heavier: Vec<f64> = data
+            .iter()
+            .map(|v| if *v > 0.0 { 4.0 } else { *v })
+            .collect();
+        default
+            .refactor("laplacian", &indptr, &indices, &heavier)
+            .unwrap();
+        supernodal
+            .refactor("laplacian", &indptr, &indices, &heavier)
+            .unwrap();
+        let b = multiply(&indptr, &indices, &heavier, &x);
+        for factor in [&default, &supernodal] {
+            let mut solved = b.clone();
+            factor.solve_in_place("b", &mut solved, 1).unwrap();
+            for (got, want) in solved.iter().zip(&x) {
+                assert!((got - want).abs() < 1e-12, "{got} != {want}");
+            }
         }
     }
 

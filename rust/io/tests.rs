@@ -4,7 +4,7 @@ use std::path::Path;
 
 use exr::prelude::*;
 
-use super::exr_image::{read_exr, write_exr, Image2};
+use super::exr_image::{read_exr, write_exr, write_exr_compressed, ExrCompression, Image2};
 use super::png_image::{read_png, write_png};
 use super::stack::read_image_stack;
 use super::Image;
@@ -34,6 +34,23 @@ fn exr_round_trip_rgb_and_y() {
         let image = ramp(7, 5, channels);
         write_exr(&path, &image).unwrap();
         assert_eq!(read_exr(&path).unwrap(), image);
+    }
+}
+
+#[test]
+fn exr_round_trip_with_each_compression_as_the_header_says() {
+    let dir = temp_dir();
+    for (compression, expected) in [
+        (ExrCompression::Zip, Compression::ZIP16),
+        (ExrCompression::Rle, Compression::RLE),
+    ] {
+        let path = dir.path().join(format!("{compression:?}.exr"));
+        let mut image = ramp(9, 6, 3);
+        image.data[..30].fill(0.0);
+        write_exr_compressed(&path, &image, compression).unwrap();
+        assert_eq!(read_exr(&path).unwrap(), image);
+        let meta = MetaData::read_from_file(&path, false).unwrap();
+        assert_eq!(meta.headers[0].compression, expected);
     }
 }
 

@@ -59,15 +59,28 @@ pub(super) fn read_exr(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyAr
     image_to_array(py, image)
 }
 
-/// Writes a float32 (H, W) array as a Y channel or (H, W, 3) as R, G, B to OpenEXR.
+/// Writes a float32 (H, W) array as a Y channel or (H, W, 3) as R, G, B to OpenEXR,
+/// `compression` "zip" (default) or "rle".
 #[pyfunction]
+#[pyo3(signature = (path, array, compression = "zip"))]
 pub(super) fn write_exr(
     py: Python<'_>,
     path: PathBuf,
     array: PyReadonlyArrayDyn<'_, f32>,
+    compression: &str,
 ) -> PyResult<()> {
+    let compression = match compression {
+        "zip" => exr_image::ExrCompression::Zip,
+        "rle" => exr_image::ExrCompression::Rle,
+        other => {
+            return Err(argument_error(
+                "compression",
+                format!("{other:?} is not one of \"zip\", \"rle\""),
+            ))
+        }
+    };
     let image = array_to_image(&array, "array")?;
-    py.detach(|| exr_image::write_exr(&path, &image))
+    py.detach(|| exr_image::write_exr_compressed(&path, &image, compression))
         .map_err(|e| to_py(renamed(e, "image", "array")))
 }
 

@@ -162,6 +162,8 @@ def run_reconstruct(args: argparse.Namespace) -> None:
             )
             chosen = "  <- result" if step.index == result.chosen else ""
             print(f"  pass {step.index}:{residual}{error}{change}{chosen}")
+        if result.stop is not None:
+            print(f"  stopped after pass {result.stop.after_pass}: {result.stop.message}")
         if dataset.gt is not None:
             metrics = evaluate(
                 mask=result.mask, normals=result.normals, albedo=result.albedo, height=result.height, gt=dataset.gt

@@ -53,7 +53,7 @@ def read_exr(path: str | Path) -> np.ndarray:
     return _core.read_exr(str(path))
 
 
-def write_exr(path: str | Path, array: np.ndarray) -> None:
+def write_exr(path: str | Path, array: np.ndarray, compression: str = "zip") -> None:
     """Write a 32-bit float OpenEXR file (Y for (H, W), R, G, B for (H, W, 3)).
 
     Parameters
@@ -61,8 +61,17 @@ def write_exr(path: str | Path, array: np.ndarray) -> None:
     path : str or pathlib.Path
     array : numpy.ndarray
         (H, W) or (H, W, 3); converted to float32.
+    compression : str
+        Lossless either way: ``"zip"`` (deflate, the smaller file) or ``"rle"`` (runs of
+        equal bytes: several times faster to write, and nearly as small for an image that
+        is mostly one value, such as an object's light with 0 around it).
+
+    Raises
+    ------
+    ArgumentError
+        Naming ``compression`` when it is neither.
     """
-    _core.write_exr(str(path), _image_array(path, array))
+    _core.write_exr(str(path), _image_array(path, array), compression)
 
 
 def read_png(path: str | Path) -> tuple[np.ndarray, int]:

@@ -131,6 +131,7 @@ def save_reconstruction(
             "placement": None if result.placement is None else result.placement.to_dict(),
             "history": [asdict(step) for step in result.history],
             "chosen_pass": result.chosen,
+            "stop": None if result.stop is None else result.stop.to_dict(),
             "albedo_scale": None if result.albedo_scale is None else result.albedo_scale.to_dict(),
             "lobe_share": result.lobe_share,
             "robust_used": result.robust_used,
@@ -144,12 +145,14 @@ def save_reconstruction(
         if result.object_indirect is not None:
             (folder / "indirect").mkdir()
             # A few at a time (the core compresses with the GIL released), each image made as
-            # it is written: never more than the writers' images in memory.
+            # it is written: never more than the writers' images in memory. Run-length
+            # compressed: each is 0 around the object, and K of them are written.
             names = indirect_file_names(result.image_names, len(result.object_indirect))
             with ThreadPoolExecutor(max_workers=_EXR_WRITERS) as writers:
                 list(
                     writers.map(
-                        lambda k: write_exr(folder / "indirect" / names[k], result.indirect_image(k)), range(len(names))
+                        lambda k: write_exr(folder / "indirect" / names[k], result.indirect_image(k), "rle"),
+                        range(len(names)),
                     )
                 )
         (folder / "run.json").write_text(json.dumps(run, indent=2))
@@ -256,6 +259,7 @@ _OPTIONAL_RUN_FIELDS = {
     "irradiance_factors": (list, type(None)),
     "camera": (dict, type(None)),
     "intrinsics": (str, type(None)),
+    "stop": (dict, type(None)),
 }
 _HISTORY_FIELDS = {
     "index": (int,),

@@ -19,7 +19,10 @@ The estimate Eₜ moves toward each new rendering by a step that adapts to how t
 converges (a secant estimate of its contraction): above 1 where the estimates converge
 slowly in one direction, below 1 where they oscillate (`irtps.irt.relaxation`). The loop stops
 when the residual has not fallen beyond its Monte-Carlo noise over the last two passes (from
-the pass two before the last to the last: a single noisy or over-relaxed pass does not stop it).
+the pass two before the last to the last: a single noisy or over-relaxed pass does not stop it),
+and after pass 1 already where that pass's correction turned the normals by less than their
+standard error (`irtps.irt.early_exit`): there the inter-reflections are below what the images
+tell apart, as on a real object alone.
 
 The loop's state between two passes is a `irtps.irt.loop_state.LoopState`; each step estimates
 the inter-reflections and updates the images with the two strategies of `irtps.irt.update`.
@@ -39,7 +42,8 @@ from irtps.errors import ArgumentError, DatasetError, IrtpsWarning
 from irtps.geometry.placement import Placement
 from irtps.geometry.surface import meshed_blocks
 from irtps.io.dataset_files import MASK_FILE
-from irtps.irt.loop_state import Iteration, LoopState
+from irtps.irt.early_exit import first_correction
+from irtps.irt.loop_state import Iteration, LoopState, Stop
 from irtps.irt.pipeline import (
     Pass,
     fitted_observations,
@@ -66,9 +70,9 @@ class InterreflectionResult:
     of its fit), placed height, the estimate subtracted from the object's pixels to get its
     images ((K, N, 3) at the mask's N pixels, row-major: the inter-reflections and, in edge
     pixels, the surroundings' light, `irtps.render.surroundings`; None for pass 0), the placement,
-    the albedo scale it rendered with, and every pass's record; and pass 0's fit (classic
-    photometric stereo's, of the images as they are), and the robust mode every pass fitted
-    with."""
+    the albedo scale it rendered with, and every pass's record; pass 0's fit (classic
+    photometric stereo's, of the images as they are), the robust mode every pass fitted
+    with, and why the loop stopped."""
 
     fit: PsResult
     albedo: np.ndarray
@@ -80,6 +84,7 @@ class InterreflectionResult:
     chosen: int = 0
     albedo_scale: AlbedoScale | None = None
     robust_used: str | None = None
+    stop: Stop | None = None
 
 
 def remove_interreflections(
@@ -113,7 +118,9 @@ def remove_interreflections(
         - ``relaxation``: ``"auto"`` adapts the step toward each new estimate (see the
           module); a number in (0, 2) fixes it (1 takes each new estimate whole);
         - ``early_stop``: stop when the residual has not fallen over the last two passes
-          by twice its Monte-Carlo noise (`irtps.irt.loop_state.LoopState.stalled_out`);
+          by twice its Monte-Carlo noise (`irtps.irt.loop_state.LoopState.stalled_out`),
+          or after pass 1 when its correction turned the normals by less than their
+          standard error (`irtps.irt.early_exit`);
         - ``denoise``: filter each estimate along the surface before subtracting it
           (`irtps.render.denoise.denoise_indirect`);
         - ``update``: ``"original"``: Aₜ₊₁ = A₀ − Eₜ − Sₜ (default; Sₜ the surroundings'
@@ -139,7 +146,7 @@ def remove_interreflections(
     Returns
     -------
     InterreflectionResult
-        The pass with the lowest residual.
+        The pass with the lowest residual, and why the loop stopped (``stop``).
 
     Warns
     -----
@@ -167,6 +174,7 @@ def remove_interreflections(
         step=1.0 if options.relaxation == "auto" else float(options.relaxation),
     )
     usable = fitted_observations(dataset, options)
+    stop = None
     with tqdm(total=options.iterations + 1, desc="IRT-PS", unit="pass", disable=not progress, leave=False) as bar:
         for index in range(options.iterations + 1):
             current = reconstruction_pass(
@@ -183,12 +191,16 @@ def remove_interreflections(
                 # (`irtps.ps.fit.photometric_stereo`), and every later pass fits with its choice.
                 state.first_fit = current.fit
                 options = with_chosen_robust(options, current.fit)
+            elif index == 1 and options.early_stop and state.first_fit is not None:
+                with timed(current.timings, "noise_test"):
+                    state.correction = first_correction(dataset, usable, state.first_fit, current.fit)
             record, rendered, rerendering = _render_pass(dataset, options, index, current, state.previous, usable)
             state.history.append(record)
             state.judge(index, current, rerendering.residual)
             bar.update(1)
             bar.set_postfix(_postfix(rerendering.residual, record.metrics), refresh=False)
-            if index == options.iterations or (options.early_stop and state.stalled_out):
+            stop = state.stop(index, options.iterations, options.early_stop)
+            if stop is not None:
                 break
             estimate, estimate_noise = estimate_indirect(options, rendered, rerendering, record.timings)
             del rerendering
@@ -215,6 +227,7 @@ def remove_interreflections(
         albedo_scale=chosen.albedo_scale,
         first_fit=first_fit,
         robust_used=options.robust,
+        stop=stop,
     )
 
 

@@ -13,12 +13,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from irtps.irt.early_exit import CorrectionSize
 from irtps.irt.pipeline import Pass
 from irtps.irt.relaxation import AdaptiveStep
 from irtps.ps.fit import PsResult
 from irtps.render.residual import Residual
 
-__all__ = ["SIGNIFICANCE", "TREND", "BestPass", "Iteration", "LoopState", "within_noise"]
+__all__ = ["SIGNIFICANCE", "STOP_REASONS", "TREND", "BestPass", "Iteration", "LoopState", "Stop", "within_noise"]
 
 #: Two residuals differ when they are this many standard deviations of their Monte-Carlo
 #: noise (combined) apart.
@@ -27,6 +28,10 @@ SIGNIFICANCE = 2.0
 #: (from the pass this many before the last to the last): one pass is not enough, as an
 #: over-relaxed step can raise the residual once on the way down.
 TREND = 2
+
+
+#: Why the loop stopped (`Stop.reason`).
+STOP_REASONS = ("iterations", "below_noise", "stalled")
 
 
 def within_noise(residual: Residual, other: Residual) -> bool:
@@ -64,6 +69,41 @@ class Iteration:
     step: float | None = None
     timings: dict[str, float] = field(default_factory=dict)
     metrics: dict | None = None
+
+
+@dataclass(frozen=True)
+class Stop:
+    """Why the loop stopped where it did.
+
+    Attributes
+    ----------
+    reason : str
+        One of `STOP_REASONS`: ``"iterations"``, the largest number of corrections was made;
+        ``"below_noise"``, the first correction turned the normals by less than their
+        standard error (`irtps.irt.early_exit`), so the loop stopped after pass 1;
+        ``"stalled"``, the residual did not fall beyond its noise over the last `TREND`
+        passes (`LoopState.stalled_out`).
+    after_pass : int
+        The last pass run.
+    message : str
+        The reason in words, with its figures.
+    correction : CorrectionSize or None
+        Pass 1's turn of the normals against their standard error, where it was measured.
+    """
+
+    reason: str
+    after_pass: int
+    message: str
+    correction: CorrectionSize | None = None
+
+    def to_dict(self) -> dict:
+        """JSON-ready fields."""
+        return {
+            "reason": self.reason,
+            "after_pass": self.after_pass,
+            "message": self.message,
+            "correction": None if self.correction is None else self.correction.to_dict(),
+        }
 
 
 @dataclass
@@ -115,6 +155,8 @@ class LoopState:
         Every pass's record.
     first_fit : PsResult or None
         Pass 0's fit: classic photometric stereo of the input images.
+    correction : CorrectionSize or None
+        How far pass 1 turned pass 0's normals against their standard error, once measured.
     """
 
     observed: np.ndarray
@@ -131,6 +173,7 @@ class LoopState:
     residuals: list[Residual] = field(default_factory=list)
     history: list[Iteration] = field(default_factory=list)
     first_fit: PsResult | None = None
+    correction: CorrectionSize | None = None
 
     def judge(self, index: int, current: Pass, residual: Residual) -> None:
         """Record pass `index`'s `residual`; the pass chosen so far is the one of the lowest
@@ -138,6 +181,38 @@ class LoopState:
         self.residuals.append(residual)
         if self.best is None or residual.object < self.best.residual.object:
             self.best = BestPass(residual, index, current, self.subtracted)
+
+    def stop(self, index: int, iterations: int, early_stop: bool) -> Stop | None:
+        """Why the loop stops after pass `index`, or None to go on: `iterations` corrections
+        made; with `early_stop`, pass 1 when its correction was below the normals' noise,
+        or any pass once the residual stalled."""
+        if index >= iterations:
+            asked = (
+                "no correction was asked for"
+                if iterations == 0
+                else f"the {iterations} corrections asked for were made"
+            )
+            return Stop("iterations", index, asked, self.correction)
+        if not early_stop:
+            return None
+        size = self.correction
+        if index == 1 and size is not None and size.below_noise:
+            return Stop(
+                "below_noise",
+                index,
+                f"the first correction turned the normals by {size.change_deg:.3g} deg (median), less than the "
+                f"{size.noise_deg:.3g} deg that their fit's residual leaves them uncertain: the inter-reflections are "
+                "below what the images tell apart",
+                size,
+            )
+        if self.stalled_out:
+            return Stop(
+                "stalled",
+                index,
+                f"the residual did not fall by more than {SIGNIFICANCE:g} times its Monte-Carlo noise over the last {TREND} passes",
+                size,
+            )
+        return None
 
     @property
     def stalled_out(self) -> bool:

@@ -18,7 +18,7 @@ from irtps.io.dataset import Dataset, load_dataset
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
 from irtps.ps.image_agreement import ImageAgreement, image_agreement
 from irtps.irt.interreflection import check_traceable, remove_interreflections
-from irtps.irt.loop_state import Iteration
+from irtps.irt.loop_state import Iteration, Stop
 from irtps.model.options import ReconstructOptions
 from irtps.model.camera import Camera
 from irtps.model.scene import orthographic_scene
@@ -107,6 +107,8 @@ class Reconstruction:
         to the pixel below (``[..., 1]``) that are depth discontinuities.
     camera : Camera or None
         The data set's camera (a pinhole's own, not its orthographic stand-in's).
+    stop : Stop or None
+        IRT-PS: why the loop stopped where it did (`irtps.irt.loop_state.Stop`).
     """
 
     normals: np.ndarray
@@ -131,6 +133,7 @@ class Reconstruction:
     depth: np.ndarray | None = None
     discontinuities: np.ndarray | None = None
     camera: Camera | None = None
+    stop: Stop | None = None
 
     @property
     def indirect(self) -> np.ndarray | None:
@@ -255,7 +258,7 @@ def reconstruct(
         options, share = _chosen(options, loop.first_fit, share)
         fit, first_fit, albedo, height = loop.fit, loop.first_fit, loop.albedo, loop.height
         placement, albedo_scale = loop.placement, loop.albedo_scale
-        indirect, history, chosen = loop.indirect, loop.history, loop.chosen
+        indirect, history, chosen, stop = loop.indirect, loop.history, loop.chosen, loop.stop
     else:
         # Classic photometric stereo: IRT-PS's first pass, with no correction after it.
         if first is None:
@@ -263,7 +266,7 @@ def reconstruct(
         timings.update(first.timings)
         fit = first_fit = first.fit
         albedo, height, placement, albedo_scale = first.fit.albedo, first.height, first.placement, first.albedo_scale
-        indirect, history, chosen = None, [], None
+        indirect, history, chosen, stop = None, [], None, None
     with timed(timings, "image_agreement"):
         agreement = _image_agreement(dataset, first_fit, options.saturation)
     depth, discontinuities = _pinhole_depth(camera, fit.normals, dataset.mask, height, timings)
@@ -290,6 +293,7 @@ def reconstruct(
         object_indirect=indirect,
         history=history,
         chosen=chosen,
+        stop=stop,
     )
 
 

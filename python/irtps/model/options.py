@@ -339,7 +339,8 @@ class ReconstructOptions(_Options):
     )
     early_stop: bool = _option(
         True,
-        "stop when the residual has not fallen over the last two passes beyond its Monte-Carlo noise",
+        "stop when the residual has not fallen over the last two passes beyond its Monte-Carlo noise, or after pass 1 "
+        "when its correction turned the normals by less than their standard error",
         bool,
         group="IRT-PS",
     )

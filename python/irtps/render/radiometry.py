@@ -216,12 +216,19 @@ def estimate_albedo_scale(
     # One geometry for every factor: only the reflectance and the irradiance change.
     geometry = make_renderer(scene, height, scaled_albedo(albedo, high), mask)
 
-    def residual(log_factor: float, path_seed: int = seed) -> float:
-        factor = float(np.exp(log_factor))
+    def rendered(factor: float, path_seed: int) -> np.ndarray:
         renderer = geometry.with_reflectance(
             scaled_albedo(albedo, factor), scaled_scene(scene, factor).light_irradiance.astype(np.float32)
         )
-        planes = renderer.render_pixels(pixel_list, bounces, PATH_SAMPLES, DIRECT_SAMPLES, path_seed, False)
+        return renderer.render_pixels(pixel_list, bounces, PATH_SAMPLES, DIRECT_SAMPLES, path_seed, True)
+
+    bounce_powers = _BouncePowers.of(scene, albedo[mask], rendered, seed)
+
+    def residual(log_factor: float, path_seed: int = seed) -> float:
+        factor = float(np.exp(log_factor))
+        planes = None if path_seed != seed or bounce_powers is None else bounce_powers.at(factor)
+        if planes is None:
+            planes = rendered(factor, path_seed)
         return float(np.abs(planes.sum(axis=0) - observed)[compared].sum()) / total
 
     result = minimize_scalar(
@@ -240,6 +247,38 @@ def estimate_albedo_scale(
             reason="the images look the same whatever the albedo scale: no inter-reflection seen",
         )
     return AlbedoScale(factor=float(np.exp(best_log)), source="images", low=low, high=high, residual=best_residual)
+
+
+@dataclass
+class _BouncePowers:
+    """A rendering's planes as a polynomial in the albedo factor, where that is exact.
+
+    Scaling the reflectance by f and the irradiance by 1/f leaves the direct light as it is
+    and multiplies bounce b by f^b, when every bounce is off the object (no floor or box)
+    and no reflectance is clipped at 1 (f at most `unclipped`). The planes rendered once at
+    `unclipped`, with the same camera paths as every other factor, then give every such
+    factor's without tracing a ray.
+    """
+
+    planes: np.ndarray
+    unclipped: float
+
+    @classmethod
+    def of(cls, scene: Scene, object_albedo: np.ndarray, rendered, seed: int) -> _BouncePowers | None:
+        """Render the planes (direct, bounce 1, ..., `rendered(factor, seed)`) where the
+        scene allows it; else None."""
+        largest = float(object_albedo.max(initial=0.0))
+        if scene.floor is not None or scene.environment is not None or not largest > 0:
+            return None
+        unclipped = 1.0 / largest
+        return cls(planes=rendered(unclipped, seed), unclipped=unclipped)
+
+    def at(self, factor: float) -> np.ndarray | None:
+        """The planes at `factor`, or None where the polynomial does not hold."""
+        if factor > self.unclipped:
+            return None
+        powers = (factor / self.unclipped) ** np.arange(len(self.planes), dtype=np.float32)
+        return self.planes * powers[:, None, None, None]
 
 
 def _grid(mask: np.ndarray, count: int) -> np.ndarray:

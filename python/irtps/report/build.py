@@ -174,7 +174,7 @@ def build_report(run_dir: str | Path, *, truth: str | Path | None = None) -> Rep
         maps = error_maps(mask=mask, normals=normals, albedo=albedo, height=height, gt=gt)
         report.figures += _error_figures(maps, report.metrics, window)
     if len(record["history"]) > 1 and any("residual" in step for step in record["history"]):
-        report.figures.append(_convergence_figure(record["history"], record.get("chosen_pass")))
+        report.figures.append(_convergence_figure(record["history"], record.get("chosen_pass"), record.get("stop")))
     agreement = recorded_agreement(record)
     if agreement is not None and not np.isnan(agreement.brightness).all():
         report.figures.append(_agreement_figure(record["images"], agreement))
@@ -411,7 +411,20 @@ def _agreement_figure(names: list[str], agreement: ImageAgreement) -> ReportFigu
     return ReportFigure("agreement", "How each image agrees with the fit", caption, png, wide=True)
 
 
-def _convergence_figure(history: list[dict], chosen: int | None) -> ReportFigure:
+def _stop_title(stop: dict | None) -> str | None:
+    """The convergence plot's title: where the loop stopped and why, in short."""
+    if not isinstance(stop, dict):
+        return None
+    reasons = {
+        "iterations": "the corrections asked for were made",
+        "below_noise": "the first correction was below the normals' noise",
+        "stalled": "the residual stopped falling",
+    }
+    reason = reasons.get(str(stop.get("reason")))
+    return None if reason is None else f"Stopped after pass {stop.get('after_pass')}: {reason}"
+
+
+def _convergence_figure(history: list[dict], chosen: int | None, stop: dict | None) -> ReportFigure:
     passes = [step["index"] for step in history]
     errors = [(step["metrics"] or {}).get("normal_mean_angular_deg") for step in history]
     residuals = [(step.get("residual") or {}).get("object") for step in history]
@@ -422,10 +435,12 @@ def _convergence_figure(history: list[dict], chosen: int | None) -> ReportFigure
         "Σ|rendered − observed| / Σ|observed| on the object: the measure of a run without ground truth. The ringed "
         "pass, the one with the lowest residual, is the result."
     )
+    if isinstance(stop, dict) and isinstance(stop.get("message"), str):
+        caption += f" The loop stopped after pass {stop.get('after_pass')}: {stop['message']}."
     return ReportFigure(
         "convergence",
         "Convergence of the iterations",
         caption,
-        convergence_png(passes, errors, residuals, chosen),
+        convergence_png(passes, errors, residuals, chosen, _stop_title(stop)),
         wide=True,
     )

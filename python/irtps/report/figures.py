@@ -107,6 +107,7 @@ def convergence_png(
     angular_error_deg: Sequence[float | None],
     residual: Sequence[float | None],
     chosen: int | None = None,
+    stopped: str | None = None,
 ) -> bytes:
     """The convergence of the IRT-PS iterations, as PNG bytes.
 
@@ -124,6 +125,8 @@ def convergence_png(
         Relative residual on the object of each pass, None where not recorded.
     chosen : int, optional
         The pass returned.
+    stopped : str, optional
+        Why the loop stopped, written above the panels.
 
     Returns
     -------
@@ -155,6 +158,8 @@ def convergence_png(
     _curve(
         panels[-1], residuals, "relative residual on the object", "Rendered reconstruction against the images", chosen
     )
+    if stopped:
+        figure.suptitle(stopped, fontsize="small")
     return _png(figure)
 
 

@@ -133,6 +133,9 @@ def _summary(report: Report) -> str:
             else f"; the result is pass {chosen}" + (" (classic photometric stereo)" if chosen == 0 else "")
         )
         method = f"IRT-PS ({parameters.get('bounces')} bounces estimated, {corrections} corrections{result}{'; ' + robust if robust else ''})"
+        stop = record.get("stop")
+        if isinstance(stop, dict) and isinstance(stop.get("message"), str):
+            method += f". The loop stopped after pass {stop.get('after_pass')}: {stop['message']}"
     else:
         method = "Classic photometric stereo" + (f" ({robust})" if robust else "")
     source = record["source"] or "an unrecorded data set"

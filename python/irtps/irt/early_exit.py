@@ -1,0 +1,96 @@
+"""Whether IRT-PS's corrections change what the images tell: the first correction's turn of
+the normals against the normals' own standard error.
+
+Pass 1 fits the images with pass 0's whole estimate of the inter-reflections removed; the
+passes after it only refine that estimate as the shape it was rendered from changes. Where
+the first correction turns the normals by less than the images fix them (the standard
+error of classic photometric stereo's normals from its own residual:
+`irtps.ps.uncertainty.normal_standard_error`), the shape barely changes, the estimate
+rendered from it even less, and later passes move the result by less than its own
+uncertainty: the loop stops after pass 1 (`first_correction`, `CorrectionSize`). That is the
+case of a real object alone, whose inter-reflections carry a few thousandths of its light
+while gloss and shadow edges leave its fit a residual a hundred times larger; an object in a
+box or beside a wall, whose bounces carry a tenth of its light or more, turns by several
+times its standard error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from irtps.model.data import Dataset, spread_pixels
+from irtps.ps.fit import PsResult
+from irtps.ps.uncertainty import normal_standard_error
+
+__all__ = ["SAMPLE", "CorrectionSize", "first_correction"]
+
+#: Object pixels measured, spread evenly over the mask: medians of a few thousand pixels are
+#: within a few hundredths of a degree of those of all of them, at a fraction of the time.
+SAMPLE = 4096
+
+
+@dataclass(frozen=True)
+class CorrectionSize:
+    """How far the first correction turned the normals, against how precisely the images fix
+    them.
+
+    Attributes
+    ----------
+    change_deg : float
+        Median over the object's pixels of the angle between pass 0's and pass 1's normals.
+    noise_deg : float
+        Median of the standard error of pass 0's normals (`normal_standard_error`).
+    pixels : int
+        The pixels measured (fitted in both passes, their error determined).
+    """
+
+    change_deg: float
+    noise_deg: float
+    pixels: int
+
+    @property
+    def below_noise(self) -> bool:
+        """The correction turned the normals by less than their standard error."""
+        return self.change_deg < self.noise_deg
+
+    def to_dict(self) -> dict:
+        """JSON-ready fields."""
+        return asdict(self)
+
+
+def first_correction(dataset: Dataset, usable: np.ndarray, first: PsResult, second: PsResult) -> CorrectionSize | None:
+    """How far pass 1's fit (`second`) turned pass 0's normals (`first`), against their
+    standard error from pass 0's residual over the observations fitted (`usable`).
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The input images and lights (distant: a perspective camera's orthographic stand-in).
+    usable : numpy.ndarray
+        bool (K, H, W, 1): the observations photometric stereo fits
+        (`irtps.irt.pipeline.fitted_observations`).
+    first, second : PsResult
+        Pass 0's and pass 1's fits.
+
+    Returns
+    -------
+    CorrectionSize or None
+        None where no pixel is fitted in both passes with a determined error.
+    """
+    measured = np.zeros_like(dataset.mask)
+    measured.flat[spread_pixels(dataset.mask, SAMPLE)] = True
+    before, after = first.normals[measured], second.normals[measured]
+    noise = normal_standard_error(
+        dataset.images, dataset.scene.light_directions, dataset.scene.light_irradiance, measured, usable
+    )[measured]
+    fitted = (np.abs(before).sum(axis=1) > 0) & (np.abs(after).sum(axis=1) > 0) & np.isfinite(noise)
+    if not fitted.any():
+        return None
+    cosine = np.clip((before[fitted] * after[fitted]).sum(axis=1), -1.0, 1.0)
+    return CorrectionSize(
+        change_deg=float(np.median(np.degrees(np.arccos(cosine)))),
+        noise_deg=float(np.median(noise[fitted])),
+        pixels=int(fitted.sum()),
+    )
