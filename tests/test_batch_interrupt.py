@@ -24,10 +24,7 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="re
 
 DATA = Path(__file__).parent / "data"
 INTERRUPTED = "irtps: interrupted; no partial output was left"
-TINY_KEPT_CLASSIC_PS = re.compile(
-    r"irtps: warning: tiny: IRT-PS: no pass explained the images better than classic photometric stereo \(residual 0\.\d{4}\); "
-    "the result is classic photometric stereo's"
-)
+TINY_KEPT_CLASSIC_PS = re.compile(r"irtps: warning: tiny: IRT-PS: [^\n]*the result is classic photometric stereo's")
 
 
 @pytest.fixture(scope="module")

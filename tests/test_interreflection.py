@@ -43,7 +43,7 @@ def test_irtps_leaves_a_scene_without_inter_reflection_alone():
     data, _ = irtps.synthesize("cap", size=32, lights=8, environment="none", floor=False, bounces=0, seed=1)
     result = remove_interreflections(data, bounces=3, iterations=2, samples=32)
     assert abs(_error(result) - result.history[0].metrics["normal_mean_angular_deg"]) <= 0.1
-    assert np.abs(result.indirect).max() == 0.0
+    assert result.indirect is None or np.abs(result.indirect).max() == 0.0  # nothing was subtracted
 
 
 def test_reconstruct_cli_writes_indirect_images_and_history(tmp_path, grooves):

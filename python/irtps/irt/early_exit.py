@@ -5,9 +5,10 @@ Pass 1 fits the images with pass 0's whole estimate of the inter-reflections rem
 passes after it only refine that estimate as the shape it was rendered from changes. Where
 the first correction turns the normals by less than the images fix them (the standard
 error of classic photometric stereo's normals from its own residual:
-`irtps.ps.uncertainty.normal_standard_error`), the shape barely changes, the estimate
-rendered from it even less, and later passes move the result by less than its own
-uncertainty: the loop stops after pass 1 (`first_correction`, `CorrectionSize`). That is the
+`irtps.ps.uncertainty.normal_standard_error`), the correction and every refinement of it
+move the result by less than its own uncertainty: the loop stops before rendering pass 1
+and returns pass 0, classic photometric stereo (`first_correction`, `CorrectionSize`,
+`irtps.irt.loop_state.LoopState.correction_stop`). That is the
 case of a real object alone, whose inter-reflections carry a few thousandths of its light
 while gloss and shadow edges leave its fit a residual a hundred times larger; an object in a
 box or beside a wall, whose bounces carry a tenth of its light or more, turns by several

@@ -20,9 +20,9 @@ converges (a secant estimate of its contraction): above 1 where the estimates co
 slowly in one direction, below 1 where they oscillate (`irtps.irt.relaxation`). The loop stops
 when the residual has not fallen beyond its Monte-Carlo noise over the last two passes (from
 the pass two before the last to the last: a single noisy or over-relaxed pass does not stop it),
-and after pass 1 already where that pass's correction turned the normals by less than their
+and before rendering pass 1 where that pass's fit turned the normals by less than their
 standard error (`irtps.irt.early_exit`): there the inter-reflections are below what the images
-tell apart, as on a real object alone.
+tell apart, as on a real object alone, and the result is pass 0's.
 
 The loop's state between two passes is a `irtps.irt.loop_state.LoopState`; each step estimates
 the inter-reflections and updates the images with the two strategies of `irtps.irt.update`.
@@ -119,7 +119,7 @@ def remove_interreflections(
           module); a number in (0, 2) fixes it (1 takes each new estimate whole);
         - ``early_stop``: stop when the residual has not fallen over the last two passes
           by twice its Monte-Carlo noise (`irtps.irt.loop_state.LoopState.stalled_out`),
-          or after pass 1 when its correction turned the normals by less than their
+          or keep pass 0 when pass 1's correction turned the normals by less than their
           standard error (`irtps.irt.early_exit`);
         - ``denoise``: filter each estimate along the surface before subtracting it
           (`irtps.render.denoise.denoise_indirect`);
@@ -151,7 +151,8 @@ def remove_interreflections(
     Warns
     -----
     IrtpsWarning
-        When that is pass 0 (classic photometric stereo).
+        When that is pass 0 (classic photometric stereo): no pass explained the images
+        better, or pass 1's correction was below the normals' noise (``stop``).
 
     Raises
     ------
@@ -192,8 +193,10 @@ def remove_interreflections(
                 state.first_fit = current.fit
                 options = with_chosen_robust(options, current.fit)
             elif index == 1 and options.early_stop and state.first_fit is not None:
-                with timed(current.timings, "noise_test"):
-                    state.correction = first_correction(dataset, usable, state.first_fit, current.fit)
+                state.correction = first_correction(dataset, usable, state.first_fit, current.fit)
+                stop = state.correction_stop()
+                if stop is not None:
+                    break
             record, rendered, rerendering = _render_pass(dataset, options, index, current, state.previous, usable)
             state.history.append(record)
             state.judge(index, current, rerendering.residual)
@@ -208,7 +211,9 @@ def remove_interreflections(
             state.previous = current
     best, first_fit = state.best, state.first_fit
     assert best is not None and first_fit is not None, "the loop runs at least one pass"
-    if best.index == 0 and len(state.history) > 1:
+    if stop is not None and stop.reason == "below_noise":
+        warnings.warn(f"IRT-PS: {stop.message}", IrtpsWarning, stacklevel=2)
+    elif best.index == 0 and len(state.history) > 1:
         warnings.warn(
             f"IRT-PS: no pass explained the images better than classic photometric stereo (residual {best.residual.object:.4f}); "
             "the result is classic photometric stereo's",

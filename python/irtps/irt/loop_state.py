@@ -79,12 +79,13 @@ class Stop:
     ----------
     reason : str
         One of `STOP_REASONS`: ``"iterations"``, the largest number of corrections was made;
-        ``"below_noise"``, the first correction turned the normals by less than their
-        standard error (`irtps.irt.early_exit`), so the loop stopped after pass 1;
+        ``"below_noise"``, pass 1's fit of the corrected images turned the normals by less
+        than their standard error (`irtps.irt.early_exit`), so the loop stopped before
+        rendering it and kept pass 0 (`LoopState.correction_stop`);
         ``"stalled"``, the residual did not fall beyond its noise over the last `TREND`
         passes (`LoopState.stalled_out`).
     after_pass : int
-        The last pass run.
+        The last pass rendered and judged.
     message : str
         The reason in words, with its figures.
     correction : CorrectionSize or None
@@ -184,8 +185,7 @@ class LoopState:
 
     def stop(self, index: int, iterations: int, early_stop: bool) -> Stop | None:
         """Why the loop stops after pass `index`, or None to go on: `iterations` corrections
-        made; with `early_stop`, pass 1 when its correction was below the normals' noise,
-        or any pass once the residual stalled."""
+        made, or with `early_stop` the residual stalled."""
         if index >= iterations:
             asked = (
                 "no correction was asked for"
@@ -195,24 +195,29 @@ class LoopState:
             return Stop("iterations", index, asked, self.correction)
         if not early_stop:
             return None
-        size = self.correction
-        if index == 1 and size is not None and size.below_noise:
-            return Stop(
-                "below_noise",
-                index,
-                f"the first correction turned the normals by {size.change_deg:.3g} deg (median), less than the "
-                f"{size.noise_deg:.3g} deg that their fit's residual leaves them uncertain: the inter-reflections are "
-                "below what the images tell apart",
-                size,
-            )
         if self.stalled_out:
             return Stop(
                 "stalled",
                 index,
                 f"the residual did not fall by more than {SIGNIFICANCE:g} times its Monte-Carlo noise over the last {TREND} passes",
-                size,
+                self.correction,
             )
         return None
+
+    def correction_stop(self) -> Stop | None:
+        """After pass 1's fit: stop before rendering it, keeping pass 0, where its correction
+        turned the normals by less than their standard error (`correction`); else None."""
+        size = self.correction
+        if size is None or not size.below_noise:
+            return None
+        return Stop(
+            "below_noise",
+            0,
+            f"the first correction turned the normals by {size.change_deg:.3g} deg (median), less than the "
+            f"{size.noise_deg:.3g} deg that their fit's residual leaves them uncertain: the inter-reflections are "
+            "below what the images tell apart, and the result is classic photometric stereo's",
+            size,
+        )
 
     @property
     def stalled_out(self) -> bool:

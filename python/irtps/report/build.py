@@ -173,7 +173,7 @@ def build_report(run_dir: str | Path, *, truth: str | Path | None = None) -> Rep
         report.metrics = evaluate(mask=mask, normals=normals, albedo=albedo, height=height, gt=gt)
         maps = error_maps(mask=mask, normals=normals, albedo=albedo, height=height, gt=gt)
         report.figures += _error_figures(maps, report.metrics, window)
-    if len(record["history"]) > 1 and any("residual" in step for step in record["history"]):
+    if (len(record["history"]) > 1 or record.get("stop")) and any("residual" in step for step in record["history"]):
         report.figures.append(_convergence_figure(record["history"], record.get("chosen_pass"), record.get("stop")))
     agreement = recorded_agreement(record)
     if agreement is not None and not np.isnan(agreement.brightness).all():
