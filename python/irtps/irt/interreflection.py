@@ -20,7 +20,7 @@ converges (a secant estimate of its contraction): above 1 where the estimates co
 slowly in one direction, below 1 where they oscillate (`irtps.irt.relaxation`). The loop stops
 when the residual has not fallen beyond its Monte-Carlo noise over the last two passes (from
 the pass two before the last to the last: a single noisy or over-relaxed pass does not stop it),
-and before rendering pass 1 where that pass's fit turned the normals by less than their
+and before rendering pass 1 where that pass's fit turned the normals by less than half their
 standard error (`irtps.irt.early_exit`): there the inter-reflections are below what the images
 tell apart, as on a real object alone, and the result is pass 0's.
 
@@ -119,8 +119,8 @@ def remove_interreflections(
           module); a number in (0, 2) fixes it (1 takes each new estimate whole);
         - ``early_stop``: stop when the residual has not fallen over the last two passes
           by twice its Monte-Carlo noise (`irtps.irt.loop_state.LoopState.stalled_out`),
-          or keep pass 0 when pass 1's correction turned the normals by less than their
-          standard error (`irtps.irt.early_exit`);
+          or keep pass 0 when pass 1's correction turned the normals by less than half
+          their standard error (`irtps.irt.early_exit`);
         - ``denoise``: filter each estimate along the surface before subtracting it
           (`irtps.render.denoise.denoise_indirect`);
         - ``update``: ``"original"``: Aₜ₊₁ = A₀ − Eₜ − Sₜ (default; Sₜ the surroundings'

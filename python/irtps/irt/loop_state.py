@@ -80,7 +80,7 @@ class Stop:
     reason : str
         One of `STOP_REASONS`: ``"iterations"``, the largest number of corrections was made;
         ``"below_noise"``, pass 1's fit of the corrected images turned the normals by less
-        than their standard error (`irtps.irt.early_exit`), so the loop stopped before
+        than half their standard error (`irtps.irt.early_exit`), so the loop stopped before
         rendering it and kept pass 0 (`LoopState.correction_stop`);
         ``"stalled"``, the residual did not fall beyond its noise over the last `TREND`
         passes (`LoopState.stalled_out`).
@@ -206,14 +206,15 @@ class LoopState:
 
     def correction_stop(self) -> Stop | None:
         """After pass 1's fit: stop before rendering it, keeping pass 0, where its correction
-        turned the normals by less than their standard error (`correction`); else None."""
+        turned the normals by less than half their standard error (`correction`,
+        `irtps.irt.early_exit.NOISE_FRACTION`); else None."""
         size = self.correction
         if size is None or not size.below_noise:
             return None
         return Stop(
             "below_noise",
             0,
-            f"the first correction turned the normals by {size.change_deg:.3g} deg (median), less than the "
+            f"the first correction turned the normals by {size.change_deg:.3g} deg (median), less than half the "
             f"{size.noise_deg:.3g} deg that their fit's residual leaves them uncertain: the inter-reflections are "
             "below what the images tell apart, and the result is classic photometric stereo's",
             size,

@@ -340,7 +340,7 @@ class ReconstructOptions(_Options):
     early_stop: bool = _option(
         True,
         "stop when the residual has not fallen over the last two passes beyond its Monte-Carlo noise, or after pass 1 "
-        "when its correction turned the normals by less than their standard error",
+        "when its correction turned the normals by less than half their standard error (the result is then classic PS's)",
         bool,
         group="IRT-PS",
     )
