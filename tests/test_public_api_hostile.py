@@ -109,6 +109,39 @@ CASES = [
         "light_irradiance: ",
     ),
     ("lobe_share", lambda f: f(np.zeros((0, 4, 4, 3)), LIGHTS, IRRADIANCE), irtps.ArgumentError, "images: "),
+    # normal_standard_error
+    (
+        "normal_standard_error",
+        lambda f: f(np.full_like(IMAGES, NAN), LIGHTS, IRRADIANCE, MASK),
+        irtps.ArgumentError,
+        "images[0]: ",
+    ),
+    (
+        "normal_standard_error",
+        lambda f: f(np.zeros((0, 4, 4, 3)), LIGHTS, IRRADIANCE, MASK),
+        irtps.ArgumentError,
+        "images: ",
+    ),
+    ("normal_standard_error", lambda f: f("images", LIGHTS, IRRADIANCE, MASK), irtps.ArgumentError, "images: "),
+    (
+        "normal_standard_error",
+        lambda f: f(IMAGES, LIGHTS[:3], IRRADIANCE, MASK),
+        irtps.ArgumentError,
+        "light_directions: ",
+    ),
+    (
+        "normal_standard_error",
+        lambda f: f(IMAGES, LIGHTS, np.full_like(IRRADIANCE, NAN), MASK),
+        irtps.ArgumentError,
+        "light_irradiance: ",
+    ),
+    ("normal_standard_error", lambda f: f(IMAGES, LIGHTS, IRRADIANCE, MASK[:2]), irtps.ArgumentError, "mask: "),
+    (
+        "normal_standard_error",
+        lambda f: f(IMAGES, LIGHTS, IRRADIANCE, MASK, np.ones((4, 4, 4, 2), bool)),
+        irtps.ArgumentError,
+        "usable: ",
+    ),
     # choose_robust
     ("choose_robust", lambda f: f("0.5"), irtps.ArgumentError, "share: "),
     ("choose_robust", lambda f: f(NAN), irtps.ArgumentError, "share: "),

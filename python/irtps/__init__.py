@@ -13,6 +13,7 @@ from irtps.io.image_selection import exclude_images
 from irtps.geometry.integrate import integrate_normals
 from irtps.geometry.boundary import place_height
 from irtps.ps.fit import PsResult, choose_robust, lobe_share, photometric_stereo
+from irtps.ps.uncertainty import normal_standard_error
 from irtps.irt.folder import save_reconstruction
 from irtps.irt.reconstruct import Reconstruction, reconstruct
 from irtps._shared.records import irtps_version
@@ -53,6 +54,7 @@ __all__ = [
     "load_scene",
     "load_scene_object",
     "lobe_share",
+    "normal_standard_error",
     "photometric_stereo",
     "place_height",
     "reconstruct",

@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from irtps._shared.checks import check_array, check_mask
+from irtps._shared.checks import check_array, check_images_finite, check_mask
 from irtps.model.data import pixel_observations
+from irtps.ps.fit import checked_lights
 
 __all__ = ["normal_standard_error"]
 
@@ -52,6 +53,12 @@ def normal_standard_error(
         float32 (H, W): NaN outside `mask`, and where fewer than 4 observations, lights
         (nearly) coplanar or a zero brightness leave the normal or its error undetermined.
 
+    Raises
+    ------
+    ArgumentError
+        Naming the argument: arrays of the wrong shape or empty, non-finite images on the
+        mask, light directions or irradiance that are not finite or out of range.
+
     Examples
     --------
     A pixel lit by four lights: exact images fix its normal exactly, and noise of 1 % of its
@@ -68,11 +75,13 @@ def normal_standard_error(
     >>> 0.1 < float(normal_standard_error(noisy, lights, np.ones((4, 3)), mask)[0, 0]) < 2
     True
     """
-    images = check_array("images", images, (None, None, None, 3), dtype=None, copy=False)
+    images = check_array("images", images, (None, None, None, 3), dtype=None, nonempty=True, copy=False)
     count = images.shape[0]
-    directions = check_array("light_directions", light_directions, (count, 3), dtype=np.float64)
-    irradiance = check_array("light_irradiance", light_irradiance, (count, 3), dtype=np.float64)
     mask = check_mask(mask, images.shape[1:3], match="images")
+    check_images_finite("images", images, mask)
+    checked_lights(light_directions, light_irradiance, count)
+    directions = np.asarray(light_directions, dtype=np.float64)
+    irradiance = np.asarray(light_irradiance, dtype=np.float64)
     error = np.full(mask.shape, np.nan, dtype=np.float32)
     if not mask.any():
         return error
