@@ -91,6 +91,31 @@ pub struct Light {
     pub irradiance: Rgb,
 }
 
+/// An isotropic point light (contract §4b): its `position` and RGB radiant `intensity`. A
+/// surface point at distance r that faces it receives `intensity / r²`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointLight {
+    pub position: Vec3A,
+    pub intensity: Rgb,
+}
+
+/// A light of a scene: distant, or a point near the object.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Emitter {
+    Distant(Light),
+    Point(PointLight),
+}
+
+impl Emitter {
+    /// Its irradiance (distant) or intensity (point), per channel.
+    pub fn power(&self) -> Rgb {
+        match self {
+            Emitter::Distant(light) => light.irradiance,
+            Emitter::Point(light) => light.intensity,
+        }
+    }
+}
+
 /// The plane `z = height` with a uniform Lambertian albedo.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Floor {
@@ -323,6 +348,22 @@ impl Frame {
         )
     }
 
+    /// `emitter` in this frame: a point light's position moved and scaled, and its intensity
+    /// divided by the scale squared (the inverse-square law in working-frame distances); a
+    /// distant light as it is.
+    pub fn local_emitter(&self, emitter: &Emitter) -> Emitter {
+        match emitter {
+            Emitter::Distant(light) => Emitter::Distant(*light),
+            Emitter::Point(light) => {
+                let area = self.scale * self.scale;
+                Emitter::Point(PointLight {
+                    position: self.to_local(light.position),
+                    intensity: light.intensity.map(|i| (f64::from(i) / area) as f32),
+                })
+            }
+        }
+    }
+
     /// The world length of working-frame length `t`.
     pub fn to_world_length(&self, t: f32) -> f32 {
         (f64::from(t) * self.scale) as f32
@@ -430,19 +471,50 @@ pub fn lights_from_rows(directions: &[[f32; 3]], irradiance: &[Rgb]) -> Result<V
 /// Checks that every light has a unit direction pointing up (z > 0) and a finite,
 /// non-negative irradiance.
 pub fn validate_lights(lights: &[Light]) -> Result<()> {
-    for (k, light) in lights.iter().enumerate() {
-        let d = light.direction;
-        if !d.is_finite() || (d.length() - 1.0).abs() > 1e-3 || d.z <= 0.0 {
-            return Err(Error::input(
-                &format!("lights[{k}].direction"),
-                format!("{d:?} must be a unit vector with z > 0"),
-            ));
-        }
-        if light.irradiance.iter().any(|e| !e.is_finite() || *e < 0.0) {
-            return Err(Error::input(
-                &format!("lights[{k}].irradiance"),
-                "must be finite and non-negative",
-            ));
+    lights
+        .iter()
+        .enumerate()
+        .try_for_each(|(k, light)| check_light(k, light))
+}
+
+/// Checks distant light `k`, naming its field.
+fn check_light(k: usize, light: &Light) -> Result<()> {
+    let d = light.direction;
+    if !d.is_finite() || (d.length() - 1.0).abs() > 1e-3 || d.z <= 0.0 {
+        return Err(Error::input(
+            &format!("lights[{k}].direction"),
+            format!("{d:?} must be a unit vector with z > 0"),
+        ));
+    }
+    if light.irradiance.iter().any(|e| !e.is_finite() || *e < 0.0) {
+        return Err(Error::input(
+            &format!("lights[{k}].irradiance"),
+            "must be finite and non-negative",
+        ));
+    }
+    Ok(())
+}
+
+/// Checks every emitter: a distant light as [`validate_lights`] does; a point light's
+/// position finite, its intensity finite and non-negative.
+pub fn validate_emitters(emitters: &[Emitter]) -> Result<()> {
+    for (k, emitter) in emitters.iter().enumerate() {
+        match emitter {
+            Emitter::Distant(light) => check_light(k, light)?,
+            Emitter::Point(light) => {
+                if !light.position.is_finite() {
+                    return Err(Error::input(
+                        &format!("lights[{k}].position"),
+                        format!("{:?} must be finite", light.position),
+                    ));
+                }
+                if light.intensity.iter().any(|i| !i.is_finite() || *i < 0.0) {
+                    return Err(Error::input(
+                        &format!("lights[{k}].intensity"),
+                        "must be finite and non-negative",
+                    ));
+                }
+            }
         }
     }
     Ok(())

@@ -1,4 +1,4 @@
-//! Direct light for every light at once.
+//! Direct light for every light at once, distant or point (contract §4, §4b).
 //!
 //! Whether each light is visible is traced once per cache point: at each vertex of the
 //! object's mesh, and at each vertex of a grid on each panel of the surroundings (about a
@@ -13,18 +13,23 @@ use std::f32::consts::PI;
 use glam::Vec3A;
 use rayon::prelude::*;
 
-use crate::scene::{Light, Rgb};
+use crate::scene::{Emitter, Rgb};
 use crate::trace::mesh::{Mesh, Panel, NO_PANEL};
 use crate::trace::Tracer;
 
 /// Light visibility at the cache points, plus the light parameters needed to shade with it.
 #[derive(Clone)]
 pub struct LightCache {
+    /// Unit direction toward each distant light (0 for a point light).
     directions: Vec<Vec3A>,
+    /// Position of each point light (None for a distant light), and whether there is any:
+    /// with none, the shading runs the loop over lights that vectorises.
+    positions: Vec<Option<Vec3A>>,
+    any_point: bool,
     /// x, y and z of each light's direction, light by light (the shading runs over lights).
     direction_xyz: [Vec<f32>; 3],
-    /// Irradiance of each light divided by π (the Lambertian BRDF without the albedo), one
-    /// vector per channel.
+    /// Irradiance of each distant light, or intensity of each point light, divided by π
+    /// (the Lambertian BRDF without the albedo), one vector per channel.
     radiance_scale: [Vec<f32>; 3],
     /// `vertex_visibility[v · K + k]` is 1 when light k is unoccluded from mesh vertex v.
     vertex_visibility: Vec<u8>,
@@ -35,11 +40,24 @@ pub struct LightCache {
 
 impl LightCache {
     /// Traces one shadow ray per cache point and light (in parallel); `ray_offset` is the
-    /// distance by which shadow rays start off the surface.
-    pub fn new(mesh: &Mesh, tracer: &Tracer, lights: &[Light], ray_offset: f32) -> LightCache {
-        let directions: Vec<Vec3A> = lights.iter().map(|l| l.direction.normalize()).collect();
-        let radiance_scale =
-            [0, 1, 2].map(|c| lights.iter().map(|l| l.irradiance[c] / PI).collect());
+    /// distance by which shadow rays start off the surface. The emitters are in the mesh's
+    /// frame.
+    pub fn new(mesh: &Mesh, tracer: &Tracer, lights: &[Emitter], ray_offset: f32) -> LightCache {
+        let directions: Vec<Vec3A> = lights
+            .iter()
+            .map(|l| match l {
+                Emitter::Distant(light) => light.direction.normalize(),
+                Emitter::Point(_) => Vec3A::ZERO,
+            })
+            .collect();
+        let positions: Vec<Option<Vec3A>> = lights
+            .iter()
+            .map(|l| match l {
+                Emitter::Distant(_) => None,
+                Emitter::Point(light) => Some(light.position),
+            })
+            .collect();
+        let radiance_scale = [0, 1, 2].map(|c| lights.iter().map(|l| l.power()[c] / PI).collect());
         let direction_xyz = [0, 1, 2].map(|axis| directions.iter().map(|d| d[axis]).collect());
         let mut object_vertex = vec![false; mesh.positions.len()];
         for (tri, &panel) in mesh.triangles.iter().zip(&mesh.panel_of) {
@@ -55,8 +73,9 @@ impl LightCache {
                 .for_each(|(row, point)| {
                     if let Some((p, n)) = point {
                         let origin = *p + *n * ray_offset;
-                        for (slot, dir) in row.iter_mut().zip(&directions) {
-                            *slot = u8::from(!tracer.occluded(origin, *dir, f32::INFINITY));
+                        for (k, slot) in row.iter_mut().enumerate() {
+                            let (dir, t_max) = toward(&directions, &positions, k, origin);
+                            *slot = u8::from(!tracer.occluded(origin, dir, t_max));
                         }
                     }
                 });
@@ -78,7 +97,9 @@ impl LightCache {
             })
             .collect();
         LightCache {
+            any_point: positions.iter().any(Option::is_some),
             directions,
+            positions,
             direction_xyz,
             radiance_scale,
             vertex_visibility,
@@ -87,9 +108,20 @@ impl LightCache {
         }
     }
 
-    /// The same visibility, shading with the irradiance `irradiance` of each light instead.
-    pub fn with_irradiance(&self, irradiance: &[Rgb]) -> LightCache {
-        let radiance_scale = [0, 1, 2].map(|c| irradiance.iter().map(|e| e[c] / PI).collect());
+    /// The same visibility, shading with the irradiance `irradiance` of each distant light
+    /// (the intensity of each point light, divided by `area`: the working frame's squared
+    /// scale, as [`crate::scene::Frame::local_emitter`] does) instead.
+    pub fn with_irradiance(&self, irradiance: &[Rgb], area: f64) -> LightCache {
+        let radiance_scale = [0, 1, 2].map(|c| {
+            irradiance
+                .iter()
+                .zip(&self.positions)
+                .map(|(e, position)| match position {
+                    None => e[c] / PI,
+                    Some(_) => (f64::from(e[c]) / area) as f32 / PI,
+                })
+                .collect()
+        });
         LightCache {
             radiance_scale,
             ..self.clone()
@@ -125,18 +157,15 @@ impl LightCache {
         let panel = mesh.panel_of[t];
         let origin = point + n * self.ray_offset;
         let traced = |k: usize| {
-            f32::from(u8::from(!tracer.occluded(
-                origin,
-                self.directions[k],
-                f32::INFINITY,
-            )))
+            let (dir, t_max) = toward(&self.directions, &self.positions, k, origin);
+            f32::from(u8::from(!tracer.occluded(origin, dir, t_max)))
         };
         if panel == NO_PANEL {
             let [a, b, c] = mesh.triangles[t]
                 .map(|i| &self.vertex_visibility[i as usize * k_count..][..k_count]);
             let w = 1.0 - u - v;
             if exact_edges {
-                self.add_shaded::<true>(n, albedo, weight, acc, |k| {
+                self.add_shaded::<true>(n, point, albedo, weight, acc, |k| {
                     if a[k] == b[k] && b[k] == c[k] {
                         f32::from(a[k])
                     } else {
@@ -144,7 +173,7 @@ impl LightCache {
                     }
                 });
             } else {
-                self.add_shaded::<false>(n, albedo, weight, acc, |k| {
+                self.add_shaded::<false>(n, point, albedo, weight, acc, |k| {
                     w * a[k] as f32 + u * b[k] as f32 + v * c[k] as f32
                 });
             }
@@ -169,7 +198,7 @@ impl LightCache {
             fs * ft,
         );
         if exact_edges {
-            self.add_shaded::<true>(n, albedo, weight, acc, |k| {
+            self.add_shaded::<true>(n, point, albedo, weight, acc, |k| {
                 if v00[k] == v10[k] && v00[k] == v01[k] && v00[k] == v11[k] {
                     f32::from(v00[k])
                 } else {
@@ -177,7 +206,7 @@ impl LightCache {
                 }
             });
         } else {
-            self.add_shaded::<false>(n, albedo, weight, acc, |k| {
+            self.add_shaded::<false>(n, point, albedo, weight, acc, |k| {
                 w00 * v00[k] as f32
                     + w10 * v10[k] as f32
                     + w01 * v01[k] as f32
@@ -187,13 +216,15 @@ impl LightCache {
     }
 
     /// Adds `weight` × albedo × E/π × max(0, n·l) × visibility of each light to `acc`
-    /// (`acc[c · K + k]`). With `TRACED` the visibility (a shadow ray) is asked for only
-    /// where the light is in front; otherwise it is read for every light (a light behind
-    /// gets 0 all the same) and the loop over lights vectorises.
+    /// (`acc[c · K + k]`), at the surface point `point` (E = I/r² for a point light). With
+    /// `TRACED` the visibility (a shadow ray) is asked for only where the light is in front;
+    /// otherwise it is read for every light (a light behind gets 0 all the same) and, where
+    /// every light is distant, the loop over lights vectorises.
     #[inline(always)]
     fn add_shaded<const TRACED: bool>(
         &self,
         n: Vec3A,
+        point: Vec3A,
         albedo: Rgb,
         weight: Rgb,
         acc: &mut [f32],
@@ -205,6 +236,29 @@ impl LightCache {
         let [scale_r, scale_g, scale_b] = [0, 1, 2].map(|c| &self.radiance_scale[c][..k_count]);
         let (red, rest) = acc[..3 * k_count].split_at_mut(k_count);
         let (green, blue) = rest.split_at_mut(k_count);
+        if self.any_point {
+            // Each point light's direction and inverse-square falloff are those of `point`,
+            // light by light.
+            for k in 0..k_count {
+                let (cosine, falloff) = match self.positions[k] {
+                    None => (n.dot(self.directions[k]).max(0.0), 1.0),
+                    Some(position) => {
+                        let offset = position - point;
+                        let squared = offset.length_squared().max(f32::MIN_POSITIVE);
+                        ((n.dot(offset) / squared.sqrt()).max(0.0), 1.0 / squared)
+                    }
+                };
+                let factor = if TRACED && cosine == 0.0 {
+                    0.0
+                } else {
+                    cosine * falloff * visibility(k)
+                };
+                red[k] += albedo[0] * scale_r[k] * factor * weight[0];
+                green[k] += albedo[1] * scale_g[k] * factor * weight[1];
+                blue[k] += albedo[2] * scale_b[k] * factor * weight[2];
+            }
+            return;
+        }
         for k in 0..k_count {
             let cosine = (n.x * x[k] + n.y * y[k] + n.z * z[k]).max(0.0);
             let factor = if TRACED && cosine == 0.0 {
@@ -230,12 +284,28 @@ impl LightCache {
         acc: &mut [f32],
     ) {
         let origin = point + n * self.ray_offset;
-        self.add_shaded::<true>(n, albedo, weight, acc, |k| {
-            f32::from(u8::from(!tracer.occluded(
-                origin,
-                self.directions[k],
-                f32::INFINITY,
-            )))
+        self.add_shaded::<true>(n, point, albedo, weight, acc, |k| {
+            let (dir, t_max) = toward(&self.directions, &self.positions, k, origin);
+            f32::from(u8::from(!tracer.occluded(origin, dir, t_max)))
         });
+    }
+}
+
+/// The unit direction from `origin` toward light `k` and how far a shadow ray goes: to
+/// infinity for a distant light, to the light for a point.
+#[inline(always)]
+fn toward(
+    directions: &[Vec3A],
+    positions: &[Option<Vec3A>],
+    k: usize,
+    origin: Vec3A,
+) -> (Vec3A, f32) {
+    match positions[k] {
+        None => (directions[k], f32::INFINITY),
+        Some(position) => {
+            let offset = position - origin;
+            let distance = offset.length();
+            (offset / distance.max(f32::MIN_POSITIVE), distance)
+        }
     }
 }

@@ -21,7 +21,9 @@ use crate::error::{Error, Result};
 use crate::memory::{check_available, try_collect, try_vec};
 use crate::render::light_cache::LightCache;
 use crate::sampler::{cosine_hemisphere, hash, low_discrepancy_4d, unit_float, Rng};
-use crate::scene::{check_albedo, validate_lights, Camera, Frame, Light, Rgb, Scene};
+use crate::scene::{
+    check_albedo, validate_emitters, validate_lights, Camera, Emitter, Frame, Light, Rgb, Scene,
+};
 use crate::trace::mesh::Mesh;
 use crate::trace::Tracer;
 
@@ -100,11 +102,19 @@ impl Renderer {
     /// working frame; refuses, naming the field, geometry that float32 cannot resolve there
     /// (see [`Frame::local_scene`]).
     pub fn new(scene: &Scene, lights: &[Light]) -> Result<Renderer> {
+        let emitters: Vec<Emitter> = lights.iter().copied().map(Emitter::Distant).collect();
+        Self::with_emitters(scene, &emitters)
+    }
+
+    /// [`Renderer::new`] under lights that may be points near the object (contract §4b):
+    /// each point light's direction and inverse-square falloff vary over the scene, and its
+    /// shadow rays stop at it.
+    pub fn with_emitters(scene: &Scene, lights: &[Emitter]) -> Result<Renderer> {
         scene.validate()?;
         if lights.is_empty() {
             return Err(Error::input("lights", "no lights given"));
         }
-        validate_lights(lights)?;
+        validate_emitters(lights)?;
         let (pixels, k) = (scene.camera.pixel_count(), lights.len());
         let estimate = pixels.saturating_mul(
             SCENE_BYTES_PER_PIXEL.saturating_add(LIGHT_CACHE_BYTES_PER_PIXEL.saturating_mul(k)),
@@ -133,7 +143,8 @@ impl Renderer {
         } else {
             extent
         };
-        let cache = LightCache::new(&mesh, &tracer, lights, ray_offset);
+        let local: Vec<Emitter> = lights.iter().map(|l| frame.local_emitter(l)).collect();
+        let cache = LightCache::new(&mesh, &tracer, &local, ray_offset);
         #[cfg(target_arch = "x86_64")]
         let avx2 = std::is_x86_feature_detected!("avx2");
         #[cfg(not(target_arch = "x86_64"))]
@@ -200,7 +211,9 @@ impl Renderer {
         Ok(Renderer {
             mesh,
             tracer: Arc::clone(&self.tracer),
-            cache: self.cache.with_irradiance(irradiance),
+            cache: self
+                .cache
+                .with_irradiance(irradiance, self.frame.scale * self.frame.scale),
             ..*self
         })
     }

@@ -1,7 +1,7 @@
 //! Tests of the renderer.
 
 use super::*;
-use crate::scene::{HeightField, Pinhole};
+use crate::scene::{Emitter, HeightField, Pinhole, PointLight};
 use glam::vec3a;
 use std::f32::consts::PI;
 
@@ -439,4 +439,142 @@ fn direct_light_on_a_tilted_plane_seen_through_a_pinhole_is_lamberts_law() {
             );
         }
     }
+}
+
+/// The direct image alone, 256 stratified footprint samples a pixel (within 0.5 % of the
+/// footprint's mean of the steep irradiance of a near light), real shadow rays.
+fn centre_direct() -> RenderSettings {
+    RenderSettings {
+        bounces: 0,
+        samples: 0,
+        direct_samples: 256,
+        seed: 0,
+        split_bounces: true,
+        cached_direct: false,
+    }
+}
+
+/// An orthographic camera of `size` × `size` pixels.
+fn level_camera(size: usize, pixel_size: f32) -> Camera {
+    Camera {
+        width: size,
+        height: size,
+        pixel_size,
+        pinhole: None,
+    }
+}
+
+/// ρ I cos θ / (π r²) under a point light, averaged over the footprint of pixel (`row`,
+/// `col`) of a level surface at height `z` (a 16 × 16 grid of points).
+fn point_radiance(
+    albedo: Rgb,
+    light: &PointLight,
+    camera: &Camera,
+    (row, col): (usize, usize),
+    z: f32,
+    c: usize,
+) -> f32 {
+    let mut sum = 0.0;
+    for i in 0..16 {
+        for j in 0..16 {
+            let (x, y) = camera.image_to_world(
+                row as f32 + (i as f32 + 0.5) / 16.0,
+                col as f32 + (j as f32 + 0.5) / 16.0,
+                z,
+            );
+            let offset = light.position - vec3a(x, y, z);
+            let r2 = offset.length_squared();
+            sum += albedo[c] * light.intensity[c] * offset.z.max(0.0) / r2.sqrt() / (PI * r2);
+        }
+    }
+    sum / 256.0
+}
+
+#[test]
+fn a_point_light_falls_off_with_the_square_of_the_distance_in_world_units() {
+    // A level plate of pixel size 0.5: the working frame's unit is 2 world units, so the
+    // intensity must be rescaled for the inverse-square law to hold in world units.
+    let (size, camera) = (16, level_camera(16, 0.5));
+    let albedo = [0.5, 0.6, 0.7];
+    let scene = object_alone(camera, vec![0.0; size * size], albedo);
+    let light = PointLight {
+        position: vec3a(1.0, -2.0, 6.0),
+        intensity: [10.0, 20.0, 30.0],
+    };
+    let renderer = Renderer::with_emitters(&scene, &[Emitter::Point(light)]).unwrap();
+    let image = renderer.render_rows(0..size, &centre_direct()).unwrap();
+    let brighter = renderer
+        .with_reflectance(&vec![albedo; size * size], &[[20.0, 40.0, 60.0]])
+        .unwrap()
+        .render_rows(0..size, &centre_direct())
+        .unwrap();
+    // Interior pixels: the surface runs between pixel centres, so the outer half pixel of
+    // the image holds none of it.
+    for (row, col) in [(1, 1), (5, 9), (12, 3), (14, 14)] {
+        for c in 0..3 {
+            let expected = point_radiance(albedo, &light, &camera, (row, col), 0.0, c);
+            let got = image[(row * size + col) * 3 + c];
+            assert!(
+                (got - expected).abs() <= 5e-3 * expected,
+                "{got} vs {expected}"
+            );
+            let doubled = brighter[(row * size + col) * 3 + c];
+            assert!(
+                (doubled - 2.0 * got).abs() <= 1e-5 * got,
+                "{doubled} vs 2 x {got}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_point_light_is_shadowed_only_by_what_stands_between_it_and_the_surface() {
+    // A plate with a tall wall on its right (columns 12 on) and a point light left of the
+    // wall, below its top: the shadow rays toward the light would hit the wall beyond it,
+    // and must stop at the light. A spike between a pixel and the light shadows it.
+    let (size, camera) = (16, level_camera(16, 1.0));
+    let mut height: Vec<f32> = (0..size * size)
+        .map(|p| if p % size >= 12 { 40.0 } else { 0.0 })
+        .collect();
+    height[4 * size + 5] = 30.0;
+    let albedo = [0.8; 3];
+    let scene = object_alone(camera, height, albedo);
+    let light = PointLight {
+        position: camera.surface_point(8, 8, 5.0),
+        intensity: [50.0; 3],
+    };
+    let renderer = Renderer::with_emitters(&scene, &[Emitter::Point(light)]).unwrap();
+    let image = renderer.render_rows(0..size, &centre_direct()).unwrap();
+    let lit = |row: usize, col: usize| image[(row * size + col) * 3];
+    for (row, col) in [(8, 2), (9, 3), (12, 6)] {
+        let expected = point_radiance(albedo, &light, &camera, (row, col), 0.0, 0);
+        let got = lit(row, col);
+        assert!(
+            (got - expected).abs() <= 5e-3 * expected,
+            "pixel ({row}, {col}): {got} vs {expected}"
+        );
+    }
+    assert_eq!(lit(2, 3), 0.0, "behind the spike");
+    assert!(lit(2, 9) > 0.0);
+}
+
+#[test]
+fn a_point_light_with_a_bad_position_or_intensity_is_named() {
+    let scene = tilted_plate(4, [0.5; 3]);
+    let bad = |position: Vec3A, intensity: Rgb| {
+        let light = Emitter::Point(PointLight {
+            position,
+            intensity,
+        });
+        let distant = Emitter::Distant(Light {
+            direction: Vec3A::Z,
+            irradiance: [1.0; 3],
+        });
+        Renderer::with_emitters(&scene, &[distant, light])
+            .err()
+            .map(|e| e.to_string())
+            .unwrap()
+    };
+    assert!(bad(vec3a(0.0, f32::NAN, 9.0), [1.0; 3]).starts_with("lights[1].position: "));
+    assert!(bad(vec3a(0.0, 0.0, 9.0), [1.0, -1.0, 1.0]).starts_with("lights[1].intensity: "));
 }
