@@ -116,7 +116,10 @@ def denoise_indirect(
 class Renderer:
     """A scene made ready for rendering and ray queries: height-field object, optional floor
     and Cornell box, distant lights; an orthographic camera, or a pinhole ``(fx, fy, cx, cy,
-    zc)`` whose ``pixel_size`` is a pixel's world size at the depth of the object's base."""
+    zc)`` whose ``pixel_size`` is a pixel's world size at the depth of the object's base.
+    ``light_positions`` (K, 3) makes light k an isotropic point at row k (world units; its
+    ``light_irradiance`` row its radiant intensity, contract §4b) where the row is not NaN;
+    its direction row is then unused."""
 
     def __new__(
         cls,
@@ -129,6 +132,7 @@ class Renderer:
         floor: Floor | None = None,
         cornell_box: CornellBox | None = None,
         pinhole: tuple[float, float, float, float, float] | None = None,
+        light_positions: _F32 | None = None,
     ) -> Renderer: ...
     def with_reflectance(self, albedo: _F32, light_irradiance: _F32) -> Renderer:
         """The same scene with the object's albedo (H, W, 3) and each light's irradiance

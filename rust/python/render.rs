@@ -2,6 +2,8 @@
 
 use std::borrow::Cow;
 
+use glam::Vec3A;
+
 use numpy::ndarray::{Array, Array2, IxDyn};
 use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyArrayDyn, PyReadonlyArray2, PyReadonlyArray3,
@@ -11,7 +13,9 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::render::{RenderSettings, Renderer as CoreRenderer};
-use crate::scene::{Camera, CornellBox, Floor, HeightField, Pinhole, Rgb, Scene};
+use crate::scene::{
+    Camera, CornellBox, Emitter, Floor, HeightField, Light, Pinhole, PointLight, Rgb, Scene,
+};
 
 use super::convert::{flat, lights_from, rows_of_3};
 use super::errors::{argument_error, renamed, to_py};
@@ -91,10 +95,42 @@ pub(super) struct Renderer {
     inner: CoreRenderer,
 }
 
+/// Light k as a point at row k of `positions` where that row is finite, its irradiance row
+/// then its intensity; else the distant light `lights[k]`.
+fn emitters_from(
+    lights: Vec<Light>,
+    positions: Option<&PyReadonlyArray2<'_, f32>>,
+) -> PyResult<Vec<Emitter>> {
+    let Some(positions) = positions else {
+        return Ok(lights.into_iter().map(Emitter::Distant).collect());
+    };
+    let rows = rows_of_3(positions, "light_positions")?;
+    if rows.len() != lights.len() {
+        return Err(argument_error(
+            "light_positions",
+            format!("{} rows for {} lights", rows.len(), lights.len()),
+        ));
+    }
+    Ok(lights
+        .into_iter()
+        .zip(rows)
+        .map(|(light, row)| {
+            if row.iter().all(|v| v.is_nan()) {
+                Emitter::Distant(light)
+            } else {
+                Emitter::Point(PointLight {
+                    position: Vec3A::from(row),
+                    intensity: light.irradiance,
+                })
+            }
+        })
+        .collect())
+}
+
 #[pymethods]
 impl Renderer {
     #[new]
-    #[pyo3(signature = (height, mask, albedo, pixel_size, light_directions, light_irradiance, floor=None, cornell_box=None, pinhole=None))]
+    #[pyo3(signature = (height, mask, albedo, pixel_size, light_directions, light_irradiance, floor=None, cornell_box=None, pinhole=None, light_positions=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -107,6 +143,7 @@ impl Renderer {
         floor: Option<FloorArgs>,
         cornell_box: Option<BoxArgs>,
         pinhole: Option<(f32, f32, f32, f32, f32)>,
+        light_positions: Option<PyReadonlyArray2<'_, f32>>,
     ) -> PyResult<Renderer> {
         let (h, w) = (height.shape()[0], height.shape()[1]);
         if mask.shape() != [h, w] {
@@ -121,7 +158,10 @@ impl Renderer {
                 format!("shape {:?}, expected {:?}", albedo.shape(), [h, w, 3]),
             ));
         }
-        let lights = lights_from(&light_directions, &light_irradiance)?;
+        let lights = emitters_from(
+            lights_from(&light_directions, &light_irradiance)?,
+            light_positions.as_ref(),
+        )?;
         let albedo_values = flat(&albedo, "albedo")?;
         let surface = HeightField {
             height: flat(&height, "height")?.into_owned(),
@@ -160,7 +200,7 @@ impl Renderer {
             }),
         };
         let inner = py
-            .detach(|| CoreRenderer::new(&scene, &lights))
+            .detach(|| CoreRenderer::with_emitters(&scene, &lights))
             .map_err(|e| {
                 to_py(renamed(
                     renamed(e, "camera", "height"),
