@@ -125,6 +125,10 @@ CASES = {
     ),
     "irtps.ps.fit.lobe_share": (lambda f: f(np.zeros((3, 4, 4, 3)), LIGHTS, np.ones((3, 3)), sample=0), "sample: "),
     "irtps.ps.fit.choose_robust": (lambda f: f(1.5), "share: "),
+    "irtps.ps.uncertainty.normal_standard_error": (
+        lambda f: f(np.zeros((3, 4, 4, 3)), LIGHTS, np.ones((3, 3)), WRONG),
+        "mask: ",
+    ),
     "irtps.render.renderer.render": (
         lambda f: f(_scene(), np.zeros((8, 8)), np.full((8, 8, 3), 0.5), WRONG, bounces=1, samples=4),
         "mask: ",
