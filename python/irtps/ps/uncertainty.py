@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from irtps._shared.checks import check_array, check_images_finite, check_mask
-from irtps.model.data import pixel_observations
+from irtps.model.data import observation_brightness, pixel_observations
 from irtps.ps.fit import checked_lights
 
 __all__ = ["normal_standard_error"]
@@ -85,8 +85,9 @@ def normal_standard_error(
     error = np.full(mask.shape, np.nan, dtype=np.float32)
     if not mask.any():
         return error
-    scaled = pixel_observations(images, mask) / irradiance[:, None, :].astype(np.float32)
-    brightness = (scaled[..., 0] + scaled[..., 1] + scaled[..., 2]).astype(np.float64)  # (K, N)
+    brightness = observation_brightness(
+        pixel_observations(images, mask), irradiance[:, None, :].astype(np.float32)
+    ).astype(np.float64)  # (K, N)
     weight = (
         np.ones_like(brightness)
         if usable is None

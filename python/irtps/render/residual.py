@@ -25,7 +25,7 @@ import numpy as np
 
 from irtps import _core
 from irtps._shared.checks import check_array, check_mask
-from irtps.model.data import pixel_observations
+from irtps.model.data import observation_brightness, pixel_observations
 from irtps.errors import ArgumentError
 from irtps.render.renderer import check_counts, check_frame_memory, make_renderer, render_sparse
 from irtps.model.scene import Scene
@@ -229,19 +229,11 @@ def compared_observations(
         # Shadows are told apart on the object only: around it every observation is kept.
         irradiance = np.asarray(irradiance, dtype=np.float32)
         pixels = np.flatnonzero(mask)
-        brightness = _brightness(pixel_observations(images, mask), irradiance[:, None, :])
+        brightness = observation_brightness(pixel_observations(images, mask), irradiance[:, None, :])
         level = shadow_fraction * brightness.max(axis=0, initial=0.0)
         flat = usable.reshape(len(images), -1)
         flat[:, pixels] &= brightness > level
     return usable
-
-
-def _brightness(image: np.ndarray, irradiance: np.ndarray) -> np.ndarray:
-    """Photometric stereo's brightness of observations (`irtps.ps.fit.photometric_stereo`): their
-    channels over their irradiance, summed. float32 (...) for (..., 3) observations."""
-    scaled = (image / irradiance).astype(np.float32, copy=False)
-    # The channels added one by one: numpy's sum over an axis of 3 is several times slower.
-    return scaled[..., 0] + scaled[..., 1] + scaled[..., 2]
 
 
 class _Halves:
