@@ -7,14 +7,12 @@ the first correction turns the normals by less than the images fix them (the sta
 error of classic photometric stereo's normals from its own residual:
 `irtps.ps.uncertainty.normal_standard_error`; by less than half of it, `NOISE_FRACTION`, as
 stopping wrongly costs accuracy and going on wrongly only time), the correction and every
-refinement of it
-move the result by less than its own uncertainty: the loop stops before rendering pass 1
-and returns pass 0, classic photometric stereo (`first_correction`, `CorrectionSize`,
-`irtps.irt.loop_state.LoopState.correction_stop`). That is the
-case of a real object alone, whose inter-reflections carry a few thousandths of its light
-while gloss and shadow edges leave its fit a residual a hundred times larger; an object in a
-box or beside a wall, whose bounces carry a tenth of its light or more, turns by several
-times its standard error.
+refinement of it move the result by less than its own uncertainty: the loop stops before
+rendering pass 1 and returns pass 0, classic photometric stereo (`first_correction`,
+`CorrectionSize`, `irtps.irt.loop_state.LoopState.correction_stop`). That is the case of a
+real object alone, whose inter-reflections carry little of its light while gloss
+and shadow edges leave its fit a far larger residual; an object in a box or beside a wall
+turns by several times its standard error (measured: docs/method.md, Convergence).
 """
 
 from __future__ import annotations
@@ -33,8 +31,8 @@ __all__ = ["NOISE_FRACTION", "SAMPLE", "CorrectionSize", "first_correction"]
 #: fraction of their standard error: stopping wrongly gives up the correction's accuracy,
 #: going on wrongly costs only time, so the rule leans toward going on.
 NOISE_FRACTION = 0.5
-#: Object pixels measured, spread evenly over the mask: medians of a few thousand pixels are
-#: within a few hundredths of a degree of those of all of them, at a fraction of the time.
+#: Object pixels measured, spread evenly over the mask: the medians of a few thousand stand
+#: for those of all of them, at a fraction of the time.
 SAMPLE = 4096
 
 
