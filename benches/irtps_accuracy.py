@@ -31,7 +31,7 @@ import irtps
 from irtps.errors import DatasetError, IrtpsWarning
 from irtps.model.options import ReconstructOptions
 from irtps.model.scene import orthographic_scene
-from irtps.irt.pipeline import fit_photometric_stereo, resolve_options, with_chosen_robust
+from irtps.irt.pipeline import fit_photometric_stereo, resolve_options, settled_near_fit, with_chosen_robust
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -48,6 +48,10 @@ def floor_error(dataset) -> float | None:
     # A pinhole camera's data set is fitted as reconstruct fits it, through its orthographic stand-in.
     dataset = dataclasses.replace(dataset, scene=orthographic_scene(dataset.scene, str(dataset.source)))
     options = resolve_options(dataset, ReconstructOptions())
+    if dataset.scene.has_point_lights:
+        # Near lights: the shape, and the lights at it, settled on the direct images alone.
+        fit, _, _ = settled_near_fit(dataset, dataset.gt.direct, options)
+        return angular_error(dataset, fit.normals)
     options = with_chosen_robust(options, fit_photometric_stereo(dataset, dataset.images, options))
     return angular_error(dataset, fit_photometric_stereo(dataset, dataset.gt.direct, options).normals)
 

@@ -1,5 +1,8 @@
 //! The scene description of the data-set contract (`irtps.scene/1`): orthographic or pinhole
-//! camera, height-field object, optional floor and Cornell box, distant lights.
+//! camera, height-field object, optional floor, Cornell box or environment mesh, distant or
+//! point lights.
+
+use std::sync::Arc;
 
 use glam::Vec3A;
 
@@ -135,6 +138,55 @@ pub struct CornellBox {
     pub front: Rgb,
 }
 
+/// Surroundings given as a triangle mesh (contract §3b): world positions, an RGB albedo per
+/// vertex (interpolated across each triangle) and the vertex indices of each triangle. Its
+/// surfaces are Lambertian and reflect on both sides.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct EnvironmentMesh {
+    pub positions: Vec<Vec3A>,
+    pub albedo: Vec<Rgb>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl EnvironmentMesh {
+    /// Checks the mesh, naming the first bad vertex or triangle.
+    pub fn validate(&self) -> Result<()> {
+        if self.albedo.len() != self.positions.len() {
+            return Err(Error::input(
+                "environment.albedo",
+                format!(
+                    "{} values for {} vertices",
+                    self.albedo.len(),
+                    self.positions.len()
+                ),
+            ));
+        }
+        if let Some(v) = self.positions.iter().position(|p| !p.is_finite()) {
+            return Err(Error::input(
+                "environment.vertices",
+                format!("vertex {v} is not finite: {:?}", self.positions[v]),
+            ));
+        }
+        let count = self.positions.len();
+        if let Some(t) = self
+            .triangles
+            .iter()
+            .position(|tri| tri.iter().any(|&i| i as usize >= count))
+        {
+            return Err(Error::input(
+                "environment.triangles",
+                format!(
+                    "triangle {t} names vertex {:?}, but there are {count} vertices",
+                    self.triangles[t]
+                ),
+            ));
+        }
+        self.albedo.iter().enumerate().try_for_each(|(v, rgb)| {
+            check_albedo(&format!("environment.albedo of vertex {v}"), rgb)
+        })
+    }
+}
+
 /// The object: heights (world units) and RGB albedo at the pixel centres of masked pixels,
 /// row-major with the camera's width and height.
 #[derive(Debug, Clone, PartialEq)]
@@ -151,12 +203,18 @@ pub struct Scene {
     pub surface: HeightField,
     pub floor: Option<Floor>,
     pub cornell_box: Option<CornellBox>,
+    /// Surroundings given as a mesh (shared, not copied, by the scenes made from this one).
+    pub environment_mesh: Option<Arc<EnvironmentMesh>>,
+    /// The z of world height 0, where the skirt ends when there is no floor: 0 in world
+    /// coordinates, moved by [`Frame::local_scene`].
+    pub zero_height: f32,
 }
 
 impl Scene {
-    /// The height the skirt and walls start from: the floor's, or 0 without a floor.
+    /// The height the skirt and walls start from: the floor's, or world height 0 without a
+    /// floor ([`Scene::zero_height`]).
     pub fn base_height(&self) -> f32 {
-        self.floor.map_or(0.0, |f| f.height)
+        self.floor.map_or(self.zero_height, |f| f.height)
     }
 
     /// Checks sizes and values; the error names the offending field.
@@ -273,6 +331,9 @@ impl Scene {
             ] {
                 check_albedo(&format!("environment.albedo.{name}"), rgb)?;
             }
+        }
+        if let Some(mesh) = &self.environment_mesh {
+            mesh.validate()?;
         }
         Ok(())
     }
@@ -421,6 +482,24 @@ impl Frame {
             pinhole,
             ..scene.camera
         };
+        let environment_mesh = match &scene.environment_mesh {
+            Some(mesh) => {
+                let mut positions = Vec::with_capacity(mesh.positions.len());
+                for (v, p) in mesh.positions.iter().enumerate() {
+                    let place = || format!("at vertex {v}");
+                    positions.push(Vec3A::new(
+                        resolvable("environment.vertices", self.local_xy(p.x), place)?,
+                        resolvable("environment.vertices", self.local_xy(p.y), place)?,
+                        resolvable("environment.vertices", self.local_z(p.z), place)?,
+                    ));
+                }
+                Some(Arc::new(EnvironmentMesh {
+                    positions,
+                    ..(**mesh).clone()
+                }))
+            }
+            None => None,
+        };
         Ok(Scene {
             camera,
             surface: HeightField {
@@ -430,6 +509,10 @@ impl Frame {
             },
             floor,
             cornell_box,
+            environment_mesh,
+            zero_height: resolvable("height", self.local_z(scene.zero_height), || {
+                "from world height 0 (where the skirt ends without a floor)".to_string()
+            })?,
         })
     }
 }

@@ -146,6 +146,10 @@ CASES = {
     "irtps.io.dataset.load_scene_object": (lambda f: f("no/such/folder"), "no/such/folder"),
     "irtps.io.dataset_writer.save_dataset": (lambda f: f(_dataset(), "unused", extra={"../x.exr": HEIGHT}), "extra: "),
     "irtps.model.scene.load_scene": (lambda f: f("no/such/scene.json"), "no/such/scene.json: "),
+    "irtps.model.environment.read_environment_mesh": (
+        lambda f: f("no/such/environment.ply"),
+        "no/such/environment.ply: ",
+    ),
 }
 
 

@@ -222,19 +222,6 @@ def test_scene_json_without_a_field_of_the_pinhole_names_it():
         parse_scene(obj)
 
 
-def test_point_lights_and_mesh_surroundings_are_refused_as_not_supported_yet():
-    point = _scene_json()
-    point["lights"][1] = {"type": "point", "position": [1, 2, 3], "intensity": [1, 1, 1]}
-    with pytest.raises(
-        DatasetError, match=r"lights\[1\]\.type is 'point': point lights \(contract §4\) are not supported yet"
-    ):
-        parse_scene(point)
-    mesh = _scene_json()
-    mesh["environment"] = {"type": "mesh", "file": "environment.ply"}
-    with pytest.raises(DatasetError, match="environment.type is 'mesh': environments given as a mesh"):
-        parse_scene(mesh)
-
-
 # The small perspective data set: ground-truth depth, reconstruction
 
 
@@ -512,12 +499,6 @@ def test_the_shared_perspective_scenes_load_with_consistent_ground_truth(name):
     assert defined.sum() > 0.99 * mask.sum() and (truth.normal[mask & ~defined] == 0).all()
     cosine = np.clip((_depth_normals(camera, truth.depth, defined) * truth.normal).sum(-1)[defined], -1, 1)
     assert np.degrees(np.arccos(cosine)).max() < 0.1
-
-
-@needs_shared
-def test_the_shared_rig_is_refused_naming_its_point_lights():
-    with pytest.raises(DatasetError, match=r"cap_rig/scene\.json: lights\[0\]\.type is 'point': point lights"):
-        irtps.load_dataset(MITSUBA / "cap_rig")
 
 
 @needs_shared

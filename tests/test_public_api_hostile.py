@@ -219,6 +219,8 @@ CASES = [
     ("load_ground_truth", lambda f: f(None, (4, 4)), irtps.ArgumentError, "path: "),
     ("load_scene_object", lambda f: f(3.5), irtps.ArgumentError, "path: "),
     ("load_scene", lambda f: f(["scene.json"]), irtps.ArgumentError, "path: "),
+    ("read_environment_mesh", lambda f: f(7), irtps.ArgumentError, "path: "),
+    ("read_environment_mesh", lambda f: f("."), irtps.DatasetError, ".: not a regular file"),
     ("save_dataset", lambda f: f({"images": IMAGES}, "unused"), irtps.ArgumentError, "dataset: "),
     ("save_dataset", lambda f: f(_dataset(), 3), irtps.ArgumentError, "path: "),
     ("load_dataset", lambda f: f(type("Odd", (), {"__fspath__": lambda self: 3})()), irtps.ArgumentError, "path: "),

@@ -11,31 +11,17 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from irtps import DatasetError, height_to_normals, load_dataset, load_scene_object, render
+from irtps import height_to_normals, load_dataset, load_scene_object, render
 
 SMALL = Path(__file__).parent / "data" / "mitsuba_small"
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mitsuba"
-#: Why the scene reader refuses a shared scene of lights or surroundings it does not read yet.
-NOT_READ_YET = "a rig's point lights and mesh surroundings: not read yet, issue 48"
-
-
-def _expected_failure(folder: Path) -> tuple[type[Exception], str] | None:
-    """How the tests of a shared scene fail while irtps does not take all of it, if they do."""
-    scene = json.loads((folder / "scene.json").read_text())
-    if any("type" in light for light in scene["lights"]) or scene["environment"]["type"] == "mesh":
-        return DatasetError, NOT_READ_YET
-    return None
 
 
 def _scene(folder: Path):
-    """A scene as a test parameter: one whose tests fail until irtps takes all of it is an
-    expected failure (strict: it must start passing when irtps does)."""
-    failure = _expected_failure(folder)
-    marks = [] if failure is None else [pytest.mark.xfail(raises=failure[0], strict=True, reason=failure[1])]
-    return pytest.param(folder, marks=marks, id=f"{folder.parent.name}/{folder.name}")
+    return pytest.param(folder, id=f"{folder.parent.name}/{folder.name}")
 
 
-SCENES = [SMALL / "cap_cornell", SMALL / "grooves_dark"]
+SCENES = [SMALL / "cap_cornell", SMALL / "grooves_dark", SMALL / "cap_rig"]
 if SHARED.is_dir():
     SCENES += sorted(p for p in SHARED.iterdir() if (p / "scene.json").is_file())
 PARAMS = [_scene(folder) for folder in SCENES]

@@ -18,7 +18,8 @@ from irtps.irt.folder import save_reconstruction
 from irtps.irt.reconstruct import Reconstruction, reconstruct
 from irtps._shared.records import irtps_version
 from irtps.render.renderer import Rendering, render, render_indirect
-from irtps.model.scene import Camera, CornellBox, Floor, Light, Scene, load_scene
+from irtps.model.environment import MeshEnvironment, read_environment_mesh
+from irtps.model.scene import Camera, CornellBox, Floor, Light, PointLight, Scene, load_scene
 from irtps.geometry.surface import depth_to_normals, height_to_normals
 from irtps.render.synth import synthesize
 
@@ -36,7 +37,9 @@ __all__ = [
     "IrtpsError",
     "IrtpsWarning",
     "Light",
+    "MeshEnvironment",
     "Metrics",
+    "PointLight",
     "PsResult",
     "Reconstruction",
     "Rendering",
@@ -56,6 +59,7 @@ __all__ = [
     "lobe_share",
     "normal_standard_error",
     "photometric_stereo",
+    "read_environment_mesh",
     "place_height",
     "reconstruct",
     "render",

@@ -24,6 +24,7 @@ __all__ = [
     "write_png",
     "read_images",
     "photometric_stereo",
+    "photometric_stereo_per_pixel",
     "tukey_with_lobe_check",
     "check_lights",
     "compare_rendering",
@@ -73,6 +74,21 @@ def photometric_stereo(
     C-contiguous float32 images (K, H, W, 3); `lobe_rounds`, the lobe mode's most rounds per
     exponent and start, at least 1 (15 by default)."""
 
+def photometric_stereo_per_pixel(
+    images: _F32,
+    mask: npt.NDArray[np.bool_],
+    light_directions: _F32,
+    light_irradiance: _F32,
+    robust: str = "tukey",
+    shadow_fraction: float = 0.05,
+    saturation: float | None = None,
+    lobe_rounds: int | None = None,
+    views: _F32 | None = None,
+) -> tuple[_F32, _F32, npt.NDArray[np.uint8], npt.NDArray[np.uint16]]:
+    """`photometric_stereo` under lights that differ from pixel to pixel (point lights near
+    the object): `light_directions` and `light_irradiance` (N, K, 3) float32 at each of the
+    mask's N pixels (row-major)."""
+
 def tukey_with_lobe_check(
     images: _F32,
     mask: npt.NDArray[np.bool_],
@@ -114,12 +130,14 @@ def denoise_indirect(
     `albedo` (H, W, 3)."""
 @final
 class Renderer:
-    """A scene made ready for rendering and ray queries: height-field object, optional floor
-    and Cornell box, distant lights; an orthographic camera, or a pinhole ``(fx, fy, cx, cy,
+    """A scene made ready for rendering and ray queries: height-field object, optional floor,
+    Cornell box and environment mesh, distant or point lights; an orthographic camera, or a pinhole ``(fx, fy, cx, cy,
     zc)`` whose ``pixel_size`` is a pixel's world size at the depth of the object's base.
     ``light_positions`` (K, 3) makes light k an isotropic point at row k (world units; its
     ``light_irradiance`` row its radiant intensity, contract §4b) where the row is not NaN;
-    its direction row is then unused."""
+    its direction row is then unused. ``environment_mesh`` ``(vertices (V, 3), triangles (F, 3)
+    uint32, albedo (V, 3))``, world units, adds surroundings given as a mesh that reflects on
+    both sides (contract §3b)."""
 
     def __new__(
         cls,
@@ -133,6 +151,7 @@ class Renderer:
         cornell_box: CornellBox | None = None,
         pinhole: tuple[float, float, float, float, float] | None = None,
         light_positions: _F32 | None = None,
+        environment_mesh: tuple[_F32, npt.NDArray[np.uint32], _F32] | None = None,
     ) -> Renderer: ...
     def with_reflectance(self, albedo: _F32, light_irradiance: _F32) -> Renderer:
         """The same scene with the object's albedo (H, W, 3) and each light's irradiance

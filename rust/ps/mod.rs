@@ -145,6 +145,71 @@ pub fn photometric_stereo(
     fit_checked(images, mask, lights, gram, settings, views)
 }
 
+/// Photometric stereo under lights that differ from pixel to pixel: point lights near the
+/// object (contract §4b), whose direction and irradiance at each surface point the caller
+/// computes. `images` are `(K, pixels, 3)` as for [`photometric_stereo`]; the m-th pixel of
+/// `mask` (row-major) takes the K lights `lights[m·K..(m+1)·K]` (its direction toward each
+/// light and its irradiance from it) and is otherwise fitted as [`photometric_stereo`] fits
+/// a pixel with `settings`. An error names the first pixel whose lights are unusable.
+pub fn photometric_stereo_per_pixel(
+    images: &[f32],
+    mask: &[bool],
+    lights: &[Light],
+    settings: &PsSettings,
+    views: Option<&[[f32; 3]]>,
+) -> Result<PsOutput> {
+    let masked: Vec<usize> = (0..mask.len()).filter(|&p| mask[p]).collect();
+    if masked.is_empty() {
+        return Err(Error::input("mask", "has no pixel"));
+    }
+    if !lights.len().is_multiple_of(masked.len()) {
+        return Err(Error::input(
+            "lights",
+            format!(
+                "{} lights for {} pixels: expected the same number for each",
+                lights.len(),
+                masked.len()
+            ),
+        ));
+    }
+    let k_count = lights.len() / masked.len();
+    check_images(images, mask, k_count)?;
+    check_settings(settings)?;
+    check_views(views, mask.len())?;
+    let n = mask.len();
+    let fits: Vec<Result<PsOutput>> = masked
+        .par_iter()
+        .enumerate()
+        .map(|(m, &p)| {
+            let own = &lights[m * k_count..(m + 1) * k_count];
+            let gram = check_lights(own)
+                .map_err(|e| Error::input(&format!("lights at pixel {p}"), e.to_string()))?;
+            let mut observations = Vec::with_capacity(k_count * 3);
+            for k in 0..k_count {
+                observations.extend_from_slice(&images[(k * n + p) * 3..][..3]);
+            }
+            let view = views.map(|v| [v[p]]);
+            fit_checked(
+                &observations,
+                &[true],
+                own,
+                gram,
+                settings,
+                view.as_ref().map(|v| &v[..]),
+            )
+        })
+        .collect();
+    let mut out = PsOutput::new(n)?;
+    for (fit, &p) in fits.into_iter().zip(&masked) {
+        let fit = fit?;
+        out.normals[p] = fit.normals[0];
+        out.albedo[p] = fit.albedo[0];
+        out.flags[p] = fit.flags[0];
+        out.used[p] = fit.used[0];
+    }
+    Ok(out)
+}
+
 /// `photometric_stereo` of inputs already checked (`gram` from `check_lights`): what the
 /// auto mode runs after checking its images once for both of its fits.
 fn fit_checked(

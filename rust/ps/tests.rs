@@ -251,3 +251,72 @@ fn dark_and_masked_pixels_are_flagged() {
         photometric_stereo(&images, &[true, false], &ls, &PsSettings::default(), None).unwrap();
     assert_eq!(out.flags, vec![flag::DARK, flag::MASKED_OUT]);
 }
+
+#[test]
+fn per_pixel_lights_fit_each_pixel_with_its_own() {
+    // Three pixels, each under the same four lights seen from a different place: pixel p's
+    // directions are the shared ones turned about z by p·40°, its irradiance scaled by 1 + p.
+    let base = lights(&[
+        [0.0, 0.0, 1.0],
+        [0.5, 0.1, 0.8],
+        [-0.3, 0.4, 0.8],
+        [0.1, -0.5, 0.8],
+    ]);
+    let normals = [
+        Vec3::new(0.1, -0.2, 1.0).normalize(),
+        Vec3::new(-0.3, 0.1, 1.0).normalize(),
+        Vec3::new(0.0, 0.3, 1.0).normalize(),
+    ];
+    let own: Vec<Vec<Light>> = (0..3)
+        .map(|p| {
+            let turn = glam::Mat3::from_rotation_z((40.0 * p as f32).to_radians());
+            base.iter()
+                .map(|l| Light {
+                    direction: (turn * Vec3::from(l.direction)).into(),
+                    irradiance: l.irradiance.map(|e| e * (1.0 + p as f32)),
+                })
+                .collect()
+        })
+        .collect();
+    // Images (K, pixels, 3).
+    let per_pixel: Vec<Vec<f32>> = (0..3)
+        .map(|p| render(normals[p], [0.6, 0.5, 0.4], &own[p]))
+        .collect();
+    let mut images = vec![0.0; 4 * 3 * 3];
+    for (p, values) in per_pixel.iter().enumerate() {
+        for k in 0..4 {
+            images[(k * 3 + p) * 3..][..3].copy_from_slice(&values[k * 3..][..3]);
+        }
+    }
+    let all: Vec<Light> = own.concat();
+    for robust in [Robust::None, Robust::Threshold, Robust::Tukey] {
+        let settings = PsSettings {
+            robust,
+            ..Default::default()
+        };
+        let out = photometric_stereo_per_pixel(&images, &[true; 3], &all, &settings, None).unwrap();
+        for (p, normal) in normals.iter().enumerate() {
+            assert!(
+                (Vec3::from(out.normals[p]) - *normal).length() < 1e-5,
+                "{robust:?} pixel {p}: {:?}",
+                out.normals[p]
+            );
+        }
+    }
+    // Lights that do not divide among the pixels, or coplanar at one pixel, are named.
+    let settings = PsSettings::default();
+    let error = photometric_stereo_per_pixel(&images, &[true; 3], &all[..11], &settings, None);
+    assert!(error
+        .unwrap_err()
+        .to_string()
+        .starts_with("lights: 11 lights for 3 pixels"));
+    let mut flat = all.clone();
+    for light in &mut flat[4..8] {
+        light.direction = vec3a(1.0, 0.0, 0.0);
+    }
+    let error = photometric_stereo_per_pixel(&images, &[true; 3], &flat, &settings, None);
+    assert!(error
+        .unwrap_err()
+        .to_string()
+        .starts_with("lights at pixel 1: "));
+}

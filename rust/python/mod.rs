@@ -41,6 +41,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(io::write_png, m)?)?;
     m.add_function(wrap_pyfunction!(io::read_images, m)?)?;
     m.add_function(wrap_pyfunction!(ps::photometric_stereo, m)?)?;
+    m.add_function(wrap_pyfunction!(ps::photometric_stereo_per_pixel, m)?)?;
     m.add_function(wrap_pyfunction!(ps::tukey_with_lobe_check, m)?)?;
     m.add_function(wrap_pyfunction!(ps::check_lights, m)?)?;
     m.add_function(wrap_pyfunction!(estimate::compare_rendering, m)?)?;

@@ -10,6 +10,7 @@ use pyo3::prelude::*;
 
 use crate::ps::{
     check_lights as core_check_lights, photometric_stereo as core_ps,
+    photometric_stereo_per_pixel as core_ps_per_pixel,
     tukey_with_lobe_check as core_tukey_with_lobe_check, PsOutput, PsSettings, Robust,
 };
 use crate::scene::Light;
@@ -56,7 +57,46 @@ pub(super) fn photometric_stereo<'py>(
     lobe_rounds: Option<usize>,
     views: Option<PyReadonlyArray3<'_, f32>>,
 ) -> PyResult<PsArrays<'py>> {
-    let robust = match robust {
+    let PsInputs {
+        shape,
+        lights,
+        data,
+        mask: mask_data,
+    } = ps_inputs(&images, &mask, &light_directions, &light_irradiance)?;
+    let settings = PsSettings {
+        robust: robust_mode(robust)?,
+        shadow_fraction,
+        saturation,
+        lobe_rounds: lobe_rounds.unwrap_or(crate::ps::lobe::LOBE_ROUNDS),
+    };
+    let views = views_of(views.as_ref(), &shape)?;
+    let out = py
+        .detach(|| core_ps(data, mask_data, &lights, &settings, views.as_deref()))
+        .map_err(to_py)?;
+    ps_arrays(py, out, shape[1], shape[2])
+}
+
+/// The (K, H, W, 3) shape of `images`, checked against the (H, W) `mask`.
+fn image_shape(
+    images: &PyReadonlyArray4<'_, f32>,
+    mask: &PyReadonlyArray2<'_, bool>,
+) -> PyResult<Vec<usize>> {
+    let shape = images.shape().to_vec();
+    if shape[3] != 3 || mask.shape() != [shape[1], shape[2]] {
+        return Err(argument_error(
+            "images",
+            format!(
+                "shape {shape:?} does not match mask {:?} x 3 channels",
+                mask.shape()
+            ),
+        ));
+    }
+    Ok(shape)
+}
+
+/// The robust mode named `robust`.
+fn robust_mode(robust: &str) -> PyResult<Robust> {
+    Ok(match robust {
         "none" => Robust::None,
         "threshold" => Robust::Threshold,
         "trim" => Robust::Trim,
@@ -68,22 +108,66 @@ pub(super) fn photometric_stereo<'py>(
                 format!("unknown mode {other:?}; expected none, threshold, trim, tukey or lobe"),
             ))
         }
-    };
-    let PsInputs {
-        shape,
-        lights,
-        data,
-        mask: mask_data,
-    } = ps_inputs(&images, &mask, &light_directions, &light_irradiance)?;
+    })
+}
+
+/// Photometric stereo under lights that differ from pixel to pixel (point lights near the
+/// object): as [`photometric_stereo`], with `light_directions` and `light_irradiance`
+/// (N, K, 3) float32 the unit direction toward each light and the irradiance from it at each
+/// of the mask's N pixels (row-major).
+#[pyfunction]
+#[pyo3(signature = (images, mask, light_directions, light_irradiance, robust="tukey", shadow_fraction=0.05, saturation=None, lobe_rounds=None, views=None))]
+#[allow(clippy::too_many_arguments)]
+pub(super) fn photometric_stereo_per_pixel<'py>(
+    py: Python<'py>,
+    images: PyReadonlyArray4<'_, f32>,
+    mask: PyReadonlyArray2<'_, bool>,
+    light_directions: PyReadonlyArray3<'_, f32>,
+    light_irradiance: PyReadonlyArray3<'_, f32>,
+    robust: &str,
+    shadow_fraction: f32,
+    saturation: Option<f32>,
+    lobe_rounds: Option<usize>,
+    views: Option<PyReadonlyArray3<'_, f32>>,
+) -> PyResult<PsArrays<'py>> {
+    let shape = image_shape(&images, &mask)?;
+    let mask_data = flat(&mask, "mask")?;
+    let pixels = mask_data.iter().filter(|&&m| m).count();
+    let expected = [pixels, shape[0], 3];
+    for (name, array) in [
+        ("light_directions", &light_directions),
+        ("light_irradiance", &light_irradiance),
+    ] {
+        if array.shape() != expected {
+            return Err(argument_error(
+                name,
+                format!(
+                    "shape {:?}, expected {expected:?} (each of the mask's pixels, each image's light)",
+                    array.shape()
+                ),
+            ));
+        }
+    }
+    let directions = flat(&light_directions, "light_directions")?;
+    let irradiance = flat(&light_irradiance, "light_irradiance")?;
+    let lights: Vec<Light> = directions
+        .chunks_exact(3)
+        .zip(irradiance.chunks_exact(3))
+        .map(|(d, e)| Light {
+            direction: glam::Vec3A::new(d[0], d[1], d[2]),
+            irradiance: [e[0], e[1], e[2]],
+        })
+        .collect();
+    let data = flat(&images, "images")?;
     let settings = PsSettings {
-        robust,
+        robust: robust_mode(robust)?,
         shadow_fraction,
         saturation,
         lobe_rounds: lobe_rounds.unwrap_or(crate::ps::lobe::LOBE_ROUNDS),
     };
     let views = views_of(views.as_ref(), &shape)?;
     let out = py
-        .detach(|| core_ps(data, mask_data, &lights, &settings, views.as_deref()))
+        .detach(|| core_ps_per_pixel(&data, &mask_data, &lights, &settings, views.as_deref()))
         .map_err(to_py)?;
     ps_arrays(py, out, shape[1], shape[2])
 }
@@ -131,16 +215,7 @@ fn ps_inputs<'a>(
     light_directions: &PyReadonlyArray2<'_, f32>,
     light_irradiance: &PyReadonlyArray2<'_, f32>,
 ) -> PyResult<PsInputs<'a>> {
-    let shape = images.shape().to_vec();
-    if shape[3] != 3 || mask.shape() != [shape[1], shape[2]] {
-        return Err(argument_error(
-            "images",
-            format!(
-                "shape {shape:?} does not match mask {:?} x 3 channels",
-                mask.shape()
-            ),
-        ));
-    }
+    let shape = image_shape(images, mask)?;
     let lights = lights_from(light_directions, light_irradiance)?;
     if lights.len() != shape[0] {
         return Err(argument_error(

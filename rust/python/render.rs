@@ -13,8 +13,11 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::render::{RenderSettings, Renderer as CoreRenderer};
+use std::sync::Arc;
+
 use crate::scene::{
-    Camera, CornellBox, Emitter, Floor, HeightField, Light, Pinhole, PointLight, Rgb, Scene,
+    Camera, CornellBox, Emitter, EnvironmentMesh, Floor, HeightField, Light, Pinhole, PointLight,
+    Rgb, Scene,
 };
 
 use super::convert::{flat, lights_from, rows_of_3};
@@ -82,14 +85,16 @@ struct BoxArgs {
     albedo_front: Rgb,
 }
 
-/// A scene made ready for rendering and ray queries: height-field object, optional floor
-/// and Cornell box, distant lights.
+/// A scene made ready for rendering and ray queries: height-field object, optional floor,
+/// Cornell box and environment mesh, distant or point lights.
 ///
 /// Parameters: `height` (H, W) float32, `mask` (H, W) bool, `albedo` (H, W, 3) float32,
 /// `pixel_size`, `light_directions` (K, 3), `light_irradiance` (K, 3), `floor` an
 /// `irtps.scene.Floor` or None, `cornell_box` an `irtps.scene.CornellBox` or None, `pinhole`
 /// None (orthographic) or `(fx, fy, cx, cy, zc)` of a pinhole camera at `(0, 0, zc)`, whose
-/// `pixel_size` is then a pixel's world size at the depth of the object's base.
+/// `pixel_size` is then a pixel's world size at the depth of the object's base;
+/// `light_positions` as [`emitters_from`] reads them; `environment_mesh` None or
+/// `(vertices (V, 3) float32, triangles (F, 3) uint32, albedo (V, 3) float32)` in world units.
 #[pyclass(frozen, module = "irtps._core")]
 pub(super) struct Renderer {
     inner: CoreRenderer,
@@ -127,10 +132,42 @@ fn emitters_from(
         .collect())
 }
 
+/// The environment mesh of `(vertices, triangles, albedo)` arrays, checked for shape (its
+/// values are checked with the scene).
+fn environment_from(
+    (vertices, triangles, albedo): &EnvironmentArrays<'_>,
+) -> PyResult<EnvironmentMesh> {
+    let positions = rows_of_3(vertices, "environment_mesh vertices")?;
+    let albedo = rows_of_3(albedo, "environment_mesh albedo")?;
+    let indices = triangles.as_array();
+    if indices.ncols() != 3 {
+        return Err(argument_error(
+            "environment_mesh triangles",
+            format!("expected shape (F, 3), got {:?}", indices.shape()),
+        ));
+    }
+    Ok(EnvironmentMesh {
+        positions: positions.into_iter().map(Vec3A::from).collect(),
+        albedo,
+        triangles: indices
+            .rows()
+            .into_iter()
+            .map(|r| [r[0], r[1], r[2]])
+            .collect(),
+    })
+}
+
+/// An environment mesh as Python hands it over: vertices, triangles, vertex albedo.
+type EnvironmentArrays<'py> = (
+    PyReadonlyArray2<'py, f32>,
+    PyReadonlyArray2<'py, u32>,
+    PyReadonlyArray2<'py, f32>,
+);
+
 #[pymethods]
 impl Renderer {
     #[new]
-    #[pyo3(signature = (height, mask, albedo, pixel_size, light_directions, light_irradiance, floor=None, cornell_box=None, pinhole=None, light_positions=None))]
+    #[pyo3(signature = (height, mask, albedo, pixel_size, light_directions, light_irradiance, floor=None, cornell_box=None, pinhole=None, light_positions=None, environment_mesh=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -144,6 +181,7 @@ impl Renderer {
         cornell_box: Option<BoxArgs>,
         pinhole: Option<(f32, f32, f32, f32, f32)>,
         light_positions: Option<PyReadonlyArray2<'_, f32>>,
+        environment_mesh: Option<EnvironmentArrays<'_>>,
     ) -> PyResult<Renderer> {
         let (h, w) = (height.shape()[0], height.shape()[1]);
         if mask.shape() != [h, w] {
@@ -198,6 +236,12 @@ impl Renderer {
                 back: walls.albedo_back,
                 front: walls.albedo_front,
             }),
+            environment_mesh: environment_mesh
+                .as_ref()
+                .map(environment_from)
+                .transpose()?
+                .map(Arc::new),
+            zero_height: 0.0,
         };
         let inner = py
             .detach(|| CoreRenderer::with_emitters(&scene, &lights))

@@ -5,8 +5,8 @@
 //! pixel apart). The direct radiance leaving any surface point then costs K multiply-adds
 //! and no rays: the Lambert term uses the surface's own normal and the visibility is
 //! interpolated (barycentrically on the object, bilinearly on a panel). Points outside a
-//! panel's cached window (the far floor), and the points the camera sees directly, are shaded
-//! with real shadow rays instead.
+//! panel's cached window (the far floor), the points of an environment mesh and the points
+//! the camera sees directly are shaded with real shadow rays instead.
 
 use std::f32::consts::PI;
 
@@ -14,7 +14,7 @@ use glam::Vec3A;
 use rayon::prelude::*;
 
 use crate::scene::{Emitter, Rgb};
-use crate::trace::mesh::{Mesh, Panel, NO_PANEL};
+use crate::trace::mesh::{Mesh, Panel, SurfaceKind, NO_PANEL};
 use crate::trace::Tracer;
 
 /// Light visibility at the cache points, plus the light parameters needed to shade with it.
@@ -60,8 +60,8 @@ impl LightCache {
         let radiance_scale = [0, 1, 2].map(|c| lights.iter().map(|l| l.power()[c] / PI).collect());
         let direction_xyz = [0, 1, 2].map(|axis| directions.iter().map(|d| d[axis]).collect());
         let mut object_vertex = vec![false; mesh.positions.len()];
-        for (tri, &panel) in mesh.triangles.iter().zip(&mesh.panel_of) {
-            if panel == NO_PANEL {
+        for (tri, kind) in mesh.triangles.iter().zip(&mesh.kinds) {
+            if matches!(kind, SurfaceKind::Object | SurfaceKind::Skirt) {
                 tri.iter().for_each(|&v| object_vertex[v as usize] = true);
             }
         }
@@ -134,10 +134,11 @@ impl LightCache {
     }
 
     /// Adds `weight` times the radiance leaving a point of triangle `t` (barycentrics `u`,
-    /// `v`, albedo `albedo`, position `point`) under each light alone to `acc`, laid out by
-    /// channel then light (`acc[c · K + k]`). The visibility is interpolated between the
-    /// cache points; with `exact_edges`, a light that they disagree about (a shadow's edge
-    /// crosses there) gets a real shadow ray instead.
+    /// `v`, albedo `albedo`, position `point`, unit normal `n` on the side seen) under each
+    /// light alone to `acc`, laid out by channel then light (`acc[c · K + k]`). The
+    /// visibility is interpolated between the cache points; with `exact_edges`, a light that
+    /// they disagree about (a shadow's edge crosses there) gets a real shadow ray instead. An
+    /// environment mesh's point gets real shadow rays.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     pub fn add_direct_radiance(
@@ -147,12 +148,16 @@ impl LightCache {
         t: usize,
         (u, v): (f32, f32),
         point: Vec3A,
+        n: Vec3A,
         albedo: Rgb,
         exact_edges: bool,
         weight: Rgb,
         acc: &mut [f32],
     ) {
-        let n = mesh.normals[t];
+        if mesh.kinds[t] == SurfaceKind::Environment {
+            self.add_traced_direct_radiance(tracer, point, n, albedo, weight, acc);
+            return;
+        }
         let k_count = self.directions.len();
         let panel = mesh.panel_of[t];
         let origin = point + n * self.ray_offset;
@@ -283,12 +288,24 @@ impl LightCache {
         weight: Rgb,
         acc: &mut [f32],
     ) {
-        let origin = point + n * self.ray_offset;
+        let origin = point + n * offset_at(self.ray_offset, point);
         self.add_shaded::<true>(n, point, albedo, weight, acc, |k| {
             let (dir, t_max) = toward(&self.directions, &self.positions, k, origin);
             f32::from(u8::from(!tracer.occluded(origin, dir, t_max)))
         });
     }
+}
+
+/// Offset, relative to a point's largest coordinate, beyond which float32 resolves a step off
+/// the surface however far from the working frame's origin the point lies (the far floor, an
+/// environment mesh much larger than the object).
+const RELATIVE_RAY_OFFSET: f32 = 1e-6;
+
+/// How far a ray leaving `point` starts off its surface: `ray_offset`, or more far from the
+/// working frame's origin, where float32 is coarser.
+#[inline(always)]
+pub fn offset_at(ray_offset: f32, point: Vec3A) -> f32 {
+    ray_offset.max(point.abs().max_element() * RELATIVE_RAY_OFFSET)
 }
 
 /// The unit direction from `origin` toward light `k` and how far a shadow ray goes: to

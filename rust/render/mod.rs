@@ -19,7 +19,7 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::memory::{check_available, try_collect, try_vec};
-use crate::render::light_cache::LightCache;
+use crate::render::light_cache::{offset_at, LightCache};
 use crate::sampler::{cosine_hemisphere, hash, low_discrepancy_4d, unit_float, Rng};
 use crate::scene::{
     check_albedo, validate_emitters, validate_lights, Camera, Emitter, Frame, Light, Rgb, Scene,
@@ -360,10 +360,9 @@ impl Renderer {
             let Some(hit) = self.tracer.closest_hit(origin, dir, f32::INFINITY) else {
                 continue;
             };
-            let n = self.mesh.normals[hit.triangle];
-            if n.dot(dir) >= 0.0 {
+            let Some(n) = self.mesh.seen_normal(hit.triangle, dir) else {
                 continue;
-            }
+            };
             let point = origin + dir * hit.t;
             let albedo = self.mesh.albedo_at(hit.triangle, hit.u, hit.v);
             if sample < s.direct_samples {
@@ -376,6 +375,7 @@ impl Renderer {
                         hit.triangle,
                         (hit.u, hit.v),
                         point,
+                        n,
                         albedo,
                         true,
                         weight,
@@ -423,17 +423,14 @@ impl Renderer {
                 (rng.next_f32(), rng.next_f32())
             };
             let dir = cosine_hemisphere(u1, u2, n);
-            let Some(hit) =
-                self.tracer
-                    .closest_hit(point + n * self.ray_offset, dir, f32::INFINITY)
-            else {
+            let origin = point + n * offset_at(self.ray_offset, point);
+            let Some(hit) = self.tracer.closest_hit(origin, dir, f32::INFINITY) else {
                 return;
             };
-            let n_hit = self.mesh.normals[hit.triangle];
-            if n_hit.dot(dir) >= 0.0 {
-                return; // the back of a surface is black
-            }
-            let p_hit = point + n * self.ray_offset + dir * hit.t;
+            let Some(n_hit) = self.mesh.seen_normal(hit.triangle, dir) else {
+                return; // the back of a one-sided surface is black
+            };
+            let p_hit = origin + dir * hit.t;
             let albedo_hit = self.mesh.albedo_at(hit.triangle, hit.u, hit.v);
             let plane = s.bounce_plane(bounce);
             let sums = &mut acc[plane * k3..(plane + 1) * k3];
@@ -443,6 +440,7 @@ impl Renderer {
                 hit.triangle,
                 (hit.u, hit.v),
                 p_hit,
+                n_hit,
                 albedo_hit,
                 false,
                 throughput,

@@ -33,6 +33,8 @@ fn object_alone(camera: Camera, height: Vec<f32>, albedo: Rgb) -> Scene {
         },
         floor: None,
         cornell_box: None,
+        environment_mesh: None,
+        zero_height: 0.0,
     }
 }
 
@@ -577,4 +579,97 @@ fn a_point_light_with_a_bad_position_or_intensity_is_named() {
     };
     assert!(bad(vec3a(0.0, f32::NAN, 9.0), [1.0; 3]).starts_with("lights[1].position: "));
     assert!(bad(vec3a(0.0, 0.0, 9.0), [1.0, -1.0, 1.0]).starts_with("lights[1].intensity: "));
+}
+
+/// A level plate of `size`² pixels at height 3 above a square environment mesh at z = 0,
+/// 40 pixels a side, wound to face `facing` (±z), of albedo `albedo`.
+fn plate_over_a_mesh(size: usize, facing: f32, albedo: Rgb) -> Scene {
+    let camera = Camera {
+        width: size,
+        height: size,
+        pixel_size: 1.0,
+        pinhole: None,
+    };
+    let mut scene = object_alone(camera, vec![3.0; size * size], [0.5; 3]);
+    for p in 0..size * size {
+        let (i, j) = (p / size, p % size);
+        scene.surface.mask[p] = (3..size - 3).contains(&i) && (3..size - 3).contains(&j);
+    }
+    let triangles = if facing > 0.0 {
+        vec![[0, 1, 2], [0, 2, 3]]
+    } else {
+        vec![[0, 2, 1], [0, 3, 2]]
+    };
+    scene.environment_mesh = Some(Arc::new(crate::scene::EnvironmentMesh {
+        positions: vec![
+            vec3a(-20.0, -20.0, 0.0),
+            vec3a(20.0, -20.0, 0.0),
+            vec3a(20.0, 20.0, 0.0),
+            vec3a(-20.0, 20.0, 0.0),
+        ],
+        albedo: vec![albedo; 4],
+        triangles,
+    }));
+    scene
+}
+
+#[test]
+fn an_environment_mesh_reflects_lamberts_law_on_either_side_and_takes_shadows() {
+    let albedo = [0.6, 0.4, 0.2];
+    let light = Light {
+        direction: vec3a(0.0, 0.6, 0.8),
+        irradiance: [PI; 3],
+    };
+    let settings = RenderSettings {
+        bounces: 0,
+        samples: 0,
+        direct_samples: 16,
+        seed: 0,
+        split_bounces: true,
+        cached_direct: true,
+    };
+    for facing in [1.0, -1.0] {
+        let renderer = Renderer::new(&plate_over_a_mesh(16, facing, albedo), &[light]).unwrap();
+        let image = renderer.render_rows(0..16, &settings).unwrap();
+        let pixel = |row: usize, col: usize| &image[(row * 16 + col) * 3..][..3];
+        // A corner of the mesh, lit: ρ E cos θ / π with E = π.
+        for (c, &value) in pixel(0, 0).iter().enumerate() {
+            let expected = albedo[c] * 0.8;
+            assert!((value - expected).abs() < 1e-5, "{value} vs {expected}");
+        }
+        // Beside the plate, on the side away from the light (−y, lower rows), its shadow.
+        assert_eq!(pixel(13, 8), [0.0; 3], "facing {facing}");
+    }
+}
+
+#[test]
+fn a_bad_environment_mesh_is_an_error_naming_it() {
+    let error = |edit: fn(&mut crate::scene::EnvironmentMesh)| {
+        let mut scene = plate_over_a_mesh(8, 1.0, [0.5; 3]);
+        let mut mesh = (**scene.environment_mesh.as_ref().unwrap()).clone();
+        edit(&mut mesh);
+        scene.environment_mesh = Some(Arc::new(mesh));
+        let light = Light {
+            direction: Vec3A::Z,
+            irradiance: [1.0; 3],
+        };
+        Renderer::new(&scene, &[light]).err().unwrap().to_string()
+    };
+    let text = error(|m| m.positions[2].x = f32::NAN);
+    assert!(
+        text.starts_with("environment.vertices: vertex 2 is not finite"),
+        "{text}"
+    );
+    let text = error(|m| m.triangles[1][2] = 9);
+    assert!(
+        text.starts_with("environment.triangles: triangle 1 names vertex"),
+        "{text}"
+    );
+    let text = error(|m| m.albedo[3] = [0.5, 1.5, 0.5]);
+    assert!(text.starts_with("environment.albedo of vertex 3"), "{text}");
+    let text = error(|m| m.positions[0].x = 1e12);
+    assert!(
+        text.starts_with("environment.vertices: lies at vertex 0"),
+        "{text}"
+    );
 }

@@ -30,8 +30,10 @@ class Placement:
     source : str
         ``"images"`` (estimated from the floor around the object), ``"object"`` (estimated
         from the object's own pixels, which the light of the floor and walls reaches
-        differently at each height: where no floor is in view), ``"boundary"`` (contract
-        §6's fallback: the floor's height) or ``"given"`` (by the user).
+        differently at each height: where no floor is in view), ``"falloff"`` (from how the
+        light of point lights near the object falls off over it:
+        `irtps.geometry.falloff_placement`), ``"boundary"`` (contract §6's fallback: the
+        floor's height) or ``"given"`` (by the user).
     reason : str or None
         Why the fallback was used, when it was used without being asked for; why the floor
         did not place an object placed from its own pixels.
@@ -80,6 +82,11 @@ def format_placement(placement: Placement | dict) -> str:
         return (
             f"{height}, estimated from the surroundings' light on the object ({fields['object_pixels']} object pixels, "
             f"residual {fields['object_residual']:.4f})" + (f": {fields['reason']}" if fields.get("reason") else "")
+        )
+    if fields["source"] == "falloff":
+        return (
+            f"{height}, estimated from the point lights' fall-off over the object ({fields['object_pixels']} object pixels, "
+            f"residual {fields['object_residual']:.4f})"
         )
     if fields["source"] == "given":
         return f"{height}, as given"

@@ -17,6 +17,7 @@ from irtps.errors import DatasetError
 from irtps.io.diligent import diligent_ground_truth_inputs, diligent_image_names, diligent_inputs
 from irtps.io.image_selection import ImageSelection, parse_image_list, select_images
 from irtps.model.data import image_file_name
+from irtps.model.environment import MeshEnvironment
 from irtps.model.scene import Scene, load_scene
 
 SCENE_FILE = "scene.json"
@@ -147,8 +148,15 @@ def ground_truth_inputs(path: str | Path) -> list[Path]:
     folder = check_folder(check_path("path", path))
     if dataset_layout(folder) == "diligent":
         return diligent_ground_truth_inputs(folder)
-    _, truth = ground_truth_files(folder)
-    return [folder, folder / SCENE_FILE, *([] if truth is None else truth.paths())]
+    scene, truth = ground_truth_files(folder)
+    return [folder, *scene_paths(folder / SCENE_FILE, scene), *([] if truth is None else truth.paths())]
+
+
+def scene_paths(scene_file: Path, scene: Scene) -> list[Path]:
+    """``scene.json`` and the files it names: an environment mesh's (contract §3b)."""
+    if isinstance(scene.environment, MeshEnvironment):
+        return [scene_file, scene_file.parent / scene.environment.file]
+    return [scene_file]
 
 
 def scene_object_inputs(path: str | Path) -> list[Path]:
@@ -181,7 +189,7 @@ class IrtpsFiles(NamedTuple):
         truth = [] if self.truth is None else self.truth.paths()
         return [
             self.scene_file.parent,
-            self.scene_file,
+            *scene_paths(self.scene_file, self.scene),
             self.scene_file.parent / IMAGES_FOLDER,
             *self.images,
             *mask,
@@ -251,7 +259,7 @@ class SceneObjectFiles(NamedTuple):
         folder = self.height.parent.parent
         return [
             folder,
-            folder / SCENE_FILE,
+            *scene_paths(folder / SCENE_FILE, self.scene),
             self.height.parent,
             self.height,
             self.albedo,

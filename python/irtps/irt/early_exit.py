@@ -21,7 +21,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from irtps.errors import ArgumentError
 from irtps.model.data import Dataset, spread_pixels
+from irtps.model.scene import lights_at
 from irtps.ps.fit import PsResult
 from irtps.ps.uncertainty import normal_standard_error
 
@@ -66,7 +68,9 @@ class CorrectionSize:
         return asdict(self)
 
 
-def first_correction(dataset: Dataset, usable: np.ndarray, first: PsResult, second: PsResult) -> CorrectionSize | None:
+def first_correction(
+    dataset: Dataset, usable: np.ndarray, first: PsResult, second: PsResult, surface: np.ndarray | None = None
+) -> CorrectionSize | None:
     """How far pass 1's fit (`second`) turned pass 0's normals (`first`), against their
     standard error from pass 0's residual over the observations fitted (`usable`).
 
@@ -79,6 +83,8 @@ def first_correction(dataset: Dataset, usable: np.ndarray, first: PsResult, seco
         (`irtps.irt.pipeline.fitted_observations`).
     first, second : PsResult
         Pass 0's and pass 1's fits.
+    surface : numpy.ndarray, optional
+        (H, W) pass 0's placed heights, where point lights shine from (needed under them).
 
     Returns
     -------
@@ -88,9 +94,14 @@ def first_correction(dataset: Dataset, usable: np.ndarray, first: PsResult, seco
     measured = np.zeros_like(dataset.mask)
     measured.flat[spread_pixels(dataset.mask, SAMPLE)] = True
     before, after = first.normals[measured], second.normals[measured]
-    noise = normal_standard_error(
-        dataset.images, dataset.scene.light_directions, dataset.scene.light_irradiance, measured, usable
-    )[measured]
+    scene = dataset.scene
+    if scene.has_point_lights:
+        if surface is None:
+            raise ArgumentError("surface", "is needed under point lights: their light at a pixel depends on its point")
+        directions, irradiance = lights_at(scene, scene.camera.surface_points(surface)[measured])
+    else:
+        directions, irradiance = scene.light_directions, scene.light_irradiance
+    noise = normal_standard_error(dataset.images, directions, irradiance, measured, usable)[measured]
     fitted = (np.abs(before).sum(axis=1) > 0) & (np.abs(after).sum(axis=1) > 0) & np.isfinite(noise)
     if not fitted.any():
         return None

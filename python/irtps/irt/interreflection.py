@@ -193,7 +193,10 @@ def remove_interreflections(
                 state.first_fit = current.fit
                 options = with_chosen_robust(options, current.fit)
             elif index == 1 and options.early_stop and state.first_fit is not None:
-                state.correction = first_correction(dataset, usable, state.first_fit, current.fit)
+                assert state.previous is not None, "pass 1 follows pass 0"
+                state.correction = first_correction(
+                    dataset, usable, state.first_fit, current.fit, surface=state.previous.height
+                )
                 stop = state.correction_stop()
                 if stop is not None:
                     break

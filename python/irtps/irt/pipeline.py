@@ -25,7 +25,8 @@ from irtps.ps.fit import MASKED_OUT, PsResult, lobe_share, photometric_stereo
 from irtps.render.radiometry import AlbedoScale, absolute_scale, estimate_albedo_scale, scaled_albedo, scaled_scene
 from irtps.render.placement import PRECISION_PIXELS, estimate_placement
 from irtps.render.residual import compared_observations
-from irtps.model.scene import Scene
+from irtps.model.scene import Scene, lights_at
+from irtps.geometry.falloff_placement import falloff_placement
 from irtps.geometry.surface import surface_albedo
 
 #: Heights are float32 (24 significant bits): a surface placed further than this many pixel
@@ -112,6 +113,8 @@ def reconstruction_pass(
     """
     mask = dataset.mask
     timings: dict[str, float] = {}
+    if dataset.scene.has_point_lights:
+        return _near_light_pass(dataset, images, options, previous, usable, rendered, coverage, progress)
     with timed(timings, "photometric_stereo"):
         fit = fit_photometric_stereo(dataset, images, options, progress=progress)
     with timed(timings, "integration"):
@@ -147,6 +150,135 @@ def reconstruction_pass(
         albedo_scale=albedo_scale,
         timings=timings,
     )
+
+
+#: Rounds of fitting, integrating and placing under point lights, at most, before the shape
+#: settles (`settled_near_fit`).
+NEAR_ROUNDS = 20
+
+
+def _near_light_pass(
+    dataset: Dataset,
+    images: np.ndarray,
+    options: ReconstructOptions,
+    previous: Pass | None,
+    usable: np.ndarray | None,
+    rendered: bool,
+    coverage: np.ndarray | None,
+    progress: bool,
+) -> Pass:
+    """`reconstruction_pass` under point lights near the object: the fit, the relief and the
+    placement settled together (`settled_near_fit`), from the previous pass's surface."""
+    timings: dict[str, float] = {}
+    with timed(timings, "photometric_stereo"):
+        fit, relief, placement = settled_near_fit(
+            dataset,
+            images,
+            options,
+            start=None if previous is None else previous.height,
+            placement=None if previous is None else previous.placement,
+            progress=progress,
+        )
+    with timed(timings, "placement"):
+        albedo = rendered_albedo(dataset, fit, relief, coverage)
+        height = placed(relief, dataset.mask, placement, dataset.scene)
+        if previous is not None:
+            albedo_scale = previous.albedo_scale
+        elif rendered or dataset.scene.relative_irradiance:
+            usable = fitted_observations(dataset, options) if usable is None else usable
+            albedo_scale = resolve_albedo_scale(dataset, height, albedo, usable, options, seed=options.seed)
+        else:
+            albedo_scale = None
+    return Pass(fit, relief, albedo, placement, height, albedo_scale, timings)
+
+
+def settled_near_fit(
+    dataset: Dataset,
+    images: np.ndarray,
+    options: ReconstructOptions,
+    *,
+    start: np.ndarray | None = None,
+    placement: Placement | None = None,
+    progress: bool = False,
+) -> tuple[PsResult, np.ndarray, Placement]:
+    """Photometric stereo under point lights near the object, whose direction and
+    irradiance at each pixel depend on where its surface point stands: fit with the lights at
+    the current surface, integrate, place (`near_placement`), and again, until the placed
+    surface moves by less than `PRECISION_PIXELS` of a pixel on average (at most
+    `NEAR_ROUNDS` rounds). From `start` (placed heights) and its `placement`, else from the
+    level surface at the scene's base height.
+
+    Returns
+    -------
+    fit, relief, placement
+        The last fit (with the lights at the surface before it), its relief (boundary median
+        at 0) and where that relief stands.
+    """
+    scene, mask = dataset.scene, dataset.mask
+    height = np.where(mask, scene.base_height, 0).astype(np.float32) if start is None else start
+    tolerance = PRECISION_PIXELS * scene.camera.orthographic_pixel_size
+    framed = images if images.ndim == 4 else _framed(images, mask)
+    change = None
+    for _ in range(NEAR_ROUNDS):
+        fit = fit_photometric_stereo(dataset, images, options, progress=progress, surface=height)
+        relief = surface_relief(dataset, fit.normals, options)
+        placed_at = near_placement(dataset, relief, framed, options, placement, change)
+        settled = placed(relief, mask, placed_at, scene)
+        change = float(np.abs(settled - height)[mask].mean())
+        height, placement = settled, placed_at
+        if change <= tolerance:
+            break
+    return fit, relief, placed_at
+
+
+def near_placement(
+    dataset: Dataset,
+    relief: np.ndarray,
+    images: np.ndarray,
+    options: ReconstructOptions,
+    previous: Placement | None,
+    shape_change: float | None,
+) -> Placement:
+    """Where `relief` stands under point lights: as ``options.base_height`` gives it, the
+    fallback for ``"boundary"``, else from the light's fall-off over `images` (K, H, W, 3)
+    (`irtps.geometry.falloff_placement`), within `PLACEMENT_SEARCH_CHANGES` times the
+    surface's last move (`shape_change`) of a `previous` estimate."""
+    if options.base_height == "boundary":
+        return fallback_placement(dataset.scene)
+    if options.base_height != "auto":
+        return Placement(base_height=float(options.base_height), source="given")
+    near = previous if previous is not None and previous.source == "falloff" and shape_change is not None else None
+    return falloff_placement(
+        dataset.scene,
+        relief,
+        dataset.mask,
+        images,
+        robust=_fitted_mode(options.robust),
+        shadow_fraction=options.shadow_fraction,
+        saturation=options.saturation,
+        near=near,
+        radius=0.0 if near is None or shape_change is None else PLACEMENT_SEARCH_CHANGES * shape_change,
+    )
+
+
+def _fitted_mode(robust: str) -> str:
+    """The robust mode a fit under per-pixel lights runs for `robust` (its ``"auto"`` is
+    the Tukey mode's)."""
+    return "tukey" if robust == "auto" else robust
+
+
+def _framed(observations: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(K, N, 3) observations of the mask's pixels as (K, H, W, 3) images, 0 elsewhere."""
+    images = np.zeros((observations.shape[0], *mask.shape, 3), dtype=np.float32)
+    images[:, mask] = observations
+    return images
+
+
+def pixel_lights(scene: Scene, height: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each light's direction and irradiance at the surface point of each of the mask's
+    pixels, the surface of heights `height` (H, W): float64 (N, K, 3) each
+    (`irtps.model.scene.lights_at`)."""
+    return lights_at(scene, scene.camera.surface_points(height)[mask])
 
 
 @contextmanager
@@ -224,15 +356,28 @@ def with_chosen_robust(options: ReconstructOptions, fit: PsResult) -> Reconstruc
 
 
 def fit_photometric_stereo(
-    dataset: Dataset, images: np.ndarray, options: ReconstructOptions, *, progress: bool = False
+    dataset: Dataset,
+    images: np.ndarray,
+    options: ReconstructOptions,
+    *,
+    progress: bool = False,
+    surface: np.ndarray | None = None,
 ) -> PsResult:
     """Photometric stereo on `images` (the data set's, or corrected ones) with the data set's
     lights and mask and the options' robust settings. `images` are (K, H, W, 3), or
     (K, N, 3) at the mask's N pixels in row-major order (the corrected images of IRT-PS).
     `progress`: a progress bar for the lobe mode's fit of (K, H, W, 3) images (asked for, or chosen by
-    ``"auto"``), the one slow enough to want one (`irtps.ps.fit.photometric_stereo`)."""
+    ``"auto"``), the one slow enough to want one (`irtps.ps.fit.photometric_stereo`). Under
+    point lights, each pixel's lights are those at its point of the surface of heights
+    `surface` (H, W), which they need (`pixel_lights`)."""
     scene, mask = dataset.scene, dataset.mask
     views = camera_views(scene)
+    if scene.has_point_lights:
+        if surface is None:
+            raise ArgumentError("surface", "is needed under point lights: their light at a pixel depends on its point")
+        directions, irradiance = pixel_lights(scene, surface, mask)
+    else:
+        directions, irradiance = scene.light_directions, scene.light_irradiance
     # (K, N, 3) observations are fitted as one row of N pixels, every one in the mask.
     fitted, fitted_mask, fitted_views = (
         (images, mask, views)
@@ -241,8 +386,8 @@ def fit_photometric_stereo(
     )
     fit = photometric_stereo(
         fitted,
-        scene.light_directions,
-        scene.light_irradiance,
+        directions,
+        irradiance,
         fitted_mask,
         robust=options.robust,
         shadow_fraction=options.shadow_fraction,
@@ -284,10 +429,18 @@ def rendered_albedo(
 
 def fitted_observations(dataset: Dataset, options: ReconstructOptions) -> np.ndarray:
     """The observations a rendering of the reconstruction is compared with
-    (`irtps.render.residual.compared_observations` under the options' robust settings)."""
+    (`irtps.render.residual.compared_observations` under the options' robust settings).
+    Point lights' irradiance at each pixel is taken on the level surface at the scene's
+    base height: it only tells the shadows apart."""
+    scene, mask = dataset.scene, dataset.mask
+    if scene.has_point_lights:
+        level = np.where(mask, scene.base_height, 0.0)
+        irradiance = np.transpose(pixel_lights(scene, level, mask)[1], (1, 0, 2))
+    else:
+        irradiance = scene.light_irradiance
     return compared_observations(
         dataset.images,
-        dataset.scene.light_irradiance,
+        irradiance,
         dataset.mask,
         robust=options.robust != "none",
         shadow_fraction=options.shadow_fraction,

@@ -21,13 +21,16 @@ from irtps.irt.interreflection import check_traceable, remove_interreflections
 from irtps.irt.loop_state import Iteration, Stop
 from irtps.model.options import ReconstructOptions
 from irtps.model.camera import Camera
-from irtps.model.scene import orthographic_scene
+from irtps.model.scene import emission_of, orthographic_scene, with_emission
 from irtps.geometry.bilateral_integration import integrate_bilateral
 from irtps.irt.pipeline import (
     dataset_lobe_share,
     fit_photometric_stereo,
+    pixel_lights,
+    placed,
     reconstruction_pass,
     resolve_options,
+    settled_near_fit,
     timed,
     with_chosen_robust,
 )
@@ -238,7 +241,7 @@ def reconstruct(
     timings: dict[str, float] = {}
     share = None
     first = None
-    if options.robust not in ("auto", "lobe"):
+    if options.robust not in ("auto", "lobe") and not dataset.scene.has_point_lights:
         # A mode asked for: the share only advises the lobe mode where it would fit better.
         with timed(timings, "lobe_share"):
             share = dataset_lobe_share(dataset, options)
@@ -268,7 +271,7 @@ def reconstruct(
         albedo, height, placement, albedo_scale = first.fit.albedo, first.height, first.placement, first.albedo_scale
         indirect, history, chosen, stop = None, [], None, None
     with timed(timings, "image_agreement"):
-        agreement = _image_agreement(dataset, first_fit, options.saturation)
+        agreement = _image_agreement(dataset, first_fit, options.saturation, height)
     depth, discontinuities = _pinhole_depth(camera, fit.normals, dataset.mask, height, timings)
     return Reconstruction(
         normals=fit.normals,
@@ -388,11 +391,15 @@ def _orthographic(dataset: Dataset) -> Dataset:
 def _brightness_corrected(dataset: Dataset, options: ReconstructOptions) -> tuple[Dataset, np.ndarray, PsResult]:
     """The data set with each light's irradiance scaled by its image's brightness against a
     first fit of `options`' robust mode, the factors (1 where not known), and that fit."""
-    first = fit_photometric_stereo(dataset, dataset.images, options)
-    brightness = _image_agreement(dataset, first, options.saturation).brightness
+    if dataset.scene.has_point_lights:
+        first, relief, placement = settled_near_fit(dataset, dataset.images, options)
+        height = placed(relief, dataset.mask, placement, dataset.scene)
+    else:
+        first, height = fit_photometric_stereo(dataset, dataset.images, options), None
+    brightness = _image_agreement(dataset, first, options.saturation, height).brightness
     factors = np.where(np.isnan(brightness), 1.0, brightness)
     lights = tuple(
-        replace(light, irradiance=light.irradiance * factor)
+        with_emission(light, emission_of(light) * factor)
         for light, factor in zip(dataset.scene.lights, factors, strict=True)
     )
     return replace(dataset, scene=replace(dataset.scene, lights=lights)), factors, first
@@ -406,18 +413,25 @@ def _chosen(options: ReconstructOptions, fit: PsResult, share: float | None) -> 
     return with_chosen_robust(options, fit), fit.lobe_share
 
 
-def _image_agreement(dataset: Dataset, fit: PsResult, saturation: float | None) -> ImageAgreement:
+def _image_agreement(
+    dataset: Dataset, fit: PsResult, saturation: float | None, height: np.ndarray | None
+) -> ImageAgreement:
     """How each image agrees with `fit` (`irtps.ps.image_agreement`), over the pixels it fitted
-    as asked or with a lobe."""
+    as asked or with a lobe; under point lights, with their light at the surface of heights
+    `height` (not measured without one)."""
     fitted = dataset.mask & ((fit.flags == OK) | (fit.flags == LOBE))
-    if not fitted.any():
+    scene = dataset.scene
+    if not fitted.any() or (scene.has_point_lights and height is None):
         unknown = np.full(len(dataset.scene.lights), np.nan)
         return ImageAgreement(unknown, unknown.copy())
-    scene = dataset.scene
+    if height is not None and scene.has_point_lights:
+        directions, irradiance = pixel_lights(scene, height, fitted)
+    else:
+        directions, irradiance = scene.light_directions, scene.light_irradiance
     return image_agreement(
         dataset.images,
-        scene.light_directions,
-        scene.light_irradiance,
+        directions,
+        irradiance,
         fit.normals,
         fit.albedo,
         fitted,
@@ -442,7 +456,9 @@ def _check_input(dataset: Dataset, saturation: float | None, robust: str) -> Non
     warn about saturated observations."""
     source = dataset.source or "the data set"
     try:
-        check_lights(dataset.scene.light_directions, dataset.scene.light_irradiance)
+        # Point lights' directions differ pixel by pixel: the fit checks each pixel's.
+        if not dataset.scene.has_point_lights:
+            check_lights(dataset.scene.light_directions, dataset.scene.light_irradiance)
     except IrtpsError as err:
         raise DatasetError(f"{source}: {err}") from None
     observed = pixel_observations(dataset.images, dataset.mask)

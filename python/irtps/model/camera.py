@@ -221,6 +221,31 @@ class Camera:
         rays = -self.ray_directions()
         return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
 
+    def surface_points(self, height: np.ndarray) -> np.ndarray:
+        """The world point each pixel sees at its height.
+
+        Parameters
+        ----------
+        height : numpy.ndarray
+            (height, width) heights z of each pixel's surface point.
+
+        Returns
+        -------
+        numpy.ndarray
+            float64 (height, width, 3). Perspective (or an orthographic stand-in, through its
+            `pinhole`): the point of height z on the pixel's centre ray, at depth
+            ``zc - z`` (contract §1b); orthographic: the pixel centre at height z.
+        """
+        camera = self.pinhole if self.pinhole is not None else self
+        z = np.asarray(height, dtype=np.float64)
+        if camera.projection == "perspective":
+            depth = camera.center_z - z
+            points = camera.ray_directions() * depth[..., None]
+            points[..., 2] += camera.center_z
+            return points
+        x, y = camera.pixel_centers()
+        return np.stack([x, y, z], axis=-1)
+
     def pixel_centers(self) -> tuple[np.ndarray, np.ndarray]:
         """World coordinates of the pixel centres of an orthographic camera.
 

@@ -21,6 +21,7 @@ from irtps._shared.checks import check_path
 from irtps._shared.atomic import atomic_write_text
 from irtps.errors import DatasetError, IrtpsWarning
 from irtps.model.camera import Camera, intrinsics_problem
+from irtps.model.environment import MeshEnvironment, read_environment_mesh, view_problem, write_environment_mesh
 from irtps.model.constants import MAX_IMAGE_PIXELS
 from irtps._shared.guarded import read_json, shown
 from irtps._shared.paths import exists
@@ -80,6 +81,39 @@ class Light:
         return hash((tuple(self.direction), tuple(self.irradiance)))
 
 
+@dataclass(frozen=True, eq=False)
+class PointLight:
+    """An isotropic point light near the object (contract §4b): a surface point p at
+    distance r from it, with unit vector l toward it, receives ``intensity · max(0, n·l) / r²``.
+
+    Attributes
+    ----------
+    position : numpy.ndarray
+        World position (3,). Read-only.
+    intensity : numpy.ndarray
+        RGB radiant intensity (3,), W/sr. Read-only.
+    """
+
+    position: np.ndarray
+    intensity: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("position", "intensity"):
+            vector = np.array(getattr(self, name), dtype=np.float64)
+            if vector.shape != (3,):
+                raise DatasetError(f"PointLight.{name} must have 3 components, got shape {vector.shape}")
+            vector.flags.writeable = False
+            object.__setattr__(self, name, vector)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, PointLight):
+            return NotImplemented
+        return bool(np.array_equal(self.position, other.position) and np.array_equal(self.intensity, other.intensity))
+
+    def __hash__(self) -> int:
+        return hash((tuple(self.position), tuple(self.intensity)))
+
+
 @dataclass(frozen=True)
 class Floor:
     """The plane ``z = height`` with a uniform RGB albedo in [0, 1]."""
@@ -120,11 +154,12 @@ class Scene:
     Attributes
     ----------
     camera : Camera
-    lights : tuple of Light
-        Image k of the data set is taken under ``lights[k]`` alone.
+    lights : tuple of Light or PointLight
+        Image k of the data set is taken under ``lights[k]`` alone: a distant light, or a
+        point light near the object.
     floor : Floor or None
         None means there is no floor.
-    environment : CornellBox or None
+    environment : CornellBox, MeshEnvironment or None
         None means nothing surrounds the object and the floor.
     relative_irradiance : bool
         The lights' irradiance is known only up to one common factor (``"irradiance":
@@ -133,9 +168,9 @@ class Scene:
     """
 
     camera: Camera
-    lights: tuple[Light, ...]
+    lights: tuple[Light | PointLight, ...]
     floor: Floor | None = None
-    environment: CornellBox | None = None
+    environment: CornellBox | MeshEnvironment | None = None
     relative_irradiance: bool = False
 
     def __post_init__(self) -> None:
@@ -144,6 +179,11 @@ class Scene:
             raise DatasetError(
                 f"Scene.camera.optical_center {_optical_center_problem(self.camera.optical_center[2], self.base_height)}"
             )
+        if isinstance(self.environment, MeshEnvironment):
+            center = self.camera.optical_center
+            problem = view_problem(self.environment, None if center is None else center[2], self.base_height)
+            if problem is not None:
+                raise DatasetError(f"Scene.environment ({self.environment.file}) {problem}")
 
     @property
     def base_height(self) -> float:
@@ -152,17 +192,69 @@ class Scene:
         return 0.0 if self.floor is None else self.floor.height
 
     @property
+    def has_point_lights(self) -> bool:
+        """Whether any light is a point light near the object (contract §4b)."""
+        return any(isinstance(light, PointLight) for light in self.lights)
+
+    @property
     def light_directions(self) -> np.ndarray:
-        """Unit light directions, float64 array (K, 3)."""
-        return np.stack([light.direction for light in self.lights])
+        """Unit light directions, float64 array (K, 3), of distant lights.
+
+        Raises
+        ------
+        DatasetError
+            If a light is a point light, whose direction changes across the object.
+        """
+        return np.stack([self._distant(k).direction for k in range(len(self.lights))])
 
     @property
     def light_irradiance(self) -> np.ndarray:
-        """RGB irradiance of each light, float64 array (K, 3)."""
-        return np.stack([light.irradiance for light in self.lights])
+        """RGB irradiance of each distant light, float64 array (K, 3).
+
+        Raises
+        ------
+        DatasetError
+            If a light is a point light, whose irradiance changes across the object.
+        """
+        return np.stack([self._distant(k).irradiance for k in range(len(self.lights))])
+
+    @property
+    def light_emission(self) -> np.ndarray:
+        """float64 (K, 3): each distant light's irradiance, each point light's intensity."""
+        return np.stack([emission_of(light) for light in self.lights])
+
+    @property
+    def light_positions(self) -> np.ndarray:
+        """float64 (K, 3): each point light's position, NaN for a distant light."""
+        return np.stack(
+            [light.position if isinstance(light, PointLight) else np.full(3, np.nan) for light in self.lights]
+        )
+
+    @property
+    def nominal_light_directions(self) -> np.ndarray:
+        """float64 (K, 3): each distant light's direction, and the unit vector from the world
+        origin (under the object) toward each point light: to tell which lights lie apart."""
+        return np.stack(
+            [
+                light.position / max(float(np.linalg.norm(light.position)), 1e-300)
+                if isinstance(light, PointLight)
+                else light.direction
+                for light in self.lights
+            ]
+        )
+
+    def _distant(self, k: int) -> Light:
+        light = self.lights[k]
+        if isinstance(light, PointLight):
+            raise DatasetError(
+                f"lights[{k}] is a point light (at {light.position.tolist()}): its direction and irradiance "
+                "change across the object, and this step takes distant lights only (point lights are "
+                "rendered, not yet fitted)"
+            )
+        return light
 
 
-def parse_scene(obj: object, source: str = "scene.json") -> Scene:
+def parse_scene(obj: object, source: str = "scene.json", folder: str | Path | None = None) -> Scene:
     """Validate a parsed ``scene.json`` and build the scene.
 
     Parameters
@@ -171,6 +263,9 @@ def parse_scene(obj: object, source: str = "scene.json") -> Scene:
         The parsed JSON value.
     source : str
         Name of the file it came from, used as the prefix of error messages.
+    folder : str or pathlib.Path, optional
+        The data set folder, where an environment mesh's file is read (contract §3b); by
+        default the folder of `source`.
 
     Returns
     -------
@@ -180,7 +275,9 @@ def parse_scene(obj: object, source: str = "scene.json") -> Scene:
     ------
     DatasetError
         If any field is missing, of the wrong JSON type, unknown or out of range;
-        the message names the field path, e.g. ``lights[3].direction``.
+        the message names the field path, e.g. ``lights[3].direction``. An environment
+        mesh that cannot be read, or that hides the object from the camera, is named by its
+        file.
     """
     fields = _Fields(source)
     scene_format = fields.mapping(obj, "", required=("format",), optional=(*_SCENE_KEYS, "irradiance"))["format"]
@@ -194,9 +291,15 @@ def parse_scene(obj: object, source: str = "scene.json") -> Scene:
     lights = _parse_lights(fields, root["lights"])
     floor = None if root["floor"] is None else _parse_floor(fields, root["floor"])
     floor_height = 0.0 if floor is None else floor.height
-    environment = _parse_environment(fields, root["environment"], floor_height)
+    folder = Path(source).parent if folder is None else Path(folder)
+    environment = _parse_environment(fields, root["environment"], floor_height, folder)
     if camera.optical_center is not None and camera.optical_center[2] <= floor_height:
         fields.fail("camera.optical_center", _optical_center_problem(camera.optical_center[2], floor_height))
+    if isinstance(environment, MeshEnvironment):
+        center = camera.optical_center
+        problem = view_problem(environment, None if center is None else center[2], floor_height)
+        if problem is not None:
+            raise DatasetError(f"{folder / environment.file}: {problem}")
     return Scene(
         camera=camera, lights=lights, floor=floor, environment=environment, relative_irradiance=irradiance == "relative"
     )
@@ -286,9 +389,7 @@ def scene_to_dict(scene: Scene) -> dict:
     return {
         "format": FORMAT,
         "camera": camera_to_dict(scene.camera),
-        "lights": [
-            {"direction": _floats(light.direction), "irradiance": _floats(light.irradiance)} for light in scene.lights
-        ],
+        "lights": [_light_to_dict(light) for light in scene.lights],
         "floor": None
         if scene.floor is None
         else {"height": float(scene.floor.height), "albedo": _floats(scene.floor.albedo)},
@@ -323,7 +424,8 @@ def load_scene(path: str | Path) -> Scene:
 
 
 def write_scene(scene: Scene, path: str | Path) -> None:
-    """Validate a scene and write it atomically as ``scene.json``.
+    """Validate a scene and write it atomically as ``scene.json``; an environment mesh is
+    written beside it, under its ``file`` name (contract §3b), first.
 
     Parameters
     ----------
@@ -336,6 +438,9 @@ def write_scene(scene: Scene, path: str | Path) -> None:
         If the scene breaks the contract (the file is then not written).
     """
     obj = scene_to_dict(scene)
+    path = Path(path)
+    if isinstance(scene.environment, MeshEnvironment):
+        write_environment_mesh(scene.environment, path.parent / scene.environment.file)
     parse_scene(obj, str(path))
     atomic_write_text(path, json.dumps(obj, indent=1) + "\n")
 
@@ -446,20 +551,19 @@ def camera_to_dict(camera: Camera) -> dict:
     }
 
 
-def _parse_lights(fields: _Fields, value: object) -> tuple[Light, ...]:
+def _parse_lights(fields: _Fields, value: object) -> tuple[Light | PointLight, ...]:
     entries = fields.array(value, "lights")
     if len(entries) < MIN_LIGHTS:
         fields.fail("lights", f"has {len(entries)} lights: photometric stereo needs at least {MIN_LIGHTS}")
-    lights = []
+    lights: list[Light | PointLight] = []
     for k, entry in enumerate(entries):
         where = f"lights[{k}]"
         if isinstance(entry, dict) and "type" in entry:
             kind = entry["type"]
-            if kind == "point":
-                fields.fail(
-                    f"{where}.type", "is 'point': point lights (contract §4) are not supported yet, only distant lights"
-                )
-            fields.fail(f"{where}.type", f"is {shown(kind)}: unknown (a distant light has no type)")
+            if kind != "point":
+                fields.fail(f"{where}.type", f"is {shown(kind)}: expected 'point' (a distant light has no type)")
+            lights.append(_parse_point_light(fields, entry, where))
+            continue
         light = fields.mapping(entry, where, required=("direction", "irradiance"))
         direction = fields.vector3(light["direction"], f"{where}.direction")
         norm = math.hypot(*direction)
@@ -476,6 +580,67 @@ def _parse_lights(fields: _Fields, value: object) -> tuple[Light, ...]:
     return tuple(lights)
 
 
+def _parse_point_light(fields: _Fields, entry: dict, where: str) -> PointLight:
+    light = fields.mapping(entry, where, required=("type", "position", "intensity"))
+    position = fields.vector3(light["position"], f"{where}.position")
+    intensity = fields.vector3(light["intensity"], f"{where}.intensity")
+    problem = irradiance_problem(intensity)
+    if problem is not None:
+        fields.fail(f"{where}.intensity", problem)
+    return PointLight(position=np.array(position), intensity=np.array(intensity))
+
+
+def _light_to_dict(light: Light | PointLight) -> dict:
+    if isinstance(light, PointLight):
+        return {"type": "point", "position": _floats(light.position), "intensity": _floats(light.intensity)}
+    return {"direction": _floats(light.direction), "irradiance": _floats(light.irradiance)}
+
+
+def lights_at(scene: Scene, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each light's unit direction and irradiance at world points.
+
+    A distant light's are its own everywhere; a point light at distance r in direction l
+    gives ``intensity / r²`` (contract §4b; the Lambert cosine is the fit's).
+
+    Parameters
+    ----------
+    scene : Scene
+    points : numpy.ndarray
+        (N, 3) world points.
+
+    Returns
+    -------
+    directions, irradiance : numpy.ndarray
+        float64 (N, K, 3) each, light k at point n in row ``[n, k]``.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    count = len(scene.lights)
+    directions = np.empty((len(points), count, 3))
+    irradiance = np.empty((len(points), count, 3))
+    for k, light in enumerate(scene.lights):
+        if isinstance(light, PointLight):
+            offset = light.position - points
+            squared = np.maximum((offset * offset).sum(axis=-1, keepdims=True), 1e-300)
+            directions[:, k] = offset / np.sqrt(squared)
+            irradiance[:, k] = light.intensity / squared
+        else:
+            directions[:, k] = light.direction
+            irradiance[:, k] = light.irradiance
+    return directions, irradiance
+
+
+def emission_of(light: Light | PointLight) -> np.ndarray:
+    """A distant light's irradiance, or a point light's intensity (3,)."""
+    return light.intensity if isinstance(light, PointLight) else light.irradiance
+
+
+def with_emission(light: Light | PointLight, emission: np.ndarray) -> Light | PointLight:
+    """`light` with its irradiance (a point light's intensity) replaced by `emission`."""
+    if isinstance(light, PointLight):
+        return PointLight(position=light.position, intensity=emission)
+    return Light(direction=light.direction, irradiance=emission)
+
+
 def _parse_floor(fields: _Fields, value: object) -> Floor:
     floor = fields.mapping(value, "floor", required=("height", "albedo"))
     return Floor(
@@ -484,15 +649,22 @@ def _parse_floor(fields: _Fields, value: object) -> Floor:
     )
 
 
-def _parse_environment(fields: _Fields, value: object, floor_height: float) -> CornellBox | None:
+def _parse_environment(
+    fields: _Fields, value: object, floor_height: float, folder: Path
+) -> CornellBox | MeshEnvironment | None:
     kind = fields.mapping(value, "environment", required=("type",), optional=(*_BOX_KEYS, "file"))["type"]
     if kind == "none":
         fields.mapping(value, "environment", required=("type",))
         return None
     if kind == "mesh":
-        fields.fail("environment.type", "is 'mesh': environments given as a mesh (contract §3b) are not supported yet")
+        name = fields.mapping(value, "environment", required=("type", "file"))["file"]
+        if not isinstance(name, str):
+            fields.expect(name, "environment.file", "a file name")
+        if not name or Path(name).name != name or name in (".", ".."):
+            fields.fail("environment.file", f"is {shown(name)}: expected a file name in the data set folder")
+        return read_environment_mesh(folder / name)
     if kind != "cornell_box":
-        fields.fail("environment.type", f"is {shown(kind)}: expected 'none' or 'cornell_box'")
+        fields.fail("environment.type", f"is {shown(kind)}: expected 'none', 'cornell_box' or 'mesh'")
     box = fields.mapping(value, "environment", required=_BOX_KEYS)
     x = fields.interval(box["x"], "environment.x")
     y = fields.interval(box["y"], "environment.y")
@@ -504,9 +676,11 @@ def _parse_environment(fields: _Fields, value: object, floor_height: float) -> C
     return CornellBox(x=x, y=y, z_top=z_top, **walls)
 
 
-def _environment_to_dict(box: CornellBox | None) -> dict:
+def _environment_to_dict(box: CornellBox | MeshEnvironment | None) -> dict:
     if box is None:
         return {"type": "none"}
+    if isinstance(box, MeshEnvironment):
+        return {"type": "mesh", "file": box.file}
     return {
         "type": "cornell_box",
         "x": _floats(box.x),

@@ -21,7 +21,7 @@ from irtps._shared.checks import (
 )
 from irtps.model.data import coarse_to_fine, spread_pixels
 from irtps.errors import ArgumentError
-from irtps.model.scene import irradiance_problem
+from irtps.model.scene import MAX_IRRADIANCE, MIN_IRRADIANCE, irradiance_problem
 
 # The robust modes (and "auto"), declared by the model (the options list them).
 from irtps.model.constants import ROBUST_CHOICES, ROBUST_MODES
@@ -149,9 +149,13 @@ def photometric_stereo(
     images : numpy.ndarray
         (K, H, W, 3) linear images, one per light.
     light_directions : numpy.ndarray
-        (K, 3) unit vectors toward the lights (x right, y up, z toward the camera).
+        (K, 3) unit vectors toward the lights (x right, y up, z toward the camera); or
+        (N, K, 3), each light's direction at each of the mask's N pixels (row-major), for
+        lights whose direction changes across the object (point lights near it:
+        `irtps.model.scene.lights_at` at the surface's points).
     light_irradiance : numpy.ndarray
-        (K, 3) RGB irradiance of each light.
+        (K, 3) RGB irradiance of each light; or (N, K, 3), at each of the mask's pixels,
+        with per-pixel directions.
     mask : numpy.ndarray, optional
         (H, W) bool; default every pixel.
     robust : str
@@ -177,7 +181,8 @@ def photometric_stereo(
           it from there (as ``"auto"`` does).
         - ``"auto"`` (default, as in ``irtps.reconstruct``): ``"lobe"`` for an object most of
           whose pixels take a specular lobe, else ``"tukey"`` (`choose_robust`), by the
-          object's `lobe_share`. The share's first pixels are fitted beside the Tukey fit,
+          object's `lobe_share` (``"tukey"`` under per-pixel lights, whose share is not
+          measured). The share's first pixels are fitted beside the Tukey fit,
           on the same threads, so that a matte object costs little more than the Tukey fit
           alone; the result tells the mode chosen and the share.
         - ``"threshold"``: drop observations in shadow (channel sum below `shadow_fraction`
@@ -233,12 +238,54 @@ def photometric_stereo(
     check_images_finite("images", images, mask)
     check_choice("robust", robust, ROBUST_CHOICES)
     views = _checked_views(views, images.shape[1:3])
+    if np.ndim(light_directions) == 3:
+        return _fit_per_pixel(
+            images, mask, light_directions, light_irradiance, robust, shadow_fraction, saturation, views
+        )
     if robust == "auto":
         return _fit_auto(images, mask, light_directions, light_irradiance, shadow_fraction, saturation, views, progress)
     settings = _core_settings(images, light_directions, light_irradiance, robust, shadow_fraction, saturation)
     if not progress:
         return PsResult(*_core.photometric_stereo(images, mask, *settings, views=views))
     return _fit_in_bands(images, mask, settings, views)
+
+
+def _fit_per_pixel(
+    images: np.ndarray,
+    mask: np.ndarray,
+    light_directions,
+    light_irradiance,
+    robust: str,
+    shadow_fraction: float,
+    saturation: float | None,
+    views: np.ndarray | None,
+) -> PsResult:
+    """`photometric_stereo` of float32 `images` under lights given at each of the mask's
+    pixels ((N, K, 3) each); ``"auto"`` fits in the Tukey mode."""
+    shape = (int(mask.sum()), len(images), 3)
+    arrays = []
+    for name, value in (("light_directions", light_directions), ("light_irradiance", light_irradiance)):
+        array = check_array(name, value, shape, dtype=np.float32)
+        check_finite(name, array, unit="light")
+        arrays.append(np.ascontiguousarray(array))
+    directions, irradiance = arrays
+    positive = irradiance > 0
+    bad = (irradiance < 0) | (positive & ((irradiance < MIN_IRRADIANCE) | (irradiance > MAX_IRRADIANCE)))
+    if bad.any():
+        pixel, k, channel = np.argwhere(bad)[0]
+        raise ArgumentError(
+            f"light_irradiance[{pixel}, {k}]",
+            f"channel {channel} = {irradiance[pixel, k, channel]:g}: expected 0 or a number from "
+            f"{MIN_IRRADIANCE:g} to {MAX_IRRADIANCE:g}",
+        )
+    robust_used = "tukey" if robust == "auto" else robust
+    _, _, _, shadow_fraction, saturation = _core_settings(
+        images, directions[0], irradiance[0], robust_used, shadow_fraction, saturation
+    )
+    fit = _core.photometric_stereo_per_pixel(
+        images, mask, directions, irradiance, robust_used, shadow_fraction, saturation, views=views
+    )
+    return PsResult(*fit, robust_used=robust_used if robust == "auto" else None)
 
 
 def _checked_views(views, size: tuple[int, int]) -> np.ndarray | None:

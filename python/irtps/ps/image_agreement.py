@@ -114,7 +114,9 @@ def image_agreement(
     images : numpy.ndarray
         (K, H, W, 3) linear RGB.
     light_directions, light_irradiance : numpy.ndarray
-        (K, 3) each: unit directions toward the lights, RGB irradiance.
+        (K, 3) each: unit directions toward the lights, RGB irradiance; or (N, K, 3) each, at
+        each of `mask`'s N pixels (row-major), for lights whose direction changes across the
+        object (point lights near it: `irtps.model.scene.lights_at`).
     normals, albedo : numpy.ndarray
         (H, W, 3) each: the fit's unit normals and RGB albedo.
     mask : numpy.ndarray
@@ -150,24 +152,33 @@ def image_agreement(
     """
     images = check_array("images", images, (None, None, None, 3), dtype=np.float32, copy=False)
     count, size = images.shape[0], images.shape[1:3]
-    directions = check_array("light_directions", light_directions, (count, 3), dtype=np.float64)
-    irradiance = check_array("light_irradiance", light_irradiance, (count, 3), dtype=np.float64)
     normals = check_array("normals", normals, (*size, 3), dtype=np.float32, copy=False)
     albedo = check_array("albedo", albedo, (*size, 3), dtype=np.float32, copy=False)
     mask = check_mask(mask, size, match="images", nonempty=True)
+    lights = (int(mask.sum()), count, 3) if np.ndim(light_directions) == 3 else (count, 3)
+    directions = check_array("light_directions", light_directions, lights, dtype=np.float64)
+    irradiance = check_array("light_irradiance", light_irradiance, lights, dtype=np.float64)
     if saturation is not None:
         saturation = check_positive("saturation", saturation)
     if isinstance(sample, bool) or not (isinstance(sample, (int, np.integer)) and sample >= 1):
         raise ArgumentError("sample", f"{sample!r} is not a positive integer")
     chosen = spread_pixels(mask, int(sample))
+    if directions.ndim == 3:
+        among = np.searchsorted(np.flatnonzero(mask), chosen)
+        directions, irradiance = directions[among], irradiance[among]
     mask = np.zeros_like(mask)
     mask.flat[chosen] = True
     observed = pixel_observations(images, mask)  # (K, N, 3)
     # Channel by channel: numpy reduces a last axis of 3 several times slower.
     red, green, blue = observed[..., 0], observed[..., 1], observed[..., 2]
     summed = red + green + blue
-    cosine = directions @ normals[mask].T.astype(np.float64)  # (K, N)
-    fitted = (irradiance @ albedo[mask].T.astype(np.float64)) * cosine / np.pi
+    fitted_normals, fitted_albedo = normals[mask].astype(np.float64), albedo[mask].astype(np.float64)
+    if directions.ndim == 3:
+        cosine = np.einsum("nki,ni->kn", directions, fitted_normals)  # (K, N)
+        fitted = np.einsum("nkc,nc->kn", irradiance, fitted_albedo) * cosine / np.pi
+    else:
+        cosine = directions @ fitted_normals.T
+        fitted = (irradiance @ fitted_albedo.T) * cosine / np.pi
     usable = (cosine >= WELL_LIT) & (fitted > 0) & (summed > 0)
     if saturation is not None:
         usable &= (red < saturation) & (green < saturation) & (blue < saturation)

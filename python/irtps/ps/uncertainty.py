@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from irtps._shared.checks import check_array, check_images_finite, check_mask
+from irtps._shared.checks import check_array, check_finite, check_images_finite, check_mask
 from irtps.model.data import observation_brightness, pixel_observations
 from irtps.ps.fit import checked_lights
 
@@ -38,9 +38,10 @@ def normal_standard_error(
     images : numpy.ndarray
         (K, H, W, 3) images under K distant lights.
     light_directions : numpy.ndarray
-        (K, 3) unit vectors toward the lights.
+        (K, 3) unit vectors toward the lights; or (N, K, 3) at each of `mask`'s N pixels
+        (row-major), for point lights near the object (`irtps.model.scene.lights_at`).
     light_irradiance : numpy.ndarray
-        (K, 3) each light's RGB irradiance.
+        (K, 3) each light's RGB irradiance; or (N, K, 3) at each of `mask`'s pixels.
     mask : numpy.ndarray
         bool (H, W): the pixels measured.
     usable : numpy.ndarray, optional
@@ -79,15 +80,25 @@ def normal_standard_error(
     count = images.shape[0]
     mask = check_mask(mask, images.shape[1:3], match="images")
     check_images_finite("images", images, mask)
-    checked_lights(light_directions, light_irradiance, count)
-    directions = np.asarray(light_directions, dtype=np.float64)
-    irradiance = np.asarray(light_irradiance, dtype=np.float64)
+    if np.ndim(light_directions) == 3:
+        shape = (int(mask.sum()), count, 3)
+        directions = check_array("light_directions", light_directions, shape, dtype=np.float64)
+        irradiance = check_array("light_irradiance", light_irradiance, shape, dtype=np.float64)
+        check_finite("light_directions", directions)
+        check_finite("light_irradiance", irradiance)
+        per_light = np.transpose(irradiance, (1, 0, 2))  # (K, N, 3)
+    else:
+        checked_lights(light_directions, light_irradiance, count)
+        directions = np.asarray(light_directions, dtype=np.float64)
+        per_light = np.asarray(light_irradiance, dtype=np.float64)[:, None, :]
     error = np.full(mask.shape, np.nan, dtype=np.float32)
     if not mask.any():
         return error
-    brightness = observation_brightness(
-        pixel_observations(images, mask), irradiance[:, None, :].astype(np.float32)
-    ).astype(np.float64)  # (K, N)
+    # Each pixel's light directions, (N, K, 3) whether shared or its own.
+    pixel_directions = np.broadcast_to(directions, (int(mask.sum()), count, 3))
+    brightness = observation_brightness(pixel_observations(images, mask), per_light.astype(np.float32)).astype(
+        np.float64
+    )  # (K, N)
     weight = (
         np.ones_like(brightness)
         if usable is None
@@ -95,12 +106,12 @@ def normal_standard_error(
             ..., 0
         ]
     ).astype(np.float64)
-    normal_matrix = np.einsum("kn,ki,kj->nij", weight, directions, directions)
+    normal_matrix = np.einsum("kn,nki,nkj->nij", weight, pixel_directions, pixel_directions)
     determined = (weight.sum(axis=0) >= MIN_OBSERVATIONS) & (np.linalg.det(normal_matrix) > 1e-9)
     inverse = np.zeros_like(normal_matrix)
     inverse[determined] = np.linalg.inv(normal_matrix[determined])
-    g = np.einsum("nij,nj->ni", inverse, np.einsum("kn,ki,kn->ni", weight, directions, brightness))
-    misfit = brightness - directions @ g.T
+    g = np.einsum("nij,nj->ni", inverse, np.einsum("kn,nki,kn->ni", weight, pixel_directions, brightness))
+    misfit = brightness - np.einsum("nki,ni->kn", pixel_directions, g)
     variance = (weight * misfit**2).sum(axis=0) / np.maximum(weight.sum(axis=0) - 3, 1)
     length = np.linalg.norm(g, axis=1)
     determined &= length > 0

@@ -112,7 +112,7 @@ def estimate_placement(
     """
     if scene.floor is None and scene.environment is None:
         return fallback_placement(scene, "no floor in scene.json: nothing in the images fixes the object's height")
-    chosen = spread_lights(scene.light_directions, MAX_LIGHTS)
+    chosen = spread_lights(scene.nominal_light_directions, MAX_LIGHTS)
     scene = dataclasses.replace(scene, lights=tuple(scene.lights[k] for k in chosen))
     images = np.asarray(images, dtype=np.float32)[chosen]
     unsaturated = (

@@ -29,7 +29,7 @@ from scipy.optimize import minimize_scalar
 
 from irtps.geometry.placement import spread_lights
 from irtps.render.renderer import make_renderer
-from irtps.model.scene import Scene
+from irtps.model.scene import Scene, emission_of, with_emission
 
 __all__ = [
     "AlbedoScale",
@@ -117,8 +117,7 @@ def format_albedo_scale(scale: AlbedoScale | dict) -> str:
 def scaled_scene(scene: Scene, factor: float) -> Scene:
     """`scene` with every light's irradiance divided by `factor` (and marked absolute)."""
     lights = tuple(
-        dataclasses.replace(light, irradiance=np.asarray(light.irradiance, dtype=np.float64) / factor)
-        for light in scene.lights
+        with_emission(light, np.asarray(emission_of(light), dtype=np.float64) / factor) for light in scene.lights
     )
     return dataclasses.replace(scene, lights=lights, relative_irradiance=False)
 
@@ -196,7 +195,7 @@ def estimate_albedo_scale(
         )
     high = 1.0 / brightest
     low = high / RANGE
-    chosen = spread_lights(scene.light_directions, MAX_LIGHTS)
+    chosen = spread_lights(scene.nominal_light_directions, MAX_LIGHTS)
     scene = dataclasses.replace(scene, lights=tuple(scene.lights[k] for k in chosen))
     pixels = _grid(mask, MAX_PIXELS)
     observed = np.asarray(images, dtype=np.float32)[chosen].reshape(len(chosen), -1, 3)[:, pixels]

@@ -13,7 +13,8 @@ from irtps.errors import ArgumentError
 from irtps.model.options import RenderOptions
 from irtps._shared.resources import check_memory
 from irtps.model.camera import Camera
-from irtps.model.scene import Scene, stand_in_scene
+from irtps.model.environment import MeshEnvironment
+from irtps.model.scene import CornellBox, Light, Scene, stand_in_scene
 
 #: Footprint samples per pixel for the direct image (stratified; shadows are traced exactly).
 DEFAULT_DIRECT_SAMPLES = 64
@@ -96,16 +97,37 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
     albedo = np.ascontiguousarray(check_array("albedo", albedo, (*expected, 3), match="the camera", dtype=np.float32))
     check_finite("height", height, mask)
     check_finite("albedo", albedo, mask)
+    environment = scene.environment
+    mesh = environment if isinstance(environment, MeshEnvironment) else None
+    box = environment if isinstance(environment, CornellBox) else None
     return _core.Renderer(
         height,
         mask,
         albedo,
         camera.orthographic_pixel_size,
-        scene.light_directions.astype(np.float32),
-        scene.light_irradiance.astype(np.float32),
+        _light_direction_rows(scene),
+        scene.light_emission.astype(np.float32),
         scene.floor,
-        scene.environment,
+        box,
         None if pinhole is None else _pinhole_arguments(pinhole),
+        scene.light_positions.astype(np.float32) if scene.has_point_lights else None,
+        None if mesh is None else _environment_arguments(mesh),
+    )
+
+
+def _light_direction_rows(scene: Scene) -> np.ndarray:
+    """float32 (K, 3): each distant light's direction; +z for a point light (unused)."""
+    return np.stack(
+        [light.direction if isinstance(light, Light) else np.array([0.0, 0.0, 1.0]) for light in scene.lights]
+    ).astype(np.float32)
+
+
+def _environment_arguments(mesh: MeshEnvironment) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(vertices, triangles, albedo)`` of an environment mesh, as the core's renderer takes them."""
+    return (
+        np.ascontiguousarray(mesh.vertices, dtype=np.float32),
+        np.ascontiguousarray(mesh.triangles, dtype=np.uint32),
+        np.ascontiguousarray(mesh.albedo, dtype=np.float32),
     )
 
 

@@ -200,7 +200,9 @@ def compared_observations(
     shadow_fraction: float,
     saturation: float | None,
 ) -> np.ndarray:
-    """The observations the residual compares: bool (K, H, W, 1).
+    """The observations the residual compares: bool (K, H, W, 1), for images under lights of
+    `irradiance` (K, 3), or (K, N, 3) at each of the mask's N pixels (point lights near the
+    object).
 
     On the object, those photometric stereo fits (`irtps.ps.fit.photometric_stereo`'s rule: in
     robust mode, not in shadow, i.e. a channel sum over the irradiance above
@@ -229,7 +231,8 @@ def compared_observations(
         # Shadows are told apart on the object only: around it every observation is kept.
         irradiance = np.asarray(irradiance, dtype=np.float32)
         pixels = np.flatnonzero(mask)
-        brightness = observation_brightness(pixel_observations(images, mask), irradiance[:, None, :])
+        per_pixel = irradiance if irradiance.ndim == 3 else irradiance[:, None, :]
+        brightness = observation_brightness(pixel_observations(images, mask), per_pixel)
         level = shadow_fraction * brightness.max(axis=0, initial=0.0)
         flat = usable.reshape(len(images), -1)
         flat[:, pixels] &= brightness > level

@@ -39,6 +39,8 @@ fn ragged_scene(w: usize, h: usize, seed: u64) -> Scene {
             albedo: [0.5; 3],
         }),
         cornell_box: None,
+        environment_mesh: None,
+        zero_height: 0.0,
     }
 }
 

@@ -1,5 +1,6 @@
 //! Triangle geometry of a scene, built exactly as the contract says: the height-field
-//! triangulation, the skirt under its boundary, the floor and the Cornell-box walls.
+//! triangulation, the skirt under its boundary, the floor, the Cornell-box walls and the
+//! triangles of an environment mesh.
 //!
 //! Large flat surfaces are tessellated to about a pixel so that per-vertex light caching
 //! (see [`crate::render::light_cache`]) resolves shadows on them.
@@ -25,6 +26,9 @@ pub enum SurfaceKind {
     Floor,
     /// A Cornell-box wall.
     Wall,
+    /// A triangle of an environment mesh (contract §3b): it reflects on both sides, and its
+    /// light is traced at each point rather than cached.
+    Environment,
 }
 
 /// An indexed triangle mesh with per-vertex albedo and per-triangle facing normals.
@@ -44,7 +48,7 @@ pub struct Mesh {
     /// Surface each triangle belongs to.
     pub kinds: Vec<SurfaceKind>,
     /// The panel each triangle belongs to, or [`NO_PANEL`] for the object's triangles
-    /// (whose light is cached per vertex).
+    /// (whose light is cached per vertex) and the environment mesh's.
     pub panel_of: Vec<u32>,
     /// The flat rectangles of the surroundings (floor and walls).
     pub panels: Vec<Panel>,
@@ -166,19 +170,34 @@ impl Mesh {
         [0, 1, 2].map(|ch| w * a[ch] + u * b[ch] + v * c[ch])
     }
 
+    /// The unit normal of triangle `t` on the side a ray along `direction` meets: its facing
+    /// normal, or the opposite one for an environment mesh's triangle seen from behind; None
+    /// for the back of a one-sided surface (black).
+    #[inline(always)]
+    pub fn seen_normal(&self, t: usize, direction: Vec3A) -> Option<Vec3A> {
+        let n = self.normals[t];
+        if n.dot(direction) < 0.0 {
+            Some(n)
+        } else if self.kinds[t] == SurfaceKind::Environment {
+            Some(-n)
+        } else {
+            None
+        }
+    }
+
     /// Corner positions of triangle `t`.
     #[inline]
     pub fn corners(&self, t: usize) -> [Vec3A; 3] {
         self.triangles[t].map(|i| self.positions[i as usize])
     }
 
-    /// Axis-aligned bounds of the object and the cached part of the panels (the far floor
-    /// excluded); infinite when the scene is empty.
+    /// Axis-aligned bounds of the object and the cached part of the panels (the far floor and
+    /// an environment mesh excluded); infinite when the scene is empty.
     pub fn near_bounds(&self) -> (Vec3A, Vec3A) {
         let mut lo = Vec3A::splat(f32::INFINITY);
         let mut hi = Vec3A::splat(f32::NEG_INFINITY);
-        for (tri, &panel) in self.triangles.iter().zip(&self.panel_of) {
-            if panel == NO_PANEL {
+        for (t, tri) in self.triangles.iter().enumerate() {
+            if self.panel_of[t] == NO_PANEL && self.kinds[t] != SurfaceKind::Environment {
                 for &i in tri {
                     lo = lo.min(self.positions[i as usize]);
                     hi = hi.max(self.positions[i as usize]);

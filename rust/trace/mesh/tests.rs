@@ -20,6 +20,8 @@ pub(crate) fn flat_scene(w: usize, h: usize, z: f32, mask: impl Fn(usize, usize)
         },
         floor: None,
         cornell_box: None,
+        environment_mesh: None,
+        zero_height: 0.0,
     }
 }
 
@@ -104,4 +106,43 @@ fn box_walls_face_inside_and_floor_faces_up() {
             Some((panel.cells.0 as f32 / 2.0, panel.cells.1 as f32 / 2.0))
         );
     }
+}
+
+#[test]
+fn without_a_floor_the_skirt_reaches_world_height_zero_in_the_working_frame() {
+    let scene = flat_scene(6, 6, 5.0, |i, j| (1..5).contains(&i) && (1..5).contains(&j));
+    let frame = crate::scene::Frame::of(&scene);
+    let mesh = Mesh::from_scene(&frame.local_scene(&scene).unwrap());
+    let lowest = (0..mesh.triangles.len())
+        .filter(|&t| mesh.kinds[t] == SurfaceKind::Skirt)
+        .flat_map(|t| mesh.corners(t))
+        .map(|p| frame.to_world(p).z)
+        .fold(f32::INFINITY, f32::min);
+    assert_eq!(lowest, 0.0);
+}
+
+#[test]
+fn an_environment_mesh_keeps_its_winding_and_albedo() {
+    let mut scene = flat_scene(4, 4, 1.0, |_, _| false);
+    scene.environment_mesh = Some(std::sync::Arc::new(crate::scene::EnvironmentMesh {
+        positions: vec![
+            vec3a(0.0, 0.0, 0.0),
+            vec3a(1.0, 0.0, 0.0),
+            vec3a(0.0, 1.0, 0.0),
+            vec3a(5.0, 5.0, 5.0),
+        ],
+        albedo: vec![[0.1, 0.2, 0.3], [0.4, 0.5, 0.6], [0.7, 0.8, 0.9], [1.0; 3]],
+        // Wound clockwise seen from +z, then a degenerate one (dropped).
+        triangles: vec![[0, 2, 1], [3, 3, 3]],
+    }));
+    let mesh = Mesh::from_scene(&scene);
+    let env: Vec<_> = (0..mesh.triangles.len())
+        .filter(|&t| mesh.kinds[t] == SurfaceKind::Environment)
+        .collect();
+    assert_eq!(env.len(), 1);
+    assert_eq!(mesh.normals[env[0]], -Vec3A::Z);
+    assert_eq!(mesh.albedo_at(env[0], 1.0, 0.0), [0.7, 0.8, 0.9]);
+    // Seen from above, its facing normal is turned toward the ray; a wall's back is black.
+    assert_eq!(mesh.seen_normal(env[0], -Vec3A::Z), Some(Vec3A::Z));
+    assert_eq!(mesh.seen_normal(env[0], Vec3A::Z), Some(-Vec3A::Z));
 }
