@@ -12,6 +12,7 @@ import pytest
 import irtps
 from irtps import Camera, PointLight, Scene
 from irtps.geometry.falloff_placement import falloff_placement
+from irtps.model.options import OptionError
 from irtps.model.scene import lights_at, stand_in_scene
 from irtps.ps.fit import photometric_stereo
 
@@ -127,3 +128,27 @@ def test_three_lights_leave_the_height_to_the_fallback_and_say_why():
     placement = falloff_placement(scene, np.zeros((8, 8)), mask, np.ones((3, 8, 8, 3)))
     assert placement.source == "boundary" and placement.base_height == 0.0
     assert "3 lights fit any height exactly" in placement.reason
+
+
+def test_a_synthesized_rig_round_trips_and_irtps_removes_its_inter_reflections(tmp_path):
+    data, _ = irtps.synthesize(
+        "cap", size=40, lights=8, environment="light-box", lights_near=0.9, bounces=3, samples=64
+    )
+    assert isinstance(data.scene.environment, irtps.MeshEnvironment) and data.scene.floor is None
+    assert data.scene.has_point_lights
+    # The irradiance at the middle of the floor is that of the distant lights they stand for.
+    np.testing.assert_allclose(lights_at(data.scene, np.zeros((1, 3)))[1], np.pi)
+    irtps.save_dataset(data, tmp_path / "rig")
+    assert irtps.load_dataset(tmp_path / "rig").scene == data.scene
+    classic = irtps.reconstruct(data, "ps")
+    result = irtps.reconstruct(data, "irtps")
+    errors = [
+        np.mean(irtps.angular_error_deg(r.normals, data.gt.normal, data.mask)[data.mask]) for r in (classic, result)
+    ]
+    assert errors[1] < 0.6 * errors[0], errors
+    assert result.placement.source == "falloff"
+
+
+def test_absurd_near_lights_are_refused_by_name():
+    with pytest.raises(OptionError, match=r"^lights_near: 0.01 is out of range"):
+        irtps.synthesize("cap", size=16, lights=3, lights_near=0.01)

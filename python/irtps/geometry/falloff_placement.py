@@ -25,8 +25,9 @@ __all__ = ["falloff_placement", "falloff_residual"]
 MIN_PLACING_LIGHTS = 4
 #: Object pixels compared at most, spread evenly over the mask.
 SAMPLE = 4096
-#: Heights scanned before the closest one is refined (Brent's method between its neighbours).
-SCAN_STEPS = 24
+#: Heights scanned before the closest one is refined (Brent's method between its neighbours):
+#: over the whole range, and near an earlier estimate.
+SCAN_STEPS, NEAR_SCAN_STEPS = 24, 6
 #: The refined height is found to within this fraction of a pixel's world size.
 PRECISION_PIXELS = 0.01
 
@@ -129,10 +130,11 @@ def falloff_placement(
     if near is not None:
         low, high = max(low, near.base_height - radius), min(high, near.base_height + radius)
     if high - low > tolerance:
-        bases = np.linspace(low, high, SCAN_STEPS + 1)
+        steps = NEAR_SCAN_STEPS if near is not None else SCAN_STEPS
+        bases = np.linspace(low, high, steps + 1)
         values = [residual(float(base)) for base in bases]
         best = int(np.argmin(values))
-        left, right = bases[max(best - 1, 0)], bases[min(best + 1, SCAN_STEPS)]
+        left, right = bases[max(best - 1, 0)], bases[min(best + 1, steps)]
         found = minimize_scalar(residual, bounds=(left, right), method="bounded", options={"xatol": tolerance})
         base = float(found.x) if found.fun <= values[best] else float(bases[best])
     else:

@@ -212,15 +212,15 @@ def _triangles(ply) -> np.ndarray:
 
 
 def write_environment_mesh(environment: MeshEnvironment, path: str | Path) -> None:
-    """Write an environment mesh atomically as a binary PLY file with float ``r, g, b``
-    albedo (contract §3b), which `read_environment_mesh` reads back exactly (in float32).
+    """Write an environment mesh atomically as a binary PLY file with ``r, g, b`` albedo
+    (contract §3b), every value a double, which `read_environment_mesh` reads back exactly.
 
     Parameters
     ----------
     environment : MeshEnvironment
     path : str or pathlib.Path
     """
-    vertex = np.empty(len(environment.vertices), dtype=[(name, "<f4") for name in ("x", "y", "z", *_FLOAT_RGB)])
+    vertex = np.empty(len(environment.vertices), dtype=[(name, "<f8") for name in ("x", "y", "z", *_FLOAT_RGB)])
     for axis, name in enumerate(("x", "y", "z")):
         vertex[name] = environment.vertices[:, axis]
     for channel, name in enumerate(_FLOAT_RGB):
@@ -230,7 +230,7 @@ def write_environment_mesh(environment: MeshEnvironment, path: str | Path) -> No
             "ply",
             "format binary_little_endian 1.0",
             f"element vertex {len(vertex)}",
-            *(f"property float {name}" for name in vertex.dtype.names or ()),
+            *(f"property double {name}" for name in vertex.dtype.names or ()),
             f"element face {len(environment.triangles)}",
             "property list uchar uint vertex_indices",
             "end_header",
@@ -260,7 +260,23 @@ def view_problem(environment: MeshEnvironment, optical_center_z: float | None, b
         orthographic camera.
     base_height : float
         The height the object stands on (the floor's, or 0).
+
+    Notes
+    -----
+    A mesh found to leave a camera's view open is remembered (the mesh is immutable): the
+    scenes made from one another in a run ask again and again.
     """
+    views_open: set = environment.__dict__.setdefault("_views_open", set())
+    if (optical_center_z, base_height) in views_open:
+        return None
+    problem = _view_problem(environment, optical_center_z, base_height)
+    if problem is None:
+        views_open.add((optical_center_z, base_height))
+    return problem
+
+
+def _view_problem(environment: MeshEnvironment, optical_center_z: float | None, base_height: float) -> str | None:
+    """`view_problem`, found by casting the rays."""
     corners = environment.vertices[environment.triangles]
     extent = float(np.ptp(environment.vertices, axis=0).max()) + abs(base_height) + 1.0
     low = base_height + 1e-6 * extent

@@ -411,7 +411,13 @@ class SynthOptions(_Options):
     size: int = _option(96, "image width and height in pixels", int, low=8, high=MAX_SYNTH_SIZE)
     lights: int = _option(12, "number of lights", int, low=3, high=MAX_LIGHTS)
     albedo: str = _option("uniform", "albedo pattern", str, choices=("uniform", "textured"))
-    environment: str = _option("cornell", "surroundings", str, choices=("cornell", "none"))
+    environment: str = _option(
+        "cornell",
+        "surroundings: a Cornell box, a light box given as a mesh (grey floor and walls, an orange side wall, "
+        "open at the front and top; no floor besides) or none",
+        str,
+        choices=("cornell", "light-box", "none"),
+    )
     floor: bool | None = _option(None, "a floor (default: only with the box)", bool, optional=True)
     fill: bool = _option(
         False,
@@ -425,6 +431,15 @@ class SynthOptions(_Options):
         "times the size in pixels, its optical centre where a pixel is 1 wide on the floor)",
         str,
         choices=("orthographic", "perspective"),
+    )
+    lights_near: float | None = _option(
+        None,
+        "point lights near the object instead of distant ones (a rig's LEDs): each this many image widths from the "
+        "middle of the floor, in the distant lights' directions, its intensity giving irradiance pi there",
+        float,
+        low=0.3,
+        high=100.0,
+        optional=True,
     )
     base: float | None = _option(
         None,

@@ -13,7 +13,8 @@ from irtps.errors import ArgumentError
 from irtps.geometry.boundary import place_height
 from irtps.model.options import OptionError, RenderOptions, SynthOptions
 from irtps.render.renderer import Rendering, check_render_memory, render
-from irtps.model.scene import Camera, CornellBox, Floor, Light, Scene
+from irtps.model.environment import MeshEnvironment
+from irtps.model.scene import Camera, CornellBox, Floor, Light, PointLight, Scene
 from irtps.geometry.surface import depth_to_normals, height_to_normals
 
 #: Wall colours of the classic Cornell box (red left, green right), as in the shared renders.
@@ -181,6 +182,39 @@ def synthetic_camera(size: int, projection: str) -> Camera:
     )
 
 
+#: Albedo of the light box's floor and walls (`light_box`), and of its coloured side wall.
+LIGHT_BOX_GREY, LIGHT_BOX_CARD = (0.78, 0.78, 0.76), (0.85, 0.62, 0.25)
+
+
+def light_box(size: int) -> MeshEnvironment:
+    """A rig's light box around an object of `size` pixels, as a mesh (contract §3b): a grey
+    floor at height 0 and grey back and left walls, an orange right wall (a reflector card),
+    open at the front and the top, each side ``1.8 * size`` long and the walls ``0.8 * size``
+    high, two triangles a face."""
+    half, top = 0.9 * size, 0.8 * size
+    faces = {
+        "floor": [(-half, -half, 0.0), (half, -half, 0.0), (half, half, 0.0), (-half, half, 0.0)],
+        "back": [(-half, half, 0.0), (half, half, 0.0), (half, half, top), (-half, half, top)],
+        "left": [(-half, -half, 0.0), (-half, half, 0.0), (-half, half, top), (-half, -half, top)],
+        "right": [(half, -half, 0.0), (half, half, 0.0), (half, half, top), (half, -half, top)],
+    }
+    vertices = np.array([corner for corners in faces.values() for corner in corners], dtype=np.float64)
+    albedo = np.array([LIGHT_BOX_CARD if name == "right" else LIGHT_BOX_GREY for name in faces for _ in range(4)])
+    triangles = np.array(
+        [[4 * f, 4 * f + 1, 4 * f + 2] for f in range(len(faces))]
+        + [[4 * f, 4 * f + 2, 4 * f + 3] for f in range(len(faces))]
+    )
+    return MeshEnvironment(vertices, triangles, albedo)
+
+
+def near_lights(distant: list[Light], distance: float) -> list[PointLight]:
+    """Point lights at `distance` from the world origin in the directions of `distant`
+    lights, each of intensity ``π distance²`` (the irradiance π at the origin)."""
+    return [
+        PointLight(position=light.direction * distance, intensity=np.full(3, np.pi * distance**2)) for light in distant
+    ]
+
+
 def synthesize(
     shape: str,
     *,
@@ -192,6 +226,7 @@ def synthesize(
     base: float | None = None,
     fill: bool = False,
     camera: str = "orthographic",
+    lights_near: float | None = None,
     bounces: int = 4,
     samples: int = 256,
     seed: int = 0,
@@ -211,9 +246,10 @@ def synthesize(
     albedo : str
         ``"uniform"`` or ``"textured"``.
     environment : str
-        ``"cornell"`` (a box with red and green side walls) or ``"none"``.
+        ``"cornell"`` (a box with red and green side walls), ``"light-box"`` (a rig's light
+        box given as a mesh, `light_box`: it holds the floor) or ``"none"``.
     floor : bool, optional
-        Whether there is a floor; by default only with the Cornell box.
+        Whether there is a floor besides; by default only with the Cornell box.
     base : float, optional
         Height of the object's boundary (the median over its mask's edge) above the floor,
         in pixel sizes; its sides run vertically down to the floor (contract §2). By
@@ -230,6 +266,11 @@ def synthesize(
         Each object pixel's surface point lies on its centre ray at its height (contract
         §1b); the ground truth adds the depth, and the normals are the depth map's
         (`irtps.depth_to_normals`).
+    lights_near : float, optional
+        Point lights near the object instead of distant ones (a rig's LEDs, contract §4b):
+        each ``lights_near * size`` from the middle of the floor in the direction of the
+        distant light it replaces (`ring_lights`), of intensity ``π (lights_near * size)²``,
+        which gives the irradiance π there.
     bounces, samples, seed, progress
         As for `irtps.render`.
 
@@ -256,6 +297,7 @@ def synthesize(
         base=base,
         fill=fill,
         camera=camera,
+        lights_near=lights_near,
     )
     RenderOptions(bounces=bounces, samples=samples, seed=seed)
     check_render_memory(lights, (size, size), bounces)
@@ -270,16 +312,21 @@ def synthesize(
             )
     height = np.where(mask, height, 0.0).astype(np.float32)
     has_floor = environment == "cornell" if floor is None else floor
-    box = None
+    surroundings: CornellBox | MeshEnvironment | None = None
     if environment == "cornell":
         half = 0.55 * size
         a = CORNELL_ALBEDO
-        box = CornellBox((-half, half), (-half, half), 0.5 * size, a["left"], a["right"], a["back"], a["front"])
+        surroundings = CornellBox(
+            (-half, half), (-half, half), 0.5 * size, a["left"], a["right"], a["back"], a["front"]
+        )
+    elif environment == "light-box":
+        surroundings = light_box(size)
+    distant = ring_lights(lights)
     scene = Scene(
         camera=synthetic_camera(size, camera),
-        lights=tuple(ring_lights(lights)),
+        lights=tuple(distant if lights_near is None else near_lights(distant, lights_near * size)),
         floor=Floor(0.0, (0.8, 0.8, 0.8)) if has_floor else None,
-        environment=box,
+        environment=surroundings,
     )
     albedo_map = make_albedo(mask, albedo, rng)
     rendering = render(scene, height, albedo_map, mask, bounces=bounces, samples=samples, seed=seed, progress=progress)
