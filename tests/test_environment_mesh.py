@@ -80,7 +80,7 @@ def test_the_shared_rig_mesh_is_read_with_its_float_colours():
             "uchar red\nproperty uchar green\nproperty uchar blue",
             "has no faces",
         ),
-        (["0 0 0", "1 0 0", "0 1 0"], ["3 0 1 2"], None, "its vertices have no colour"),
+        (["0 0 0", "1 0 0", "0 1 0"], ["3 0 1 2"], None, "has no colour for the albedo"),
         (["nan 0 0 9 9 9", "1 0 0 9 9 9", "0 1 0 9 9 9"], ["3 0 1 2"], None, "vertex 0 is not finite"),
         (
             ["0 0 0 0.5 1.5 0", "1 0 0 0 0 0", "0 1 0 0 0 0"],
@@ -293,3 +293,84 @@ def test_render_refuses_to_write_where_the_mesh_it_reads_lies(tmp_path, capsys):
     assert main(["render", str(rig), "--out", str(elsewhere), "--force", "--quiet"]) == 2
     assert "environment.ply" in capsys.readouterr().err
     assert (elsewhere / "box.ply").read_bytes() == before
+
+
+# Meshes as users have them: OBJ, colours per face, one albedo for the whole file
+
+
+def test_an_obj_written_by_trimesh_reads_with_its_vertex_colours(tmp_path):
+    trimesh = pytest.importorskip("trimesh")
+    rng = np.random.default_rng(2)
+    colours = rng.integers(0, 256, (30, 3))
+    mesh = trimesh.Trimesh(
+        rng.normal(size=(30, 3)),
+        rng.integers(0, 30, (40, 3)),
+        vertex_colors=np.c_[colours, np.full(30, 255)],
+        process=False,
+    )
+    mesh.export(tmp_path / "box.obj")
+    back = read_environment_mesh(tmp_path / "box.obj")
+    np.testing.assert_allclose(back.vertices, mesh.vertices, atol=1e-7)
+    np.testing.assert_array_equal(back.triangles, mesh.faces)
+    np.testing.assert_allclose(back.albedo, colours / 255, atol=1e-7)
+
+
+def test_a_ply_coloured_per_face_gives_each_triangle_its_face_colour(tmp_path):
+    trimesh = pytest.importorskip("trimesh")
+    faces = np.array([[0, 1, 2], [1, 3, 2]])
+    mesh = trimesh.Trimesh(
+        [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]],
+        faces,
+        face_colors=[[255, 0, 0, 255], [0, 51, 255, 255]],
+        process=False,
+    )
+    mesh.export(tmp_path / "card.ply")
+    back = read_environment_mesh(tmp_path / "card.ply")
+    assert back.triangles.shape == (2, 3)
+    np.testing.assert_array_equal(back.vertices[back.triangles], mesh.vertices[faces])
+    np.testing.assert_allclose(back.albedo[back.triangles[1]], np.tile([0.0, 0.2, 1.0], (3, 1)))
+
+
+def test_an_obj_takes_each_faces_material_colour_and_splits_its_quads(tmp_path):
+    (tmp_path / "rig.mtl").write_text("newmtl grey\nKd 0.5 0.5 0.5\nnewmtl card  # reflector\nKd 0.85 0.62 0.25\n")
+    (tmp_path / "rig.obj").write_text(
+        "mtllib rig.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\n"
+        "usemtl grey\nf 1/1/1 2/2/1 3/3/1 4/4/1\nusemtl card\nf -5 -4 -1\n"
+    )
+    back = read_environment_mesh(tmp_path / "rig.obj")
+    assert back.triangles.shape == (3, 3)
+    np.testing.assert_allclose(back.albedo[back.triangles[2]], np.tile([0.85, 0.62, 0.25], (3, 1)))
+    np.testing.assert_allclose(back.albedo[back.triangles[0]], 0.5)
+
+
+@pytest.mark.parametrize(
+    ("name", "text", "message"),
+    [
+        ("rig.stl", "solid x\n", "not a mesh file irtps reads: expected one of .ply, .obj"),
+        ("rig.obj", "mtllib ../other.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "mtllib '../other.mtl' lies outside"),
+        ("rig.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl none\nf 1 2 3\n", "a face's material 'none' has no Kd colour"),
+        ("rig.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n", "line 4: vertex index 0"),
+        ("rig.obj", "v 0 0\n", "line 1: a vertex needs x y z"),
+        (
+            "rig.obj",
+            "v 0 0 0 0.5 0.5 0.5\nv 1 0 0 1 1 1\nv 0 1 0 1 1 1\nf 1 2 x\n",
+            "not a readable OBJ file: ValueError",
+        ),
+    ],
+)
+def test_a_bad_obj_or_unknown_file_is_one_named_error(tmp_path, name, text, message):
+    (tmp_path / name).write_text(text)
+    with pytest.raises(DatasetError, match=rf"{name}: {message}"):
+        read_environment_mesh(tmp_path / name)
+
+
+def test_one_albedo_for_the_whole_mesh_round_trips_through_scene_json(tmp_path):
+    _ascii_ply(tmp_path / "environment.ply", ["-30 -30 0", "30 -30 0", "30 30 0", "-30 30 0"], ["4 0 1 2 3"], colour="")
+    obj = _rig_json()
+    obj["environment"]["albedo"] = [0.2, 0.3, 0.4]
+    scene = parse_scene(obj, str(tmp_path / "scene.json"))
+    assert scene.environment.uniform_albedo == (0.2, 0.3, 0.4)
+    np.testing.assert_array_equal(scene.environment.albedo, np.tile([0.2, 0.3, 0.4], (4, 1)))
+    assert scene_to_dict(scene)["environment"] == {"type": "mesh", "file": "environment.ply", "albedo": [0.2, 0.3, 0.4]}
+    with pytest.raises(irtps.ArgumentError, match=r"^albedo: must be three numbers in \[0, 1\]"):
+        read_environment_mesh(tmp_path / "environment.ply", albedo=(0.2, 1.5, 0.1))

@@ -17,7 +17,7 @@ import numpy as np
 from irtps._shared.atomic import atomic_write_bytes
 from irtps._shared.checks import check_path
 from irtps._shared.paths import exists
-from irtps.errors import DatasetError
+from irtps.errors import ArgumentError, DatasetError
 
 #: The name of the mesh file in a data set folder that `irtps synth` writes.
 ENVIRONMENT_FILE = "environment.ply"
@@ -44,6 +44,9 @@ class MeshEnvironment:
         float64 (V, 3) RGB albedo in [0, 1] at each vertex. Read-only.
     file : str
         The file name ``scene.json`` gives it, relative to the data set folder.
+    uniform_albedo : tuple of 3 floats or None
+        The one albedo ``scene.json`` gives the whole mesh (``environment.albedo``), which
+        `albedo` then holds at every vertex; None where the file's colours are the albedo.
 
     Raises
     ------
@@ -56,6 +59,7 @@ class MeshEnvironment:
     triangles: np.ndarray
     albedo: np.ndarray
     file: str = ENVIRONMENT_FILE
+    uniform_albedo: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         vertices = np.array(self.vertices, dtype=np.float64)
@@ -74,8 +78,13 @@ class MeshEnvironment:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, MeshEnvironment):
             return NotImplemented
-        return self.file == other.file and all(
-            np.array_equal(getattr(self, name), getattr(other, name)) for name in ("vertices", "triangles", "albedo")
+        return (
+            self.file == other.file
+            and self.uniform_albedo == other.uniform_albedo
+            and all(
+                np.array_equal(getattr(self, name), getattr(other, name))
+                for name in ("vertices", "triangles", "albedo")
+            )
         )
 
     __hash__ = None  # type: ignore[assignment]
@@ -116,51 +125,122 @@ def mesh_problem(vertices: np.ndarray, triangles: np.ndarray, albedo: np.ndarray
     return None
 
 
-def read_environment_mesh(path: str | Path) -> MeshEnvironment:
-    """Read an environment mesh from a PLY file (binary or ASCII), as contract §3b gives it.
+#: The mesh files read, by suffix.
+MESH_SUFFIXES = (".ply", ".obj")
 
-    Each vertex has ``x, y, z`` and a colour, the albedo: ``r, g, b`` as floats in [0, 1], or
-    ``red, green, blue`` as 8-bit (or 16-bit) values. Faces with more than three corners are
-    split into triangles around their first corner.
+
+def read_environment_mesh(path: str | Path, albedo=None) -> MeshEnvironment:
+    """Read an environment mesh (contract §3b) from a PLY (binary or ASCII) or OBJ file.
+
+    The albedo comes, in this order, from `albedo` (one RGB value for the whole mesh), from
+    a colour per vertex (PLY: ``r, g, b`` floats in [0, 1] or ``red, green, blue`` integers
+    over their type's largest value; OBJ: ``v x y z r g b``), or from a colour per face (PLY:
+    the same properties on faces; OBJ: the ``Kd`` of each face's material, from the
+    ``mtllib`` file beside it). Faces of more than three corners are split into triangles
+    around their first corner.
 
     Parameters
     ----------
     path : str or pathlib.Path
+        A ``.ply`` or ``.obj`` file.
+    albedo : sequence of 3 floats, optional
+        One RGB albedo in [0, 1] for the whole mesh, whatever colours the file holds.
 
     Returns
     -------
     MeshEnvironment
-        With ``file`` the name of `path`.
+        With ``file`` the name of `path`, and `albedo` as its ``uniform_albedo``.
 
     Raises
     ------
     DatasetError
-        Naming `path`: a file that is missing or not a readable PLY file, a vertex without
-        position or colour, no faces, or a mesh that `mesh_problem` refuses.
+        Naming `path`: a file that is missing, of another kind, or not readable as its kind;
+        vertices without a position, no faces, no colour and no `albedo`, a material without
+        ``Kd``, or a mesh that `mesh_problem` refuses.
+    ArgumentError
+        An `albedo` that is not three numbers in [0, 1].
     """
-    import plyfile
-
     path = check_path("path", path)
+    uniform = None if albedo is None else _checked_albedo(albedo)
     if not exists(path):
         raise DatasetError(f"{path}: file not found (the environment mesh of scene.json)")
     if not path.is_file():
         raise DatasetError(f"{path}: not a regular file (the environment mesh of scene.json)")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise DatasetError(f"{path}: not a mesh file irtps reads: expected one of {', '.join(MESH_SUFFIXES)}")
     try:
-        ply = _read_ply(plyfile, path)
-        vertices, albedo = _vertex_data(ply)
-        triangles = _triangles(ply)
+        read = _read_obj if path.suffix.lower() == ".obj" else _read_ply_mesh
+        vertices, triangles, vertex_albedo, face_albedo = read(path)
     except DatasetError as error:
         raise DatasetError(f"{path}: {error}") from None
-    except (plyfile.PlyParseError, plyfile.PlyElementParseError, plyfile.PlyHeaderParseError) as error:
-        raise DatasetError(f"{path}: not a readable PLY file: {error}") from None
     except (ValueError, TypeError, IndexError, EOFError, UnicodeDecodeError) as error:
-        raise DatasetError(f"{path}: not a readable PLY file: {type(error).__name__}: {error}") from None
+        raise DatasetError(
+            f"{path}: not a readable {path.suffix[1:].upper()} file: {type(error).__name__}: {error}"
+        ) from None
     except OSError as error:
         raise DatasetError(f"{path}: cannot be read: {error.strerror or error}") from None
-    problem = mesh_problem(vertices, triangles, albedo)
+    if uniform is not None:
+        vertex_albedo = np.tile(uniform, (len(vertices), 1))
+    elif vertex_albedo is None and face_albedo is not None:
+        vertices, triangles, vertex_albedo = _split_faces(vertices, triangles, face_albedo)
+    elif vertex_albedo is None:
+        raise DatasetError(
+            f"{path}: has no colour for the albedo (per vertex or per face): give one albedo for the whole "
+            "mesh (scene.json's environment.albedo)"
+        )
+    problem = mesh_problem(vertices, triangles, vertex_albedo)
     if problem is not None:
         raise DatasetError(f"{path}: {problem}")
-    return MeshEnvironment(vertices=vertices, triangles=triangles, albedo=albedo, file=path.name)
+    return MeshEnvironment(vertices, triangles, vertex_albedo, file=path.name, uniform_albedo=uniform)
+
+
+#: What a mesh reader gives: vertices (V, 3), triangles (F, 3), and a colour per vertex
+#: (V, 3) or per triangle (F, 3), or neither (None).
+_MeshData = tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]
+
+
+def _checked_albedo(albedo) -> tuple[float, float, float]:
+    values = np.asarray(albedo, dtype=np.float64) if not isinstance(albedo, str) else np.array([])
+    if values.shape != (3,) or not np.isfinite(values).all() or values.min() < 0 or values.max() > 1:
+        raise ArgumentError("albedo", f"must be three numbers in [0, 1], got {albedo!r}")
+    return (float(values[0]), float(values[1]), float(values[2]))
+
+
+def _split_faces(vertices: np.ndarray, triangles: np.ndarray, face_albedo: np.ndarray):
+    """A mesh coloured per face as one coloured per vertex: each triangle its own corners."""
+    corners = vertices[triangles].reshape(-1, 3)
+    return corners, np.arange(len(corners)).reshape(-1, 3), np.repeat(face_albedo, 3, axis=0)
+
+
+def _read_ply_mesh(path: Path) -> _MeshData:
+    import plyfile
+
+    try:
+        ply = _read_ply(plyfile, path)
+    except (plyfile.PlyParseError, plyfile.PlyElementParseError, plyfile.PlyHeaderParseError) as error:
+        raise DatasetError(f"not a readable PLY file: {error}") from None
+    if "vertex" not in ply:
+        raise DatasetError("has no 'vertex' element")
+    data = ply["vertex"].data
+    names = data.dtype.names or ()
+    missing = [name for name in ("x", "y", "z") if name not in names]
+    if missing:
+        raise DatasetError(f"its vertices have no {', '.join(missing)} (need x, y, z)")
+    vertices = np.stack([np.asarray(data[name], dtype=np.float64) for name in ("x", "y", "z")], axis=1)
+    triangles, face_of = _triangles(ply)
+    face_albedo = _ply_colours(ply["face"].data)
+    return vertices, triangles, _ply_colours(data), None if face_albedo is None else face_albedo[face_of]
+
+
+def _ply_colours(data: np.ndarray) -> np.ndarray | None:
+    """The RGB colours in [0, 1] of a PLY element's records, or None where it has none."""
+    names = data.dtype.names or ()
+    for channels in (_FLOAT_RGB, _BYTE_RGB):
+        if all(name in names for name in channels):
+            dtype = data.dtype[channels[0]]
+            scale = float(np.iinfo(dtype).max) if np.issubdtype(dtype, np.integer) else 1.0
+            return np.stack([np.asarray(data[name], dtype=np.float64) for name in channels], axis=1) / scale
+    return None
 
 
 def _read_ply(plyfile, path: Path):
@@ -172,27 +252,8 @@ def _read_ply(plyfile, path: Path):
         return plyfile.PlyData.read(str(path))
 
 
-def _vertex_data(ply) -> tuple[np.ndarray, np.ndarray]:
-    if "vertex" not in ply:
-        raise DatasetError("has no 'vertex' element")
-    data = ply["vertex"].data
-    names = data.dtype.names or ()
-    missing = [name for name in ("x", "y", "z") if name not in names]
-    if missing:
-        raise DatasetError(f"its vertices have no {', '.join(missing)} (need x, y, z)")
-    vertices = np.stack([np.asarray(data[name], dtype=np.float64) for name in ("x", "y", "z")], axis=1)
-    if all(name in names for name in _FLOAT_RGB):
-        albedo = np.stack([np.asarray(data[name], dtype=np.float64) for name in _FLOAT_RGB], axis=1)
-    elif all(name in names for name in _BYTE_RGB):
-        dtype = data.dtype[_BYTE_RGB[0]]
-        scale = float(np.iinfo(dtype).max) if np.issubdtype(dtype, np.integer) else 1.0
-        albedo = np.stack([np.asarray(data[name], dtype=np.float64) for name in _BYTE_RGB], axis=1) / scale
-    else:
-        raise DatasetError("its vertices have no colour, the albedo: expected properties r, g, b or red, green, blue")
-    return vertices, albedo
-
-
-def _triangles(ply) -> np.ndarray:
+def _triangles(ply) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles of a PLY mesh's faces (fans of larger ones), and the face of each."""
     if "face" not in ply or len(ply["face"].data) == 0:
         raise DatasetError("has no faces")
     data = ply["face"].data
@@ -202,13 +263,104 @@ def _triangles(ply) -> np.ndarray:
         raise DatasetError("its faces have no vertex_indices list")
     faces = data[name]
     if faces.dtype != object:
-        return np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+        triangles = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+        return triangles, np.arange(len(triangles))
+    return _fans([np.asarray(face, dtype=np.int64) for face in faces])
+
+
+def _fans(faces: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles of polygons split around their first corner, and the polygon of each."""
     corners = np.array([len(face) for face in faces])
     if corners.min() < 3:
         bad = int(np.argmin(corners))
         raise DatasetError(f"face {bad} has {corners[bad]} corners, fewer than 3")
-    fans = [np.asarray(face, dtype=np.int64) for face in faces]
-    return np.concatenate([np.stack([np.full(len(f) - 2, f[0]), f[1:-1], f[2:]], axis=1) for f in fans])
+    triangles = np.concatenate([np.stack([np.full(len(f) - 2, f[0]), f[1:-1], f[2:]], axis=1) for f in faces])
+    return triangles, np.repeat(np.arange(len(faces)), corners - 2)
+
+
+def _read_obj(path: Path) -> _MeshData:
+    """Vertices (with ``v x y z r g b`` colours), faces and the ``Kd`` of their materials."""
+    vertices: list[list[float]] = []
+    colours: list[list[float]] = []
+    faces: list[np.ndarray] = []
+    face_material: list[str | None] = []
+    materials: dict[str, tuple[float, float, float] | None] = {}
+    material = None
+    with path.open(encoding="utf-8") as lines:
+        for number, line in enumerate(lines, start=1):
+            fields = line.split("#", 1)[0].split()
+            if not fields:
+                continue
+            keyword, values = fields[0], fields[1:]
+            if keyword == "v":
+                if len(values) not in (3, 4, 6, 7):
+                    raise DatasetError(f"line {number}: a vertex needs x y z (and r g b), got {len(values)} numbers")
+                numbers = [float(value) for value in values]
+                vertices.append(numbers[:3])
+                if len(values) >= 6:
+                    colours.append(numbers[-3:])
+            elif keyword == "f":
+                faces.append(_obj_face(values, len(vertices), number))
+                face_material.append(material)
+            elif keyword == "mtllib":
+                materials.update(_read_mtl(path, " ".join(values)))
+            elif keyword == "usemtl":
+                material = " ".join(values)
+    if not vertices:
+        raise DatasetError("has no vertices")
+    if not faces:
+        raise DatasetError("has no faces")
+    triangles, face_of = _fans(faces)
+    vertex_albedo = np.array(colours, dtype=np.float64) if len(colours) == len(vertices) else None
+    face_albedo = None
+    if vertex_albedo is None and any(name is not None for name in face_material):
+        face_albedo = np.array([_material_kd(materials, name) for name in face_material], dtype=np.float64)[face_of]
+    return np.array(vertices, dtype=np.float64), triangles, vertex_albedo, face_albedo
+
+
+def _obj_face(values: list[str], count: int, number: int) -> np.ndarray:
+    """The 0-based vertex indices of an OBJ face (``i``, ``i/t``, ``i//n``, ``i/t/n``; a
+    negative index counts back from the last vertex read)."""
+    indices = []
+    for value in values:
+        index = int(value.split("/", 1)[0])
+        if index == 0:
+            raise DatasetError(f"line {number}: vertex index 0 (OBJ counts from 1)")
+        indices.append(index - 1 if index > 0 else count + index)
+    return np.array(indices, dtype=np.int64)
+
+
+def _read_mtl(obj: Path, name: str) -> dict[str, tuple[float, float, float] | None]:
+    """The diffuse colour ``Kd`` of each material of the ``mtllib`` file `name` (beside `obj`)."""
+    path = obj.parent / name
+    if Path(name).is_absolute() or ".." in Path(name).parts:
+        raise DatasetError(f"mtllib {name!r} lies outside the mesh's folder")
+    if not path.is_file():
+        raise DatasetError(f"mtllib {name!r}: file not found beside the mesh")
+    kd: dict[str, tuple[float, float, float] | None] = {}
+    current = None
+    with path.open(encoding="utf-8") as lines:
+        for line in lines:
+            fields = line.split("#", 1)[0].split()
+            if fields[:1] == ["newmtl"]:
+                current = " ".join(fields[1:])
+                kd[current] = None
+            elif fields[:1] == ["Kd"] and current is not None and len(fields) >= 4:
+                kd[current] = (float(fields[1]), float(fields[2]), float(fields[3]))
+    return kd
+
+
+def _material_kd(
+    materials: dict[str, tuple[float, float, float] | None], name: str | None
+) -> tuple[float, float, float]:
+    colour = None if name is None else materials.get(name)
+    if colour is None:
+        raise DatasetError(
+            f"a face's material {name!r} has no Kd colour"
+            if name is not None
+            else "some faces have a material and others none: every face needs a colour"
+        )
+    return colour
 
 
 def write_environment_mesh(environment: MeshEnvironment, path: str | Path) -> None:

@@ -657,12 +657,14 @@ def _parse_environment(
         fields.mapping(value, "environment", required=("type",))
         return None
     if kind == "mesh":
-        name = fields.mapping(value, "environment", required=("type", "file"))["file"]
+        mesh = fields.mapping(value, "environment", required=("type", "file"), optional=("albedo",))
+        name = mesh["file"]
         if not isinstance(name, str):
             fields.expect(name, "environment.file", "a file name")
         if not name or Path(name).name != name or name in (".", ".."):
             fields.fail("environment.file", f"is {shown(name)}: expected a file name in the data set folder")
-        return read_environment_mesh(folder / name)
+        uniform = None if "albedo" not in mesh else fields.rgb01(mesh["albedo"], "environment.albedo")
+        return read_environment_mesh(folder / name, albedo=uniform)
     if kind != "cornell_box":
         fields.fail("environment.type", f"is {shown(kind)}: expected 'none', 'cornell_box' or 'mesh'")
     box = fields.mapping(value, "environment", required=_BOX_KEYS)
@@ -680,7 +682,8 @@ def _environment_to_dict(box: CornellBox | MeshEnvironment | None) -> dict:
     if box is None:
         return {"type": "none"}
     if isinstance(box, MeshEnvironment):
-        return {"type": "mesh", "file": box.file}
+        uniform = {} if box.uniform_albedo is None else {"albedo": _floats(box.uniform_albedo)}
+        return {"type": "mesh", "file": box.file} | uniform
     return {
         "type": "cornell_box",
         "x": _floats(box.x),
