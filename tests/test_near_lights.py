@@ -56,6 +56,8 @@ def test_each_pixel_is_fitted_with_its_own_lights(robust):
     cosine = (fit.normals.reshape(-1, 3)[lit] * normals[lit]).sum(axis=1)
     assert lit.sum() > 10 and np.degrees(np.arccos(np.clip(cosine, -1, 1))).max() < 0.05
     np.testing.assert_allclose(fit.albedo.reshape(-1, 3)[lit], albedo[lit], rtol=1e-3)
+    if robust == "auto":  # matte: the lobe share of its pixels, fitted with their own lights, chooses Tukey
+        assert fit.robust_used == "tukey" and fit.lobe_share is not None and fit.lobe_share < 0.5
     # The same lights taken as one distant light each (from the origin) miss the normals.
     distant = photometric_stereo(
         images, scene.nominal_light_directions, LEDS[0].intensity[None] / 900.0 * np.ones((6, 3)), robust="none"
@@ -152,3 +154,33 @@ def test_a_synthesized_rig_round_trips_and_irtps_removes_its_inter_reflections(t
 def test_absurd_near_lights_are_refused_by_name():
     with pytest.raises(OptionError, match=r"^lights_near: 0.01 is out of range"):
         irtps.synthesize("cap", size=16, lights=3, lights_near=0.01)
+
+
+def test_the_report_draws_the_rig_around_the_object(tmp_path):
+    from irtps.report.build import build_report
+
+    out = tmp_path / "out"
+    irtps.save_reconstruction(irtps.reconstruct(irtps.load_dataset(RIG), "ps"), out, source=str(RIG))
+    report = build_report(out)
+    rig = next(figure for figure in report.figures if figure.name == "rig")
+    assert rig.png.startswith(b"\x89PNG") and "point lights" in rig.caption
+
+
+def test_auto_chooses_the_lobe_mode_for_a_glossy_object_under_near_lights():
+    rng = np.random.default_rng(8)
+    count = 400
+    normals = rng.normal(size=(count, 3)) * [0.3, 0.3, 0.0] + [0.0, 0.0, 1.0]
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    points = np.c_[rng.uniform(-4, 4, (count, 2)), np.zeros(count)]
+    lights = [
+        PointLight((12.0 * np.cos(a), 12.0 * np.sin(a), 10.0 + 4 * np.cos(2 * a)), (600.0,) * 3)
+        for a in np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    ]
+    directions, irradiance = lights_at(Scene(Camera(20, 20, 1.0), lights), points)
+    half = directions + [0.0, 0.0, 1.0]
+    half /= np.linalg.norm(half, axis=-1, keepdims=True)
+    cosine = np.clip(np.einsum("nki,ni->nk", directions, normals), 0.0, None)
+    lobe = 0.4 + 3.0 * np.clip(np.einsum("nki,ni->nk", half, normals), 0.0, None) ** 16
+    images = np.transpose(irradiance * (cosine * lobe)[..., None] / np.pi, (1, 0, 2)).reshape(16, 20, 20, 3)
+    fit = photometric_stereo(images, directions, irradiance, robust="auto")
+    assert fit.robust_used == "lobe" and fit.lobe_share > 0.5

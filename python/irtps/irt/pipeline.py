@@ -218,9 +218,14 @@ def settled_near_fit(
     height = np.where(mask, scene.base_height, 0).astype(np.float32) if start is None else start
     tolerance = PRECISION_PIXELS * scene.camera.orthographic_pixel_size
     framed = images if images.ndim == 4 else _framed(images, mask)
-    change = None
+    change, chosen_by = None, None
     for _ in range(NEAR_ROUNDS):
         fit = fit_photometric_stereo(dataset, images, options, progress=progress, surface=height)
+        if options.robust == "auto":
+            # The first round chooses the robust mode; the later ones fit with its choice.
+            chosen_by, options = fit, with_chosen_robust(options, fit)
+        elif chosen_by is not None:
+            fit = dataclasses.replace(fit, robust_used=chosen_by.robust_used, lobe_share=chosen_by.lobe_share)
         relief = surface_relief(dataset, fit.normals, options)
         placed_at = near_placement(dataset, relief, framed, options, placement, change)
         settled = placed(relief, mask, placed_at, scene)
@@ -253,18 +258,12 @@ def near_placement(
         relief,
         dataset.mask,
         images,
-        robust=_fitted_mode(options.robust),
+        robust="tukey" if options.robust == "auto" else options.robust,
         shadow_fraction=options.shadow_fraction,
         saturation=options.saturation,
         near=near,
         radius=0.0 if near is None or shape_change is None else PLACEMENT_SEARCH_CHANGES * shape_change,
     )
-
-
-def _fitted_mode(robust: str) -> str:
-    """The robust mode a fit under per-pixel lights runs for `robust` (its ``"auto"`` is
-    the Tukey mode's)."""
-    return "tukey" if robust == "auto" else robust
 
 
 def _framed(observations: np.ndarray, mask: np.ndarray) -> np.ndarray:

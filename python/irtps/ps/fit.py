@@ -181,8 +181,8 @@ def photometric_stereo(
           it from there (as ``"auto"`` does).
         - ``"auto"`` (default, as in ``irtps.reconstruct``): ``"lobe"`` for an object most of
           whose pixels take a specular lobe, else ``"tukey"`` (`choose_robust`), by the
-          object's `lobe_share` (``"tukey"`` under per-pixel lights, whose share is not
-          measured). The share's first pixels are fitted beside the Tukey fit,
+          object's `lobe_share` (under per-pixel lights, of up to `LOBE_SAMPLE` pixels
+          spread over the mask, fitted with their own lights). The share's first pixels are fitted beside the Tukey fit,
           on the same threads, so that a matte object costs little more than the Tukey fit
           alone; the result tells the mode chosen and the share.
         - ``"threshold"``: drop observations in shadow (channel sum below `shadow_fraction`
@@ -261,7 +261,8 @@ def _fit_per_pixel(
     views: np.ndarray | None,
 ) -> PsResult:
     """`photometric_stereo` of float32 `images` under lights given at each of the mask's
-    pixels ((N, K, 3) each); ``"auto"`` fits in the Tukey mode."""
+    pixels ((N, K, 3) each); ``"auto"`` chooses by the lobe share of up to `LOBE_SAMPLE` of
+    them (`choose_robust`)."""
     shape = (int(mask.sum()), len(images), 3)
     arrays = []
     for name, value in (("light_directions", light_directions), ("light_irradiance", light_irradiance)):
@@ -278,14 +279,36 @@ def _fit_per_pixel(
             f"channel {channel} = {irradiance[pixel, k, channel]:g}: expected 0 or a number from "
             f"{MIN_IRRADIANCE:g} to {MAX_IRRADIANCE:g}",
         )
-    robust_used = "tukey" if robust == "auto" else robust
     _, _, _, shadow_fraction, saturation = _core_settings(
-        images, directions[0], irradiance[0], robust_used, shadow_fraction, saturation
+        images, directions[0], irradiance[0], "lobe" if robust == "auto" else robust, shadow_fraction, saturation
     )
+    if robust != "auto":
+        return PsResult(
+            *_core.photometric_stereo_per_pixel(
+                images, mask, directions, irradiance, robust, shadow_fraction, saturation, views=views
+            )
+        )
+    # The lobe share of up to LOBE_SAMPLE spread pixels, fitted as `lobe_share` fits them.
+    sample = np.zeros_like(mask)
+    sample.flat[spread_pixels(mask, LOBE_SAMPLE)] = True
+    among = np.searchsorted(np.flatnonzero(mask), np.flatnonzero(sample))
+    flags = _core.photometric_stereo_per_pixel(
+        images,
+        sample,
+        np.ascontiguousarray(directions[among]),
+        np.ascontiguousarray(irradiance[among]),
+        "lobe",
+        shadow_fraction,
+        saturation,
+        lobe_rounds=LOBE_CHECK_ROUNDS,
+        views=views,
+    )[2]
+    share = float((flags[sample] == LOBE).mean())
+    chosen = choose_robust(share)
     fit = _core.photometric_stereo_per_pixel(
-        images, mask, directions, irradiance, robust_used, shadow_fraction, saturation, views=views
+        images, mask, directions, irradiance, chosen, shadow_fraction, saturation, views=views
     )
-    return PsResult(*fit, robust_used=robust_used if robust == "auto" else None)
+    return PsResult(*fit, robust_used=chosen, lobe_share=share)
 
 
 def _checked_views(views, size: tuple[int, int]) -> np.ndarray | None:

@@ -38,6 +38,9 @@ from irtps._shared.output_rule import check_output
 from irtps._shared.paths import folder_problem
 from irtps.irt.folder import RECONSTRUCTION_FILES, load_reconstruction, load_run_record
 from irtps.report.page import recorded_agreement, report_html
+from irtps.report.rig_figure import rig_png, shows_a_rig
+from irtps.io.dataset_files import SCENE_FILE
+from irtps.model.scene import load_scene
 
 __all__ = ["PAGE_FILE", "REPORT_FOLDER", "Report", "ReportFigure", "build_report", "report_inputs", "write_report"]
 
@@ -163,6 +166,9 @@ def build_report(run_dir: str | Path, *, truth: str | Path | None = None) -> Rep
         _albedo_figure(albedo[window], shown),
         _shading_figure(height[window], shown, record, report.notes),
     ]
+    rig = _rig_figure(record, height, mask, report.notes)
+    if rig is not None:
+        report.figures.append(rig)
     if (folder / "discontinuities.png").exists():
         report.figures.append(_discontinuity_figure(folder / "discontinuities.png", normals, mask, window))
     indirect = _indirect_figure(folder / "indirect", mask, window)
@@ -367,6 +373,27 @@ def _ground_truth(record: dict, truth: str | Path | None, size: tuple[int, int])
     if gt is None:
         return None, f"none, so no error maps: the source data set {source} has none ({NO_TRUTH_HINT})."
     return gt, f"from the source data set {source}."
+
+
+def _rig_figure(record: dict, height: np.ndarray, mask: np.ndarray, notes: list[str]) -> ReportFigure | None:
+    """The rig around the object (`irtps.report.rig_figure`), when the recorded source data
+    set has point lights or a mesh around the object."""
+    source, _ = _recorded_source(record)
+    if source is None or not (Path(source) / SCENE_FILE).is_file():
+        return None
+    try:
+        scene = load_scene(Path(source) / SCENE_FILE)
+    except IrtpsError as error:
+        notes.append(f"The rig is not drawn: {error}")
+        return None
+    if not shows_a_rig(scene) or (scene.camera.height, scene.camera.width) != mask.shape:
+        return None
+    caption = (
+        "The reconstructed surface (grey points, each pixel's on its camera ray) inside the source data set's "
+        "surroundings given as a mesh (in their albedo), with its point lights (numbered stars, as its images) "
+        "and the camera's optical centre (blue); world units."
+    )
+    return ReportFigure("rig", "The rig", caption, rig_png(scene, height, mask, "The rig"))
 
 
 def _error_figures(maps: ErrorMaps, metrics: Metrics, window: tuple[slice, slice]) -> list[ReportFigure]:
