@@ -184,3 +184,15 @@ def test_auto_chooses_the_lobe_mode_for_a_glossy_object_under_near_lights():
     images = np.transpose(irradiance * (cosine * lobe)[..., None] / np.pi, (1, 0, 2)).reshape(16, 20, 20, 3)
     fit = photometric_stereo(images, directions, irradiance, robust="auto")
     assert fit.robust_used == "lobe" and fit.lobe_share > 0.5
+
+
+def test_the_residual_covers_the_visible_environment_of_a_rig():
+    from irtps.render.residual import render_with_residual
+
+    data = irtps.load_dataset(RIG)
+    scene, height, albedo, mask = irtps.load_scene_object(RIG)
+    right = render_with_residual(scene, height, albedo, mask, data.images, bounces=2, samples=16).residual
+    dark = render_with_residual(scene, height, albedo, mask, 0.5 * data.images, bounces=2, samples=16).residual
+    # The true scene explains its light box within the Monte-Carlo noise; halved images do not.
+    assert right.surroundings is not None and right.surroundings < 0.15
+    assert dark.surroundings > 0.5

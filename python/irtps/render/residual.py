@@ -28,6 +28,7 @@ from irtps._shared.checks import check_array, check_mask
 from irtps.model.data import observation_brightness, pixel_observations
 from irtps.errors import ArgumentError
 from irtps.render.renderer import check_counts, check_frame_memory, make_renderer, render_sparse
+from irtps.model.environment import MeshEnvironment
 from irtps.model.scene import Scene
 
 __all__ = ["Rerendering", "Residual", "compared_observations", "render_with_residual"]
@@ -53,7 +54,7 @@ class Residual:
         channels, for the observations photometric stereo fits (`compared_observations`).
     surroundings : float or None
         The same over the pixels outside the mask (every observation that is not
-        saturated); None without a floor.
+        saturated); None without a floor or an environment mesh (a rig's: contract §3b).
     noise : float
         Monte-Carlo standard deviation of `object` (from two independent halves of the
         camera paths; 0 with a single path per pixel).
@@ -181,7 +182,7 @@ def render_with_residual(
     del sparse
     scale = max(on_object[1], np.finfo(float).tiny)
     surroundings = None
-    if scene.floor is not None:
+    if scene.floor is not None or isinstance(scene.environment, MeshEnvironment):
         surroundings = _surroundings_residual(rendering, ~mask, images, usable, counts)
     residual = Residual(
         object=float(on_object[0] / scale),
