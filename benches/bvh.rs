@@ -83,7 +83,6 @@ fn scene(n: usize) -> Scene {
             back: [0.7, 0.7, 0.7],
             front: [0.7, 0.7, 0.7],
         }),
-        environment_mesh: None,
         zero_height: 0.0,
     }
 }

@@ -2,8 +2,6 @@
 //! camera, height-field object, optional floor, Cornell box or environment mesh, distant or
 //! point lights.
 
-use std::sync::Arc;
-
 use glam::Vec3A;
 
 use crate::error::{Error, Result};
@@ -203,8 +201,6 @@ pub struct Scene {
     pub surface: HeightField,
     pub floor: Option<Floor>,
     pub cornell_box: Option<CornellBox>,
-    /// Surroundings given as a mesh (shared, not copied, by the scenes made from this one).
-    pub environment_mesh: Option<Arc<EnvironmentMesh>>,
     /// The z of world height 0, where the skirt ends when there is no floor: 0 in world
     /// coordinates, moved by [`Frame::local_scene`].
     pub zero_height: f32,
@@ -332,9 +328,6 @@ impl Scene {
                 check_albedo(&format!("environment.albedo.{name}"), rgb)?;
             }
         }
-        if let Some(mesh) = &self.environment_mesh {
-            mesh.validate()?;
-        }
         Ok(())
     }
 }
@@ -425,6 +418,16 @@ impl Frame {
         }
     }
 
+    /// The working-frame point of world point `p`, refused as [`Frame::local_scene`] refuses
+    /// a coordinate float32 cannot resolve, naming `field` and `place()`.
+    pub fn local_point(&self, field: &str, p: Vec3A, place: impl Fn() -> String) -> Result<Vec3A> {
+        Ok(Vec3A::new(
+            resolvable(field, self.local_xy(p.x), &place)?,
+            resolvable(field, self.local_xy(p.y), &place)?,
+            resolvable(field, self.local_z(p.z), &place)?,
+        ))
+    }
+
     /// The world length of working-frame length `t`.
     pub fn to_world_length(&self, t: f32) -> f32 {
         (f64::from(t) * self.scale) as f32
@@ -482,24 +485,6 @@ impl Frame {
             pinhole,
             ..scene.camera
         };
-        let environment_mesh = match &scene.environment_mesh {
-            Some(mesh) => {
-                let mut positions = Vec::with_capacity(mesh.positions.len());
-                for (v, p) in mesh.positions.iter().enumerate() {
-                    let place = || format!("at vertex {v}");
-                    positions.push(Vec3A::new(
-                        resolvable("environment.vertices", self.local_xy(p.x), place)?,
-                        resolvable("environment.vertices", self.local_xy(p.y), place)?,
-                        resolvable("environment.vertices", self.local_z(p.z), place)?,
-                    ));
-                }
-                Some(Arc::new(EnvironmentMesh {
-                    positions,
-                    ..(**mesh).clone()
-                }))
-            }
-            None => None,
-        };
         Ok(Scene {
             camera,
             surface: HeightField {
@@ -509,7 +494,6 @@ impl Frame {
             },
             floor,
             cornell_box,
-            environment_mesh,
             zero_height: resolvable("height", self.local_z(scene.zero_height), || {
                 "from world height 0 (where the skirt ends without a floor)".to_string()
             })?,

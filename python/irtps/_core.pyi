@@ -29,6 +29,7 @@ __all__ = [
     "check_lights",
     "compare_rendering",
     "denoise_indirect",
+    "Environment",
     "Renderer",
     "SparseCholesky",
     "integrate_bilateral",
@@ -129,15 +130,25 @@ def denoise_indirect(
     energy (N,), filtered along the surface of heights `height_px` (H, W, in pixels) and
     `albedo` (H, W, 3)."""
 @final
+class Environment:
+    """Surroundings given as a mesh (contract §3b), made ready for ray queries once and shared
+    by every `Renderer` built with it: `vertices` (V, 3) float32 in world units, `triangles`
+    (F, 3) uint32, `albedo` (V, 3) float32 in [0, 1]."""
+
+    def __new__(cls, vertices: _F32, triangles: npt.NDArray[np.uint32], albedo: _F32) -> Environment: ...
+    @property
+    def triangle_count(self) -> int:
+        """Number of triangles."""
+
+@final
 class Renderer:
     """A scene made ready for rendering and ray queries: height-field object, optional floor,
     Cornell box and environment mesh, distant or point lights; an orthographic camera, or a pinhole ``(fx, fy, cx, cy,
     zc)`` whose ``pixel_size`` is a pixel's world size at the depth of the object's base.
     ``light_positions`` (K, 3) makes light k an isotropic point at row k (world units; its
     ``light_irradiance`` row its radiant intensity, contract §4b) where the row is not NaN;
-    its direction row is then unused. ``environment_mesh`` ``(vertices (V, 3), triangles (F, 3)
-    uint32, albedo (V, 3))``, world units, adds surroundings given as a mesh that reflects on
-    both sides (contract §3b)."""
+    its direction row is then unused. ``environment_mesh`` adds surroundings given as a mesh
+    that reflects on both sides (contract §3b), built once (`Environment`)."""
 
     def __new__(
         cls,
@@ -151,7 +162,7 @@ class Renderer:
         cornell_box: CornellBox | None = None,
         pinhole: tuple[float, float, float, float, float] | None = None,
         light_positions: _F32 | None = None,
-        environment_mesh: tuple[_F32, npt.NDArray[np.uint32], _F32] | None = None,
+        environment_mesh: Environment | None = None,
     ) -> Renderer: ...
     def with_reflectance(self, albedo: _F32, light_irradiance: _F32) -> Renderer:
         """The same scene with the object's albedo (H, W, 3) and each light's irradiance

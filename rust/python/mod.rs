@@ -47,6 +47,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(estimate::compare_rendering, m)?)?;
     m.add_function(wrap_pyfunction!(estimate::denoise_indirect, m)?)?;
     m.add_class::<render::Renderer>()?;
+    m.add_class::<render::Environment>()?;
     m.add_class::<integrate::SparseCholesky>()?;
     m.add_function(wrap_pyfunction!(integrate::integrate_bilateral, m)?)?;
     m.add("MAX_IMAGE_PIXELS", crate::io::MAX_IMAGE_PIXELS)?;

@@ -19,6 +19,7 @@ use crate::scene::{
     Camera, CornellBox, Emitter, EnvironmentMesh, Floor, HeightField, Light, Pinhole, PointLight,
     Rgb, Scene,
 };
+use crate::trace::environment::EnvironmentAccel;
 
 use super::convert::{flat, lights_from, rows_of_3};
 use super::errors::{argument_error, renamed, to_py};
@@ -93,8 +94,8 @@ struct BoxArgs {
 /// `irtps.scene.Floor` or None, `cornell_box` an `irtps.scene.CornellBox` or None, `pinhole`
 /// None (orthographic) or `(fx, fy, cx, cy, zc)` of a pinhole camera at `(0, 0, zc)`, whose
 /// `pixel_size` is then a pixel's world size at the depth of the object's base;
-/// `light_positions` as [`emitters_from`] reads them; `environment_mesh` None or
-/// `(vertices (V, 3) float32, triangles (F, 3) uint32, albedo (V, 3) float32)` in world units.
+/// `light_positions` as [`emitters_from`] reads them; `environment_mesh` None or an
+/// [`Environment`].
 #[pyclass(frozen, module = "irtps._core")]
 pub(super) struct Renderer {
     inner: CoreRenderer,
@@ -132,37 +133,53 @@ fn emitters_from(
         .collect())
 }
 
-/// The environment mesh of `(vertices, triangles, albedo)` arrays, checked for shape (its
-/// values are checked with the scene).
-fn environment_from(
-    (vertices, triangles, albedo): &EnvironmentArrays<'_>,
-) -> PyResult<EnvironmentMesh> {
-    let positions = rows_of_3(vertices, "environment_mesh vertices")?;
-    let albedo = rows_of_3(albedo, "environment_mesh albedo")?;
-    let indices = triangles.as_array();
-    if indices.ncols() != 3 {
-        return Err(argument_error(
-            "environment_mesh triangles",
-            format!("expected shape (F, 3), got {:?}", indices.shape()),
-        ));
-    }
-    Ok(EnvironmentMesh {
-        positions: positions.into_iter().map(Vec3A::from).collect(),
-        albedo,
-        triangles: indices
-            .rows()
-            .into_iter()
-            .map(|r| [r[0], r[1], r[2]])
-            .collect(),
-    })
+/// Surroundings given as a mesh (contract §3b), made ready for ray queries once and shared
+/// by every renderer built with it: `vertices` (V, 3) float32 in world units, `triangles`
+/// (F, 3) uint32, `albedo` (V, 3) float32 in [0, 1].
+#[pyclass(frozen, module = "irtps._core")]
+pub(super) struct Environment {
+    inner: Arc<EnvironmentAccel>,
 }
 
-/// An environment mesh as Python hands it over: vertices, triangles, vertex albedo.
-type EnvironmentArrays<'py> = (
-    PyReadonlyArray2<'py, f32>,
-    PyReadonlyArray2<'py, u32>,
-    PyReadonlyArray2<'py, f32>,
-);
+#[pymethods]
+impl Environment {
+    #[new]
+    fn new(
+        py: Python<'_>,
+        vertices: PyReadonlyArray2<'_, f32>,
+        triangles: PyReadonlyArray2<'_, u32>,
+        albedo: PyReadonlyArray2<'_, f32>,
+    ) -> PyResult<Environment> {
+        let positions = rows_of_3(&vertices, "vertices")?;
+        let albedo = rows_of_3(&albedo, "albedo")?;
+        let indices = triangles.as_array();
+        if indices.ncols() != 3 {
+            return Err(argument_error(
+                "triangles",
+                format!("expected shape (F, 3), got {:?}", indices.shape()),
+            ));
+        }
+        let mesh = EnvironmentMesh {
+            positions: positions.into_iter().map(Vec3A::from).collect(),
+            albedo,
+            triangles: indices
+                .rows()
+                .into_iter()
+                .map(|r| [r[0], r[1], r[2]])
+                .collect(),
+        };
+        let inner = py.detach(|| EnvironmentAccel::new(mesh)).map_err(to_py)?;
+        Ok(Environment {
+            inner: Arc::new(inner),
+        })
+    }
+
+    /// Number of triangles.
+    #[getter]
+    fn triangle_count(&self) -> usize {
+        self.inner.len()
+    }
+}
 
 #[pymethods]
 impl Renderer {
@@ -181,7 +198,7 @@ impl Renderer {
         cornell_box: Option<BoxArgs>,
         pinhole: Option<(f32, f32, f32, f32, f32)>,
         light_positions: Option<PyReadonlyArray2<'_, f32>>,
-        environment_mesh: Option<EnvironmentArrays<'_>>,
+        environment_mesh: Option<PyRef<'_, Environment>>,
     ) -> PyResult<Renderer> {
         let (h, w) = (height.shape()[0], height.shape()[1]);
         if mask.shape() != [h, w] {
@@ -236,15 +253,11 @@ impl Renderer {
                 back: walls.albedo_back,
                 front: walls.albedo_front,
             }),
-            environment_mesh: environment_mesh
-                .as_ref()
-                .map(environment_from)
-                .transpose()?
-                .map(Arc::new),
             zero_height: 0.0,
         };
+        let environment = environment_mesh.map(|e| Arc::clone(&e.inner));
         let inner = py
-            .detach(|| CoreRenderer::with_emitters(&scene, &lights))
+            .detach(|| CoreRenderer::with_environment(&scene, &lights, environment))
             .map_err(|e| {
                 to_py(renamed(
                     renamed(e, "camera", "height"),

@@ -154,7 +154,7 @@ impl LightCache {
         weight: Rgb,
         acc: &mut [f32],
     ) {
-        if mesh.kinds[t] == SurfaceKind::Environment {
+        if mesh.is_environment(t) {
             self.add_traced_direct_radiance(tracer, point, n, albedo, weight, acc);
             return;
         }

@@ -24,7 +24,8 @@ use crate::sampler::{cosine_hemisphere, hash, low_discrepancy_4d, unit_float, Rn
 use crate::scene::{
     check_albedo, validate_emitters, validate_lights, Camera, Emitter, Frame, Light, Rgb, Scene,
 };
-use crate::trace::mesh::Mesh;
+use crate::trace::environment::EnvironmentAccel;
+use crate::trace::mesh::{Mesh, PlacedEnvironment};
 use crate::trace::Tracer;
 
 pub mod denoise;
@@ -110,6 +111,18 @@ impl Renderer {
     /// each point light's direction and inverse-square falloff vary over the scene, and its
     /// shadow rays stop at it.
     pub fn with_emitters(scene: &Scene, lights: &[Emitter]) -> Result<Renderer> {
+        Self::with_environment(scene, lights, None)
+    }
+
+    /// [`Renderer::with_emitters`] in surroundings given as a mesh (contract §3b), built for
+    /// ray queries once ([`EnvironmentAccel`]) and shared, not copied: renderers of the same
+    /// scene with other objects (IRT-PS's passes) build only the object's structures. Refuses,
+    /// naming it, a mesh that float32 cannot resolve in the scene's working frame.
+    pub fn with_environment(
+        scene: &Scene,
+        lights: &[Emitter],
+        environment: Option<Arc<EnvironmentAccel>>,
+    ) -> Result<Renderer> {
         scene.validate()?;
         if lights.is_empty() {
             return Err(Error::input("lights", "no lights given"));
@@ -128,7 +141,23 @@ impl Renderer {
         )?;
         let frame = Frame::of(scene);
         let scene = &frame.local_scene(scene)?;
-        let mesh = Mesh::from_scene(scene);
+        let mut mesh = Mesh::from_scene(scene);
+        // The top of the environment mesh, which an orthographic camera's rays start above.
+        let mut environment_top = f32::NEG_INFINITY;
+        if let Some(accel) = environment {
+            let (lo, hi) = accel.bounds();
+            for corner in [lo, hi] {
+                let local = frame.local_point("environment.vertices", corner, || {
+                    "at a corner of the box around them".to_string()
+                })?;
+                environment_top = environment_top.max(local.z);
+            }
+            mesh.environment = Some(PlacedEnvironment {
+                accel,
+                scale: frame.scale as f32,
+                z_origin: frame.z_origin as f32,
+            });
+        }
         let tracer = Arc::new(Tracer::new(&mesh));
         let (lo, hi) = mesh.near_bounds();
         let view = scene.camera.width.max(scene.camera.height) as f32;
@@ -138,8 +167,9 @@ impl Renderer {
             view
         };
         let ray_offset = 1e-4 * extent;
-        let camera_z = if hi.z.is_finite() {
-            hi.z + extent
+        let top = hi.z.max(environment_top);
+        let camera_z = if top.is_finite() {
+            top + extent
         } else {
             extent
         };

@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::scene::{Emitter, HeightField, Pinhole, PointLight};
+use crate::trace::environment::EnvironmentAccel;
 use glam::vec3a;
 use std::f32::consts::PI;
 
@@ -33,7 +34,6 @@ fn object_alone(camera: Camera, height: Vec<f32>, albedo: Rgb) -> Scene {
         },
         floor: None,
         cornell_box: None,
-        environment_mesh: None,
         zero_height: 0.0,
     }
 }
@@ -581,9 +581,28 @@ fn a_point_light_with_a_bad_position_or_intensity_is_named() {
     assert!(bad(vec3a(0.0, 0.0, 9.0), [1.0, -1.0, 1.0]).starts_with("lights[1].intensity: "));
 }
 
-/// A level plate of `size`² pixels at height 3 above a square environment mesh at z = 0,
-/// 40 pixels a side, wound to face `facing` (±z), of albedo `albedo`.
-fn plate_over_a_mesh(size: usize, facing: f32, albedo: Rgb) -> Scene {
+/// A square environment mesh at z = 0, 40 pixels a side, wound to face `facing` (±z), of
+/// albedo `albedo`.
+fn square_mesh(facing: f32, albedo: Rgb) -> crate::scene::EnvironmentMesh {
+    let triangles = if facing > 0.0 {
+        vec![[0, 1, 2], [0, 2, 3]]
+    } else {
+        vec![[0, 2, 1], [0, 3, 2]]
+    };
+    crate::scene::EnvironmentMesh {
+        positions: vec![
+            vec3a(-20.0, -20.0, 0.0),
+            vec3a(20.0, -20.0, 0.0),
+            vec3a(20.0, 20.0, 0.0),
+            vec3a(-20.0, 20.0, 0.0),
+        ],
+        albedo: vec![albedo; 4],
+        triangles,
+    }
+}
+
+/// A level plate of `size`² pixels at height 3 (its middle, 3 pixels in from the edges).
+fn plate(size: usize) -> Scene {
     let camera = Camera {
         width: size,
         height: size,
@@ -595,31 +614,16 @@ fn plate_over_a_mesh(size: usize, facing: f32, albedo: Rgb) -> Scene {
         let (i, j) = (p / size, p % size);
         scene.surface.mask[p] = (3..size - 3).contains(&i) && (3..size - 3).contains(&j);
     }
-    let triangles = if facing > 0.0 {
-        vec![[0, 1, 2], [0, 2, 3]]
-    } else {
-        vec![[0, 2, 1], [0, 3, 2]]
-    };
-    scene.environment_mesh = Some(Arc::new(crate::scene::EnvironmentMesh {
-        positions: vec![
-            vec3a(-20.0, -20.0, 0.0),
-            vec3a(20.0, -20.0, 0.0),
-            vec3a(20.0, 20.0, 0.0),
-            vec3a(-20.0, 20.0, 0.0),
-        ],
-        albedo: vec![albedo; 4],
-        triangles,
-    }));
     scene
 }
 
 #[test]
 fn an_environment_mesh_reflects_lamberts_law_on_either_side_and_takes_shadows() {
     let albedo = [0.6, 0.4, 0.2];
-    let light = Light {
+    let light = Emitter::Distant(Light {
         direction: vec3a(0.0, 0.6, 0.8),
         irradiance: [PI; 3],
-    };
+    });
     let settings = RenderSettings {
         bounces: 0,
         samples: 0,
@@ -629,7 +633,8 @@ fn an_environment_mesh_reflects_lamberts_law_on_either_side_and_takes_shadows() 
         cached_direct: true,
     };
     for facing in [1.0, -1.0] {
-        let renderer = Renderer::new(&plate_over_a_mesh(16, facing, albedo), &[light]).unwrap();
+        let accel = Arc::new(EnvironmentAccel::new(square_mesh(facing, albedo)).unwrap());
+        let renderer = Renderer::with_environment(&plate(16), &[light], Some(accel)).unwrap();
         let image = renderer.render_rows(0..16, &settings).unwrap();
         let pixel = |row: usize, col: usize| &image[(row * 16 + col) * 3..][..3];
         // A corner of the mesh, lit: ρ E cos θ / π with E = π.
@@ -643,17 +648,70 @@ fn an_environment_mesh_reflects_lamberts_law_on_either_side_and_takes_shadows() 
 }
 
 #[test]
+fn a_scene_with_an_environment_mesh_renders_alike_at_any_height_and_scale() {
+    // The whole scene (plate and mesh) raised by 57 pixel sizes, or drawn at a quarter of the
+    // size: the working frame moves, the mesh's BVH stays in world units, the image is the same.
+    let settings = RenderSettings {
+        bounces: 0,
+        samples: 0,
+        direct_samples: 4,
+        seed: 2,
+        split_bounces: true,
+        cached_direct: true,
+    };
+    let light = Emitter::Distant(Light {
+        direction: vec3a(0.3, 0.2, 0.9).normalize(),
+        irradiance: [PI; 3],
+    });
+    let render = |scale: f32, lift: f32| {
+        let mut scene = plate(12);
+        scene.camera.pixel_size = scale;
+        scene.zero_height = lift * scale;
+        scene
+            .surface
+            .height
+            .iter_mut()
+            .for_each(|h| *h = (*h + lift) * scale);
+        let mut mesh = square_mesh(1.0, [0.5; 3]);
+        mesh.positions
+            .iter_mut()
+            .for_each(|p| *p = (*p + vec3a(0.0, 0.0, lift)) * scale);
+        let accel = Arc::new(EnvironmentAccel::new(mesh).unwrap());
+        Renderer::with_environment(&scene, &[light], Some(accel))
+            .unwrap()
+            .render_rows(0..12, &settings)
+            .unwrap()
+    };
+    let reference = render(1.0, 0.0);
+    // The plate's shadow falls on the mesh: a wrong placement of either would move it.
+    assert!(reference.contains(&0.0) && reference.iter().any(|&v| v > 0.1));
+    for (scale, lift) in [(0.25, 0.0), (1.0, 57.0)] {
+        let other = render(scale, lift);
+        let worst = reference
+            .iter()
+            .zip(&other)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        assert!(worst <= 1e-4, "{scale} {lift}: off by {worst}");
+    }
+}
+
+#[test]
 fn a_bad_environment_mesh_is_an_error_naming_it() {
     let error = |edit: fn(&mut crate::scene::EnvironmentMesh)| {
-        let mut scene = plate_over_a_mesh(8, 1.0, [0.5; 3]);
-        let mut mesh = (**scene.environment_mesh.as_ref().unwrap()).clone();
+        let mut mesh = square_mesh(1.0, [0.5; 3]);
         edit(&mut mesh);
-        scene.environment_mesh = Some(Arc::new(mesh));
-        let light = Light {
+        let light = Emitter::Distant(Light {
             direction: Vec3A::Z,
             irradiance: [1.0; 3],
-        };
-        Renderer::new(&scene, &[light]).err().unwrap().to_string()
+        });
+        EnvironmentAccel::new(mesh)
+            .and_then(|accel| {
+                Renderer::with_environment(&plate(8), &[light], Some(Arc::new(accel)))
+            })
+            .err()
+            .unwrap()
+            .to_string()
     };
     let text = error(|m| m.positions[2].x = f32::NAN);
     assert!(
@@ -669,7 +727,7 @@ fn a_bad_environment_mesh_is_an_error_naming_it() {
     assert!(text.starts_with("environment.albedo of vertex 3"), "{text}");
     let text = error(|m| m.positions[0].x = 1e12);
     assert!(
-        text.starts_with("environment.vertices: lies at vertex 0"),
+        text.starts_with("environment.vertices: lies at a corner of the box around them"),
         "{text}"
     );
 }

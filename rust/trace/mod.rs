@@ -1,23 +1,21 @@
 //! Ray queries over a [`Mesh`]: the height field and its skirt through the grid-based
 //! [`HeightFieldAccel`], the panels of the surroundings (floor and walls) analytically as
-//! rectangles or planes, and any other triangle through a compressed wide BVH (obvhs CWBVH).
+//! rectangles or planes, any other triangle through a compressed wide BVH (obvhs CWBVH,
+//! [`bvh`]), and an environment mesh through its own, built once a run ([`environment`]).
 //!
 //! This module is the [`Tracer`]; [`mesh`] builds the scene's triangles, [`height_field`]
 //! walks the height field's grid.
 
-use std::time::Duration;
-
-use glam::{UVec2, Vec3A};
-use obvhs::cwbvh::builder::build_cwbvh_from_tris;
-use obvhs::cwbvh::CwBvh;
+use glam::Vec3A;
 use obvhs::ray::Ray;
-use obvhs::rt_triangle::RtTriangle;
 use obvhs::triangle::Triangle;
-use obvhs::BvhBuildParams;
 
+use crate::trace::bvh::TriangleBvh;
 use crate::trace::height_field::HeightFieldAccel;
-use crate::trace::mesh::{Mesh, SurfaceKind, NO_PANEL};
+use crate::trace::mesh::{Mesh, PlacedEnvironment, SurfaceKind, NO_PANEL};
 
+pub mod bvh;
+pub mod environment;
 pub mod height_field;
 pub mod mesh;
 
@@ -43,15 +41,12 @@ pub struct Tracer {
     panels: Vec<PanelShape>,
     /// Where the groups along x, y and z end in `panels`.
     axis_ends: [usize; 3],
-    bvh: CwBvh,
-    /// Triangles in BVH order, laid out for fast intersection.
-    triangles: Vec<RtTriangle>,
-    /// Mesh index of each triangle in BVH order.
-    mesh_index: Vec<u32>,
+    /// Every other triangle of the mesh.
+    bvh: TriangleBvh,
     /// Number of mesh triangles.
     triangle_count: usize,
-    /// BVH position of the point placed beyond the bounds (see [`Tracer::new`]).
-    bounds_guard: usize,
+    /// The environment mesh, queried in world units (its triangles follow the mesh's).
+    environment: Option<PlacedEnvironment>,
     /// Whether this CPU runs the AVX2 build of the traversal.
     avx2: bool,
     /// The height field's box, when every panel lies outside it: a ray starting inside the
@@ -60,7 +55,8 @@ pub struct Tracer {
 }
 
 impl Tracer {
-    /// Builds the acceleration structures (the BVH in parallel on rayon's pool).
+    /// Builds the acceleration structures (the BVH in parallel on rayon's pool); an
+    /// environment mesh's is the one it was built with (`Mesh::environment`).
     pub fn new(mesh: &Mesh) -> Tracer {
         let height_field = HeightFieldAccel::new(mesh);
         let on_grid = |t: usize| {
@@ -84,14 +80,13 @@ impl Tracer {
             .filter(|&t| !on_grid(t) && !on_panel(t))
             .map(|t| t as u32)
             .collect();
-        let mut tris: Vec<Triangle> = in_bvh
+        let tris: Vec<Triangle> = in_bvh
             .iter()
             .map(|&t| {
                 let [v0, v1, v2] = mesh.corners(t as usize);
                 Triangle { v0, v1, v2 }
             })
             .collect();
-        let triangle_count = mesh.triangles.len();
         let field_box = height_field
             .as_ref()
             .map(HeightFieldAccel::bounds)
@@ -102,91 +97,26 @@ impl Tracer {
                     (0..3).any(|k| b[k] <= lo[k] || a[k] >= hi[k])
                 })
             });
-        if tris.is_empty() {
-            return Tracer {
-                field_box,
-                height_field,
-                panels,
-                axis_ends,
-                bvh: CwBvh::default(),
-                triangles: Vec::new(),
-                mesh_index: Vec::new(),
-                triangle_count,
-                bounds_guard: usize::MAX,
-                avx2: avx2_available(),
-            };
-        }
-        // obvhs's Morton code wraps a coordinate lying exactly on the build bounds' maximum
-        // to 0 (e.g. the skirt on the +x and +y sides), which spoils the BVH (many more nodes
-        // visited). A degenerate point beyond the maximum keeps every real triangle inside;
-        // traversal skips it.
-        let (lo, hi) = tris
-            .iter()
-            .fold((Vec3A::INFINITY, Vec3A::NEG_INFINITY), |(lo, hi), t| {
-                (
-                    lo.min(t.v0).min(t.v1).min(t.v2),
-                    hi.max(t.v0).max(t.v1).max(t.v2),
-                )
-            });
-        let guard = hi + (hi - lo).max(Vec3A::ONE) * 0.01;
-        let guard_index = tris.len() as u32;
-        tris.push(Triangle {
-            v0: guard,
-            v1: guard,
-            v2: guard,
-        });
-        let bvh = build_cwbvh_from_tris(
-            &tris,
-            BvhBuildParams::very_fast_build(),
-            &mut Duration::default(),
-        );
-        let bounds_guard = bvh
-            .primitive_indices
-            .iter()
-            .position(|&i| i == guard_index)
-            .expect("the guard is in the BVH");
-        let mesh_index = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| in_bvh.get(i as usize).copied().unwrap_or(u32::MAX))
-            .collect();
-        let triangles = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| RtTriangle::from(&tris[i as usize]))
-            .collect();
         Tracer {
-            field_box,
+            field_box: field_box.filter(|_| mesh.environment.is_none()),
             height_field,
             panels,
             axis_ends,
-            bvh,
-            triangles,
-            mesh_index,
-            triangle_count,
-            bounds_guard,
+            bvh: TriangleBvh::new(tris, in_bvh),
+            triangle_count: mesh.triangles.len(),
+            environment: mesh.environment.clone(),
             avx2: avx2_available(),
         }
     }
 
-    /// Distance to BVH primitive `id` along `ray` (infinite for the bounds guard).
-    #[inline(always)]
-    fn intersect(&self, ray: &Ray, id: usize) -> f32 {
-        if id == self.bounds_guard {
-            f32::INFINITY
-        } else {
-            self.triangles[id].intersect(ray)
-        }
-    }
-
-    /// Number of triangles.
+    /// Number of triangles, the environment mesh's included.
     pub fn len(&self) -> usize {
-        self.triangle_count
+        self.triangle_count + self.environment.as_ref().map_or(0, |e| e.accel.len())
     }
 
     /// Whether there is nothing to hit.
     pub fn is_empty(&self) -> bool {
-        self.triangle_count == 0
+        self.len() == 0
     }
 
     /// The nearest panel hit in (0, `t_max`) (of equal ones, the first in mesh order).
@@ -288,7 +218,7 @@ impl Tracer {
         {
             t_limit = hit.t;
             best = Some(hit);
-            if self.triangles.is_empty()
+            if self.bvh.is_empty()
                 && self
                     .field_box
                     .is_some_and(|(lo, hi)| origin.cmpge(lo).all() && origin.cmple(hi).all())
@@ -296,17 +226,32 @@ impl Tracer {
                 return best;
             }
         }
-        if !self.triangles.is_empty() {
-            let ray = make_ray(origin, direction, t_limit);
-            if let Some((id, t)) = self.closest_portable(ray) {
-                let uv = self.triangles[id].compute_barycentric(&ray);
-                best = Some(Hit {
-                    triangle: self.mesh_index[id] as usize,
-                    t,
-                    u: uv.x,
-                    v: uv.y,
-                });
-                t_limit = t;
+        if let Some((triangle, t, u, v)) = self.bvh.closest(make_ray(origin, direction, t_limit)) {
+            best = Some(Hit {
+                triangle: triangle as usize,
+                t,
+                u,
+                v,
+            });
+            t_limit = t;
+        }
+        if let Some(environment) = &self.environment {
+            let scale = environment.scale;
+            let found =
+                environment
+                    .accel
+                    .closest(environment.to_world(origin), direction, t_limit * scale);
+            if let Some((triangle, t_world, u, v)) = found {
+                let t = t_world / scale;
+                if t < t_limit {
+                    best = Some(Hit {
+                        triangle: self.triangle_count + triangle as usize,
+                        t,
+                        u,
+                        v,
+                    });
+                    t_limit = t;
+                }
             }
         }
         self.panel_hit(origin, direction, t_limit).or(best)
@@ -330,7 +275,16 @@ impl Tracer {
         {
             return true;
         }
-        !self.triangles.is_empty() && self.any_portable(make_ray(origin, direction, t_max))
+        if self.bvh.any(make_ray(origin, direction, t_max)) {
+            return true;
+        }
+        self.environment.as_ref().is_some_and(|environment| {
+            environment.accel.occluded(
+                environment.to_world(origin),
+                direction,
+                t_max * environment.scale,
+            )
+        })
     }
 
     /// The same queries compiled for AVX2 and FMA (chosen at run time; the same hits, but
@@ -358,51 +312,6 @@ impl Tracer {
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
     unsafe fn occluded_avx2(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
         self.occluded_with::<true>(origin, direction, t_max)
-    }
-
-    #[inline(always)]
-    fn closest_portable(&self, ray: Ray) -> Option<(usize, f32)> {
-        let mut traverse_ray = ray;
-        let mut state = self.bvh.new_traversal(ray.direction);
-        let mut node;
-        let mut best = None;
-        obvhs::traverse!(
-            self.bvh,
-            node,
-            state,
-            node.intersect_ray(&traverse_ray, state.oct_inv4),
-            {
-                let id = state.primitive_id as usize;
-                let t = self.intersect(&traverse_ray, id);
-                if t < traverse_ray.tmax {
-                    best = Some(id);
-                    traverse_ray.tmax = t;
-                }
-            }
-        );
-        best.map(|id| (id, traverse_ray.tmax))
-    }
-
-    #[inline(always)]
-    fn any_portable(&self, ray: Ray) -> bool {
-        let mut state = self.bvh.new_traversal(ray.direction);
-        let mut node;
-        let mut hit = false;
-        'search: {
-            obvhs::traverse!(
-                self.bvh,
-                node,
-                state,
-                node.intersect_ray(&ray, state.oct_inv4),
-                {
-                    if self.intersect(&ray, state.primitive_id as usize) < ray.tmax {
-                        hit = true;
-                        break 'search;
-                    }
-                }
-            );
-        }
-        hit
     }
 }
 
@@ -556,7 +465,7 @@ fn avx2_available() -> bool {
 /// traversal octant from `d < 0` but the slab inverse from the sign bit, and the two disagree
 /// on −0.0, which loses hits of axis-aligned rays.
 #[inline]
-fn make_ray(origin: Vec3A, direction: Vec3A, t_max: f32) -> Ray {
+pub(crate) fn make_ray(origin: Vec3A, direction: Vec3A, t_max: f32) -> Ray {
     Ray::new(origin, direction + Vec3A::ZERO, 0.0, t_max)
 }
 

@@ -69,7 +69,6 @@ fn the_avx2_traversal_agrees_with_the_portable_one() {
             albedo: [0.5; 3],
         }),
         cornell_box: None,
-        environment_mesh: None,
         zero_height: 0.0,
     };
     // Through the height-field grid, and with the grid dropped, through the BVH.
@@ -129,7 +128,6 @@ fn a_batch_gets_the_same_hits_as_one_ray_at_a_time() {
             back: [0.5; 3],
             front: [0.5; 3],
         }),
-        environment_mesh: None,
         zero_height: 0.0,
     };
     let tracer = Tracer::new(&Mesh::from_scene(&scene));

@@ -122,13 +122,19 @@ def _light_direction_rows(scene: Scene) -> np.ndarray:
     ).astype(np.float32)
 
 
-def _environment_arguments(mesh: MeshEnvironment) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(vertices, triangles, albedo)`` of an environment mesh, as the core's renderer takes them."""
-    return (
-        np.ascontiguousarray(mesh.vertices, dtype=np.float32),
-        np.ascontiguousarray(mesh.triangles, dtype=np.uint32),
-        np.ascontiguousarray(mesh.albedo, dtype=np.float32),
-    )
+def _environment_arguments(mesh: MeshEnvironment) -> _core.Environment:
+    """An environment mesh made ready for ray queries (its BVH, in world units), built once
+    per mesh and kept with it: every renderer of the scene (IRT-PS's passes, the placement's
+    renderings) shares it."""
+    built = mesh.__dict__.get("_core_environment")
+    if built is None:
+        built = _core.Environment(
+            np.ascontiguousarray(mesh.vertices, dtype=np.float32),
+            np.ascontiguousarray(mesh.triangles, dtype=np.uint32),
+            np.ascontiguousarray(mesh.albedo, dtype=np.float32),
+        )
+        mesh.__dict__["_core_environment"] = built
+    return built
 
 
 def _pinhole_arguments(pinhole: Camera) -> tuple[float, float, float, float, float]:

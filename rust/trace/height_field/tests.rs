@@ -39,7 +39,6 @@ fn ragged_scene(w: usize, h: usize, seed: u64) -> Scene {
             albedo: [0.5; 3],
         }),
         cornell_box: None,
-        environment_mesh: None,
         zero_height: 0.0,
     }
 }

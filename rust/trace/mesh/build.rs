@@ -1,11 +1,12 @@
 //! The mesh of a scene, built exactly as the contract says: the height-field triangulation,
-//! the skirt under its boundary, the floor, the Cornell-box walls and an environment mesh.
+//! the skirt under its boundary, the floor and the Cornell-box walls (an environment mesh is
+//! placed beside them: [`super::PlacedEnvironment`]).
 
 use std::sync::Arc;
 
 use glam::{vec3a, Vec3A};
 
-use crate::scene::{EnvironmentMesh, Rgb, Scene};
+use crate::scene::{Rgb, Scene};
 
 use super::{
     BlockSide, HeightFieldGrid, Mesh, Panel, SkirtEdge, SurfaceKind, NO_PANEL, NO_TRIANGLE,
@@ -29,26 +30,8 @@ impl Mesh {
         if let Some(f) = &scene.floor {
             mesh.add_floor(scene, f.height, f.albedo);
         }
-        if let Some(environment) = &scene.environment_mesh {
-            mesh.add_environment_mesh(environment);
-        }
         mesh.finish_vertex_normals();
         mesh
-    }
-
-    /// Appends the triangles of an environment mesh as they are wound (both sides reflect);
-    /// degenerate ones are dropped.
-    fn add_environment_mesh(&mut self, environment: &EnvironmentMesh) {
-        let first = self.positions.len() as u32;
-        for (p, albedo) in environment.positions.iter().zip(&environment.albedo) {
-            self.add_vertex(*p, *albedo, u32::MAX);
-        }
-        for tri in &environment.triangles {
-            let tri = tri.map(|i| first + i);
-            let [a, b, c] = tri.map(|i| self.positions[i as usize]);
-            let n = (b - a).cross(c - a);
-            self.add_triangle(tri, n, SurfaceKind::Environment, NO_PANEL);
-        }
     }
 
     fn add_vertex(&mut self, p: Vec3A, albedo: Rgb, pixel: u32) -> u32 {

@@ -12,6 +12,7 @@ use std::sync::Arc;
 use glam::Vec3A;
 
 use crate::scene::Rgb;
+use crate::trace::environment::EnvironmentAccel;
 
 mod build;
 
@@ -26,9 +27,38 @@ pub enum SurfaceKind {
     Floor,
     /// A Cornell-box wall.
     Wall,
-    /// A triangle of an environment mesh (contract §3b): it reflects on both sides, and its
-    /// light is traced at each point rather than cached.
-    Environment,
+}
+
+/// An environment mesh (contract §3b) placed in a mesh's working frame: its triangles stay
+/// in world units, in their BVH built once a run; a point of the frame is `to_world` there.
+/// Its triangles follow the mesh's: triangle `t` of the environment is the mesh's
+/// `triangles.len() + t`. They reflect on both sides, and their light is traced at each
+/// point rather than cached.
+#[derive(Clone)]
+pub struct PlacedEnvironment {
+    pub accel: Arc<EnvironmentAccel>,
+    /// World units per working-frame unit.
+    pub scale: f32,
+    /// World z of the working frame's origin.
+    pub z_origin: f32,
+}
+
+impl PlacedEnvironment {
+    /// The world point of working-frame point `p`.
+    #[inline(always)]
+    pub fn to_world(&self, p: Vec3A) -> Vec3A {
+        Vec3A::new(
+            p.x * self.scale,
+            p.y * self.scale,
+            p.z * self.scale + self.z_origin,
+        )
+    }
+}
+
+impl std::fmt::Debug for PlacedEnvironment {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "PlacedEnvironment({} triangles)", self.accel.len())
+    }
 }
 
 /// An indexed triangle mesh with per-vertex albedo and per-triangle facing normals.
@@ -48,7 +78,7 @@ pub struct Mesh {
     /// Surface each triangle belongs to.
     pub kinds: Vec<SurfaceKind>,
     /// The panel each triangle belongs to, or [`NO_PANEL`] for the object's triangles
-    /// (whose light is cached per vertex) and the environment mesh's.
+    /// (whose light is cached per vertex).
     pub panel_of: Vec<u32>,
     /// The flat rectangles of the surroundings (floor and walls).
     pub panels: Vec<Panel>,
@@ -60,6 +90,8 @@ pub struct Mesh {
     /// that exploit it (shared with them, not copied); None when the mesh was not built from
     /// a height field.
     pub grid: Option<Arc<HeightFieldGrid>>,
+    /// Surroundings given as a mesh, whose triangles follow this mesh's.
+    pub environment: Option<PlacedEnvironment>,
 }
 
 /// The height-field part of a [`Mesh`] on its pixel grid. Block (i, j) is the square between
@@ -165,9 +197,18 @@ impl Mesh {
     /// on its vertices 0, 1, 2).
     #[inline]
     pub fn albedo_at(&self, t: usize, u: f32, v: f32) -> Rgb {
+        if let Some(environment) = self.environment.as_ref().filter(|_| self.is_environment(t)) {
+            return environment.accel.albedo_at(t - self.triangles.len(), u, v);
+        }
         let [a, b, c] = self.triangles[t].map(|i| self.albedo[i as usize]);
         let w = 1.0 - u - v;
         [0, 1, 2].map(|ch| w * a[ch] + u * b[ch] + v * c[ch])
+    }
+
+    /// Whether triangle `t` is the environment mesh's.
+    #[inline(always)]
+    pub fn is_environment(&self, t: usize) -> bool {
+        t >= self.triangles.len()
     }
 
     /// The unit normal of triangle `t` on the side a ray along `direction` meets: its facing
@@ -175,14 +216,12 @@ impl Mesh {
     /// for the back of a one-sided surface (black).
     #[inline(always)]
     pub fn seen_normal(&self, t: usize, direction: Vec3A) -> Option<Vec3A> {
-        let n = self.normals[t];
-        if n.dot(direction) < 0.0 {
-            Some(n)
-        } else if self.kinds[t] == SurfaceKind::Environment {
-            Some(-n)
-        } else {
-            None
+        if let Some(environment) = self.environment.as_ref().filter(|_| self.is_environment(t)) {
+            let n = environment.accel.normal(t - self.triangles.len());
+            return Some(if n.dot(direction) < 0.0 { n } else { -n });
         }
+        let n = self.normals[t];
+        (n.dot(direction) < 0.0).then_some(n)
     }
 
     /// Corner positions of triangle `t`.
@@ -192,12 +231,12 @@ impl Mesh {
     }
 
     /// Axis-aligned bounds of the object and the cached part of the panels (the far floor and
-    /// an environment mesh excluded); infinite when the scene is empty.
+    /// an environment mesh left out); infinite when the scene is empty.
     pub fn near_bounds(&self) -> (Vec3A, Vec3A) {
         let mut lo = Vec3A::splat(f32::INFINITY);
         let mut hi = Vec3A::splat(f32::NEG_INFINITY);
         for (t, tri) in self.triangles.iter().enumerate() {
-            if self.panel_of[t] == NO_PANEL && self.kinds[t] != SurfaceKind::Environment {
+            if self.panel_of[t] == NO_PANEL {
                 for &i in tri {
                     lo = lo.min(self.positions[i as usize]);
                     hi = hi.max(self.positions[i as usize]);

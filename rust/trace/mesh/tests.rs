@@ -3,6 +3,7 @@
 use super::*;
 use crate::scene::{Camera, CornellBox, Floor, HeightField, Scene};
 use glam::vec3a;
+use std::sync::Arc;
 
 pub(crate) fn flat_scene(w: usize, h: usize, z: f32, mask: impl Fn(usize, usize) -> bool) -> Scene {
     let n = w * h;
@@ -20,7 +21,6 @@ pub(crate) fn flat_scene(w: usize, h: usize, z: f32, mask: impl Fn(usize, usize)
         },
         floor: None,
         cornell_box: None,
-        environment_mesh: None,
         zero_height: 0.0,
     }
 }
@@ -122,9 +122,9 @@ fn without_a_floor_the_skirt_reaches_world_height_zero_in_the_working_frame() {
 }
 
 #[test]
-fn an_environment_mesh_keeps_its_winding_and_albedo() {
-    let mut scene = flat_scene(4, 4, 1.0, |_, _| false);
-    scene.environment_mesh = Some(std::sync::Arc::new(crate::scene::EnvironmentMesh {
+fn an_environment_mesh_keeps_its_winding_and_albedo_and_follows_the_meshs_triangles() {
+    let mut mesh = Mesh::from_scene(&flat_scene(4, 4, 1.0, |_, _| true));
+    let accel = crate::trace::environment::EnvironmentAccel::new(crate::scene::EnvironmentMesh {
         positions: vec![
             vec3a(0.0, 0.0, 0.0),
             vec3a(1.0, 0.0, 0.0),
@@ -132,17 +132,22 @@ fn an_environment_mesh_keeps_its_winding_and_albedo() {
             vec3a(5.0, 5.0, 5.0),
         ],
         albedo: vec![[0.1, 0.2, 0.3], [0.4, 0.5, 0.6], [0.7, 0.8, 0.9], [1.0; 3]],
-        // Wound clockwise seen from +z, then a degenerate one (dropped).
+        // Wound clockwise seen from +z, then a degenerate one.
         triangles: vec![[0, 2, 1], [3, 3, 3]],
-    }));
-    let mesh = Mesh::from_scene(&scene);
-    let env: Vec<_> = (0..mesh.triangles.len())
-        .filter(|&t| mesh.kinds[t] == SurfaceKind::Environment)
-        .collect();
-    assert_eq!(env.len(), 1);
-    assert_eq!(mesh.normals[env[0]], -Vec3A::Z);
-    assert_eq!(mesh.albedo_at(env[0], 1.0, 0.0), [0.7, 0.8, 0.9]);
-    // Seen from above, its facing normal is turned toward the ray; a wall's back is black.
-    assert_eq!(mesh.seen_normal(env[0], -Vec3A::Z), Some(Vec3A::Z));
-    assert_eq!(mesh.seen_normal(env[0], Vec3A::Z), Some(-Vec3A::Z));
+    })
+    .unwrap();
+    assert_eq!(accel.normal(0), -Vec3A::Z);
+    assert_eq!(accel.normal(1), Vec3A::ZERO);
+    mesh.environment = Some(PlacedEnvironment {
+        accel: Arc::new(accel),
+        scale: 1.0,
+        z_origin: 0.0,
+    });
+    let first = mesh.triangles.len();
+    assert!(mesh.is_environment(first) && !mesh.is_environment(first - 1));
+    assert_eq!(mesh.albedo_at(first, 1.0, 0.0), [0.7, 0.8, 0.9]);
+    // Seen from above, its facing normal is turned toward the ray; the object's back is black.
+    assert_eq!(mesh.seen_normal(first, -Vec3A::Z), Some(Vec3A::Z));
+    assert_eq!(mesh.seen_normal(first, Vec3A::Z), Some(-Vec3A::Z));
+    assert_eq!(mesh.seen_normal(0, Vec3A::Z), None);
 }
