@@ -168,7 +168,8 @@ def _near_light_pass(
     progress: bool,
 ) -> Pass:
     """`reconstruction_pass` under point lights near the object: the fit, the relief and the
-    placement settled together (`settled_near_fit`), from the previous pass's surface."""
+    placement settled together (`settled_near_fit`), from the previous pass's surface; its
+    ``photometric_stereo`` timing holds the rounds' integrations and placements too."""
     timings: dict[str, float] = {}
     with timed(timings, "photometric_stereo"):
         fit, relief, placement = settled_near_fit(

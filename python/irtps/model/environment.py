@@ -3,8 +3,9 @@ turntable or reflector card, scanned or modelled.
 
 The mesh is in world coordinates, its albedo given per vertex (interpolated across each
 triangle); its surfaces are Lambertian and reflect on both sides. `read_environment_mesh`
-reads it from a PLY file, `write_environment_mesh` writes one; `view_problem` says whether
-it hides the object from the camera.
+reads it from a PLY or OBJ file (colours per vertex or per face, or one albedo for all),
+`write_environment_mesh` writes a PLY file; `view_problem` says whether it hides the object
+from the camera.
 """
 
 from __future__ import annotations
