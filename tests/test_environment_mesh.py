@@ -374,3 +374,13 @@ def test_one_albedo_for_the_whole_mesh_round_trips_through_scene_json(tmp_path):
     assert scene_to_dict(scene)["environment"] == {"type": "mesh", "file": "environment.ply", "albedo": [0.2, 0.3, 0.4]}
     with pytest.raises(irtps.ArgumentError, match=r"^albedo: must be three numbers in \[0, 1\]"):
         read_environment_mesh(tmp_path / "environment.ply", albedo=(0.2, 1.5, 0.1))
+
+
+def test_a_checked_mesh_pickles_without_its_ray_structures_and_checks_again():
+    import pickle
+
+    mesh = _square(z=30.0, half=30.0)
+    assert "lies between" in view_problem(mesh, 50.0, 0.0)  # builds its BVH, kept with it
+    back = pickle.loads(pickle.dumps(mesh))
+    assert back == mesh and "_core_environment" not in back.__dict__
+    assert "lies between" in view_problem(back, 50.0, 0.0)

@@ -140,6 +140,12 @@ class Environment:
     def triangle_count(self) -> int:
         """Number of triangles."""
 
+    def first_hit(
+        self, origin: tuple[float, float, float], direction: tuple[float, float, float], t_max: float
+    ) -> float | None:
+        """Distance from `origin` along the unit `direction` (world units) to the nearest
+        triangle, either side, within (0, `t_max`); None if there is none."""
+
 @final
 class Renderer:
     """A scene made ready for rendering and ray queries: height-field object, optional floor,

@@ -179,6 +179,14 @@ impl Environment {
     fn triangle_count(&self) -> usize {
         self.inner.len()
     }
+
+    /// Distance from `origin` along the unit `direction` (world units) to the nearest
+    /// triangle, either side, within (0, `t_max`); None if there is none.
+    fn first_hit(&self, origin: [f32; 3], direction: [f32; 3], t_max: f32) -> Option<f32> {
+        self.inner
+            .closest(Vec3A::from(origin), Vec3A::from(direction), t_max)
+            .map(|(_, t, _, _)| t)
+    }
 }
 
 #[pymethods]

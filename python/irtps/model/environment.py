@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from irtps import _core
 from irtps._shared.atomic import atomic_write_bytes
 from irtps._shared.checks import check_path
 from irtps._shared.paths import exists
@@ -89,6 +90,11 @@ class MeshEnvironment:
         )
 
     __hash__ = None  # type: ignore[assignment]
+
+    def __getstate__(self) -> dict:
+        """Its fields, without what is built from them (`core_environment`, the view checks
+        remembered): pickled to a batch's workers, they are built again there."""
+        return {name: value for name, value in self.__dict__.items() if not name.startswith("_")}
 
 
 def mesh_problem(vertices: np.ndarray, triangles: np.ndarray, albedo: np.ndarray) -> str | None:
@@ -429,22 +435,25 @@ def view_problem(environment: MeshEnvironment, optical_center_z: float | None, b
 
 
 def _view_problem(environment: MeshEnvironment, optical_center_z: float | None, base_height: float) -> str | None:
-    """`view_problem`, found by casting the rays."""
-    corners = environment.vertices[environment.triangles]
+    """`view_problem`, found by casting the rays through the mesh's BVH (`core_environment`).
+    Each ray leaves a hair (a millionth of the scene's size, in no special direction) off the
+    axis, so that it does not run along the shared edge of a mesh laid out around the axis."""
+    accel = core_environment(environment)
     extent = float(np.ptp(environment.vertices, axis=0).max()) + abs(base_height) + 1.0
-    low = base_height + 1e-6 * extent
+    hair = 1e-6 * extent
+    low = base_height + hair
     top = float(environment.vertices[:, 2].max()) + 1.0 if optical_center_z is None else optical_center_z
     if top > low:
-        hit = _first_hit(corners, np.array([0.0, 0.0, top]), np.array([0.0, 0.0, -1.0]), top - low)
+        hit = accel.first_hit((hair, 0.618 * hair, top), (0.0, 0.0, -1.0), top - low)
         if hit is not None:
             return (
                 f"lies between the camera and the object: the camera's axis meets it at z = {top - hit:g}, "
                 f"above the object's base ({base_height:g}); the camera would see the mesh, not the object"
             )
     if optical_center_z is not None:
-        origin = np.array([0.0, 0.0, optical_center_z])
-        axes = np.concatenate([np.eye(3), -np.eye(3)])
-        if all(_first_hit(corners, origin, axis, np.inf) is not None for axis in axes):
+        origin = (hair, 0.618 * hair, optical_center_z + 0.382 * hair)
+        axes = [(1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (-1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0)]
+        if all(accel.first_hit(origin, axis, np.inf) is not None for axis in axes):
             return (
                 f"encloses the camera (the optical centre at z = {optical_center_z:g}): the camera must see "
                 "the scene from outside the mesh (are the mesh's units the scene's?)"
@@ -452,28 +461,16 @@ def _view_problem(environment: MeshEnvironment, optical_center_z: float | None, 
     return None
 
 
-#: Triangles tested at once by `_first_hit` (bounds its temporaries to some hundred MB).
-_CHUNK = 1 << 20
-
-
-def _first_hit(corners: np.ndarray, origin: np.ndarray, direction: np.ndarray, t_max: float) -> float | None:
-    """Distance along `direction` from `origin` to the nearest triangle of `corners`
-    (F, 3, 3) in (0, t_max), or None (Möller–Trumbore, both sides)."""
-    best = None
-    for start in range(0, len(corners), _CHUNK):
-        v0, v1, v2 = (corners[start : start + _CHUNK, c] for c in range(3))
-        e1, e2 = v1 - v0, v2 - v0
-        p = np.cross(direction, e2)
-        det = np.einsum("ij,ij->i", e1, p)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / det
-            s = origin - v0
-            u = np.einsum("ij,ij->i", s, p) * inv
-            q = np.cross(s, e1)
-            v = (q @ direction) * inv
-            t = np.einsum("ij,ij->i", e2, q) * inv
-            hit = (det != 0.0) & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > 0.0) & (t < t_max)
-        if hit.any():
-            nearest = float(t[hit].min())
-            best = nearest if best is None else min(best, nearest)
-    return best
+def core_environment(mesh: MeshEnvironment) -> _core.Environment:
+    """The mesh made ready for ray queries (its BVH, in world units), built once per mesh and
+    kept with it: its view check and every renderer of the scene (IRT-PS's passes, the
+    placement's renderings) share it."""
+    built = mesh.__dict__.get("_core_environment")
+    if built is None:
+        built = _core.Environment(
+            np.ascontiguousarray(mesh.vertices, dtype=np.float32),
+            np.ascontiguousarray(mesh.triangles, dtype=np.uint32),
+            np.ascontiguousarray(mesh.albedo, dtype=np.float32),
+        )
+        mesh.__dict__["_core_environment"] = built
+    return built

@@ -13,7 +13,7 @@ from irtps.errors import ArgumentError
 from irtps.model.options import RenderOptions
 from irtps._shared.resources import check_memory
 from irtps.model.camera import Camera
-from irtps.model.environment import MeshEnvironment
+from irtps.model.environment import MeshEnvironment, core_environment
 from irtps.model.scene import CornellBox, Light, Scene, stand_in_scene
 
 #: Footprint samples per pixel for the direct image (stratified; shadows are traced exactly).
@@ -111,7 +111,7 @@ def make_renderer(scene: Scene, height: np.ndarray, albedo: np.ndarray, mask: np
         box,
         None if pinhole is None else _pinhole_arguments(pinhole),
         scene.light_positions.astype(np.float32) if scene.has_point_lights else None,
-        None if mesh is None else _environment_arguments(mesh),
+        None if mesh is None else core_environment(mesh),
     )
 
 
@@ -120,21 +120,6 @@ def _light_direction_rows(scene: Scene) -> np.ndarray:
     return np.stack(
         [light.direction if isinstance(light, Light) else np.array([0.0, 0.0, 1.0]) for light in scene.lights]
     ).astype(np.float32)
-
-
-def _environment_arguments(mesh: MeshEnvironment) -> _core.Environment:
-    """An environment mesh made ready for ray queries (its BVH, in world units), built once
-    per mesh and kept with it: every renderer of the scene (IRT-PS's passes, the placement's
-    renderings) shares it."""
-    built = mesh.__dict__.get("_core_environment")
-    if built is None:
-        built = _core.Environment(
-            np.ascontiguousarray(mesh.vertices, dtype=np.float32),
-            np.ascontiguousarray(mesh.triangles, dtype=np.uint32),
-            np.ascontiguousarray(mesh.albedo, dtype=np.float32),
-        )
-        mesh.__dict__["_core_environment"] = built
-    return built
 
 
 def _pinhole_arguments(pinhole: Camera) -> tuple[float, float, float, float, float]:
