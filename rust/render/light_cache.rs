@@ -5,15 +5,24 @@
 //! pixel apart). The direct radiance leaving any surface point then costs K multiply-adds
 //! and no rays: the Lambert term uses the surface's own normal and the visibility is
 //! interpolated (barycentrically on the object, bilinearly on a panel). Points outside a
-//! panel's cached window (the far floor), the points of an environment mesh and the points
-//! the camera sees directly are shaded with real shadow rays instead.
+//! panel's cached window (the far floor) and the points the camera sees directly are shaded
+//! with real shadow rays instead.
+//!
+//! An environment mesh's triangles no larger than the cache's spacing (a scan's) interpolate
+//! the shadow the mesh casts on itself between their corners ([`EnvironmentVisibility`],
+//! traced once a run) and trace the object's part of the shadow, which changes from pass
+//! to pass, against the object alone. Larger triangles (a coarse light box) are shaded with
+//! real shadow rays.
 
 use std::f32::consts::PI;
 
 use glam::Vec3A;
 use rayon::prelude::*;
 
+use std::sync::Arc;
+
 use crate::scene::{Emitter, Rgb};
+use crate::trace::environment::EnvironmentVisibility;
 use crate::trace::mesh::{Mesh, Panel, SurfaceKind, NO_PANEL};
 use crate::trace::Tracer;
 
@@ -35,14 +44,22 @@ pub struct LightCache {
     vertex_visibility: Vec<u8>,
     /// Per panel, `[(b · (nu + 1) + a) · K + k]` for grid vertex (a, b).
     panel_visibility: Vec<Vec<u8>>,
+    /// At the environment mesh's vertices, the mesh alone occluding.
+    environment_visibility: Option<Arc<EnvironmentVisibility>>,
     ray_offset: f32,
 }
 
 impl LightCache {
     /// Traces one shadow ray per cache point and light (in parallel); `ray_offset` is the
     /// distance by which shadow rays start off the surface. The emitters are in the mesh's
-    /// frame.
-    pub fn new(mesh: &Mesh, tracer: &Tracer, lights: &[Emitter], ray_offset: f32) -> LightCache {
+    /// frame; `environment_visibility` is theirs at the environment mesh's vertices.
+    pub fn new(
+        mesh: &Mesh,
+        tracer: &Tracer,
+        lights: &[Emitter],
+        ray_offset: f32,
+        environment_visibility: Option<Arc<EnvironmentVisibility>>,
+    ) -> LightCache {
         let directions: Vec<Vec3A> = lights
             .iter()
             .map(|l| match l {
@@ -104,6 +121,7 @@ impl LightCache {
             radiance_scale,
             vertex_visibility,
             panel_visibility,
+            environment_visibility,
             ray_offset,
         }
     }
@@ -138,7 +156,7 @@ impl LightCache {
     /// light alone to `acc`, laid out by channel then light (`acc[c · K + k]`). The
     /// visibility is interpolated between the cache points; with `exact_edges`, a light that
     /// they disagree about (a shadow's edge crosses there) gets a real shadow ray instead. An
-    /// environment mesh's point gets real shadow rays.
+    /// environment mesh's point: see [`Self::add_environment_radiance`].
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     pub fn add_direct_radiance(
@@ -155,7 +173,17 @@ impl LightCache {
         acc: &mut [f32],
     ) {
         if mesh.is_environment(t) {
-            self.add_traced_direct_radiance(tracer, point, n, albedo, weight, acc);
+            self.add_environment_radiance(
+                mesh,
+                tracer,
+                t,
+                (u, v),
+                (point, n),
+                albedo,
+                exact_edges,
+                weight,
+                acc,
+            );
             return;
         }
         let k_count = self.directions.len();
@@ -275,6 +303,65 @@ impl LightCache {
             green[k] += albedo[1] * scale_g[k] * factor * weight[1];
             blue[k] += albedo[2] * scale_b[k] * factor * weight[2];
         }
+    }
+
+    /// [`Self::add_direct_radiance`] at a point of environment triangle `t` (a mesh index)
+    /// seen on the side of `n`. Where the triangle is no larger than the cache's spacing (a
+    /// pixel of the working frame), the shadow the environment casts on itself is
+    /// interpolated between its corners (with `exact_edges`, a light that they disagree about
+    /// gets a real shadow ray), and a light that reaches the point past the environment gets
+    /// a shadow ray against the object alone; a larger triangle gets real shadow rays.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn add_environment_radiance(
+        &self,
+        mesh: &Mesh,
+        tracer: &Tracer,
+        t: usize,
+        (u, v): (f32, f32),
+        (point, n): (Vec3A, Vec3A),
+        albedo: Rgb,
+        exact_edges: bool,
+        weight: Rgb,
+        acc: &mut [f32],
+    ) {
+        let corners = mesh
+            .environment
+            .as_ref()
+            .zip(self.environment_visibility.as_ref());
+        let corners = corners.and_then(|(placed, visibility)| {
+            placed
+                .accel
+                .corner_visibility(visibility, t - mesh.triangles.len(), placed.scale)
+        });
+        let Some([a, b, c]) = corners else {
+            self.add_traced_direct_radiance(tracer, point, n, albedo, weight, acc);
+            return;
+        };
+        let origin = point + n * offset_at(self.ray_offset, point);
+        let past = |k: usize, environment: bool| {
+            let (dir, t_max) = toward(&self.directions, &self.positions, k, origin);
+            let blocked = if environment {
+                tracer.occluded(origin, dir, t_max)
+            } else {
+                tracer.occluded_apart_from_environment(origin, dir, t_max)
+            };
+            f32::from(u8::from(!blocked))
+        };
+        let w = 1.0 - u - v;
+        self.add_shaded::<true>(n, point, albedo, weight, acc, |k| {
+            if a[k] == b[k] && b[k] == c[k] {
+                if a[k] == 0 {
+                    0.0
+                } else {
+                    past(k, false)
+                }
+            } else if exact_edges {
+                past(k, true)
+            } else {
+                (w * a[k] as f32 + u * b[k] as f32 + v * c[k] as f32) * past(k, false)
+            }
+        });
     }
 
     /// Like [`Self::add_direct_radiance`], but with one real shadow ray per light in front.

@@ -115,9 +115,10 @@ impl Renderer {
     }
 
     /// [`Renderer::with_emitters`] in surroundings given as a mesh (contract §3b), built for
-    /// ray queries once ([`EnvironmentAccel`]) and shared, not copied: renderers of the same
-    /// scene with other objects (IRT-PS's passes) build only the object's structures. Refuses,
-    /// naming it, a mesh that float32 cannot resolve in the scene's working frame.
+    /// ray queries once ([`EnvironmentAccel`]) and shared, not copied, with the shadows it
+    /// casts on itself, traced once for these lights: renderers of the same scene with other
+    /// objects (IRT-PS's passes) build only the object's structures. Refuses, naming it, a
+    /// mesh that float32 cannot resolve in the scene's working frame.
     pub fn with_environment(
         scene: &Scene,
         lights: &[Emitter],
@@ -144,6 +145,7 @@ impl Renderer {
         let mut mesh = Mesh::from_scene(scene);
         // The top of the environment mesh, which an orthographic camera's rays start above.
         let mut environment_top = f32::NEG_INFINITY;
+        let mut environment_visibility = None;
         if let Some(accel) = environment {
             let (lo, hi) = accel.bounds();
             for corner in [lo, hi] {
@@ -152,6 +154,7 @@ impl Renderer {
                 })?;
                 environment_top = environment_top.max(local.z);
             }
+            environment_visibility = Some(accel.visibility(lights)?);
             mesh.environment = Some(PlacedEnvironment {
                 accel,
                 scale: frame.scale as f32,
@@ -174,7 +177,7 @@ impl Renderer {
             extent
         };
         let local: Vec<Emitter> = lights.iter().map(|l| frame.local_emitter(l)).collect();
-        let cache = LightCache::new(&mesh, &tracer, &local, ray_offset);
+        let cache = LightCache::new(&mesh, &tracer, &local, ray_offset, environment_visibility);
         #[cfg(target_arch = "x86_64")]
         let avx2 = std::is_x86_feature_detected!("avx2");
         #[cfg(not(target_arch = "x86_64"))]

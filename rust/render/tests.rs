@@ -731,3 +731,104 @@ fn a_bad_environment_mesh_is_an_error_naming_it() {
         "{text}"
     );
 }
+
+/// The corners of each of `corners`' triangles split at their edges' midpoints, `levels`
+/// times over (each triangle with its own three vertices).
+fn subdivided(corners: Vec<[Vec3A; 3]>, levels: usize) -> crate::scene::EnvironmentMesh {
+    let mut corners = corners;
+    for _ in 0..levels {
+        corners = corners
+            .iter()
+            .flat_map(|&[a, b, c]| {
+                let (ab, bc, ca) = ((a + b) / 2.0, (b + c) / 2.0, (c + a) / 2.0);
+                [[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]
+            })
+            .collect();
+    }
+    let count = corners.len() as u32;
+    crate::scene::EnvironmentMesh {
+        positions: corners.iter().flatten().copied().collect(),
+        albedo: vec![[0.6, 0.5, 0.4]; 3 * corners.len()],
+        triangles: (0..count).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect(),
+    }
+}
+
+/// Surroundings of two rectangles: a floor under the whole view and a card standing beside
+/// the object, which shadows the floor behind it.
+fn floor_and_card() -> Vec<[Vec3A; 3]> {
+    let rectangle = |a: Vec3A, b: Vec3A, c: Vec3A, d: Vec3A| [[a, b, c], [a, c, d]];
+    let floor = rectangle(
+        vec3a(-20.0, -20.0, 0.0),
+        vec3a(20.0, -20.0, 0.0),
+        vec3a(20.0, 20.0, 0.0),
+        vec3a(-20.0, 20.0, 0.0),
+    );
+    let card = rectangle(
+        vec3a(8.0, -10.0, 0.0),
+        vec3a(8.0, 10.0, 0.0),
+        vec3a(10.0, 10.0, 8.0),
+        vec3a(10.0, -10.0, 8.0),
+    );
+    floor.into_iter().chain(card).collect()
+}
+
+#[test]
+fn an_environment_mesh_finer_than_a_pixel_renders_as_the_same_mesh_traced() {
+    // The same floor and card, as four triangles (larger than the cache's spacing: every
+    // shadow traced) and as 8 192 (under a pixel a side: their own shadows read at their
+    // corners, the object's traced). The plate's shadow and the card's fall on the floor.
+    let size = 32;
+    let mut scene = plate(size);
+    for p in 0..size * size {
+        let (i, j) = (p / size, p % size);
+        scene.surface.mask[p] = (11..21).contains(&i) && (11..21).contains(&j);
+    }
+    let light = Emitter::Point(PointLight {
+        position: vec3a(-4.0, 3.0, 14.0),
+        intensity: [600.0; 3],
+    });
+    let render = |levels: usize, settings: &RenderSettings| {
+        let accel = Arc::new(EnvironmentAccel::new(subdivided(floor_and_card(), levels)).unwrap());
+        let visibility = accel.visibility(&[light]).unwrap();
+        let cached = accel.corner_visibility(&visibility, 0, 1.0).is_some();
+        assert_eq!(cached, levels > 0, "levels {levels}");
+        let renderer = Renderer::with_environment(&scene, &[light], Some(accel)).unwrap();
+        renderer.render_rows(0..size, settings).unwrap()
+    };
+    let direct = |cached_direct| RenderSettings {
+        bounces: 0,
+        samples: 0,
+        direct_samples: 16,
+        seed: 5,
+        split_bounces: true,
+        cached_direct,
+    };
+    let bounced = RenderSettings {
+        bounces: 2,
+        samples: 64,
+        direct_samples: 0,
+        seed: 5,
+        split_bounces: false,
+        cached_direct: false,
+    };
+    for (settings, tolerance) in [(direct(false), 1e-3), (direct(true), 1e-3), (bounced, 1e-2)] {
+        let (traced, cached) = (render(0, &settings), render(6, &settings));
+        let mean = traced.iter().sum::<f32>() / traced.len() as f32;
+        let off = traced
+            .iter()
+            .zip(&cached)
+            .map(|(a, b)| (a - b).abs())
+            .sum::<f32>()
+            / traced.len() as f32;
+        assert!(
+            off <= tolerance * mean,
+            "{settings:?}: off by {off} on average, of {mean}"
+        );
+        // Both shadows are there: the card's and the plate's leave floor pixels dark.
+        if settings.bounces == 0 {
+            let pixel = |row: usize, col: usize| cached[(row * size + col) * 3];
+            assert!(pixel(16, 30) < 0.01 * pixel(16, 2), "behind the card");
+            assert!(pixel(15, 21) < 0.01 * pixel(16, 2), "behind the plate");
+        }
+    }
+}

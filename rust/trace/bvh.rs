@@ -17,7 +17,8 @@ pub struct TriangleBvh {
     bvh: CwBvh,
     /// Triangles in BVH order.
     triangles: Vec<RtTriangle>,
-    /// The caller's index of each triangle, in BVH order.
+    /// The caller's index of each triangle, in BVH order (empty when the triangles are
+    /// numbered in BVH order: see [`TriangleBvh::in_bvh_order`]).
     ids: Vec<u32>,
     /// BVH position of the point placed beyond the bounds (see [`TriangleBvh::new`]).
     bounds_guard: usize,
@@ -80,6 +81,29 @@ impl TriangleBvh {
         }
     }
 
+    /// Builds the BVH of `tris` with the triangles numbered in the order it lays them out:
+    /// the hits name triangle `order[i]` of `tris` as `i`, and data the caller keeps per
+    /// triangle in that order lies together in memory where hits do in space (a large
+    /// mesh's shading data is then read from a few cache lines, not from scattered ones).
+    /// Returns the BVH and `order`.
+    pub fn in_bvh_order(tris: Vec<Triangle>) -> (TriangleBvh, Vec<u32>) {
+        let count = tris.len() as u32;
+        let mut bvh = TriangleBvh::new(tris, (0..count).collect());
+        let order = bvh.ids.iter().copied().filter(|&i| i != u32::MAX).collect();
+        bvh.ids = Vec::new();
+        (bvh, order)
+    }
+
+    /// The caller's index of the triangle at BVH position `slot` (not the bounds guard's).
+    #[inline(always)]
+    fn id(&self, slot: usize) -> u32 {
+        if self.ids.is_empty() {
+            (slot - usize::from(slot > self.bounds_guard)) as u32
+        } else {
+            self.ids[slot]
+        }
+    }
+
     /// Whether it holds no triangle.
     pub fn is_empty(&self) -> bool {
         self.triangles.is_empty()
@@ -122,7 +146,7 @@ impl TriangleBvh {
         );
         best.map(|slot| {
             let uv = self.triangles[slot].compute_barycentric(&traverse_ray);
-            (self.ids[slot], traverse_ray.tmax, uv.x, uv.y)
+            (self.id(slot), traverse_ray.tmax, uv.x, uv.y)
         })
     }
 

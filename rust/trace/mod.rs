@@ -181,24 +181,41 @@ impl Tracer {
     /// Whether anything lies along `origin + t·direction` for `t` in (0, `t_max`).
     #[inline]
     pub fn occluded(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
+        self.occluded_by::<true>(origin, direction, t_max)
+    }
+
+    /// Whether anything but the environment mesh lies along `origin + t·direction` for `t`
+    /// in (0, `t_max`): the object's part of a shadow whose environment part is known.
+    #[inline]
+    pub fn occluded_apart_from_environment(
+        &self,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+    ) -> bool {
+        self.occluded_by::<false>(origin, direction, t_max)
+    }
+
+    /// [`Tracer::occluded`], the environment mesh included when `ENVIRONMENT`.
+    #[inline(always)]
+    fn occluded_by<const ENVIRONMENT: bool>(
+        &self,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+    ) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.avx2 {
             // SAFETY: as in `closest_hit`.
-            return unsafe { self.occluded_avx2(origin, direction, t_max) };
+            return unsafe { self.occluded_avx2::<ENVIRONMENT>(origin, direction, t_max) };
         }
-        self.occluded_portable(origin, direction, t_max)
+        self.occluded_with::<false, ENVIRONMENT>(origin, direction, t_max)
     }
 
     /// The closest hit, for a CPU without the AVX2 build's features.
     #[inline(always)]
     fn closest_hit_portable(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> Option<Hit> {
         self.closest_hit_with::<false>(origin, direction, t_max)
-    }
-
-    /// Whether anything lies along the ray, for a CPU without the AVX2 build's features.
-    #[inline(always)]
-    fn occluded_portable(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
-        self.occluded_with::<false>(origin, direction, t_max)
     }
 
     /// The closest hit; with `FUSED`, the height-field walk uses fused multiply-adds.
@@ -257,9 +274,10 @@ impl Tracer {
         self.panel_hit(origin, direction, t_limit).or(best)
     }
 
-    /// Whether anything lies along the ray (`FUSED` as in [`Tracer::closest_hit_with`]).
+    /// Whether anything lies along the ray (`FUSED` as in [`Tracer::closest_hit_with`]; the
+    /// environment mesh only when `ENVIRONMENT`).
     #[inline(always)]
-    fn occluded_with<const FUSED: bool>(
+    fn occluded_with<const FUSED: bool, const ENVIRONMENT: bool>(
         &self,
         origin: Vec3A,
         direction: Vec3A,
@@ -278,13 +296,14 @@ impl Tracer {
         if self.bvh.any(make_ray(origin, direction, t_max)) {
             return true;
         }
-        self.environment.as_ref().is_some_and(|environment| {
-            environment.accel.occluded(
-                environment.to_world(origin),
-                direction,
-                t_max * environment.scale,
-            )
-        })
+        ENVIRONMENT
+            && self.environment.as_ref().is_some_and(|environment| {
+                environment.accel.occluded(
+                    environment.to_world(origin),
+                    direction,
+                    t_max * environment.scale,
+                )
+            })
     }
 
     /// The same queries compiled for AVX2 and FMA (chosen at run time; the same hits, but
@@ -310,8 +329,13 @@ impl Tracer {
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn occluded_avx2(&self, origin: Vec3A, direction: Vec3A, t_max: f32) -> bool {
-        self.occluded_with::<true>(origin, direction, t_max)
+    unsafe fn occluded_avx2<const ENVIRONMENT: bool>(
+        &self,
+        origin: Vec3A,
+        direction: Vec3A,
+        t_max: f32,
+    ) -> bool {
+        self.occluded_with::<true, ENVIRONMENT>(origin, direction, t_max)
     }
 }
 

@@ -93,7 +93,7 @@ fn the_avx2_traversal_agrees_with_the_portable_one() {
             );
             assert_eq!(
                 tracer.occluded(origin, direction, f32::INFINITY),
-                tracer.occluded_portable(origin, direction, f32::INFINITY)
+                tracer.occluded_with::<false, true>(origin, direction, f32::INFINITY)
             );
         }
     }
@@ -171,4 +171,54 @@ fn occlusion_respects_the_distance_limit() {
     assert!(tracer
         .closest_hit(vec3a(3.0, 3.0, 1.0), -Vec3A::Z, f32::INFINITY)
         .is_none());
+}
+
+#[test]
+fn an_environment_mesh_knows_which_of_its_vertices_its_own_shadow_covers() {
+    use crate::scene::{Emitter, EnvironmentMesh, PointLight};
+    use crate::trace::environment::EnvironmentAccel;
+    // A floor triangle with a vertex under a square card; the light above the card.
+    let mesh = EnvironmentMesh {
+        positions: vec![
+            vec3a(0.0, 0.0, 0.0),
+            vec3a(10.0, 0.0, 0.0),
+            vec3a(0.0, 10.0, 0.0),
+            vec3a(-1.0, -1.5, 2.0),
+            vec3a(1.5, -1.5, 2.0),
+            vec3a(1.5, 1.0, 2.0),
+            vec3a(-1.0, 1.0, 2.0),
+        ],
+        albedo: vec![[0.5; 3]; 7],
+        triangles: vec![[0, 1, 2], [3, 4, 5], [3, 5, 6]],
+    };
+    let accel = EnvironmentAccel::new(mesh).unwrap();
+    let light = |x: f32| {
+        Emitter::Point(PointLight {
+            position: vec3a(x, 0.0, 6.0),
+            intensity: [1.0; 3],
+        })
+    };
+    let above = accel.visibility(&[light(0.0), light(30.0)]).unwrap();
+    // The vertex at the origin lies in the card's shadow of the light above it, not of the
+    // one far aside; the floor's other corners and the card's own see both.
+    for v in 0..7 {
+        let expected = if accel.position(v) == Vec3A::ZERO {
+            [0, 1]
+        } else {
+            [1, 1]
+        };
+        assert_eq!(above.at_vertex(v), expected, "vertex {v}");
+    }
+    // Kept for the same lights, whatever their intensities; traced again for others.
+    let brighter = Emitter::Point(PointLight {
+        position: vec3a(0.0, 0.0, 6.0),
+        intensity: [9.0; 3],
+    });
+    let again = accel.visibility(&[brighter, light(30.0)]).unwrap();
+    assert!(std::sync::Arc::ptr_eq(&above, &again));
+    let other = accel.visibility(&[light(30.0)]).unwrap();
+    assert!((0..7).all(|v| other.at_vertex(v) == [1]));
+    // Only triangles no longer than the spacing (the card's two) read their corners.
+    let read = (0..3).filter(|&t| accel.corner_visibility(&other, t, 4.0).is_some());
+    assert_eq!(read.count(), 2);
 }
