@@ -26,6 +26,7 @@ ARRAY_MODULES = [
     "geometry.integrate",
     "irt.interreflection",
     "io.mesh",
+    "io.exchange",
     "render.residual",
     "geometry.surface",
 ]
@@ -96,6 +97,12 @@ CASES = {
     ),
     "irtps.io.mesh.write_ply": (lambda f: f("unused.ply", np.zeros((3, 3)), np.array([[0, 1, 5]])), "faces: "),
     "irtps.io.mesh.write_obj": (lambda f: f("unused.obj", np.zeros((3, 2)), np.zeros((0, 3), int)), "vertices: "),
+    "irtps.io.mesh.write_glb": (lambda f: f("unused.glb", np.zeros((3, 3)), np.array([[0, 1, 3]])), "faces: "),
+    "irtps.io.exchange.normal_map_image": (lambda f: f(NORMALS, MASK, "vulkan"), "convention: "),
+    "irtps.io.exchange.write_normal_png": (lambda f: f("unused.png", WRONG, MASK), "normals: "),
+    "irtps.io.exchange.quantised_map": (lambda f: f(np.full((4, 4), np.nan), MASK), "values: "),
+    "irtps.io.exchange.write_quantised_png": (lambda f: f("unused.png", HEIGHT, WRONG), "mask: "),
+    "irtps.io.exchange.write_float_tiff": (lambda f: f("unused.tif", ALBEDO), "values: "),
     "irtps.render.residual.compared_observations": (
         lambda f: f(np.zeros((3, 4, 4, 3)), np.ones((3, 3)), WRONG, robust=True, shadow_fraction=0.05, saturation=None),
         "mask: ",

@@ -418,3 +418,19 @@ def test_a_list_for_no_data_set_is_refused_before_anything_runs(three_sets, tmp_
     assert not (tmp_path / "out").exists()
     with pytest.raises(irtps.ArgumentError, match="'bear' is none of the data sets"):
         reconstruct_many([three_sets[0]], tmp_path / "out", exclude_images={"bear": "1-20"})
+
+
+def test_resume_redoes_a_folder_with_another_normal_map_or_without_its_glb(cluster, three_sets, tmp_path, capsys):
+    cap, ball, _ = three_sets
+    out = tmp_path / "out"
+    argv = ["batch", str(cap), str(ball), "--out", str(out), "--scheduler", cluster.scheduler.address, "--quiet"]
+    assert main([*argv, "--normal-map", "directx"]) == 0
+    (out / "ball" / "mesh.glb").unlink()
+    assert main([*argv, "--normal-map", "directx", "--resume"]) == 0
+    summary = json.loads((out / "batch.json").read_text())
+    assert [(s["name"], s["status"]) for s in summary["datasets"]] == [("cap", "reused"), ("ball", "ok")]
+    assert main([*argv, "--resume"]) == 0  # OpenGL now: both redone
+    summary = json.loads((out / "batch.json").read_text())
+    assert [s["status"] for s in summary["datasets"]] == ["ok", "ok"]
+    record = json.loads((out / "cap" / "run.json").read_text())
+    assert record["exports"]["normal.png"]["convention"] == "opengl"

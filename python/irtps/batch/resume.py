@@ -22,16 +22,22 @@ def complete_output(
     options: ReconstructOptions,
     exclude_images: str | None,
     intrinsics: str | None = None,
+    normal_map: str = "opengl",
 ) -> tuple | None:
     """The normals, albedo, height and mask of a complete output folder of `source` made
     with `options`, leaving out the images of `exclude_images`, with the intrinsics file
-    `intrinsics` (or none) and its camera as it reads now (see
-    `irtps.batch.task.reconstruct_to_folder`), and its recorded robust mode, or None."""
+    `intrinsics` (or none) and its camera as it reads now, its normal map in the convention
+    `normal_map` (see `irtps.batch.task.reconstruct_to_folder`), and its recorded robust
+    mode, or None."""
     folder = Path(destination)
     try:
         record = load_run_record(folder)
         maps = load_reconstruction(folder)
-        meshes = all(_nonempty_file(folder / name) for name in ("mesh.ply", "mesh.obj"))
+        exports = record.get("exports") or {}
+        scaled = [name for name in exports if name != "normal.png"]  # height.png, depth.png
+        files = ["mesh.ply", "mesh.obj", "mesh.glb", "normal.png", *scaled, *(Path(n).stem + ".tif" for n in scaled)]
+        written = all(_nonempty_file(folder / name) for name in files)
+        same_normal_map = (exports.get("normal.png") or {}).get("convention") == normal_map
         indirect = not record.get("chosen_pass") or _complete_indirect(folder / "indirect", record.get("images", []))
         excluded = select_images(dataset_image_names(source), exclude_images, where=source).excluded
         camera = None if intrinsics is None else read_intrinsics(intrinsics)
@@ -42,8 +48,9 @@ def complete_output(
         and _same_options(record["parameters"], options)
         and tuple(record.get("excluded_images", ())) == excluded
         and _same_intrinsics(record, intrinsics, camera)
+        and same_normal_map
     )
-    return (maps, record.get("robust_used")) if same_run and meshes and indirect else None
+    return (maps, record.get("robust_used")) if same_run and written and indirect else None
 
 
 def _complete_indirect(folder: Path, images: list[str]) -> bool:

@@ -38,6 +38,7 @@ from irtps.batch.result import BatchResult, describe_error
 from irtps.batch.task import reconstruct_to_folder
 from irtps.batch.task_warnings import issue_warnings
 from irtps.errors import ArgumentError
+from irtps.io.exchange import NORMAL_MAP_CONVENTIONS
 from irtps.model.options import ReconstructOptions
 
 __all__ = ["reconstruct_many"]
@@ -53,6 +54,7 @@ def reconstruct_many(
     resume: bool = False,
     exclude_images: str | Mapping[str, str | None] | None = None,
     intrinsics: str | Path | Mapping[str, str | Path | None] | None = None,
+    normal_map: str = "opengl",
     **settings,
 ) -> list[BatchResult]:
     """Reconstruct many data set folders on a Dask cluster, each into ``out/NAME/``.
@@ -111,6 +113,9 @@ def reconstruct_many(
         "reading/K.txt"}``. Each file is read and checked here, before anything runs; one
         whose principal point does not fit a data set's images fails that data set alone.
         Recorded in each ``run.json``, which `resume` compares.
+    normal_map : {"opengl", "directx"}
+        The convention of each ``normal.png`` (`irtps.save_reconstruction`), which `resume`
+        compares.
     **settings
         Fields of `ReconstructOptions` that replace those of `options`, e.g.
         ``method="irtps"``.
@@ -126,7 +131,7 @@ def reconstruct_many(
         Before anything runs: no data set, an option unknown or out of range
         (`irtps.model.options.OptionError`), a malformed list of images to leave out or one for
         a ``NAME`` that is none of the data sets', intrinsics for a ``NAME`` that is none of
-        them.
+        them, a `normal_map` that is neither convention.
     DatasetError
         Before anything runs: an intrinsics file that is missing or not a 3x3 intrinsic
         matrix (`irtps.io.intrinsics.read_intrinsics`).
@@ -150,6 +155,8 @@ def reconstruct_many(
     if not datasets:
         raise ArgumentError("datasets", "none given")
     options = ReconstructOptions.build(options, **settings)
+    if normal_map not in NORMAL_MAP_CONVENTIONS:
+        raise ArgumentError("normal_map", f"{normal_map!r} is not one of {', '.join(NORMAL_MAP_CONVENTIONS)}")
     distributed = import_distributed()
     from tqdm import tqdm
 
@@ -168,6 +175,7 @@ def reconstruct_many(
                 resume=resume,
                 exclude_images=exclusions[name],
                 intrinsics=cameras[name],
+                normal_map=normal_map,
                 pure=False,
                 priority=-index,
             ): (name, source)

@@ -36,6 +36,7 @@ def reconstruct_to_folder(
     resume: bool = False,
     exclude_images: str | None = None,
     intrinsics: str | None = None,
+    normal_map: str = "opengl",
 ) -> BatchResult:
     """Reconstruct one data set folder into an output folder: the task of a batch.
 
@@ -68,6 +69,8 @@ def reconstruct_to_folder(
         Images of the data set to leave out, not read (`irtps.load_dataset`).
     intrinsics : str, optional
         A ``K.txt`` that gives the data set a perspective camera (`irtps.load_dataset`).
+    normal_map : {"opengl", "directx"}
+        The convention of ``normal.png`` (`irtps.save_reconstruction`).
 
     Returns
     -------
@@ -84,14 +87,24 @@ def reconstruct_to_folder(
     start = time.perf_counter()
     with _TASKS.running(), recorded_warnings() as recorded:
         try:
-            kept = complete_output(destination, source, options, exclude_images, intrinsics) if resume else None
+            kept = (
+                complete_output(destination, source, options, exclude_images, intrinsics, normal_map)
+                if resume
+                else None
+            )
             if kept is None:
                 status = "ok"
                 dataset, result = load_and_reconstruct(
                     source, options=options, exclude_images=exclude_images, intrinsics=intrinsics
                 )
                 with _TASKS.writing():
-                    save_reconstruction(result, destination, source=str(resolve_path(source)), intrinsics=intrinsics)
+                    save_reconstruction(
+                        result,
+                        destination,
+                        source=str(resolve_path(source)),
+                        intrinsics=intrinsics,
+                        normal_map=normal_map,
+                    )
                 gt, normals, albedo, height, mask = (
                     dataset.gt,
                     result.normals,

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from irtps.io.exchange import NORMAL_MAP_CONVENTIONS
 from irtps.model.options import (
     ClusterOptions,
     ReconstructOptions,
@@ -26,6 +27,7 @@ __all__ = [
     "EXCLUDE_IMAGES_BY_NAME",
     "INTRINSICS",
     "INTRINSICS_BY_NAME",
+    "NORMAL_MAP",
     "RECONSTRUCT",
     "RENDER",
     "SYNTH",
@@ -170,6 +172,15 @@ INTRINSICS = Argument(
     "that perspective camera, whatever its folder says (a DiLiGenT folder's own K.txt is read without it); renderings "
     "trace through the pinhole, and the steps that take a pixel size use its orthographic stand-in at the object's "
     "distance, and say so",
+)
+
+#: The convention of the normal map written for other tools.
+NORMAL_MAP = Argument(
+    "--normal-map",
+    choices=NORMAL_MAP_CONVENTIONS,
+    default="opengl",
+    help="the convention of normal.png, the 16-bit normal map for other tools: opengl (green up the image: Blender, "
+    "RTI viewers, Unity) or directx (green down: Unreal, 3ds Max); recorded in run.json (default: opengl)",
 )
 
 #: The images to leave out of the commands that take many data sets: of all, or of one by name.

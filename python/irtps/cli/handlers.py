@@ -131,7 +131,13 @@ def run_reconstruct(args: argparse.Namespace) -> None:
         exclude_images=args.exclude_images,
         intrinsics=args.intrinsics,
     )
-    save_reconstruction(result, args.out, source=str(resolve_path(args.data)), intrinsics=args.intrinsics)
+    save_reconstruction(
+        result,
+        args.out,
+        source=str(resolve_path(args.data)),
+        intrinsics=args.intrinsics,
+        normal_map=args.normal_map,
+    )
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
         print(f"reconstructed {args.data} ({options.method}; {stages}) -> {args.out}")
@@ -199,6 +205,7 @@ def run_batch(args: argparse.Namespace) -> None:
             resume=args.resume,
             exclude_images=exclusions,
             intrinsics=intrinsics,
+            normal_map=args.normal_map,
         )
     write_summary(results, args.out, settings=options.to_dict())
     print(summary_table(results), end="")

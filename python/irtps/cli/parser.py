@@ -17,6 +17,7 @@ from irtps.cli.arguments import (
     EXCLUDE_IMAGES_BY_NAME,
     INTRINSICS,
     INTRINSICS_BY_NAME,
+    NORMAL_MAP,
     RECONSTRUCT,
     RENDER,
     SYNTH,
@@ -112,7 +113,9 @@ COMMANDS = (
         description="Reconstruct the object of DATA (contract layout, or DiLiGenT layout, detected; its camera "
         "orthographic, or perspective: scene.json's, a DiLiGenT folder's K.txt or --intrinsics) and write OUT: "
         "normal.exr (R, G, B = nx, ny, nz), albedo.exr, height.exr, mask.png, mesh.ply (the height field with "
-        "per-vertex albedo colour and normals), mesh.obj (the same mesh for any viewer) and run.json (parameters, "
+        "per-vertex albedo colour and normals), mesh.obj (the same mesh for any viewer), for other tools normal.png "
+        "(16-bit normal map, --normal-map), height.tif (32-bit float), height.png (16-bit, its scale in run.json) "
+        "and mesh.glb (glTF binary with vertex colours), and run.json (parameters, "
         "timings, versions, the data set's path, the placement, the robust mode used and the lobe share that auto "
         "chose it by, the images fitted and those left out, and how each image agrees with the fit: one whose "
         "brightness is far from the others' had another light or exposure than recorded, one whose spread is wider "
@@ -132,11 +135,12 @@ COMMANDS = (
             "irtps reconstruct rig_capture --out rig --method irtps --albedo-scale 0.8",
             "irtps reconstruct bearPNG --out bear --exclude-images 1-20",
             "irtps reconstruct capture --out capture_ps --intrinsics capture/K.txt",
+            "irtps reconstruct capture --out capture_ps --normal-map directx   # for Unreal",
         ),
         run=handlers.run_reconstruct,
         arguments=(Argument("data", type=Path, help="data set folder"),),
         output=Output("output folder", quiet="no progress bar or summary"),
-        options=(EXCLUDE_IMAGES, INTRINSICS, RECONSTRUCT),
+        options=(EXCLUDE_IMAGES, INTRINSICS, NORMAL_MAP, RECONSTRUCT),
     ),
     Command(
         "batch",
@@ -169,7 +173,7 @@ COMMANDS = (
         output=Output(
             "folder for one reconstruction folder per data set and the summary", quiet="no progress bar", resume=True
         ),
-        options=(EXCLUDE_IMAGES_BY_NAME, INTRINSICS_BY_NAME, RECONSTRUCT, CLUSTER),
+        options=(EXCLUDE_IMAGES_BY_NAME, INTRINSICS_BY_NAME, NORMAL_MAP, RECONSTRUCT, CLUSTER),
     ),
     Command(
         "evaluate",

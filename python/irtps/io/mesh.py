@@ -33,7 +33,7 @@ from irtps.errors import ArgumentError
 from irtps.geometry.surface import meshed_blocks
 from irtps.model.camera import Camera
 
-__all__ = ["height_field_mesh", "pinhole_mesh", "write_obj", "write_ply"]
+__all__ = ["height_field_mesh", "pinhole_mesh", "write_glb", "write_obj", "write_ply"]
 
 
 def height_field_mesh(
@@ -362,6 +362,54 @@ def write_obj(path: str | Path, vertices: np.ndarray, faces: np.ndarray, normals
     else:
         parts.append(_format_rows("f %d %d %d\n", one_based))
     atomic_write_bytes(path, "".join(parts).encode("ascii"))
+
+
+def write_glb(
+    path: str | Path,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    colors: np.ndarray | None = None,
+    normals: np.ndarray | None = None,
+) -> None:
+    """Write a triangle mesh as glTF 2.0 binary (GLB, by trimesh), atomically.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+    vertices : numpy.ndarray
+        (N, 3) positions.
+    faces : numpy.ndarray
+        (F, 3) vertex indices, counter-clockwise seen from the front.
+    colors : numpy.ndarray, optional
+        (N, 3) uint8 vertex colours, linear (as the albedo; glTF's ``COLOR_0`` is linear).
+    normals : numpy.ndarray, optional
+        (N, 3) unit vertex normals, stored as ``NORMAL``.
+
+    Raises
+    ------
+    ArgumentError
+        (an `IrtpsError`) naming the argument that is malformed; nothing is written then.
+    DatasetError
+        If the folder cannot be created or written to.
+    """
+    # Here, not at the top: trimesh alone would add a third to `import irtps`.
+    import trimesh
+    from trimesh.exchange.gltf import export_glb
+
+    vertices, faces, colors, normals = _check_mesh(vertices, faces, colors, normals)
+    if not len(vertices):  # no object (a degenerate mask): a file with an empty scene
+        colors = normals = None
+    vertex_colors = None
+    if colors is not None:
+        vertex_colors = np.c_[colors, np.full(len(colors), 255, dtype=np.uint8)]
+    mesh = trimesh.Trimesh(
+        vertices=vertices,
+        faces=faces,
+        vertex_normals=normals,
+        vertex_colors=vertex_colors,
+        process=False,
+    )
+    atomic_write_bytes(path, export_glb(mesh))
 
 
 def _format_rows(line: str, rows: np.ndarray) -> str:

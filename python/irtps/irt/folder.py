@@ -1,8 +1,9 @@
 """The reconstruction folder: `save_reconstruction` writes it, `load_reconstruction` and
 `load_run_record` read it back.
 
-Its files (`RECONSTRUCTION_FILES`): the maps as EXR and PNG, the meshes, ``run.json`` and, for
-IRT-PS, ``indirect/``. Here rather than in `irtps.io`, the layer of files, because it writes
+Its files (`RECONSTRUCTION_FILES`): the maps as EXR and PNG, the maps and the mesh as other
+tools read them (`irtps.io.exchange`), the meshes, ``run.json`` and, for IRT-PS,
+``indirect/``. Here rather than in `irtps.io`, the layer of files, because it writes
 a `irtps.irt.reconstruct.Reconstruction`, whose pass history and albedo scale belong to
 higher layers than ``io``.
 """
@@ -27,8 +28,9 @@ from irtps._shared.paths import check_file, check_folder, resolve_path
 from irtps._shared.records import RUN, stamp
 from irtps.errors import ArgumentError, DatasetError
 from irtps.io.dataset import read_albedo_map, read_height_map, read_normal_map
+from irtps.io.exchange import NORMAL_MAP_CONVENTIONS, write_float_tiff, write_normal_png, write_quantised_png
 from irtps.io.imageio import read_mask, write_exr, write_png
-from irtps.io.mesh import height_field_mesh, pinhole_mesh, write_obj, write_ply
+from irtps.io.mesh import height_field_mesh, pinhole_mesh, write_glb, write_obj, write_ply
 from irtps.irt.reconstruct import Reconstruction
 from irtps.model.scene import camera_to_dict
 from irtps.ps.fit import FLAGS
@@ -37,7 +39,7 @@ from irtps.ps.fit import FLAGS
 #: one writer's time).
 _EXR_WRITERS = max(1, min(4, os.cpu_count() or 1))
 #: What a reconstruction folder holds (`save_reconstruction`); ``indirect`` for IRT-PS only,
-#: ``depth.exr`` and ``discontinuities.png`` for a pinhole camera only.
+#: the depth maps and ``discontinuities.png`` for a pinhole camera only.
 RECONSTRUCTION_FILES = (
     "normal.exr",
     "albedo.exr",
@@ -49,13 +51,24 @@ RECONSTRUCTION_FILES = (
     "indirect",
     "depth.exr",
     "discontinuities.png",
+    "normal.png",
+    "height.tif",
+    "height.png",
+    "depth.tif",
+    "depth.png",
+    "mesh.glb",
 )
 #: An image name's stem that can name its file in ``indirect/``: plain, not hidden.
 _PLAIN_STEM = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*")
 
 
 def save_reconstruction(
-    result: Reconstruction, path: str | Path, *, source: str | None = None, intrinsics: str | Path | None = None
+    result: Reconstruction,
+    path: str | Path,
+    *,
+    source: str | None = None,
+    intrinsics: str | Path | None = None,
+    normal_map: str = "opengl",
 ) -> None:
     """Write a reconstruction folder atomically.
 
@@ -73,6 +86,13 @@ def save_reconstruction(
     0 outside the mask; `Reconstruction.depth`) and ``discontinuities.png`` (8-bit: 1 at both
     pixels of each edge that is a depth discontinuity, 0 elsewhere).
 
+    For other tools (`irtps.io.exchange`): ``normal.png`` (16-bit RGB normal map, (n + 1) / 2,
+    in the `normal_map` convention, flat outside the mask), ``height.tif`` (32-bit float) and
+    ``height.png`` (16-bit: 0 outside the mask, level L > 0 the height offset + (L - 1) step,
+    both recorded in ``run.json`` under ``exports``), with a pinhole camera ``depth.tif`` and
+    ``depth.png`` likewise, and ``mesh.glb`` (glTF 2.0 binary: the mesh of ``mesh.ply`` with its
+    normals and linear albedo as vertex colours).
+
     Parameters
     ----------
     result : Reconstruction
@@ -83,16 +103,20 @@ def save_reconstruction(
     intrinsics : str or pathlib.Path, optional
         The ``K.txt`` that gave the data set its camera (``--intrinsics``), recorded in
         ``run.json`` (as an absolute path, beside the camera as ``scene.json`` holds it).
+    normal_map : {"opengl", "directx"}
+        The convention of ``normal.png``: green up the image (OpenGL), or down it (DirectX).
 
     Raises
     ------
     ArgumentError
-        If `result` is not a `Reconstruction`.
+        If `result` is not a `Reconstruction`, or naming `normal_map`.
     DatasetError
         If the folder cannot be written.
     """
     if not isinstance(result, Reconstruction):
         raise ArgumentError("result", f"expected a Reconstruction, got {type(result).__name__}")
+    if normal_map not in NORMAL_MAP_CONVENTIONS:
+        raise ArgumentError("normal_map", f"{normal_map!r} is not one of {', '.join(NORMAL_MAP_CONVENTIONS)}")
     with atomic_output_dir(check_path("path", path)) as folder:
         write_exr(folder / "normal.exr", result.normals)
         write_exr(folder / "albedo.exr", result.albedo)
@@ -117,6 +141,8 @@ def save_reconstruction(
             )
         write_ply(folder / "mesh.ply", vertices, faces, colors=colors, normals=normals)
         write_obj(folder / "mesh.obj", vertices, faces, normals=normals)
+        write_glb(folder / "mesh.glb", vertices, faces, colors=colors, normals=normals)
+        exports = _write_exports(folder, result, normal_map)
         run = {
             **stamp(RUN),
             "python": platform.python_version(),
@@ -141,6 +167,7 @@ def save_reconstruction(
             "irradiance_factors": None
             if result.irradiance_factors is None
             else [round(float(factor), 4) for factor in result.irradiance_factors],
+            "exports": exports,
         }
         if result.object_indirect is not None:
             (folder / "indirect").mkdir()
@@ -156,6 +183,18 @@ def save_reconstruction(
                     )
                 )
         (folder / "run.json").write_text(json.dumps(run, indent=2))
+
+
+def _write_exports(folder: Path, result: Reconstruction, normal_map: str) -> dict:
+    """Write the maps other tools read (`irtps.io.exchange`) into `folder`; what ``run.json``
+    records of them: the normal map's convention and each 16-bit map's scale."""
+    write_normal_png(folder / "normal.png", result.normals, result.mask, normal_map)
+    exports: dict = {"normal.png": {"convention": normal_map}}
+    maps = {"height": result.height} if result.depth is None else {"height": result.height, "depth": result.depth}
+    for name, values in maps.items():
+        write_float_tiff(folder / f"{name}.tif", values)
+        exports[f"{name}.png"] = write_quantised_png(folder / f"{name}.png", values, result.mask)
+    return exports
 
 
 def _edge_pixels(discontinuities: np.ndarray) -> np.ndarray:
