@@ -27,6 +27,7 @@ ARRAY_MODULES = [
     "irt.interreflection",
     "io.mesh",
     "io.exchange",
+    "ps.semi_calibrated",
     "render.residual",
     "geometry.surface",
 ]
@@ -99,6 +100,10 @@ CASES = {
     "irtps.io.mesh.write_obj": (lambda f: f("unused.obj", np.zeros((3, 2)), np.zeros((0, 3), int)), "vertices: "),
     "irtps.io.mesh.write_glb": (lambda f: f("unused.glb", np.zeros((3, 3)), np.array([[0, 1, 3]])), "faces: "),
     "irtps.io.exchange.normal_map_image": (lambda f: f(NORMALS, MASK, "vulkan"), "convention: "),
+    "irtps.ps.semi_calibrated.estimate_light_intensities": (
+        lambda f: f(np.ones((3, 4, 4, 3)), LIGHTS, MASK, shadow_fraction=1.5),
+        "shadow_fraction: ",
+    ),
     "irtps.io.exchange.write_normal_png": (lambda f: f("unused.png", WRONG, MASK), "normals: "),
     "irtps.io.exchange.quantised_map": (lambda f: f(np.full((4, 4), np.nan), MASK), "values: "),
     "irtps.io.exchange.write_quantised_png": (lambda f: f("unused.png", HEIGHT, WRONG), "mask: "),

@@ -142,9 +142,9 @@ def _second_image(folder):
 
 MALFORMED = {
     "missing filenames.txt": (lambda f: (f / "filenames.txt").unlink(), "filenames.txt: missing"),
-    "missing light_intensities.txt": (
-        lambda f: (f / "light_intensities.txt").unlink(),
-        "light_intensities.txt: missing",
+    "light_intensities.txt a folder": (
+        lambda f: ((f / "light_intensities.txt").unlink(), (f / "light_intensities.txt").mkdir()),
+        "light_intensities.txt: ",
     ),
     "line counts disagree": (
         lambda f: (f / "light_directions.txt").write_text("\n".join(_lines(f / "light_directions.txt")[:7]) + "\n"),

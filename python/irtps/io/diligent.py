@@ -60,7 +60,9 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
     Dataset
         Images in ``filenames.txt`` order, read at full bit depth and divided by
         ``2^bits - 1``. Each light's irradiance is its line of
-        ``light_intensities.txt``. The camera is orthographic with the images'
+        ``light_intensities.txt``; without that file, 1 for every light and
+        `Dataset.irradiance_known` False (`irtps.reconstruct` then estimates the lights'
+        strengths from the images). The camera is orthographic with the images'
         size and ``pixel_size`` 1, or, when the folder holds a ``K.txt``, perspective with
         those intrinsics and its optical centre at ``(0, 0, sqrt(fx * fy))``, where a pixel
         at the object's base is 1 wide (`irtps.io.intrinsics.with_intrinsics`); there is
@@ -118,6 +120,7 @@ def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images
         saturation=saturation,
         image_names=selection.names,
         excluded_images=selection.excluded,
+        irradiance_known=files.irradiance_known,
     )
 
 
@@ -135,8 +138,12 @@ class _DiligentFiles(NamedTuple):
     intrinsics: Intrinsics | None
     depth: Path | None
 
+    #: Whether the folder has ``light_intensities.txt`` (else every light's is 1, unknown).
+    irradiance_known: bool
+
     def paths(self) -> list[Path]:
-        lists = [self.folder / name for name in (FILENAMES_FILE, DIRECTIONS_FILE, INTENSITIES_FILE)]
+        listed = (FILENAMES_FILE, DIRECTIONS_FILE) + ((INTENSITIES_FILE,) if self.irradiance_known else ())
+        lists = [self.folder / name for name in listed]
         camera = [] if self.intrinsics is None else [self.intrinsics.source]
         optional = [path for path in (self.mask, self.normals, self.depth) if path is not None]
         return [self.folder, *lists, *camera, *self.images, *optional]
@@ -145,7 +152,11 @@ class _DiligentFiles(NamedTuple):
 def _diligent_files(folder: Path, ground_truth: bool, exclude_images: str | None) -> _DiligentFiles:
     names, name_lines = _read_filenames(folder / FILENAMES_FILE)
     directions, direction_lines = _read_table(folder / DIRECTIONS_FILE)
-    intensities, intensity_lines = _read_table(folder / INTENSITIES_FILE)
+    irradiance_known = optional_file(folder / INTENSITIES_FILE)
+    if irradiance_known:
+        intensities, intensity_lines = _read_table(folder / INTENSITIES_FILE)
+    else:  # unknown: estimated by `irtps.reconstruct`
+        intensities, intensity_lines = np.ones((len(directions), 3)), list(direction_lines)
     for other, table in ((DIRECTIONS_FILE, directions), (INTENSITIES_FILE, intensities)):
         if len(table) != len(names):
             raise DatasetError(f"{folder / other}: {len(table)} lines, but {FILENAMES_FILE} lists {len(names)} images")
@@ -165,7 +176,7 @@ def _diligent_files(folder: Path, ground_truth: bool, exclude_images: str | None
         folder / name if ground_truth and optional_file(folder / name) else None for name in (NORMALS_FILE, DEPTH_FILE)
     )
     intrinsics = read_intrinsics(folder / INTRINSICS_FILE) if optional_file(folder / INTRINSICS_FILE) else None
-    return _DiligentFiles(folder, lights, image_paths, selection, mask, normals, intrinsics, depth)
+    return _DiligentFiles(folder, lights, image_paths, selection, mask, normals, intrinsics, depth, irradiance_known)
 
 
 def diligent_inputs(path: str | Path, *, ground_truth: bool = True, exclude_images: str | None = None) -> list[Path]:
@@ -226,7 +237,7 @@ def diligent_image_names(folder: str | Path) -> tuple[str, ...]:
 
 def _read_lines(path: Path) -> list[tuple[int, str]]:
     """Non-blank lines of a text file, stripped, with their 1-based line numbers."""
-    needed = f"a DiLiGenT folder needs {FILENAMES_FILE}, {DIRECTIONS_FILE} and {INTENSITIES_FILE}"
+    needed = f"a DiLiGenT folder needs {FILENAMES_FILE} and {DIRECTIONS_FILE} ({INTENSITIES_FILE} if it has one)"
     check_file(path, needed)
     text = read_text(path)
     return [(number, line.strip()) for number, line in enumerate(text.splitlines(), start=1) if line.strip()]

@@ -167,6 +167,9 @@ def save_reconstruction(
             "irradiance_factors": None
             if result.irradiance_factors is None
             else [round(float(factor), 4) for factor in result.irradiance_factors],
+            "estimated_irradiance": None
+            if result.estimated_irradiance is None
+            else np.round(result.estimated_irradiance, 5).tolist(),
             "exports": exports,
         }
         if result.object_indirect is not None:

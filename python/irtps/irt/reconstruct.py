@@ -17,6 +17,7 @@ from irtps.model.data import pixel_observations
 from irtps.io.dataset import Dataset, load_dataset
 from irtps.errors import ArgumentError, DatasetError, IrtpsError, IrtpsWarning
 from irtps.ps.image_agreement import ImageAgreement, image_agreement
+from irtps.ps.semi_calibrated import estimate_light_intensities
 from irtps.irt.interreflection import check_traceable, remove_interreflections
 from irtps.irt.loop_state import Iteration, Stop
 from irtps.model.options import ReconstructOptions
@@ -100,6 +101,11 @@ class Reconstruction:
         With ``correct_brightness``: float64 (K,), the factor each light's irradiance was
         scaled by before the fit (its image's brightness against a first fit; 1 where not
         known).
+    estimated_irradiance : numpy.ndarray or None
+        For a data set that gave no light strengths (`Dataset.irradiance_known` False):
+        float64 (K, 3), each light's RGB strength as estimated from the images and used
+        throughout, the median light's 1 in each channel
+        (`irtps.ps.semi_calibrated.estimate_light_intensities`).
     depth : numpy.ndarray or None
         With a pinhole camera: float32 (H, W) depth along the optical axis, 0 outside the
         mask, integrated from ``normals`` through the pinhole so that it keeps its
@@ -133,6 +139,7 @@ class Reconstruction:
     excluded_images: tuple[str, ...] = ()
     image_agreement: ImageAgreement | None = None
     irradiance_factors: np.ndarray | None = None
+    estimated_irradiance: np.ndarray | None = None
     depth: np.ndarray | None = None
     discontinuities: np.ndarray | None = None
     camera: Camera | None = None
@@ -239,6 +246,10 @@ def reconstruct(
         check_traceable(dataset)
     parameters = options.to_dict()
     timings: dict[str, float] = {}
+    estimated = None
+    if not dataset.irradiance_known:
+        with timed(timings, "light_intensities"):
+            dataset, estimated = _with_estimated_irradiance(dataset, options)
     share = None
     first = None
     if options.robust not in ("auto", "lobe") and not dataset.scene.has_point_lights:
@@ -290,6 +301,7 @@ def reconstruct(
         excluded_images=dataset.excluded_images,
         image_agreement=agreement,
         irradiance_factors=factors,
+        estimated_irradiance=estimated,
         depth=depth,
         discontinuities=discontinuities,
         camera=camera,
@@ -403,6 +415,32 @@ def _brightness_corrected(dataset: Dataset, options: ReconstructOptions) -> tupl
         for light, factor in zip(dataset.scene.lights, factors, strict=True)
     )
     return replace(dataset, scene=replace(dataset.scene, lights=lights)), factors, first
+
+
+def _with_estimated_irradiance(dataset: Dataset, options: ReconstructOptions) -> tuple[Dataset, np.ndarray]:
+    """The data set with its lights' strengths estimated from its images, which it did not
+    give, and those strengths (K, 3); says so in a warning."""
+    try:
+        strengths = estimate_light_intensities(
+            dataset.images,
+            dataset.scene.light_directions,
+            dataset.mask,
+            shadow_fraction=options.shadow_fraction,
+            saturation=options.saturation,
+        )
+    except ArgumentError as error:
+        raise DatasetError(
+            f"{dataset.source or 'the data set'}: no light intensities given, and {error.problem}"
+        ) from None
+    lights = tuple(with_emission(light, row) for light, row in zip(dataset.scene.lights, strengths, strict=True))
+    spread = strengths.mean(axis=1)
+    warnings.warn(
+        f"{dataset.source or 'the data set'}: no light intensities given: estimated from the images "
+        f"(semi-calibrated photometric stereo), from {spread.min():.2f} to {spread.max():.2f} of the median light's",
+        IrtpsWarning,
+        stacklevel=3,
+    )
+    return replace(dataset, scene=replace(dataset.scene, lights=lights), irradiance_known=True), strengths
 
 
 def _chosen(options: ReconstructOptions, fit: PsResult, share: float | None) -> tuple[ReconstructOptions, float | None]:

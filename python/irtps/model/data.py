@@ -71,6 +71,11 @@ class Dataset:
     excluded_images : tuple of str
         The names of the folder's images left out when it was read, or since
         (`irtps.exclude_images`).
+    irradiance_known : bool
+        False when the data set gave the lights' directions but not their strengths (a
+        DiLiGenT folder without ``light_intensities.txt``): the scene's irradiance is then 1
+        for every light, and `irtps.reconstruct` estimates the strengths from the images
+        first (`irtps.ps.semi_calibrated.estimate_light_intensities`).
 
     Raises
     ------
@@ -86,6 +91,7 @@ class Dataset:
     saturation: float | None = None
     image_names: tuple[str, ...] | None = None
     excluded_images: tuple[str, ...] = ()
+    irradiance_known: bool = True
 
     def __post_init__(self) -> None:
         self.images = np.asarray(self.images, dtype=np.float32)

@@ -11,6 +11,8 @@ import json
 from html import escape
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from irtps.errors import ArgumentError
 from irtps.model.metrics import format_metrics
 from irtps.ps.image_agreement import ImageAgreement, format_image_agreement
@@ -147,12 +149,29 @@ def _summary(report: Report) -> str:
         placement += f" {format_albedo_scale(record['albedo_scale']).capitalize()}."
     if record.get("lobe_share") is not None:
         placement += f" {format_lobe_share(record['lobe_share'], record.get('robust_used'))}."
+    placement += _estimated_strengths(record.get("estimated_irradiance"))
     if record.get("excluded_images"):
         placement += f" {_sentence(format_images_fitted(len(record.get('images', [])), record['excluded_images']))}."
     agreement = recorded_agreement(record)
     if agreement is not None:
         placement += "".join(f" {_sentence(line)}." for line in format_image_agreement(record["images"], agreement))
     return f"{method} of {source}: {cols}×{rows} pixels, {report.object_pixels} on the object{scale}.{placement} Folder: {report.run_dir}."
+
+
+def _estimated_strengths(recorded: object) -> str:
+    """A sentence on the lights' strengths that a run estimated (``run.json``'s
+    ``estimated_irradiance``: each light's RGB), or nothing when they were given or the record
+    does not hold them as numbers."""
+    try:
+        strengths = np.asarray(recorded, dtype=float).mean(axis=1)
+    except (TypeError, ValueError, np.exceptions.AxisError):
+        return ""
+    if strengths.ndim != 1 or not strengths.size or not np.isfinite(strengths).all():
+        return ""
+    return (
+        f" The lights' strengths were not given: estimated from the images (semi-calibrated), "
+        f"from {strengths.min():.2f} to {strengths.max():.2f} of the median light's."
+    )
 
 
 def recorded_agreement(record: dict) -> ImageAgreement | None:
