@@ -8,6 +8,10 @@ read with ``irradiance_known`` False, as a folder without the file is); the esti
 strengths' error against the given ones (each normalised to its median light, per channel);
 and the median time of the estimate over ``--runs`` calls after a warm-up.
 
+Then each object as a dome user would hold it (an RTI folder, `irtps.io.rti`): its images
+sRGB-encoded into 8-bit JPEG files at quality 95 (Pillow), a ``.lp`` file of its light
+directions, its mask, no intensities; the mean angular error of ``irtps.reconstruct`` on it.
+
     python benches/semi_calibrated.py [--runs 5] [--only ballPNG]
 """
 
@@ -15,12 +19,15 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import shutil
 import statistics
+import tempfile
 import time
 import warnings
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
 import irtps
 from irtps.model.scene import with_emission
@@ -38,13 +45,30 @@ def mean_error(dataset: irtps.Dataset) -> float:
     return float(irtps.angular_error_deg(result.normals, dataset.gt.normal, dataset.mask)[dataset.mask].mean())
 
 
+def as_rti_folder(dataset: irtps.Dataset, source: Path, folder: Path) -> Path:
+    """`dataset` as a dome user's RTI folder in `folder`: 8-bit sRGB JPEG images (quality 95),
+    ``capture.lp`` and the mask."""
+    lines = [str(len(dataset.images))]
+    for k, (image, direction) in enumerate(zip(dataset.images, dataset.scene.light_directions, strict=True)):
+        linear = np.clip(image, 0.0, 1.0)
+        encoded = np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1 / 2.4) - 0.055)
+        name = f"capture_{k + 1:03d}.jpg"
+        Image.fromarray(np.rint(encoded * 255).astype(np.uint8)).save(folder / name, quality=95)
+        lines.append(f"{name} {direction[0]:.6f} {direction[1]:.6f} {direction[2]:.6f}")
+    (folder / "capture.lp").write_text("\n".join(lines) + "\n")
+    shutil.copy(source / "mask.png", folder / "mask.png")
+    return folder
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--only", nargs="*", default=list(OBJECTS))
     args = parser.parse_args()
-    print("| object | given | all equal | estimated | strengths' error, mean / largest | estimate s |")
-    print("|---|---|---|---|---|---|")
+    print(
+        "| object | given | all equal | estimated | strengths' error, mean / largest | estimate s | RTI folder, JPEG |"
+    )
+    print("|---|---|---|---|---|---|---|")
     for name in args.only:
         dataset = irtps.load_dataset(DILIGENT / name)
         given = np.array([light.irradiance for light in dataset.scene.lights])
@@ -62,9 +86,13 @@ def main() -> None:
             found = estimate_light_intensities(dataset.images, directions, dataset.mask, saturation=dataset.saturation)
             seconds.append(time.perf_counter() - start)
         relative = np.abs(found / (given / np.median(given, axis=0)) - 1)
+        with tempfile.TemporaryDirectory() as folder:
+            rti = irtps.load_dataset(as_rti_folder(dataset, DILIGENT / name, Path(folder)))
+        rti.gt = dataset.gt
         print(
             f"| {name} | {mean_error(dataset):.3f}° | {mean_error(equal):.3f}° | {mean_error(unknown):.3f}° "
-            f"| {100 * relative.mean():.1f} % / {100 * relative.max():.1f} % | {statistics.median(seconds[1:]):.2f} |"
+            f"| {100 * relative.mean():.1f} % / {100 * relative.max():.1f} % | {statistics.median(seconds[1:]):.2f} "
+            f"| {mean_error(rti):.3f}° |"
         )
 
 

@@ -25,6 +25,7 @@ from irtps.io.dataset_files import (
     scene_object_files,
 )
 from irtps.io.diligent import load_diligent, load_diligent_ground_truth
+from irtps.io.rti import load_rti
 from irtps.io.image_selection import parse_image_list
 from irtps.io.intrinsics import Intrinsics, read_intrinsics, with_intrinsics
 from irtps.io.imageio import (
@@ -50,13 +51,14 @@ def load_dataset(
     exclude_images: str | None = None,
     intrinsics: str | Path | None = None,
 ) -> Dataset:
-    """Read a data set folder, in the irtps layout or the DiLiGenT layout.
+    """Read a data set folder, in the irtps layout, the DiLiGenT layout or as an RTI folder
+    (`irtps.io.rti`: a ``*.lp`` file and its images, the lights' strengths unknown).
 
     Parameters
     ----------
     path : str or pathlib.Path
-        A folder holding ``scene.json`` (irtps layout) or ``light_directions.txt``
-        (DiLiGenT layout).
+        A folder holding ``scene.json`` (irtps layout), ``light_directions.txt``
+        (DiLiGenT layout) or one ``*.lp`` file (RTI).
     ground_truth : bool
         Also read the ground truth (``gt/``, or DiLiGenT's ``Normal_gt.mat``) when present.
     exclude_images : str, optional
@@ -102,9 +104,13 @@ def load_dataset(
         parse_image_list(exclude_images)
     camera = None if intrinsics is None else read_intrinsics(check_path("intrinsics", intrinsics))
     folder = check_folder(path)
-    if dataset_layout(folder) == "irtps":
+    layout = dataset_layout(folder)
+    if layout == "irtps":
         return _load_irtps(folder, ground_truth, exclude_images, camera)
-    dataset = load_diligent(folder, ground_truth=ground_truth, exclude_images=exclude_images)
+    if layout == "rti":
+        dataset = load_rti(folder, exclude_images=exclude_images)
+    else:
+        dataset = load_diligent(folder, ground_truth=ground_truth, exclude_images=exclude_images)
     return dataset if camera is None else dataclasses.replace(dataset, scene=with_intrinsics(dataset.scene, camera))
 
 
@@ -164,8 +170,11 @@ def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | 
     """
     size = _checked_image_size(size)
     folder = check_folder(check_path("path", path))
-    if dataset_layout(folder) == "diligent":
+    layout = dataset_layout(folder)
+    if layout == "diligent":
         return load_diligent_ground_truth(folder, (size[0], size[1]))
+    if layout == "rti":
+        return None  # an RTI folder holds no ground truth
     scene, truth = ground_truth_files(folder)
     camera_size = (scene.camera.height, scene.camera.width)
     if camera_size != tuple(size):

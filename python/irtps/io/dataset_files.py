@@ -15,6 +15,7 @@ from irtps._shared.checks import check_path
 from irtps._shared.paths import check_file, check_folder, exists, folder_problem, optional_file, optional_folder
 from irtps.errors import DatasetError
 from irtps.io.diligent import diligent_ground_truth_inputs, diligent_image_names, diligent_inputs
+from irtps.io.rti import lp_file, rti_image_names, rti_inputs
 from irtps.io.image_selection import ImageSelection, parse_image_list, select_images
 from irtps.model.data import image_file_name
 from irtps.model.environment import MeshEnvironment
@@ -30,30 +31,44 @@ _NUMBERED_IMAGE = re.compile(r"\d{3,}\.(exr|png)", re.IGNORECASE)
 
 
 def is_data_set(path: str | Path) -> bool:
-    """Whether `path` is a folder that holds a data set's marker file (``scene.json``, or
-    DiLiGenT's ``light_directions.txt``); what it holds is not read.
+    """Whether `path` is a folder that holds a data set's marker file (``scene.json``,
+    DiLiGenT's ``light_directions.txt``, or an RTI folder's ``*.lp``); what it holds is not
+    read.
 
     Examples
     --------
     >>> is_data_set("/")
     False
     """
-    return folder_problem(path) is None and (exists(Path(path) / SCENE_FILE) or exists(Path(path) / DILIGENT_MARKER))
+    if folder_problem(path) is not None:
+        return False
+    folder = Path(path)
+    return exists(folder / SCENE_FILE) or exists(folder / DILIGENT_MARKER) or _has_lp_file(folder)
 
 
 def dataset_layout(folder: Path) -> str:
-    """``"irtps"`` or ``"diligent"``: the layout of a data set folder, told by its marker file."""
+    """``"irtps"``, ``"diligent"`` or ``"rti"``: the layout of a data set folder, told by its
+    marker file."""
     if exists(folder / SCENE_FILE):
         return "irtps"
     if exists(folder / DILIGENT_MARKER):
         return "diligent"
+    if lp_file(folder) is not None:
+        return "rti"
     raise _not_a_dataset(folder)
+
+
+def _has_lp_file(folder: Path) -> bool:
+    try:
+        return lp_file(folder) is not None
+    except DatasetError:  # several: it is one, and reading it says what is wrong
+        return True
 
 
 def _not_a_dataset(folder: Path) -> DatasetError:
     return DatasetError(
         f"{folder}: not a data set: it holds neither {SCENE_FILE} (irtps layout) "
-        f"nor {DILIGENT_MARKER} (DiLiGenT layout)"
+        f"nor {DILIGENT_MARKER} (DiLiGenT layout) nor a *.lp light position file (RTI)"
     )
 
 
@@ -79,8 +94,11 @@ def dataset_image_names(path: str | Path) -> tuple[str, ...]:
     ('000.exr', '001.exr', '002.exr', '003.exr')
     """
     folder = check_folder(path)
-    if dataset_layout(folder) == "diligent":
+    layout = dataset_layout(folder)
+    if layout == "diligent":
         return diligent_image_names(folder)
+    if layout == "rti":
+        return rti_image_names(folder)
     scene = load_scene(folder / SCENE_FILE)
     return tuple(image.name for image in _numbered_images(folder / IMAGES_FOLDER, len(scene.lights)))
 
@@ -130,8 +148,11 @@ def dataset_inputs(
         parse_image_list(exclude_images)
     camera = [] if intrinsics is None else [check_path("intrinsics", intrinsics)]
     folder = check_folder(check_path("path", path))
-    if dataset_layout(folder) == "diligent":
+    layout = dataset_layout(folder)
+    if layout == "diligent":
         return diligent_inputs(folder, ground_truth=ground_truth, exclude_images=exclude_images) + camera
+    if layout == "rti":
+        return rti_inputs(folder, exclude_images=exclude_images) + camera
     return irtps_files(folder, ground_truth, exclude_images).paths() + camera
 
 
@@ -146,8 +167,11 @@ def ground_truth_inputs(path: str | Path) -> list[Path]:
         map.
     """
     folder = check_folder(check_path("path", path))
-    if dataset_layout(folder) == "diligent":
+    layout = dataset_layout(folder)
+    if layout == "diligent":
         return diligent_ground_truth_inputs(folder)
+    if layout == "rti":
+        return [folder]  # an RTI folder holds no ground truth
     scene, truth = ground_truth_files(folder)
     return [folder, *scene_paths(folder / SCENE_FILE, scene), *([] if truth is None else truth.paths())]
 
