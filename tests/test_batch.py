@@ -434,3 +434,7 @@ def test_resume_redoes_a_folder_with_another_normal_map_or_without_its_glb(clust
     assert [s["status"] for s in summary["datasets"]] == ["ok", "ok"]
     record = json.loads((out / "cap" / "run.json").read_text())
     assert record["exports"]["normal.png"]["convention"] == "opengl"
+    assert main([*argv, "--resume", "--encoding", "linear"]) == 0  # decoded otherwise: both redone
+    summary = json.loads((out / "batch.json").read_text())
+    assert [s["status"] for s in summary["datasets"]] == ["ok", "ok"]
+    assert json.loads((out / "cap" / "run.json").read_text())["encoding"] == "linear"

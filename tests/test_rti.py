@@ -2,6 +2,7 @@
 as dome users hold them; made here from the DiLiGenT ball cut, whose true normals and
 calibrated result they are checked against."""
 
+import json
 import shutil
 from pathlib import Path, PureWindowsPath
 
@@ -13,7 +14,10 @@ from PIL import Image
 import irtps
 from irtps.cli.main import main
 from irtps.io.dataset_files import dataset_inputs
-from irtps.io.rti import load_rti, srgb_to_linear
+from irtps.io.dataset_writer import save_dataset
+from irtps.io.imageio import srgb_to_linear
+from irtps.io.rti import load_rti
+from irtps.render.synth import synthesize
 
 BALL = Path(__file__).parent / "data" / "diligent_ball_small"
 
@@ -126,3 +130,23 @@ def test_float_and_16_bit_tiff_images_are_linear(tmp_path):
     read = load_rti(tmp_path / "dome")
     assert np.allclose(read.images, data.images, atol=1 / 65535)
     assert read.saturation is None  # float images do not clip at a known code
+
+
+def test_encoding_overrides_any_layout_and_is_recorded(tmp_path, capsys):
+    _rti_folder(tmp_path / "dome")
+    assert (
+        main(["reconstruct", str(tmp_path / "dome"), "--out", str(tmp_path / "out"), "--quiet", "--encoding", "linear"])
+        == 0
+    )
+    assert json.loads((tmp_path / "out" / "run.json").read_text())["encoding"] == "linear"
+    # DiLiGenT's 16-bit PNG files are linear by its layout; read as sRGB when asked.
+    linear, srgb = (irtps.load_dataset(BALL, encoding=encoding) for encoding in (None, "srgb"))
+    assert np.allclose(srgb.images, srgb_to_linear(linear.images), atol=1e-6)
+    # The irtps layout's EXR images are linear floats: sRGB does not apply.
+    data, _ = synthesize("cap", size=16, lights=4, bounces=0, environment="none")
+    save_dataset(data, tmp_path / "cap")
+    argv = ["reconstruct", str(tmp_path / "cap"), "--out", str(tmp_path / "cap_out"), "--encoding", "srgb"]
+    capsys.readouterr()
+    assert main(argv) == 2
+    assert capsys.readouterr().err.startswith("irtps: error: --encoding: 'srgb' applies to PNG, JPEG and TIFF images")
+    assert not (tmp_path / "cap_out").exists()

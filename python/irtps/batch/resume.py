@@ -23,12 +23,13 @@ def complete_output(
     exclude_images: str | None,
     intrinsics: str | None = None,
     normal_map: str = "opengl",
+    encoding: str | None = None,
 ) -> tuple | None:
     """The normals, albedo, height and mask of a complete output folder of `source` made
     with `options`, leaving out the images of `exclude_images`, with the intrinsics file
     `intrinsics` (or none) and its camera as it reads now, its normal map in the convention
-    `normal_map` (see `irtps.batch.task.reconstruct_to_folder`), and its recorded robust
-    mode, or None."""
+    `normal_map`, its images decoded by `encoding` (see
+    `irtps.batch.task.reconstruct_to_folder`), and its recorded robust mode, or None."""
     folder = Path(destination)
     try:
         record = load_run_record(folder)
@@ -49,6 +50,7 @@ def complete_output(
         and tuple(record.get("excluded_images", ())) == excluded
         and _same_intrinsics(record, intrinsics, camera)
         and same_normal_map
+        and record.get("encoding") == encoding
     )
     return (maps, record.get("robust_used")) if same_run and written and indirect else None
 

@@ -39,6 +39,7 @@ from irtps.batch.task import reconstruct_to_folder
 from irtps.batch.task_warnings import issue_warnings
 from irtps.errors import ArgumentError
 from irtps.io.exchange import NORMAL_MAP_CONVENTIONS
+from irtps.io.imageio import ENCODINGS
 from irtps.model.options import ReconstructOptions
 
 __all__ = ["reconstruct_many"]
@@ -55,6 +56,7 @@ def reconstruct_many(
     exclude_images: str | Mapping[str, str | None] | None = None,
     intrinsics: str | Path | Mapping[str, str | Path | None] | None = None,
     normal_map: str = "opengl",
+    encoding: str | None = None,
     **settings,
 ) -> list[BatchResult]:
     """Reconstruct many data set folders on a Dask cluster, each into ``out/NAME/``.
@@ -116,6 +118,8 @@ def reconstruct_many(
     normal_map : {"opengl", "directx"}
         The convention of each ``normal.png`` (`irtps.save_reconstruction`), which `resume`
         compares.
+    encoding : {"srgb", "linear"}, optional
+        How the images' values map to light (`irtps.load_dataset`), which `resume` compares.
     **settings
         Fields of `ReconstructOptions` that replace those of `options`, e.g.
         ``method="irtps"``.
@@ -131,7 +135,7 @@ def reconstruct_many(
         Before anything runs: no data set, an option unknown or out of range
         (`irtps.model.options.OptionError`), a malformed list of images to leave out or one for
         a ``NAME`` that is none of the data sets', intrinsics for a ``NAME`` that is none of
-        them, a `normal_map` that is neither convention.
+        them, a `normal_map` that is neither convention, an unknown `encoding`.
     DatasetError
         Before anything runs: an intrinsics file that is missing or not a 3x3 intrinsic
         matrix (`irtps.io.intrinsics.read_intrinsics`).
@@ -157,6 +161,8 @@ def reconstruct_many(
     options = ReconstructOptions.build(options, **settings)
     if normal_map not in NORMAL_MAP_CONVENTIONS:
         raise ArgumentError("normal_map", f"{normal_map!r} is not one of {', '.join(NORMAL_MAP_CONVENTIONS)}")
+    if encoding is not None and encoding not in ENCODINGS:
+        raise ArgumentError("encoding", f"{encoding!r} is not one of {', '.join(ENCODINGS)}")
     distributed = import_distributed()
     from tqdm import tqdm
 
@@ -176,6 +182,7 @@ def reconstruct_many(
                 exclude_images=exclusions[name],
                 intrinsics=cameras[name],
                 normal_map=normal_map,
+                encoding=encoding,
                 pure=False,
                 priority=-index,
             ): (name, source)

@@ -37,6 +37,7 @@ def reconstruct_to_folder(
     exclude_images: str | None = None,
     intrinsics: str | None = None,
     normal_map: str = "opengl",
+    encoding: str | None = None,
 ) -> BatchResult:
     """Reconstruct one data set folder into an output folder: the task of a batch.
 
@@ -71,6 +72,8 @@ def reconstruct_to_folder(
         A ``K.txt`` that gives the data set a perspective camera (`irtps.load_dataset`).
     normal_map : {"opengl", "directx"}
         The convention of ``normal.png`` (`irtps.save_reconstruction`).
+    encoding : {"srgb", "linear"}, optional
+        How the images' values map to light (`irtps.load_dataset`).
 
     Returns
     -------
@@ -88,14 +91,14 @@ def reconstruct_to_folder(
     with _TASKS.running(), recorded_warnings() as recorded:
         try:
             kept = (
-                complete_output(destination, source, options, exclude_images, intrinsics, normal_map)
+                complete_output(destination, source, options, exclude_images, intrinsics, normal_map, encoding)
                 if resume
                 else None
             )
             if kept is None:
                 status = "ok"
                 dataset, result = load_and_reconstruct(
-                    source, options=options, exclude_images=exclude_images, intrinsics=intrinsics
+                    source, options=options, exclude_images=exclude_images, intrinsics=intrinsics, encoding=encoding
                 )
                 with _TASKS.writing():
                     save_reconstruction(
@@ -104,6 +107,7 @@ def reconstruct_to_folder(
                         source=str(resolve_path(source)),
                         intrinsics=intrinsics,
                         normal_map=normal_map,
+                        encoding=encoding,
                     )
                 gt, normals, albedo, height, mask = (
                     dataset.gt,

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from irtps.io.exchange import NORMAL_MAP_CONVENTIONS
+from irtps.io.imageio import ENCODINGS
 from irtps.model.options import (
     ClusterOptions,
     ReconstructOptions,
@@ -23,6 +24,7 @@ from irtps.model.options import (
 
 __all__ = [
     "CLUSTER",
+    "ENCODING",
     "EXCLUDE_IMAGES",
     "EXCLUDE_IMAGES_BY_NAME",
     "INTRINSICS",
@@ -172,6 +174,15 @@ INTRINSICS = Argument(
     "that perspective camera, whatever its folder says (a DiLiGenT folder's own K.txt is read without it); renderings "
     "trace through the pinhole, and the steps that take a pixel size use its orthographic stand-in at the object's "
     "distance, and say so",
+)
+
+#: How the images' values map to light.
+ENCODING = Argument(
+    "--encoding",
+    choices=ENCODINGS,
+    help="how the images' values map to light, whatever the layout's default: srgb (a camera's JPEG or 8-bit "
+    "files) or linear; by default the irtps and DiLiGenT layouts are linear and an RTI folder's 8-bit images sRGB, "
+    "its 16-bit and float ones linear; recorded in run.json",
 )
 
 #: The convention of the normal map written for other tools.

@@ -130,6 +130,7 @@ def run_reconstruct(args: argparse.Namespace) -> None:
         progress=not args.quiet,
         exclude_images=args.exclude_images,
         intrinsics=args.intrinsics,
+        encoding=args.encoding,
     )
     save_reconstruction(
         result,
@@ -137,6 +138,7 @@ def run_reconstruct(args: argparse.Namespace) -> None:
         source=str(resolve_path(args.data)),
         intrinsics=args.intrinsics,
         normal_map=args.normal_map,
+        encoding=args.encoding,
     )
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
@@ -206,6 +208,7 @@ def run_batch(args: argparse.Namespace) -> None:
             exclude_images=exclusions,
             intrinsics=intrinsics,
             normal_map=args.normal_map,
+            encoding=args.encoding,
         )
     write_summary(results, args.out, settings=options.to_dict())
     print(summary_table(results), end="")

@@ -13,6 +13,7 @@ from irtps._shared.output_rule import escaped
 from irtps.cli import handlers
 from irtps.cli.arguments import (
     CLUSTER,
+    ENCODING,
     EXCLUDE_IMAGES,
     EXCLUDE_IMAGES_BY_NAME,
     INTRINSICS,
@@ -140,7 +141,7 @@ COMMANDS = (
         run=handlers.run_reconstruct,
         arguments=(Argument("data", type=Path, help="data set folder"),),
         output=Output("output folder", quiet="no progress bar or summary"),
-        options=(EXCLUDE_IMAGES, INTRINSICS, NORMAL_MAP, RECONSTRUCT),
+        options=(EXCLUDE_IMAGES, INTRINSICS, ENCODING, NORMAL_MAP, RECONSTRUCT),
     ),
     Command(
         "batch",
@@ -173,7 +174,7 @@ COMMANDS = (
         output=Output(
             "folder for one reconstruction folder per data set and the summary", quiet="no progress bar", resume=True
         ),
-        options=(EXCLUDE_IMAGES_BY_NAME, INTRINSICS_BY_NAME, NORMAL_MAP, RECONSTRUCT, CLUSTER),
+        options=(EXCLUDE_IMAGES_BY_NAME, INTRINSICS_BY_NAME, ENCODING, NORMAL_MAP, RECONSTRUCT, CLUSTER),
     ),
     Command(
         "evaluate",

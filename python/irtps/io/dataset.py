@@ -29,6 +29,7 @@ from irtps.io.rti import load_rti
 from irtps.io.image_selection import parse_image_list
 from irtps.io.intrinsics import Intrinsics, read_intrinsics, with_intrinsics
 from irtps.io.imageio import (
+    ENCODINGS,
     check_stack_memory,
     clip_negative,
     format_size,
@@ -37,6 +38,7 @@ from irtps.io.imageio import (
     read_image,
     read_images,
     read_mask,
+    srgb_to_linear,
 )
 from irtps.model.data import Dataset, GroundTruth
 from irtps.model.scene import Scene
@@ -50,6 +52,7 @@ def load_dataset(
     ground_truth: bool = True,
     exclude_images: str | None = None,
     intrinsics: str | Path | None = None,
+    encoding: str | None = None,
 ) -> Dataset:
     """Read a data set folder, in the irtps layout, the DiLiGenT layout or as an RTI folder
     (`irtps.io.rti`: a ``*.lp`` file and its images, the lights' strengths unknown).
@@ -68,6 +71,10 @@ def load_dataset(
         A ``K.txt`` (`irtps.io.intrinsics`): the data set's camera is then the perspective
         camera of those intrinsics (`irtps.io.intrinsics.with_intrinsics`), whatever the
         folder says.
+    encoding : {"srgb", "linear"}, optional
+        How the images' values map to light, whatever the layout's default: linear for the
+        irtps and DiLiGenT layouts (their contract), by bit depth in an RTI folder (8-bit
+        sRGB, else linear). ``"srgb"`` applies to PNG, JPEG and TIFF images only.
 
     Returns
     -------
@@ -102,16 +109,29 @@ def load_dataset(
     path = check_path("path", path)
     if exclude_images is not None:
         parse_image_list(exclude_images)
+    if encoding is not None and encoding not in ENCODINGS:
+        raise ArgumentError("encoding", f"{encoding!r} is not one of {', '.join(ENCODINGS)}")
     camera = None if intrinsics is None else read_intrinsics(check_path("intrinsics", intrinsics))
     folder = check_folder(path)
     layout = dataset_layout(folder)
-    if layout == "irtps":
-        return _load_irtps(folder, ground_truth, exclude_images, camera)
     if layout == "rti":
-        dataset = load_rti(folder, exclude_images=exclude_images)
+        dataset = load_rti(folder, exclude_images=exclude_images, encoding=encoding)
+    elif layout == "irtps":
+        dataset, camera = _load_irtps(folder, ground_truth, exclude_images, camera), None  # its camera set
     else:
         dataset = load_diligent(folder, ground_truth=ground_truth, exclude_images=exclude_images)
+    if encoding == "srgb" and layout != "rti":
+        _decode_srgb(dataset)
     return dataset if camera is None else dataclasses.replace(dataset, scene=with_intrinsics(dataset.scene, camera))
+
+
+def _decode_srgb(dataset: Dataset) -> None:
+    """Linearise the images of `dataset`, read as they are stored, from sRGB, in place."""
+    for name in dataset.names:
+        if not name.lower().endswith(".png"):
+            raise ArgumentError("encoding", f"'srgb' applies to PNG, JPEG and TIFF images; {name} is stored linear")
+    for image in dataset.images:  # one at a time: no float64 copy of the whole stack
+        image[...] = srgb_to_linear(image)
 
 
 def _load_irtps(folder: Path, ground_truth: bool, exclude_images: str | None, camera: Intrinsics | None) -> Dataset:

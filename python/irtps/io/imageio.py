@@ -29,6 +29,23 @@ PNG_BIT_DEPTHS = (8, 16)
 """Bit depths of PNG files that can be written."""
 
 
+#: How the values of an image file map to light: "srgb" (the sRGB curve of cameras' JPEG
+#: and 8-bit files), "linear".
+ENCODINGS = ("srgb", "linear")
+
+
+def srgb_to_linear(values: np.ndarray) -> np.ndarray:
+    """The linear light of sRGB-encoded values in [0, 1] (IEC 61966-2-1).
+
+    Examples
+    --------
+    >>> srgb_to_linear(np.array([0.0, 0.04045, 0.5, 1.0])).round(5).tolist()
+    [0.0, 0.00313, 0.21404, 1.0]
+    """
+    values = np.asarray(values, dtype=np.float64)
+    return np.where(values <= 0.04045, values / 12.92, ((values + 0.055) / 1.055) ** 2.4)
+
+
 def read_exr(path: str | Path) -> np.ndarray:
     """Read an OpenEXR file with channels R, G, B or a single Y: the image of its display
     window, in which the pixels of its data window are placed where that window lies; the

@@ -27,32 +27,18 @@ from irtps._shared.guarded import read_text
 from irtps._shared.paths import check_file, check_folder, exists, optional_file
 from irtps.errors import ArgumentError, DatasetError
 from irtps.io.image_selection import ImageSelection, select_images
-from irtps.io.imageio import format_size, read_mask, read_png
+from irtps.io.imageio import ENCODINGS, format_size, read_mask, read_png, srgb_to_linear
 from irtps.model.data import Dataset
 from irtps.model.scene import MIN_LIGHTS, Camera, Light, Scene, upward_problem
 
-__all__ = ["ENCODINGS", "load_rti", "lp_file", "rti_image_names", "rti_inputs", "srgb_to_linear"]
+__all__ = ["load_rti", "lp_file", "rti_image_names", "rti_inputs"]
 
-#: How the values of an image's file map to light: "srgb" (the sRGB curve), "linear".
-ENCODINGS = ("srgb", "linear")
 LP_SUFFIX = ".lp"
 MASK_FILE = "mask.png"
 #: How far the norm of a listed light direction may be from 1; within it, it is renormalised.
 UNIT_TOLERANCE = 1e-2
 _JPEG = (".jpg", ".jpeg")
 _TIFF = (".tif", ".tiff")
-
-
-def srgb_to_linear(values: np.ndarray) -> np.ndarray:
-    """The linear light of sRGB-encoded values in [0, 1] (IEC 61966-2-1).
-
-    Examples
-    --------
-    >>> srgb_to_linear(np.array([0.0, 0.04045, 0.5, 1.0])).round(5).tolist()
-    [0.0, 0.00313, 0.21404, 1.0]
-    """
-    values = np.asarray(values, dtype=np.float64)
-    return np.where(values <= 0.04045, values / 12.92, ((values + 0.055) / 1.055) ** 2.4)
 
 
 def lp_file(folder: str | Path) -> Path | None:

@@ -69,6 +69,7 @@ def save_reconstruction(
     source: str | None = None,
     intrinsics: str | Path | None = None,
     normal_map: str = "opengl",
+    encoding: str | None = None,
 ) -> None:
     """Write a reconstruction folder atomically.
 
@@ -105,6 +106,9 @@ def save_reconstruction(
         ``run.json`` (as an absolute path, beside the camera as ``scene.json`` holds it).
     normal_map : {"opengl", "directx"}
         The convention of ``normal.png``: green up the image (OpenGL), or down it (DirectX).
+    encoding : {"srgb", "linear"}, optional
+        How the images were decoded when they were read (`irtps.load_dataset`), recorded in
+        ``run.json`` (None: by the layout).
 
     Raises
     ------
@@ -152,6 +156,7 @@ def save_reconstruction(
             "pixel_size": result.pixel_size,
             "camera": None if result.camera is None else camera_to_dict(result.camera),
             "intrinsics": None if intrinsics is None else str(resolve_path(intrinsics)),
+            "encoding": encoding,
             "timings_s": result.timings,
             "flags": {name: int((result.flags[result.mask] == value).sum()) for value, name in FLAGS.items()},
             "placement": None if result.placement is None else result.placement.to_dict(),

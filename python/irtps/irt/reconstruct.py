@@ -318,6 +318,7 @@ def load_and_reconstruct(
     *,
     exclude_images: str | None = None,
     intrinsics: str | Path | None = None,
+    encoding: str | None = None,
     **options,
 ) -> tuple[Dataset, Reconstruction]:
     """Read a data set folder and reconstruct it, timing the reading too.
@@ -332,6 +333,8 @@ def load_and_reconstruct(
         Images not to read (`irtps.load_dataset`), e.g. ``"1-20"``.
     intrinsics : str or pathlib.Path, optional
         A ``K.txt`` that gives the data set a perspective camera (`irtps.load_dataset`).
+    encoding : {"srgb", "linear"}, optional
+        How the images' values map to light (`irtps.load_dataset`).
     **options
         The other keyword arguments of `reconstruct` (``options``, ``progress``, fields
         of `ReconstructOptions`).
@@ -368,7 +371,7 @@ def load_and_reconstruct(
     settings = {key: value for key, value in options.items() if key not in ("options", "progress")}
     ReconstructOptions.build(options.get("options"), **settings)  # a bad option fails before the data set is read
     start = time.perf_counter()
-    dataset = load_dataset(path, exclude_images=exclude_images, intrinsics=intrinsics)
+    dataset = load_dataset(path, exclude_images=exclude_images, intrinsics=intrinsics, encoding=encoding)
     loaded = time.perf_counter() - start
     result = reconstruct(dataset, **options)
     result.timings = {"load": loaded, **result.timings}
