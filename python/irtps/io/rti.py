@@ -27,7 +27,7 @@ from irtps._shared.guarded import read_text
 from irtps._shared.paths import check_file, check_folder, exists, optional_file
 from irtps.errors import ArgumentError, DatasetError
 from irtps.io.image_selection import ImageSelection, select_images
-from irtps.io.imageio import ENCODINGS, format_size, read_mask, read_png, srgb_to_linear
+from irtps.io.imageio import ENCODINGS, check_stack_memory, format_size, read_mask, read_png, srgb_to_linear
 from irtps.model.data import Dataset
 from irtps.model.scene import MIN_LIGHTS, Camera, Light, Scene, upward_problem
 
@@ -97,8 +97,8 @@ def load_rti(path: str | Path, *, exclude_images: str | None = None, encoding: s
     ----------
     path : str or pathlib.Path
     exclude_images : str, optional
-        Images to leave out, not read (`irtps.io.image_selection`), by number in the
-        ``.lp`` file's order (from 1) or by file name.
+        Images to leave out, not read (`irtps.io.image_selection`): by file name, with or
+        without its extension (a number names an image whose file name is that number).
     encoding : {"srgb", "linear"}, optional
         How the images' values map to light; default by bit depth: 8-bit images sRGB,
         16-bit and float ones linear.
@@ -124,6 +124,7 @@ def load_rti(path: str | Path, *, exclude_images: str | None = None, encoding: s
     if encoding is not None and encoding not in ENCODINGS:
         raise ArgumentError("encoding", f"{encoding!r} is not one of {', '.join(ENCODINGS)}")
     files = _rti_files(check_folder(path), exclude_images)
+    check_stack_memory(files.images, _header_size(files.images[0]), where=files.lp)
     images, integer_codes = zip(*(_read_capture_image(image, encoding) for image in files.images), strict=True)
     size = images[0].shape[:2]
     for image, image_path in zip(images, files.images, strict=True):
@@ -235,11 +236,20 @@ def _read_capture_image(path: Path, encoding: str | None) -> tuple[np.ndarray, b
     return linear.astype(np.float32), bits is not None
 
 
+def _header_size(path: Path) -> tuple[int, int] | None:
+    """(H, W) of an image from its header (no pixel decoded), None when Pillow cannot tell."""
+    try:
+        with Image.open(path) as image:
+            return image.height, image.width
+    except (OSError, UnidentifiedImageError, Image.DecompressionBombError):
+        return None
+
+
 def _read_jpeg(path: Path) -> np.ndarray:
     try:
         with Image.open(path) as image:
             return np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
-    except (OSError, UnidentifiedImageError) as error:
+    except (OSError, UnidentifiedImageError, Image.DecompressionBombError) as error:
         raise DatasetError(f"{path}: cannot be read as a JPEG image: {error}") from None
 
 
