@@ -82,10 +82,13 @@ impl EnvironmentAccel {
     /// Checks `mesh` (naming the first bad vertex or triangle) and builds its BVH.
     pub fn new(mesh: EnvironmentMesh) -> Result<EnvironmentAccel> {
         mesh.validate()?;
+        let shading: Vec<TriangleShading> = mesh
+            .triangles
+            .iter()
+            .map(|&tri| TriangleShading::new(&mesh, tri))
+            .collect();
         let (kept, degenerate): (Vec<u32>, Vec<u32>) =
-            (0..mesh.triangles.len() as u32).partition(|&t| {
-                TriangleShading::new(&mesh, mesh.triangles[t as usize]).normal != [0.0; 3]
-            });
+            (0..mesh.triangles.len() as u32).partition(|&t| shading[t as usize].normal != [0.0; 3]);
         let tris = kept
             .iter()
             .map(|&t| {
@@ -101,10 +104,14 @@ impl EnvironmentAccel {
             .chain(degenerate)
             .collect();
         let mesh = in_order(mesh, &triangle_order);
-        let shading = mesh
-            .triangles
+        // The same records in the new order, naming the renumbered vertices.
+        let shading = triangle_order
             .iter()
-            .map(|&tri| TriangleShading::new(&mesh, tri))
+            .zip(&mesh.triangles)
+            .map(|(&t, &vertices)| TriangleShading {
+                vertices,
+                ..shading[t as usize]
+            })
             .collect();
         let bounds = mesh
             .positions

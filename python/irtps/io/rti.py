@@ -125,20 +125,24 @@ def load_rti(path: str | Path, *, exclude_images: str | None = None, encoding: s
         raise ArgumentError("encoding", f"{encoding!r} is not one of {', '.join(ENCODINGS)}")
     files = _rti_files(check_folder(path), exclude_images)
     check_stack_memory(files.images, _header_size(files.images[0]), where=files.lp)
-    images, integer_codes = zip(*(_read_capture_image(image, encoding) for image in files.images), strict=True)
-    size = images[0].shape[:2]
-    for image, image_path in zip(images, files.images, strict=True):
+    first, integer_codes = _read_capture_image(files.images[0], encoding)
+    size = first.shape[:2]
+    images = np.empty((len(files.images), *first.shape), dtype=np.float32)  # filled image by image
+    images[0] = first
+    for k, image_path in enumerate(files.images[1:], start=1):
+        image, integer = _read_capture_image(image_path, encoding)
         if image.shape[:2] != size:
             raise DatasetError(
                 f"{image_path}: size {format_size(image.shape)} differs from {files.images[0].name}'s ({format_size(size)})"
             )
+        images[k], integer_codes = image, integer_codes and integer
     mask = read_mask(files.mask, size) if files.mask is not None else np.ones(size, dtype=bool)
     return Dataset(
         scene=Scene(camera=Camera(width=size[1], height=size[0], pixel_size=1.0), lights=files.lights),
-        images=np.stack(images),
+        images=images,
         mask=mask,
         source=str(files.folder),
-        saturation=1.0 if all(integer_codes) else None,
+        saturation=1.0 if integer_codes else None,
         image_names=files.selection.names,
         excluded_images=files.selection.excluded,
         irradiance_known=False,

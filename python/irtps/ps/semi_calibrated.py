@@ -86,9 +86,7 @@ def estimate_light_intensities(
     >>> bool(np.allclose(found, strength / np.median(strength, axis=0)))
     True
     """
-    images = check_array("images", images, (None, None, None, 3), dtype=None, copy=False)
-    if not np.issubdtype(images.dtype, np.number) or np.issubdtype(images.dtype, np.complexfloating):
-        raise ArgumentError("images", f"must hold real numbers, got dtype {images.dtype}")
+    images = check_array("images", images, (None, None, None, 3), dtype=np.float32, copy=False)
     directions = check_array("light_directions", light_directions, (len(images), 3), match="images")
     check_finite("light_directions", directions, unit="light")
     mask = check_mask(mask, images.shape[1:3], match="images")
@@ -107,15 +105,16 @@ def estimate_light_intensities(
             f"{int(lit.sum())} pixels are lit by every light (not in shadow, not saturated): fewer than the "
             f"{len(directions)} lights, too few to tell their strengths apart; give the intensities",
         )
+    off_span = np.eye(len(directions)) - directions @ np.linalg.pinv(directions)
     gray = observations[:, lit].sum(axis=-1)  # (K, N)
-    inverse, kept = _trimmed_inverse_strengths(gray, directions)
+    inverse, kept = _trimmed_inverse_strengths(gray, off_span)
     chosen = observations[:, lit][:, kept]  # (K, M, 3)
     # Each channel alone is exactly Lambertian (their sum is so only under lights of one
     # colour): the same solution on the chosen pixels, channel by channel, where it is
     # positive (a channel dark on the object tells nothing).
     strengths = np.repeat((1.0 / inverse)[:, None], 3, axis=1)
     for channel in range(3):
-        per_channel = _inverse_strengths(chosen[..., channel], directions)
+        per_channel = _inverse_strengths(chosen[..., channel], off_span)
         if (per_channel > 0).all():
             strengths[:, channel] = 1.0 / per_channel
     return strengths / np.median(strengths, axis=0)
@@ -130,22 +129,21 @@ def _lit_by_every_light(observations: np.ndarray, shadow_fraction: float, satura
     return lit
 
 
-def _inverse_strengths(values: np.ndarray, directions: np.ndarray) -> np.ndarray:
+def _inverse_strengths(values: np.ndarray, off_span: np.ndarray) -> np.ndarray:
     """``u = 1 / e`` (K,) from `values` (K, N) of pixels lit by every light: the eigenvector
-    of the smallest eigenvalue of ``P * (I^T I)``, signed to sum positive (all positive when
-    the values fix the strengths)."""
-    off_span = np.eye(len(directions)) - directions @ np.linalg.pinv(directions)
+    of the smallest eigenvalue of ``P * (I^T I)`` (P = `off_span`, the projector off the
+    span of the light directions), signed to sum positive (all positive when the values fix
+    the strengths)."""
     _, vectors = np.linalg.eigh(off_span * (values @ values.T))
     return vectors[:, 0] * np.sign(vectors[:, 0].sum())
 
 
-def _trimmed_inverse_strengths(gray: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _trimmed_inverse_strengths(gray: np.ndarray, off_span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``u = 1 / e`` (K,) from the channel sums `gray` (K, N) of pixels lit by every light, on
     the half of them it explains best, and that half (bool (N,))."""
-    off_span = np.eye(len(directions)) - directions @ np.linalg.pinv(directions)
     kept = np.ones(gray.shape[1], dtype=bool)
     for _ in range(_ROUNDS):
-        inverse = _inverse_strengths(gray[:, kept], directions)
+        inverse = _inverse_strengths(gray[:, kept], off_span)
         scaled = gray.T * inverse
         misfit = np.linalg.norm(scaled @ off_span, axis=1) / np.linalg.norm(scaled, axis=1)
         better = misfit <= np.median(misfit)
