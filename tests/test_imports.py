@@ -29,6 +29,7 @@ LAYERS = [
     ["irt"],
     ["evaluate"],
     ["report", "batch"],
+    ["calibrate"],
     ["cli"],
 ]
 

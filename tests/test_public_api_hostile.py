@@ -224,6 +224,17 @@ CASES = [
     ("save_dataset", lambda f: f({"images": IMAGES}, "unused"), irtps.ArgumentError, "dataset: "),
     ("save_dataset", lambda f: f(_dataset(), 3), irtps.ArgumentError, "path: "),
     ("load_dataset", lambda f: f(type("Odd", (), {"__fspath__": lambda self: 3})()), irtps.ArgumentError, "path: "),
+    # calibrate_lights
+    ("calibrate_lights", lambda f: f("images"), irtps.ArgumentError, "images: "),
+    ("calibrate_lights", lambda f: f(np.zeros((4, 0, 4, 3))), irtps.ArgumentError, "images: "),
+    ("calibrate_lights", lambda f: f(np.full((4, 4, 4, 3), NAN)), irtps.ArgumentError, "images: "),
+    ("calibrate_lights", lambda f: f(IMAGES, saturated=MASK), irtps.ArgumentError, "saturated: "),
+    ("calibrate_lights", lambda f: f(IMAGES, chrome="2,2,1"), irtps.ArgumentError, "chrome: "),
+    ("calibrate_lights", lambda f: f(IMAGES, matte=(2, 2, 0)), irtps.ArgumentError, "matte: "),
+    ("calibrate_lights", lambda f: f(IMAGES, matte_albedo="0.8"), irtps.ArgumentError, "matte_albedo: "),
+    ("calibrate_lights", lambda f: f(IMAGES, matte_albedo=NAN), irtps.ArgumentError, "matte_albedo: "),
+    ("calibrate_lights", lambda f: f(IMAGES, matte_albedo=1.5), irtps.ArgumentError, "matte_albedo: "),
+    ("calibrate_lights", lambda f: f(IMAGES), irtps.DatasetError, "capture: no mirror or matte sphere"),
 ]
 
 

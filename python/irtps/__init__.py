@@ -14,6 +14,7 @@ from irtps.geometry.integrate import integrate_normals
 from irtps.geometry.boundary import place_height
 from irtps.ps.fit import PsResult, choose_robust, lobe_share, photometric_stereo
 from irtps.ps.uncertainty import normal_standard_error
+from irtps.calibrate.lights import LightCalibration, calibrate_lights
 from irtps.irt.folder import save_reconstruction
 from irtps.irt.reconstruct import Reconstruction, reconstruct
 from irtps._shared.records import irtps_version
@@ -37,6 +38,7 @@ __all__ = [
     "IrtpsError",
     "IrtpsWarning",
     "Light",
+    "LightCalibration",
     "MeshEnvironment",
     "Metrics",
     "PointLight",
@@ -46,6 +48,7 @@ __all__ = [
     "Scene",
     "__version__",
     "angular_error_deg",
+    "calibrate_lights",
     "choose_robust",
     "depth_to_normals",
     "evaluate",

@@ -28,6 +28,7 @@ from irtps._shared.guarded import parse_json
 
 __all__ = [
     "BATCH",
+    "CALIBRATION",
     "RENDERING",
     "REPORT",
     "REPORT_MARKER",
@@ -43,6 +44,7 @@ TABLE = "irtps.table/1"
 BATCH = "irtps.batch/1"
 RENDERING = "irtps.rendering/1"
 REPORT = "irtps.report/1"
+CALIBRATION = "irtps.calibration/1"
 
 #: The record of each kind of output folder: its path inside the folder, and its format.
 RECORDS = {
@@ -51,6 +53,7 @@ RECORDS = {
     "batch.json": BATCH,
     "gt/rendering.json": RENDERING,
     "index.html": REPORT,
+    "calibration.json": CALIBRATION,
 }
 
 #: The line in the head of a report's page that marks it as ours.

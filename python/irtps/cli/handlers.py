@@ -19,11 +19,16 @@ from irtps._shared.records import TABLE, stamp, written_by_irtps
 from irtps.batch.cluster import connect, local_cluster
 from irtps.batch.plan import output_names
 from irtps.batch.run import reconstruct_many
+from irtps.calibrate.circles import parse_circle
+from irtps.calibrate.folder import save_calibration
+from irtps.calibrate.lights import calibrate_lights
+from irtps.calibrate.summary import format_calibration
 from irtps.batch.summary import SUMMARY_JSON, SUMMARY_MARKDOWN, summary_table, write_summary
 from irtps.errors import DatasetError, IrtpsError
 from irtps.evaluate.table import comparison_table, format_table, method_names
 from irtps.geometry.placement import format_placement
 from irtps.geometry.surface import depth_to_normals, height_to_normals
+from irtps.io.capture import capture_image_paths, read_capture
 from irtps.io.dataset import Dataset, GroundTruth, load_dataset, load_ground_truth, load_scene_object
 from irtps.io.dataset_files import dataset_inputs, scene_object_inputs
 from irtps.io.dataset_writer import save_dataset
@@ -249,6 +254,47 @@ def _holds_batch_outputs(out: Path) -> bool:
         entry.name in (SUMMARY_JSON, SUMMARY_MARKDOWN) or (entry.is_dir() and written_by_irtps(entry))
         for entry in entries
     )
+
+
+def run_calibrate(args: argparse.Namespace) -> None:
+    """``irtps calibrate``: each light's direction and strength from a capture of calibration spheres."""
+    chrome = None if args.chrome is None else parse_circle(args.chrome, "chrome")
+    matte = None if args.matte is None else parse_circle(args.matte, "matte")
+    paths = capture_image_paths(args.capture)
+    names = [path.name for path in paths]
+    inputs: list[Path] = [args.capture, *paths]
+    if args.names_from is not None:
+        named = capture_image_paths(args.names_from)
+        if len(named) != len(paths):
+            raise DatasetError(
+                f"{args.names_from}: {len(named)} images, but the capture {args.capture} has {len(paths)}: "
+                "--names-from needs the images taken under the same lights, one each"
+            )
+        names, inputs = [path.name for path in named], [*inputs, args.names_from]
+    check_output(args.out, inputs, force=args.force)
+    capture = read_capture(paths, args.encoding, where=args.capture)
+    calibration = calibrate_lights(
+        capture.images,
+        saturated=capture.saturated,
+        chrome=chrome,
+        matte=matte,
+        matte_albedo=args.matte_albedo,
+        names=[path.name for path in paths],
+        where=str(args.capture),
+    )
+    written = save_calibration(
+        calibration,
+        args.out,
+        names=names,
+        mean_image=capture.images.mean(axis=0),
+        source=str(resolve_path(args.capture)),
+        matte_albedo=args.matte_albedo,
+        encoding=args.encoding,
+    )
+    if not args.quiet:
+        print(f"calibrated {len(paths)} lights from {args.capture} -> {args.out} ({', '.join(written)})")
+        for line in format_calibration(calibration, names):
+            print(f"  {line}")
 
 
 def run_evaluate(args: argparse.Namespace) -> None:

@@ -177,6 +177,56 @@ COMMANDS = (
         options=(EXCLUDE_IMAGES_BY_NAME, INTRINSICS_BY_NAME, ENCODING, NORMAL_MAP, RECONSTRUCT, CLUSTER),
     ),
     Command(
+        "calibrate",
+        help="each light's direction and strength from images of a mirror and a matte sphere",
+        description="Calibrate a rig's lights from CAPTURE, a folder of images (JPEG, PNG, TIFF or EXR, one light "
+        "each, in name order) of a mirror (chrome) sphere and, optionally, a matte white sphere, seen by a distant "
+        "(orthographic) camera. The spheres are found (or given: --chrome, --matte); each light's direction is its "
+        "highlight on the mirror sphere, mirrored about the view direction, and its RGB strength the matte sphere's "
+        "brightness over n.l. The mirror sphere's outline is faint where it mirrors what is behind it, so with a "
+        "matte sphere its circle is fitted to the highlights and the matte sphere's shading (each light's direction "
+        "still comes from its own highlight); without a mirror sphere, the directions come from the matte sphere. "
+        "Writes OUT: lights.lp (for an RTI folder: 'name x y z' per image), lights.json (the scene contract's "
+        "'lights', with strengths; only with a matte sphere), calibration.json (the circles, each highlight, both "
+        "spheres' directions and how far apart they are) and calibration.png (what was found). OUT is replaced "
+        "atomically.",
+        examples=(
+            "irtps calibrate shared/data/calibration/spheres/png --out rig_lights",
+            "irtps calibrate dome_spheres --out dome_lights --names-from dome_object   # lights.lp names its images",
+            "irtps calibrate spheres --out lights --chrome 412,380,95 --matte 1210,380,96 --matte-albedo 0.99",
+        ),
+        run=handlers.run_calibrate,
+        arguments=(Argument("capture", type=Path, help="folder of the calibration images"),),
+        output=Output("output folder", quiet="print nothing"),
+        options=(
+            Argument(
+                "--chrome",
+                metavar="COLUMN,ROW,RADIUS",
+                help="the mirror sphere's circle in pixels from the image's top-left corner (default: found)",
+            ),
+            Argument(
+                "--matte",
+                metavar="COLUMN,ROW,RADIUS",
+                help="the matte sphere's circle in pixels from the image's top-left corner (default: found)",
+            ),
+            Argument(
+                "--matte-albedo",
+                type=float,
+                default=1.0,
+                help="the matte sphere's albedo: strengths are then irradiances, and albedos reconstructed with them "
+                "absolute (default 1.0: relative to a white sphere)",
+            ),
+            Argument(
+                "--names-from",
+                type=Path,
+                metavar="FOLDER",
+                help="name lights.lp's lines after the images of FOLDER (as many, taken under the same lights, in name "
+                "order) instead of the capture's",
+            ),
+            ENCODING,
+        ),
+    ),
+    Command(
         "evaluate",
         help="compare a reconstruction with ground truth",
         description="Print the errors of the reconstruction in OUT against the ground truth of the data set GT "

@@ -20,14 +20,13 @@ from pathlib import Path, PureWindowsPath
 from typing import NamedTuple
 
 import numpy as np
-import tifffile
-from PIL import Image, UnidentifiedImageError
 
 from irtps._shared.guarded import read_text
 from irtps._shared.paths import check_file, check_folder, exists, optional_file
 from irtps.errors import ArgumentError, DatasetError
 from irtps.io.image_selection import ImageSelection, select_images
-from irtps.io.imageio import ENCODINGS, check_stack_memory, format_size, read_mask, read_png, srgb_to_linear
+from irtps.io.capture import read_capture_images
+from irtps.io.imageio import ENCODINGS, read_mask
 from irtps.model.data import Dataset
 from irtps.model.scene import MIN_LIGHTS, Camera, Light, Scene, upward_problem
 
@@ -124,18 +123,8 @@ def load_rti(path: str | Path, *, exclude_images: str | None = None, encoding: s
     if encoding is not None and encoding not in ENCODINGS:
         raise ArgumentError("encoding", f"{encoding!r} is not one of {', '.join(ENCODINGS)}")
     files = _rti_files(check_folder(path), exclude_images)
-    check_stack_memory(files.images, _header_size(files.images[0]), where=files.lp)
-    first, integer_codes = _read_capture_image(files.images[0], encoding)
-    size = first.shape[:2]
-    images = np.empty((len(files.images), *first.shape), dtype=np.float32)  # filled image by image
-    images[0] = first
-    for k, image_path in enumerate(files.images[1:], start=1):
-        image, integer = _read_capture_image(image_path, encoding)
-        if image.shape[:2] != size:
-            raise DatasetError(
-                f"{image_path}: size {format_size(image.shape)} differs from {files.images[0].name}'s ({format_size(size)})"
-            )
-        images[k], integer_codes = image, integer_codes and integer
+    images, integer_codes = read_capture_images(files.images, encoding, where=files.lp)
+    size = images.shape[1:3]
     mask = read_mask(files.mask, size) if files.mask is not None else np.ones(size, dtype=bool)
     return Dataset(
         scene=Scene(camera=Camera(width=size[1], height=size[0], pixel_size=1.0), lights=files.lights),
@@ -213,59 +202,3 @@ def _image_path(folder: Path, name: str) -> Path:
     if exists(written):
         return written
     return folder / PureWindowsPath(name).name
-
-
-def _read_capture_image(path: Path, encoding: str | None) -> tuple[np.ndarray, bool]:
-    """float32 (H, W, 3) linear RGB of a JPEG, PNG or TIFF file, and whether it holds integer
-    codes."""
-    suffix = path.suffix.lower()
-    bits: int | None
-    if suffix == ".png":
-        values, bits = read_png(path)
-    elif suffix in _JPEG:
-        values, bits = _read_jpeg(path), 8
-    elif suffix in _TIFF:
-        values, bits = _read_tiff(path)
-    else:
-        raise DatasetError(f"{path}: not a JPEG, PNG or TIFF file (by its extension)")
-    if values.ndim == 2:
-        values = np.repeat(values[..., None], 3, axis=2)
-    if values.ndim != 3 or values.shape[2] < 3:
-        raise DatasetError(f"{path}: expected a gray or RGB image, got shape {values.shape}")
-    values = values[..., :3]
-    if not np.isfinite(values).all():
-        raise DatasetError(f"{path}: holds non-finite values")
-    chosen = encoding or ("srgb" if bits == 8 else "linear")
-    linear = srgb_to_linear(np.clip(values, 0.0, 1.0)) if chosen == "srgb" else np.clip(values, 0.0, None)
-    return linear.astype(np.float32), bits is not None
-
-
-def _header_size(path: Path) -> tuple[int, int] | None:
-    """(H, W) of an image from its header (no pixel decoded), None when Pillow cannot tell."""
-    try:
-        with Image.open(path) as image:
-            return image.height, image.width
-    except (OSError, UnidentifiedImageError, Image.DecompressionBombError):
-        return None
-
-
-def _read_jpeg(path: Path) -> np.ndarray:
-    try:
-        with Image.open(path) as image:
-            return np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
-    except (OSError, UnidentifiedImageError, Image.DecompressionBombError) as error:
-        raise DatasetError(f"{path}: cannot be read as a JPEG image: {error}") from None
-
-
-def _read_tiff(path: Path) -> tuple[np.ndarray, int | None]:
-    """Values of a TIFF file in [0, 1] for integer codes (as they are for floats), and its
-    bits per channel (None for floats)."""
-    try:
-        raw = tifffile.imread(path)
-    except (OSError, ValueError, tifffile.TiffFileError) as error:
-        raise DatasetError(f"{path}: cannot be read as a TIFF image: {error}") from None
-    if np.issubdtype(raw.dtype, np.integer):
-        return raw.astype(np.float64) / np.iinfo(raw.dtype).max, raw.dtype.itemsize * 8
-    if np.issubdtype(raw.dtype, np.floating):
-        return raw.astype(np.float64), None
-    raise DatasetError(f"{path}: TIFF samples of type {raw.dtype} are not supported")

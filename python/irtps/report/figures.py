@@ -15,11 +15,11 @@ from matplotlib import colormaps
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
-from irtps._shared.checks import check_array
+from irtps._shared.checks import check_array, check_instance
 from irtps.report.display import BACKGROUND
 from irtps.errors import ArgumentError
 
-__all__ = ["agreement_png", "convergence_png", "error_map_png", "image_png"]
+__all__ = ["agreement_png", "convergence_png", "error_map_png", "figure_png", "image_png"]
 
 #: Size of a figure in inches, and its resolution.
 FIGURE_SIZE = (4.8, 4.2)
@@ -53,7 +53,7 @@ def image_png(rgb: np.ndarray, title: str) -> bytes:
     axes = figure.add_subplot()
     axes.imshow(np.clip(rgb, 0.0, 1.0))
     _image_axes(axes, title)
-    return _png(figure)
+    return figure_png(figure)
 
 
 def error_map_png(errors: np.ndarray, title: str, unit: str) -> bytes:
@@ -99,7 +99,7 @@ def error_map_png(errors: np.ndarray, title: str, unit: str) -> bytes:
     image = axes.imshow(np.ma.masked_invalid(errors), cmap=_error_colormap(), vmin=0.0, vmax=top if top > 0 else 1.0)
     figure.colorbar(image, ax=axes, label=unit, extend="max" if finite.max() > top else "neither", shrink=0.85)
     _image_axes(axes, title)
-    return _png(figure)
+    return figure_png(figure)
 
 
 def convergence_png(
@@ -160,7 +160,7 @@ def convergence_png(
     )
     if stopped:
         figure.suptitle(stopped, fontsize="small")
-    return _png(figure)
+    return figure_png(figure)
 
 
 def agreement_png(
@@ -251,7 +251,7 @@ def agreement_png(
         axes.xaxis.set_major_locator(MaxNLocator(integer=True))
         axes.grid(True, alpha=0.3)
     left.axhline(1.0, color="C3", linewidth=1)
-    return _png(figure)
+    return figure_png(figure)
 
 
 def _curve(axes, points: list[tuple[int, float]], label: str, title: str, chosen: int | None = None) -> None:
@@ -285,7 +285,16 @@ def _image_axes(axes, title: str) -> None:
     axes.set_axis_off()
 
 
-def _png(figure: Figure) -> bytes:
+def figure_png(figure: Figure) -> bytes:
+    """A matplotlib figure as PNG bytes, at `DPI`, without a software tag (the same figure gives
+    the same bytes).
+
+    Raises
+    ------
+    ArgumentError
+        Naming `figure`: not a `matplotlib.figure.Figure`.
+    """
+    check_instance("figure", figure, Figure)
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=DPI, metadata={"Software": None})
     return buffer.getvalue()

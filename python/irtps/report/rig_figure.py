@@ -10,7 +10,7 @@ from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 from irtps.model.environment import MeshEnvironment
 from irtps.model.scene import PointLight, Scene
 from irtps.model.data import spread_pixels
-from irtps.report.figures import DPI, _png
+from irtps.report.figures import DPI, figure_png
 
 __all__ = ["rig_png", "shows_a_rig"]
 
@@ -65,4 +65,4 @@ def rig_png(scene: Scene, height: np.ndarray, mask: np.ndarray, title: str) -> b
     axes.legend(loc="upper left", fontsize="x-small")
     axes.set_title(title, fontsize="medium")
     figure.set_dpi(DPI)
-    return _png(figure)
+    return figure_png(figure)

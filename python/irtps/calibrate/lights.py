@@ -1,0 +1,224 @@
+"""Calibrating a rig's lights from a capture of calibration spheres: each light's direction
+from a mirror sphere's highlight (or a matte sphere's shading, when there is no mirror sphere)
+and its RGB strength from a matte sphere."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from irtps._shared.checks import check_array, check_finite, check_number
+from irtps.calibrate.chrome import circle_from_highlights, find_highlights, mirror_directions
+from irtps.calibrate.circles import Circle, as_circle
+from irtps.calibrate.matte import fit_shading, matte_irradiance
+from irtps.calibrate.spheres import MAX_SHADING_RESIDUAL, find_spheres
+from irtps.errors import ArgumentError, DatasetError
+
+__all__ = ["LightCalibration", "calibrate_lights"]
+
+#: How far (a fraction of the outline's radius) the mirror sphere's circle fitted to its
+#: highlights and the matte sphere's directions may lie from its outline and still be taken.
+MAX_CIRCLE_SHIFT = 0.1
+#: The fewest lights with both a highlight and a matte-sphere direction that fit the circle.
+MIN_SHARED_LIGHTS = 3
+
+
+@dataclass(frozen=True)
+class LightCalibration:
+    """What `calibrate_lights` found.
+
+    Attributes
+    ----------
+    directions : numpy.ndarray
+        (K, 3) unit vectors toward each light (x right, y up, z toward the camera).
+    irradiance : numpy.ndarray or None
+        (K, 3) each light's RGB irradiance from the matte sphere (relative to a white sphere
+        unless its albedo was given); None without a matte sphere.
+    direction_source : str
+        ``"chrome"`` (highlights on the mirror sphere) or ``"matte"`` (the matte sphere's shading).
+    chrome : Circle or None
+        The mirror sphere's circle that the directions were taken with.
+    chrome_outline : Circle or None
+        The mirror sphere's circle as given or fitted to its outline.
+    chrome_circle_source : str or None
+        ``"given"``, ``"outline"`` or ``"highlights"`` (fitted to the highlights and the matte
+        sphere's directions).
+    matte : Circle or None
+    matte_given : bool
+    highlights : numpy.ndarray or None
+        (K, 2) column, row of each highlight (NaN where none was found).
+    matte_directions : numpy.ndarray or None
+        (K, 3) the directions of the matte sphere's shading (zero where it gave none).
+    matte_residual : numpy.ndarray or None
+        (K,) the relative RMS residual of the matte sphere's Lambertian fit.
+    agreement_deg : numpy.ndarray or None
+        (K,) the angle between the two spheres' directions (NaN where one gave none).
+    notes : tuple of str
+        What the user should know: a light taken from the other sphere, a circle not taken.
+    """
+
+    directions: np.ndarray
+    irradiance: np.ndarray | None
+    direction_source: str
+    chrome: Circle | None
+    chrome_outline: Circle | None
+    chrome_circle_source: str | None
+    matte: Circle | None
+    matte_given: bool
+    highlights: np.ndarray | None
+    matte_directions: np.ndarray | None
+    matte_residual: np.ndarray | None
+    agreement_deg: np.ndarray | None
+    notes: tuple[str, ...]
+
+
+def calibrate_lights(
+    images: np.ndarray,
+    *,
+    saturated: np.ndarray | None = None,
+    chrome: Circle | None = None,
+    matte: Circle | None = None,
+    matte_albedo: float = 1.0,
+    names: Sequence[str] | None = None,
+    where: str = "capture",
+) -> LightCalibration:
+    """Each light's direction and strength from images of a mirror and a matte sphere.
+
+    The spheres not given are found (`irtps.calibrate.spheres.find_spheres`). Each light's
+    direction is its highlight on the mirror sphere mirrored about the view direction
+    (orthographic camera, looking down -z). The mirror sphere's outline is faint where it
+    mirrors what is behind it, so with a matte sphere in the capture its circle is the one that
+    puts each highlight where the matte sphere's shading says the light is (a least-squares fit
+    of 3 numbers over all lights; each light's direction still comes from its own highlight).
+    Each light's RGB irradiance is the median of ``pi I / (albedo n.l)`` over the matte sphere's
+    well-lit pixels. Without a mirror sphere, the directions are the matte sphere's.
+
+    Parameters
+    ----------
+    images : numpy.ndarray
+        (K, H, W, 3) linear images, one light each.
+    saturated : numpy.ndarray, optional
+        (K, H, W) bool: clipped pixels (8-bit codes at 255), left out of the matte sphere's fits.
+    chrome, matte : Circle, optional
+        The spheres' circles (pixels from the top-left corner), taken as given.
+    matte_albedo : float
+        The matte sphere's albedo; the default 1.0 gives irradiances relative to a white sphere
+        (albedos reconstructed with them are then relative to the sphere's).
+    names : sequence of str, optional
+        The images' names, for messages.
+    where : str
+        What the images are (a folder), for messages.
+
+    Returns
+    -------
+    LightCalibration
+
+    Raises
+    ------
+    DatasetError
+        Naming `where`: no sphere found (give its circle), an image with neither a highlight
+        nor a direction from the matte sphere, or that lights too little of the matte sphere
+        to measure its strength.
+    ArgumentError
+        Naming the argument: `images` not (K, H, W, 3) finite, `saturated` of another shape,
+        `matte_albedo` not in (0, 1].
+    """
+    images = check_array("images", images, (None, None, None, 3), nonempty=True)
+    check_finite("images", images)
+    saturated = (
+        np.zeros(images.shape[:3], dtype=bool)
+        if saturated is None
+        else check_array("saturated", saturated, images.shape[:3], match="images", dtype=bool)
+    )
+    chrome = None if chrome is None else as_circle(chrome, "chrome")
+    matte = None if matte is None else as_circle(matte, "matte")
+    matte_albedo = check_number("matte_albedo", matte_albedo)
+    if not 0.0 < matte_albedo <= 1.0:
+        raise ArgumentError("matte_albedo", f"must be in (0, 1], got {matte_albedo!r}")
+    labels = list(names) if names is not None else [f"image {k}" for k in range(len(images))]
+    gray = images.mean(axis=-1)
+    spheres = find_spheres(gray, saturated, chrome=chrome, matte=matte)
+    if spheres.chrome is None and spheres.matte is None:
+        raise DatasetError(
+            f"{where}: no mirror or matte sphere found; give their circles (--chrome, --matte COLUMN,ROW,RADIUS)"
+        )
+    notes: list[str] = []
+    shading = fit_shading(gray, saturated, spheres.matte) if spheres.matte is not None else None
+    shaded = (
+        (shading.residual <= MAX_SHADING_RESIDUAL) & (np.abs(shading.directions).sum(axis=1) > 0)
+        if shading is not None
+        else np.zeros(len(images), dtype=bool)
+    )
+    if spheres.chrome is None:
+        assert shading is not None
+        _require(~shaded, labels, where, "is not explained by the matte sphere's shading and there is no mirror sphere")
+        directions, source = shading.directions, "matte"
+        circle, circle_source, highlights = None, None, None
+    else:
+        circle, circle_source = spheres.chrome, "given" if chrome is not None else "outline"
+        found = find_highlights(gray, circle)
+        both = found.found & shaded
+        if chrome is None and shading is not None and both.sum() >= MIN_SHARED_LIGHTS:
+            fitted = circle_from_highlights(found.positions[both], shading.directions[both])
+            shift = max(
+                np.hypot(fitted.column - circle.column, fitted.row - circle.row), abs(fitted.radius - circle.radius)
+            )
+            if shift <= MAX_CIRCLE_SHIFT * circle.radius:
+                circle, circle_source = fitted, "highlights"
+                found = find_highlights(gray, circle)
+            else:
+                notes.append(
+                    f"the mirror sphere's circle that the matte sphere's directions give, {fitted}, is "
+                    f"{shift:.1f} px from its outline, {circle}; the outline is used"
+                )
+        directions = mirror_directions(np.nan_to_num(found.positions), circle)
+        missing = ~found.found
+        _require(missing & ~shaded, labels, where, "shows no highlight on the mirror sphere")
+        if missing.any():
+            assert shading is not None
+            directions[missing] = shading.directions[missing]
+            notes.append(
+                f"no highlight on the mirror sphere in {_listed(missing, labels)}: its direction is the matte sphere's"
+            )
+        source, highlights = "chrome", found.positions
+    irradiance = None
+    if spheres.matte is not None:
+        irradiance = matte_irradiance(images, saturated, spheres.matte, directions, matte_albedo)
+        _require(
+            ~np.isfinite(irradiance).all(axis=1),
+            labels,
+            where,
+            "lights too little of the matte sphere to measure its strength",
+        )
+    agreement = None
+    if shading is not None and source == "chrome":
+        cosine = np.clip(np.sum(directions * shading.directions, axis=1), -1.0, 1.0)
+        agreement = np.where(shaded, np.degrees(np.arccos(cosine)), np.nan)
+    return LightCalibration(
+        directions=directions,
+        irradiance=irradiance,
+        direction_source=source,
+        chrome=circle,
+        chrome_outline=spheres.chrome,
+        chrome_circle_source=circle_source,
+        matte=spheres.matte,
+        matte_given=matte is not None,
+        highlights=highlights,
+        matte_directions=None if shading is None else shading.directions,
+        matte_residual=None if shading is None else shading.residual,
+        agreement_deg=agreement,
+        notes=tuple(notes),
+    )
+
+
+def _require(failing: np.ndarray, labels: list[str], where: str, problem: str) -> None:
+    if failing.any():
+        raise DatasetError(f"{where}: {_listed(failing, labels)} {problem}")
+
+
+def _listed(chosen: np.ndarray, labels: list[str]) -> str:
+    picked = [labels[k] for k in np.flatnonzero(chosen)]
+    shown = ", ".join(picked[:5]) + (f" and {len(picked) - 5} more" if len(picked) > 5 else "")
+    return shown
