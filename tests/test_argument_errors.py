@@ -115,6 +115,7 @@ CASES = {
     "irtps.calibrate.circles.as_circle": (lambda f: f((1.0, 2.0, np.nan)), "circle: "),
     "irtps.calibrate.circles.find_circles": (lambda f: f(HEIGHT, 0), "count: "),
     "irtps.calibrate.circles.refine_circle": (lambda f: f(HEIGHT, (2.0, 2.0, 1.0), band=1.5), "band: "),
+    "irtps.calibrate.circles.outermost_outline": (lambda f: f(HEIGHT, (2.0, 2.0, 1.0), 8.0, reach=1.0), "reach: "),
     "irtps.calibrate.circles.outline_contrast": (lambda f: f(WRONG[None, None], (2.0, 2.0, 1.0)), "image: "),
     "irtps.calibrate.circles.parse_circle": (lambda f: f("1,2,x"), "circle: "),
     "irtps.calibrate.spheres.find_spheres": (lambda f: f(np.zeros((3, 4, 4)), WRONG), "saturated: "),

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import irtps
-from irtps.calibrate.circles import parse_circle
-from irtps.calibrate.spheres import find_spheres
+from irtps.calibrate.circles import Circle, outermost_outline, parse_circle
+from irtps.calibrate.spheres import find_spheres, outline_image
 from irtps.cli.main import main
 from irtps.io.imageio import srgb_to_linear, write_exr
 
@@ -28,10 +28,12 @@ def _directions(count=10, seed=0):
     return np.c_[tilt * np.cos(angle), tilt * np.sin(angle), np.sqrt(1 - tilt**2)]
 
 
-def _capture(lights, strengths, chrome=CHROME, matte=MATTE, size=(80, 140), supersample=4):
+def _capture(lights, strengths, chrome=CHROME, matte=MATTE, size=(80, 140), supersample=4, horizon=False):
     """Linear images of a mirror sphere (mirroring surroundings of radiance 0.15, and each
     light's highlight where the normal is its half vector), a Lambertian sphere of albedo 0.8
-    and a floor of albedo 0.05 facing the camera; each pixel the mean of supersample^2 samples."""
+    and a floor of albedo 0.05 facing the camera; each pixel the mean of supersample^2 samples.
+    With `horizon`, the mirror sphere mirrors a dark sky within 0.7 of its radius and, beyond,
+    the floor behind it: its outline hardly shows, the horizon is a strong circle inside it."""
     height, width = size
     rows, columns = (np.mgrid[0 : height * supersample, 0 : width * supersample] + 0.5) / supersample
     spheres = []
@@ -51,7 +53,11 @@ def _capture(lights, strengths, chrome=CHROME, matte=MATTE, size=(80, 140), supe
             inside, normals = spheres[0]
             half = (light + [0, 0, 1]) / np.linalg.norm(light + [0, 0, 1])
             lobe = 30.0 * np.exp(-(1 - normals[inside] @ half) / 0.0005)
-            image[inside] = 0.15 + lobe[:, None] * strength / strength.mean()
+            mirrored = 0.15
+            if horizon:
+                floor = 0.05 * strength * light[2] / np.pi
+                mirrored = np.where(normals[inside][:, 2:3] > np.sqrt(0.5), 0.002, 0.9 * floor)
+            image[inside] = mirrored + lobe[:, None] * strength / strength.mean()
         images[k] = image
     return images.reshape(len(lights), height, supersample, width, supersample, 3).mean(axis=(2, 4))
 
@@ -145,6 +151,27 @@ def test_a_mirror_sphere_alone_gives_directions_from_its_outline_and_no_strength
     assert not (tmp_path / "out" / "lights.json").exists()
     names = [line.split()[0] for line in (tmp_path / "out" / "lights.lp").read_text().splitlines()[1:]]
     assert names == [f"light_{k + 1}.exr" for k in range(10)]  # 2 before 10: numbers in names as numbers
+
+
+def test_a_mirror_sphere_on_a_floor_is_told_from_the_horizon_it_mirrors():
+    lights, strengths = _directions(seed=7), _strengths(seed=7)
+    images = _capture(lights, strengths, matte=None, horizon=True)
+    calibration = irtps.calibrate_lights(images)
+    assert abs(calibration.chrome.radius - CHROME[2]) < 0.3  # not the horizon at 0.7 of it
+    assert np.hypot(calibration.chrome.column - CHROME[0], calibration.chrome.row - CHROME[1]) < 0.1
+    assert _angles_deg(calibration.directions, lights).max() < 0.3
+    with_matte = irtps.calibrate_lights(_capture(lights, strengths, horizon=True))
+    assert with_matte.chrome_circle_source == "highlights"
+    assert _angles_deg(with_matte.directions, lights).max() < 0.25
+
+
+def test_a_mirror_spheres_outline_is_the_outermost_circle_about_it():
+    images = _capture(_directions(seed=8), _strengths(seed=8), matte=None, horizon=True)
+    outline = outline_image(images.mean(axis=-1))
+    horizon = Circle(CHROME[0], CHROME[1], CHROME[2] * np.sqrt(0.5))
+    assert abs(outermost_outline(outline, horizon, 8.0).radius - CHROME[2]) < 0.5
+    own = Circle(*CHROME)
+    assert outermost_outline(outline, own, 8.0) == own  # nothing beyond it stands out
 
 
 def test_a_matte_sphere_alone_gives_directions_from_its_shading():

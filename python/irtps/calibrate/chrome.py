@@ -138,7 +138,7 @@ def mirror_directions(positions: np.ndarray, circle: Circle) -> np.ndarray:
     return 2.0 * (normals @ view)[:, None] * normals - view
 
 
-def circle_from_highlights(positions: np.ndarray, directions: np.ndarray) -> Circle:
+def circle_from_highlights(positions: np.ndarray, directions: np.ndarray) -> tuple[Circle, float]:
     """The mirror sphere's outline that puts each light's highlight where it is seen, given the
     lights' directions (e.g. from a matte sphere).
 
@@ -155,7 +155,10 @@ def circle_from_highlights(positions: np.ndarray, directions: np.ndarray) -> Cir
 
     Returns
     -------
-    Circle
+    circle : Circle
+    residual_px : float
+        The RMS distance between the highlights and where the circle puts them: how well the
+        two agree.
     """
     half = directions + np.array([0.0, 0.0, 1.0])
     half /= np.linalg.norm(half, axis=1, keepdims=True)
@@ -164,5 +167,6 @@ def circle_from_highlights(positions: np.ndarray, directions: np.ndarray) -> Cir
     system[0::2, 2] = half[:, 0]
     system[1::2, 1] = 1.0
     system[1::2, 2] = -half[:, 1]
-    column, row, radius = np.linalg.lstsq(system, positions.reshape(-1), rcond=None)[0]
-    return Circle(float(column), float(row), float(radius))
+    solution = np.linalg.lstsq(system, positions.reshape(-1), rcond=None)[0]
+    residual = system @ solution - positions.reshape(-1)
+    return Circle(*(float(value) for value in solution)), float(np.sqrt(2.0 * np.mean(residual**2)))

@@ -17,7 +17,15 @@ from skimage import feature, transform
 from irtps._shared.checks import check_array, check_finite, check_integer, check_number
 from irtps.errors import ArgumentError
 
-__all__ = ["Circle", "as_circle", "find_circles", "outline_contrast", "parse_circle", "refine_circle"]
+__all__ = [
+    "Circle",
+    "as_circle",
+    "find_circles",
+    "outermost_outline",
+    "outline_contrast",
+    "parse_circle",
+    "refine_circle",
+]
 
 #: The longest side, in pixels, of the image the Hough transform searches (a larger one is
 #: reduced by whole-pixel block means first).
@@ -26,6 +34,10 @@ HOUGH_SIDE_PX = 320
 MIN_RADIUS_PX = 6
 #: Radial samples per pixel along each ray of the sub-pixel fit.
 SAMPLES_PER_PX = 8
+#: An outline beyond a circle is at least this fraction as steep as the circle's own (a
+#: mirror sphere's outline, where it mirrors what stands behind it, can be a tenth as steep as
+#: the edges it mirrors).
+MIN_RELATIVE_STEEPNESS = 0.01
 #: Rays around the circle of the sub-pixel fit.
 RAYS = 360
 
@@ -113,7 +125,7 @@ def refine_circle(images: np.ndarray, circle: Circle, band: float = 0.25, rounds
     On each of `RAYS` rays from the centre, between ``(1 - band)`` and ``(1 + band)`` times the
     radius, the radial gradient's magnitude is summed over the images, and the position of its
     largest value (a parabola through its samples) is an edge point; the circle is the robust
-    (soft-L1) geometric fit to them, and the search is repeated about the fitted circle `rounds`
+    (arctan loss) geometric fit to them, and the search is repeated about the fitted circle `rounds`
     times. A sphere's outline is a step in every image of a capture, whichever side of it is
     brighter under each light; the shading inside and the background change smoothly.
 
@@ -164,6 +176,67 @@ def refine_circle(images: np.ndarray, circle: Circle, band: float = 0.25, rounds
         edge_rows = circle.row + np.sin(angles[inside]) * edge_radii
         circle = _fit(edge_columns, edge_rows, circle)
     return circle
+
+
+def outermost_outline(image: np.ndarray, circle: Circle, min_contrast: float, reach: float = 2.0) -> Circle:
+    """The outermost circle about `circle`'s centre, up to `reach` times its radius, whose
+    outline stands out of `image` (`outline_contrast` at least `min_contrast`), or `circle`
+    when none beyond it does.
+
+    A mirror sphere shows circles inside its outline (the edge of what it mirrors, e.g. a
+    floor's horizon); its own outline is the outermost of them. Along rays from the centre, the
+    median over rays of the radial gradient's magnitude is taken at each radius; its outermost
+    local maximum beyond 1.1 radii that is at least `min_contrast` times the median of the
+    magnitudes out there (the surroundings' texture and noise), and at least
+    `MIN_RELATIVE_STEEPNESS` of `circle`'s own (surroundings without noise have no texture to
+    measure by), is the outline.
+
+    Parameters
+    ----------
+    image : numpy.ndarray
+        (H, W) float.
+    circle : Circle
+    min_contrast : float
+        Over the median radial gradient magnitude beyond 1.1 radii.
+    reach : float
+        How far out to look, as a multiple of the radius (within the image).
+
+    Returns
+    -------
+    Circle
+        Whole-sample radius (`refine_circle` fits it finer).
+
+    Raises
+    ------
+    ArgumentError
+        Naming `image`, `circle`, `min_contrast` (not a positive number) or `reach` (not above 1).
+    """
+    image, circle = _image(image), as_circle(circle)
+    min_contrast = check_number("min_contrast", min_contrast)
+    reach = check_number("reach", reach)
+    if min_contrast <= 0:
+        raise ArgumentError("min_contrast", f"must be positive, got {min_contrast!r}")
+    if reach <= 1.0:
+        raise ArgumentError("reach", f"must be above 1, got {reach!r}")
+    room = min(circle.column, circle.row, image.shape[1] - circle.column, image.shape[0] - circle.row)
+    largest = min(reach * circle.radius, room - 1.0)
+    if largest <= 1.1 * circle.radius:
+        return circle
+    radii = np.arange(0.9 * circle.radius, largest, 1.0 / SAMPLES_PER_PX)
+    angles = np.linspace(0.0, 2.0 * np.pi, RAYS, endpoint=False)
+    columns = circle.column + np.outer(np.cos(angles), radii)
+    rows = circle.row + np.outer(np.sin(angles), radii)
+    profiles = ndimage.map_coordinates(image, [rows - 0.5, columns - 0.5], order=1, mode="nearest")
+    gradients = np.abs(np.gradient(profiles, radii, axis=1))
+    steepness = np.median(gradients, axis=0)
+    own = float(steepness[radii <= 1.1 * circle.radius].max())
+    texture = float(np.median(gradients[:, radii > 1.1 * circle.radius]))
+    peaks = (steepness[1:-1] >= steepness[:-2]) & (steepness[1:-1] >= steepness[2:])
+    peaks &= (steepness[1:-1] >= min_contrast * texture) & (steepness[1:-1] >= MIN_RELATIVE_STEEPNESS * own)
+    peaks &= radii[1:-1] > 1.1 * circle.radius
+    if not peaks.any():
+        return circle
+    return Circle(circle.column, circle.row, float(radii[1:-1][np.flatnonzero(peaks)[-1]]))
 
 
 def outline_contrast(image: np.ndarray, circle: Circle) -> float:
@@ -245,12 +318,13 @@ def _steepest(gradient: np.ndarray, radii: np.ndarray) -> np.ndarray:
 
 
 def _fit(columns: np.ndarray, rows: np.ndarray, start: Circle) -> Circle:
-    """The circle nearest to the points, robust to the points off it (soft-L1 loss, scale 0.3 px)."""
+    """The circle nearest to the points, the points far off it (an edge of what a mirror sphere
+    mirrors) without weight: a redescending (arctan) loss of scale 0.3 px."""
 
     def distances(parameters: np.ndarray) -> np.ndarray:
         return np.hypot(columns - parameters[0], rows - parameters[1]) - parameters[2]
 
-    fitted = optimize.least_squares(distances, np.array(start), loss="soft_l1", f_scale=0.3)
+    fitted = optimize.least_squares(distances, np.array(start), loss="arctan", f_scale=0.3)
     return Circle(*(float(value) for value in fitted.x))
 
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from irtps._shared.checks import check_array, check_finite, check_number
-from irtps.calibrate.chrome import circle_from_highlights, find_highlights, mirror_directions
+from irtps.calibrate.chrome import Highlights, circle_from_highlights, find_highlights, mirror_directions
 from irtps.calibrate.circles import Circle, as_circle
 from irtps.calibrate.matte import fit_shading, matte_irradiance
 from irtps.calibrate.spheres import MAX_SHADING_RESIDUAL, find_spheres
@@ -18,11 +18,17 @@ from irtps.errors import ArgumentError, DatasetError
 
 __all__ = ["LightCalibration", "calibrate_lights"]
 
-#: How far (a fraction of the outline's radius) the mirror sphere's circle fitted to its
-#: highlights and the matte sphere's directions may lie from its outline and still be taken.
-MAX_CIRCLE_SHIFT = 0.1
+#: The mirror sphere's circle fitted to its highlights and the matte sphere's directions is
+#: taken when the highlights lie within this fraction of its radius (RMS) of where it puts
+#: them; further, the two spheres disagree (a matte sphere far from Lambertian) and the
+#: outline is used.
+MAX_HIGHLIGHT_RESIDUAL = 0.02
 #: The fewest lights with both a highlight and a matte-sphere direction that fit the circle.
 MIN_SHARED_LIGHTS = 3
+#: Their half vectors must spread at least this far (in x or y) for the radius to be known.
+MIN_HALF_VECTOR_SPREAD = 0.05
+#: Rounds of finding the highlights on the fitted circle and fitting it again.
+HIGHLIGHT_FIT_ROUNDS = 2
 
 
 @dataclass(frozen=True)
@@ -159,19 +165,19 @@ def calibrate_lights(
     else:
         circle, circle_source = spheres.chrome, "given" if chrome is not None else "outline"
         found = find_highlights(gray, circle)
-        both = found.found & shaded
-        if chrome is None and shading is not None and both.sum() >= MIN_SHARED_LIGHTS:
-            fitted = circle_from_highlights(found.positions[both], shading.directions[both])
-            shift = max(
-                np.hypot(fitted.column - circle.column, fitted.row - circle.row), abs(fitted.radius - circle.radius)
-            )
-            if shift <= MAX_CIRCLE_SHIFT * circle.radius:
-                circle, circle_source = fitted, "highlights"
-                found = find_highlights(gray, circle)
+        if chrome is None and shading is not None:
+            fitted = _fit_to_highlights(gray, circle, found, shading.directions, shaded)
+            if fitted is None:
+                notes.append(
+                    f"too few lights with both a highlight and a direction from the matte sphere, or too alike, "
+                    f"to fit the mirror sphere's circle to them: its outline {circle} is used"
+                )
+            elif fitted[2] <= MAX_HIGHLIGHT_RESIDUAL * fitted[0].radius:
+                circle, found, circle_source = fitted[0], fitted[1], "highlights"
             else:
                 notes.append(
-                    f"the mirror sphere's circle that the matte sphere's directions give, {fitted}, is "
-                    f"{shift:.1f} px from its outline, {circle}; the outline is used"
+                    f"the highlights lie {fitted[2]:.2f} px (RMS) from where the matte sphere's directions put them on "
+                    f"the best circle, {fitted[0]}: its outline {circle} is used"
                 )
         directions = mirror_directions(np.nan_to_num(found.positions), circle)
         missing = ~found.found
@@ -211,6 +217,24 @@ def calibrate_lights(
         agreement_deg=agreement,
         notes=tuple(notes),
     )
+
+
+def _fit_to_highlights(
+    gray: np.ndarray, circle: Circle, found: Highlights, directions: np.ndarray, shaded: np.ndarray
+) -> tuple[Circle, Highlights, float] | None:
+    """The mirror sphere's circle that puts the highlights where `directions` say, found again
+    on it (`HIGHLIGHT_FIT_ROUNDS` times), and the highlights' RMS distance from it; None when
+    too few lights, or lights too alike, fit it."""
+    residual = np.inf
+    for _ in range(HIGHLIGHT_FIT_ROUNDS):
+        both = found.found & shaded
+        half = directions[both] + np.array([0.0, 0.0, 1.0])
+        half /= np.linalg.norm(half, axis=1, keepdims=True)
+        if both.sum() < MIN_SHARED_LIGHTS or np.ptp(half[:, :2], axis=0).max() < MIN_HALF_VECTOR_SPREAD:
+            return None
+        circle, residual = circle_from_highlights(found.positions[both], directions[both])
+        found = find_highlights(gray, circle)
+    return circle, found, residual
 
 
 def _require(failing: np.ndarray, labels: list[str], where: str, problem: str) -> None:

@@ -11,7 +11,14 @@ from scipy import ndimage
 
 from irtps.calibrate.chrome import find_highlights
 from irtps._shared.checks import check_array, check_finite
-from irtps.calibrate.circles import Circle, as_circle, find_circles, outline_contrast, refine_circle
+from irtps.calibrate.circles import (
+    Circle,
+    as_circle,
+    find_circles,
+    outermost_outline,
+    outline_contrast,
+    refine_circle,
+)
 from irtps.calibrate.matte import fit_matte_circle, fit_shading
 
 __all__ = ["Spheres", "find_spheres", "outline_image"]
@@ -71,7 +78,9 @@ def find_spheres(
     outline stands out of the image (`outline_contrast` at least `MIN_OUTLINE_CONTRAST`); it is
     a matte sphere when a Lambertian fit explains its pixels within `MAX_SHADING_RESIDUAL`,
     else a mirror sphere when at least half of the images show a compact highlight on it
-    (`irtps.calibrate.chrome.find_highlights`). The strongest circle of each kind that
+    (`irtps.calibrate.chrome.find_highlights`), whose outline is the outermost circle about
+    its centre that stands out (`outermost_outline`: inside, it shows the edges of what it
+    mirrors). The strongest circle of each kind that
     overlaps no sphere already taken is kept; a matte sphere's circle is then fitted to its
     shading (`irtps.calibrate.matte.fit_matte_circle`).
 
@@ -111,7 +120,8 @@ def find_spheres(
         if matte is None and _is_matte(gray, saturated, circle):
             matte = fit_matte_circle(gray, saturated, circle)
         elif chrome is None and _is_mirror(gray, circle):
-            chrome = circle
+            outer = outermost_outline(outline, circle, MIN_OUTLINE_CONTRAST)
+            chrome = circle if outer == circle else refine_circle(edges, outer, band=OUTLINE_BAND)
     return Spheres(chrome, matte)
 
 
