@@ -179,7 +179,7 @@ COMMANDS = (
     Command(
         "calibrate",
         help="each light's direction and strength from images of a mirror and a matte sphere",
-        description="Calibrate a rig's lights from CAPTURE, a folder of images (JPEG, PNG, TIFF or EXR, one light "
+        description="Calibrate a rig's lights from CAPTURE, a folder of images (JPEG, PNG, TIFF, EXR or camera RAW, one light "
         "each, in name order) of a mirror (chrome) sphere and, optionally, a matte white sphere, seen by a distant "
         "(orthographic) camera. The spheres are found (or given: --chrome, --matte); each light's direction is its "
         "highlight on the mirror sphere, mirrored about the view direction, and its RGB strength the matte sphere's "

@@ -1,5 +1,12 @@
-"""Images as cameras and capture software save them: JPEG, PNG, TIFF or EXR, 8-bit ones sRGB
-encoded (a camera's JPEG pipeline), 16-bit and float ones linear.
+"""Images as cameras and capture software save them: JPEG, PNG, TIFF, EXR or camera RAW, 8-bit
+ones sRGB encoded (a camera's JPEG pipeline), 16-bit and float ones linear.
+
+Camera RAW files (``.dng``, ``.cr2``, ``.cr3``, ``.nef``, ``.arw``, ``.raf``, ``.orf``,
+``.rw2``, ``.pef``, ``.srw``) are read through LibRaw (rawpy, an optional dependency:
+``pip install "irtps[raw]"``): demosaiced, white-balanced as shot, in linear sRGB primaries,
+16-bit, without brightening, gamma, LibRaw's stretch of the white level to the brightest
+pixel, or the camera's rotation (as JPEG files are read), so values stay proportional to light
+and the sensor's clip is the largest code.
 
 The readers of the RTI layout (`irtps.io.rti`) and of light-calibration captures
 (`irtps calibrate`) share them.
@@ -31,8 +38,13 @@ __all__ = [
 
 _JPEG = (".jpg", ".jpeg")
 _TIFF = (".tif", ".tiff")
+#: Camera RAW files, read through rawpy.
+RAW_SUFFIXES = (".dng", ".cr2", ".cr3", ".nef", ".arw", ".raf", ".orf", ".rw2", ".pef", ".srw")
 #: The image files a capture may hold, by extension.
-CAPTURE_SUFFIXES = (*_JPEG, ".png", *_TIFF, ".exr")
+CAPTURE_SUFFIXES = (*_JPEG, ".png", *_TIFF, ".exr", *RAW_SUFFIXES)
+#: Integer codes at or above this fraction of the largest are clipped: the largest, and LibRaw's
+#: clip of a RAW file after white balance (one 16-bit code below it).
+SATURATED_LEVEL = 1.0 - 1e-4
 #: Files of a capture folder that are not one of its images.
 _NOT_IMAGES = ("mask.png",)
 
@@ -54,10 +66,10 @@ def read_capture_image(path: str | Path, encoding: str | None = None) -> tuple[n
     Parameters
     ----------
     path : str or pathlib.Path
-        A JPEG, PNG, TIFF or EXR file (by its extension).
+        A JPEG, PNG, TIFF, EXR or camera RAW file (by its extension).
     encoding : {"srgb", "linear"}, optional
         How its values map to light; default by bit depth: 8-bit sRGB, 16-bit and float
-        linear. EXR images are linear.
+        linear. EXR and RAW images are linear.
 
     Returns
     -------
@@ -70,7 +82,8 @@ def read_capture_image(path: str | Path, encoding: str | None = None) -> tuple[n
     ------
     DatasetError
         Naming the file: an unknown extension, a file that cannot be read, a shape that is not
-        an image, non-finite values, ``"srgb"`` for an EXR image.
+        an image, non-finite values, ``"srgb"`` for an EXR or RAW image, a RAW file without
+        rawpy installed.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -85,8 +98,12 @@ def read_capture_image(path: str | Path, encoding: str | None = None) -> tuple[n
         if encoding == "srgb":
             raise DatasetError(f"{path}: an EXR image is stored linear; the 'srgb' encoding does not apply to it")
         values, bits = read_exr(path), None
+    elif suffix in RAW_SUFFIXES:
+        if encoding == "srgb":
+            raise DatasetError(f"{path}: a camera RAW file is linear; the 'srgb' encoding does not apply to it")
+        values, bits = _read_raw(path), 16
     else:
-        raise DatasetError(f"{path}: not a JPEG, PNG, TIFF or EXR file (by its extension)")
+        raise DatasetError(f"{path}: not a JPEG, PNG, TIFF, EXR or camera RAW file (by its extension)")
     if values.ndim == 2:
         values = np.repeat(values[..., None], 3, axis=2)
     if values.ndim != 3 or values.shape[2] < 3:
@@ -144,7 +161,7 @@ def read_capture_images(
 
 
 def capture_image_paths(folder: str | Path) -> list[Path]:
-    """The images of a capture folder: its JPEG, PNG, TIFF or EXR files (``mask.png`` aside),
+    """The images of a capture folder: its JPEG, PNG, TIFF, EXR or camera RAW files (``mask.png`` aside),
     in name order, numbers in names compared as numbers (``img2`` before ``img10``).
 
     Raises
@@ -159,7 +176,7 @@ def capture_image_paths(folder: str | Path) -> list[Path]:
         if path.suffix.lower() in CAPTURE_SUFFIXES and path.name.lower() not in _NOT_IMAGES and path.is_file()
     ]
     if not found:
-        raise DatasetError(f"{folder}: no image (JPEG, PNG, TIFF or EXR file)")
+        raise DatasetError(f"{folder}: no image (JPEG, PNG, TIFF, EXR or camera RAW file)")
     kinds = sorted({_kind(path) for path in found})
     if len(kinds) > 1:
         raise DatasetError(f"{folder}: holds images of several kinds ({', '.join(kinds)}): keep one kind in the folder")
@@ -186,12 +203,18 @@ def read_capture(paths: Sequence[Path], encoding: str | None = None, where: str 
         As `read_capture_images`.
     """
     images, integer_codes = read_capture_images(paths, encoding, where)
-    saturated = np.asarray((images >= 1.0).any(axis=-1)) if integer_codes else np.zeros(images.shape[:3], dtype=bool)
+    saturated = (
+        np.asarray((images >= SATURATED_LEVEL).any(axis=-1))
+        if integer_codes
+        else np.zeros(images.shape[:3], dtype=bool)
+    )
     return Capture(images, saturated, tuple(paths))
 
 
 def _kind(path: Path) -> str:
     suffix = path.suffix.lower()
+    if suffix in RAW_SUFFIXES:
+        return "RAW"
     return "JPEG" if suffix in _JPEG else "TIFF" if suffix in _TIFF else suffix[1:].upper()
 
 
@@ -203,6 +226,8 @@ def _header_size(path: Path) -> tuple[int, int] | None:
     """(H, W) of an image from its header (no pixel decoded), None when it cannot tell."""
     if path.suffix.lower() in (".png", ".exr"):
         return image_size(path)
+    if path.suffix.lower() in RAW_SUFFIXES:
+        return None
     try:
         with Image.open(path) as image:
             return image.height, image.width
@@ -216,6 +241,27 @@ def _read_jpeg(path: Path) -> np.ndarray:
             return np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
     except (OSError, UnidentifiedImageError, Image.DecompressionBombError) as error:
         raise DatasetError(f"{path}: cannot be read as a JPEG image: {error}") from None
+
+
+def _read_raw(path: Path) -> np.ndarray:
+    """Values in [0, 1] of a camera RAW file, demosaiced and linear (the module docstring)."""
+    try:
+        import rawpy
+    except ImportError:
+        raise DatasetError(f"{path}: reading camera RAW files needs rawpy: pip install 'irtps[raw]'") from None
+    try:
+        with rawpy.imread(str(path)) as raw:
+            rgb = raw.postprocess(
+                gamma=(1, 1),
+                no_auto_bright=True,
+                adjust_maximum_thr=0.0,
+                output_bps=16,
+                use_camera_wb=True,
+                user_flip=0,
+            )
+    except (rawpy.LibRawError, OSError, ValueError) as error:
+        raise DatasetError(f"{path}: cannot be read as a camera RAW file: {error}") from None
+    return rgb.astype(np.float64) / 65535.0
 
 
 def _read_tiff(path: Path) -> tuple[np.ndarray, int | None]:

@@ -1,5 +1,6 @@
 """Reflectance-transformation-imaging (RTI) folders, as dome users hold them: a light position
-file ``*.lp`` (RTIBuilder, Relight) and the images it lists, JPEG, PNG or TIFF.
+file ``*.lp`` (RTIBuilder, Relight) and the images it lists, JPEG, PNG, TIFF or camera RAW
+(`irtps.io.capture`).
 
 The ``.lp`` file holds the image count on its first line, then one line per image,
 ``filename x y z``: a unit vector toward the light (x right, y up, z toward the camera, the
@@ -114,7 +115,7 @@ def load_rti(path: str | Path, *, exclude_images: str | None = None, encoding: s
     DatasetError
         Naming the file (and line): no ``.lp`` file or several, a count that disagrees with
         its lines, a line that is not ``filename x y z``, an image that is missing, listed
-        twice or not a JPEG, PNG or TIFF file that can be read, a direction that is not a
+        twice or not a JPEG, PNG, TIFF or RAW file that can be read, a direction that is not a
         unit vector (beyond 1e-2) or points away from the camera, fewer than 3 images,
         images of different sizes.
     ArgumentError
