@@ -12,7 +12,7 @@ import numpy as np
 from irtps._shared.checks import check_array, check_finite, check_number
 from irtps.calibrate.chrome import Highlights, circle_from_highlights, find_highlights, mirror_directions
 from irtps.calibrate.circles import Circle, as_circle
-from irtps.calibrate.matte import fit_shading, matte_irradiance
+from irtps.calibrate.matte import Shading, fit_shading, matte_irradiance
 from irtps.calibrate.spheres import MAX_SHADING_RESIDUAL, find_spheres
 from irtps.errors import ArgumentError, DatasetError
 
@@ -97,7 +97,9 @@ def calibrate_lights(
     (orthographic camera, looking down -z). The mirror sphere's outline is faint where it
     mirrors what is behind it, so with a matte sphere in the capture its circle is the one that
     puts each highlight where the matte sphere's shading says the light is (a least-squares fit
-    of 3 numbers over all lights; each light's direction still comes from its own highlight).
+    of 3 numbers over all lights; each light's direction still comes from its own highlight),
+    taken when the highlights lie within `MAX_HIGHLIGHT_RESIDUAL` of its radius (RMS) of where
+    it puts them; else the outline's circle is used, and a note says so.
     Each light's RGB irradiance is the median of ``pi I / (albedo n.l)`` over the matte sphere's
     well-lit pixels. Without a mirror sphere, the directions are the matte sphere's.
 
@@ -163,32 +165,10 @@ def calibrate_lights(
         directions, source = shading.directions, "matte"
         circle, circle_source, highlights = None, None, None
     else:
-        circle, circle_source = spheres.chrome, "given" if chrome is not None else "outline"
-        found = find_highlights(gray, circle)
-        if chrome is None and shading is not None:
-            fitted = _fit_to_highlights(gray, circle, found, shading.directions, shaded)
-            if fitted is None:
-                notes.append(
-                    f"too few lights with both a highlight and a direction from the matte sphere, or too alike, "
-                    f"to fit the mirror sphere's circle to them: its outline {circle} is used"
-                )
-            elif fitted[2] <= MAX_HIGHLIGHT_RESIDUAL * fitted[0].radius:
-                circle, found, circle_source = fitted[0], fitted[1], "highlights"
-            else:
-                notes.append(
-                    f"the highlights lie {fitted[2]:.2f} px (RMS) from where the matte sphere's directions put them on "
-                    f"the best circle, {fitted[0]}: its outline {circle} is used"
-                )
-        directions = mirror_directions(np.nan_to_num(found.positions), circle)
-        missing = ~found.found
-        _require(missing & ~shaded, labels, where, "shows no highlight on the mirror sphere")
-        if missing.any():
-            assert shading is not None
-            directions[missing] = shading.directions[missing]
-            notes.append(
-                f"no highlight on the mirror sphere in {_listed(missing, labels)}: its direction is the matte sphere's"
-            )
-        source, highlights = "chrome", found.positions
+        mirror = _mirror_directions(gray, spheres.chrome, chrome is not None, shading, shaded, labels, where)
+        directions, circle, circle_source, highlights, mirror_notes = mirror
+        notes.extend(mirror_notes)
+        source = "chrome"
     irradiance = None
     if spheres.matte is not None:
         irradiance = matte_irradiance(images, saturated, spheres.matte, directions, matte_albedo)
@@ -217,6 +197,46 @@ def calibrate_lights(
         agreement_deg=agreement,
         notes=tuple(notes),
     )
+
+
+def _mirror_directions(
+    gray: np.ndarray,
+    outline: Circle,
+    given: bool,
+    shading: Shading | None,
+    shaded: np.ndarray,
+    labels: list[str],
+    where: str,
+) -> tuple[np.ndarray, Circle, str, np.ndarray, list[str]]:
+    """The lights' directions from the mirror sphere's highlights (`calibrate_lights`): the
+    directions, the circle they were taken with, how it was had, the highlights and the notes."""
+    notes = []
+    circle, circle_source = outline, "given" if given else "outline"
+    found = find_highlights(gray, circle)
+    if not given and shading is not None:
+        fitted = _fit_to_highlights(gray, circle, found, shading.directions, shaded)
+        if fitted is None:
+            notes.append(
+                f"too few lights with both a highlight and a direction from the matte sphere, or too alike, "
+                f"to fit the mirror sphere's circle to them: its outline {circle} is used"
+            )
+        elif fitted[2] <= MAX_HIGHLIGHT_RESIDUAL * fitted[0].radius:
+            circle, found, circle_source = fitted[0], fitted[1], "highlights"
+        else:
+            notes.append(
+                f"the highlights lie {fitted[2]:.2f} px (RMS) from where the matte sphere's directions put them on "
+                f"the best circle, {fitted[0]}: its outline {circle} is used"
+            )
+    directions = mirror_directions(np.nan_to_num(found.positions), circle)
+    missing = ~found.found
+    _require(missing & ~shaded, labels, where, "shows no highlight on the mirror sphere")
+    if missing.any():
+        assert shading is not None
+        directions[missing] = shading.directions[missing]
+        notes.append(
+            f"no highlight on the mirror sphere in {_listed(missing, labels)}: its direction is the matte sphere's"
+        )
+    return directions, circle, circle_source, found.positions, notes
 
 
 def _fit_to_highlights(
