@@ -116,9 +116,14 @@ def test_the_lp_file_turns_the_capture_into_an_rti_folder(tmp_path):
         shutil.copy(image, folder)
     shutil.copy(tmp_path / "lights" / "lights.lp", folder)
     dataset = irtps.load_dataset(folder)
-    directions, _, _ = _truth()
+    directions, irradiance, _ = _truth()
     read = np.array([light.direction for light in dataset.scene.lights])
     assert _angles_deg(read, directions).max() <= 1.0
+    assert not dataset.irradiance_known
+    shutil.copy(tmp_path / "lights" / "light_intensities.txt", folder)
+    dataset = irtps.load_dataset(folder)
+    assert dataset.irradiance_known
+    assert _relative(dataset.scene.light_irradiance, irradiance).max() <= 0.02
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -149,6 +154,7 @@ def test_a_mirror_sphere_alone_gives_directions_from_its_outline_and_no_strength
         write_exr(capture / f"light_{k + 1}.exr", image.astype(np.float32))
     assert main(["calibrate", str(capture), "--out", str(tmp_path / "out"), "--quiet"]) == 0
     assert not (tmp_path / "out" / "lights.json").exists()
+    assert not (tmp_path / "out" / "light_intensities.txt").exists()
     names = [line.split()[0] for line in (tmp_path / "out" / "lights.lp").read_text().splitlines()[1:]]
     assert names == [f"light_{k + 1}.exr" for k in range(10)]  # 2 before 10: numbers in names as numbers
 

@@ -4,6 +4,8 @@ calibrated result they are checked against."""
 
 import json
 import shutil
+import warnings
+from contextlib import contextmanager
 from pathlib import Path, PureWindowsPath
 
 import numpy as np
@@ -20,6 +22,13 @@ from irtps.io.rti import load_rti
 from irtps.render.synth import synthesize
 
 BALL = Path(__file__).parent / "data" / "diligent_ball_small"
+
+
+@contextmanager
+def warnings_as_errors():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", irtps.IrtpsWarning)
+        yield
 
 
 def _to_srgb(linear):
@@ -150,3 +159,30 @@ def test_encoding_overrides_any_layout_and_is_recorded(tmp_path, capsys):
     assert main(argv) == 2
     assert capsys.readouterr().err.startswith("irtps: error: --encoding: 'srgb' applies to PNG, JPEG and TIFF images")
     assert not (tmp_path / "cap_out").exists()
+
+
+def test_light_intensities_beside_the_lp_file_are_the_lights_strengths(tmp_path):
+    data = _rti_folder(tmp_path / "dome")
+    given = data.scene.light_irradiance
+    (tmp_path / "dome" / "light_intensities.txt").write_text("".join(f"{r} {g} {b}\n" for r, g, b in given))
+    rti = irtps.load_dataset(tmp_path / "dome", exclude_images="ball_02.jpg")
+    assert rti.irradiance_known and rti.scene.relative_irradiance
+    assert np.allclose(rti.scene.light_irradiance, np.delete(given, 1, axis=0))
+    assert tmp_path / "dome" / "light_intensities.txt" in dataset_inputs(tmp_path / "dome")
+    with warnings_as_errors():
+        irtps.reconstruct(rti)  # nothing to estimate, nothing to warn about
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("1 1 1\n" * 7, r"light_intensities\.txt: 7 lines, but ball\.lp lists 8 images"),
+        ("1 1 1\n" * 7 + "1 -1 1\n", r"light_intensities\.txt: line 8: light intensities must not be negative"),
+        ("1 1 1\n" * 7 + "1 1\n", r"light_intensities\.txt: line 8: expected 3 numbers, got 2"),
+    ],
+)
+def test_bad_light_intensities_are_named(tmp_path, text, message):
+    _rti_folder(tmp_path / "dome")
+    (tmp_path / "dome" / "light_intensities.txt").write_text(text)
+    with pytest.raises(irtps.DatasetError, match=message):
+        irtps.load_dataset(tmp_path / "dome")

@@ -1,5 +1,6 @@
-"""Writing a light calibration: ``lights.lp`` (RTI), ``lights.json`` (the scene contract's
-``lights``), ``calibration.json`` (everything found) and ``calibration.png``."""
+"""Writing a light calibration: ``lights.lp`` and ``light_intensities.txt`` (an RTI folder's),
+``lights.json`` (the scene contract's ``lights``), ``calibration.json`` (everything found) and
+``calibration.png``."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from irtps.calibrate.lights import LightCalibration
 __all__ = ["lp_text", "save_calibration"]
 
 LP_FILE = "lights.lp"
+INTENSITIES_FILE = "light_intensities.txt"
 LIGHTS_FILE = "lights.json"
 RECORD_FILE = "calibration.json"
 PICTURE_FILE = "calibration.png"
@@ -53,9 +55,10 @@ def save_calibration(
 ) -> list[str]:
     """Write a calibration to a folder, replaced atomically.
 
-    ``lights.lp`` lists `names` with their lights' directions; ``lights.json`` holds the
-    contract's ``lights`` (directions and RGB irradiances), written only when a matte sphere
-    gave the strengths; ``calibration.json`` records the circles, each light's highlight, both
+    ``lights.lp`` lists `names` with their lights' directions; ``light_intensities.txt`` their
+    RGB strengths, one line each in the same order (`irtps.io.rti`), and ``lights.json`` the
+    contract's ``lights`` (directions and RGB irradiances), both written only when a matte
+    sphere gave the strengths; ``calibration.json`` records the circles, each light's highlight, both
     spheres' directions and their agreement, the notes and the inputs; ``calibration.png`` is
     `irtps.calibrate.figure.calibration_png`.
 
@@ -92,6 +95,7 @@ def save_calibration(
             for direction, irradiance in zip(calibration.directions, calibration.irradiance)
         ]
         files[LIGHTS_FILE] = json.dumps({"lights": lights}, indent=1) + "\n"
+        files[INTENSITIES_FILE] = "".join(f"{r:.6g} {g:.6g} {b:.6g}\n" for r, g, b in calibration.irradiance)
     picture = calibration_png(calibration, mean_image, names)
     with atomic_output_dir(out) as folder:
         for name, text in files.items():

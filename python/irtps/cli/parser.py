@@ -186,8 +186,9 @@ COMMANDS = (
         "brightness over n.l. The mirror sphere's outline is faint where it mirrors what is behind it, so with a "
         "matte sphere its circle is fitted to the highlights and the matte sphere's shading (each light's direction "
         "still comes from its own highlight); without a mirror sphere, the directions come from the matte sphere. "
-        "Writes OUT: lights.lp (for an RTI folder: 'name x y z' per image), lights.json (the scene contract's "
-        "'lights', with strengths; only with a matte sphere), calibration.json (the circles, each highlight, both "
+        "Writes OUT: lights.lp (for an RTI folder: 'name x y z' per image), with a matte sphere also "
+        "light_intensities.txt (the strengths, one RGB line per image, which an RTI folder takes beside its .lp) and "
+        "lights.json (the scene contract's 'lights'), calibration.json (the circles, each highlight, both "
         "spheres' directions and how far apart they are) and calibration.png (what was found). OUT is replaced "
         "atomically.",
         examples=(

@@ -25,9 +25,9 @@ from irtps._shared.guarded import read_text
 from irtps.io.image_selection import ImageSelection, select_images
 from irtps.io.imageio import check_stack_memory, format_size, png_saturation, read_images, read_mask
 from irtps.io.intrinsics import INTRINSICS_FILE, Intrinsics, read_intrinsics, with_intrinsics
-from irtps.io.number_lines import three_numbers
+from irtps.io.number_lines import check_intensities, three_number_lines
 from irtps._shared.paths import check_file, check_folder, optional_file
-from irtps.model.scene import MIN_LIGHTS, Camera, Light, Scene, irradiance_problem, upward_problem
+from irtps.model.scene import MIN_LIGHTS, Camera, Light, Scene, upward_problem
 
 FILENAMES_FILE = "filenames.txt"
 DIRECTIONS_FILE = "light_directions.txt"
@@ -40,6 +40,9 @@ DEPTH_VARIABLE = "depth_gt"
 
 UNIT_TOLERANCE = 1e-2
 """How far the norm of a listed light direction may be from 1; within it, it is renormalised."""
+
+#: What a missing list's error says.
+_NEEDED = f"a DiLiGenT folder needs {FILENAMES_FILE} and {DIRECTIONS_FILE} ({INTENSITIES_FILE} if it has one)"
 
 
 def load_diligent(path: str | Path, *, ground_truth: bool = True, exclude_images: str | None = None) -> Dataset:
@@ -165,7 +168,7 @@ def _diligent_files(folder: Path, ground_truth: bool, exclude_images: str | None
             f"{folder / FILENAMES_FILE}: {len(names)} images: photometric stereo needs at least {MIN_LIGHTS}"
         )
     directions = _unit_directions(folder / DIRECTIONS_FILE, directions, direction_lines)
-    _check_intensities(folder / INTENSITIES_FILE, intensities, intensity_lines)
+    check_intensities(folder / INTENSITIES_FILE, intensities, intensity_lines)
     selection = select_images(names, exclude_images, where=str(folder))
     image_paths = [folder / names[k] for k in selection.kept]
     for image_path, line in zip(image_paths, [name_lines[k] for k in selection.kept], strict=True):
@@ -237,8 +240,7 @@ def diligent_image_names(folder: str | Path) -> tuple[str, ...]:
 
 def _read_lines(path: Path) -> list[tuple[int, str]]:
     """Non-blank lines of a text file, stripped, with their 1-based line numbers."""
-    needed = f"a DiLiGenT folder needs {FILENAMES_FILE} and {DIRECTIONS_FILE} ({INTENSITIES_FILE} if it has one)"
-    check_file(path, needed)
+    check_file(path, _NEEDED)
     text = read_text(path)
     return [(number, line.strip()) for number, line in enumerate(text.splitlines(), start=1) if line.strip()]
 
@@ -259,11 +261,8 @@ def _read_filenames(path: Path) -> tuple[list[str], list[int]]:
 
 def _read_table(path: Path) -> tuple[np.ndarray, list[int]]:
     """Three finite numbers per line: a float64 (N, 3) array and the line numbers."""
-    rows, numbers = [], []
-    for number, line in _read_lines(path):
-        rows.append(three_numbers(path, number, line))
-        numbers.append(number)
-    return np.array(rows, dtype=np.float64).reshape(-1, 3), numbers
+    check_file(path, _NEEDED)
+    return three_number_lines(path)
 
 
 def _unit_directions(path: Path, directions: np.ndarray, lines: list[int]) -> np.ndarray:
@@ -275,17 +274,6 @@ def _unit_directions(path: Path, directions: np.ndarray, lines: list[int]) -> np
         if upward is not None:
             raise DatasetError(f"{path}: line {line}: light direction {upward}")
     return directions / norms[:, None]
-
-
-def _check_intensities(path: Path, intensities: np.ndarray, lines: list[int]) -> None:
-    """Refuse a line with a negative intensity or one out of the core's range
-    (`irtps.model.scene.irradiance_problem`)."""
-    for row, line in zip(intensities, lines, strict=True):
-        if (row < 0.0).any():
-            raise DatasetError(f"{path}: line {line}: light intensities must not be negative, got {row.tolist()}")
-        problem = irradiance_problem(row)
-        if problem is not None:
-            raise DatasetError(f"{path}: line {line}: light intensity {problem}")
 
 
 def _read_normals(path: Path, size: tuple[int, int]) -> np.ndarray:

@@ -6,10 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
-from irtps._shared.guarded import parse_float
+from irtps._shared.guarded import parse_float, read_text
 from irtps.errors import ArgumentError, DatasetError
+from irtps.model.scene import irradiance_problem
 
-__all__ = ["three_numbers"]
+__all__ = ["check_intensities", "three_number_lines", "three_numbers"]
 
 
 def three_numbers(path: Path, number: int, line: str) -> list[float]:
@@ -41,3 +42,37 @@ def three_numbers(path: Path, number: int, line: str) -> list[float]:
     if not all(np.isfinite(row)):
         raise DatasetError(f"{path}: line {number}: non-finite value in {line!r}")
     return row
+
+
+def three_number_lines(path: Path) -> tuple[np.ndarray, list[int]]:
+    """Three finite numbers per non-blank line of a text file (`three_numbers`): a float64
+    (N, 3) array and the lines' 1-based numbers.
+
+    Raises
+    ------
+    DatasetError
+        As `three_numbers`, naming the file and the line.
+    """
+    rows, numbers = [], []
+    for number, line in enumerate(read_text(path).splitlines(), start=1):
+        if line.strip():
+            rows.append(three_numbers(path, number, line.strip()))
+            numbers.append(number)
+    return np.array(rows, dtype=np.float64).reshape(-1, 3), numbers
+
+
+def check_intensities(path: Path, intensities: np.ndarray, lines: list[int]) -> None:
+    """Refuse a line of light intensities (``light_intensities.txt``) with a negative value or
+    one out of the core's range (`irtps.model.scene.irradiance_problem`).
+
+    Raises
+    ------
+    DatasetError
+        ``"PATH: line N: PROBLEM"``.
+    """
+    for row, line in zip(intensities, lines, strict=True):
+        if (row < 0.0).any():
+            raise DatasetError(f"{path}: line {line}: light intensities must not be negative, got {row.tolist()}")
+        problem = irradiance_problem(row)
+        if problem is not None:
+            raise DatasetError(f"{path}: line {line}: light intensity {problem}")

@@ -5,10 +5,12 @@ file ``*.lp`` (RTIBuilder, Relight) and the images it lists, JPEG, PNG, TIFF or 
 The ``.lp`` file holds the image count on its first line, then one line per image,
 ``filename x y z``: a unit vector toward the light (x right, y up, z toward the camera, the
 contract's frame). A file name may be a path written on another machine (``C:\\dome\\a.jpg``):
-when nothing is at it, the file of that name beside the ``.lp`` file is read. There are no
-light strengths: `irtps.reconstruct` estimates them (`irtps.model.data.Dataset.irradiance_known`
-False). The camera is orthographic, one world unit a pixel, with no floor and no environment;
-``mask.png`` is optional.
+when nothing is at it, the file of that name beside the ``.lp`` file is read. The lights'
+strengths come from ``light_intensities.txt`` beside it when there is one (one RGB line per
+``.lp`` line, in its order, as DiLiGenT's and as ``irtps calibrate`` writes it); without it,
+`irtps.reconstruct` estimates them (`irtps.model.data.Dataset.irradiance_known` False). The
+camera is orthographic, one world unit a pixel, with no floor and no environment; ``mask.png``
+is optional.
 
 8-bit images (JPEG, 8-bit PNG or TIFF) are read as sRGB, the encoding of cameras' JPEGs, and
 linearised; 16-bit and float images are read as linear. `load_rti`'s ``encoding`` overrides
@@ -28,6 +30,7 @@ from irtps.errors import ArgumentError, DatasetError
 from irtps.io.image_selection import ImageSelection, select_images
 from irtps.io.capture import read_capture_images
 from irtps.io.imageio import ENCODINGS, read_mask
+from irtps.io.number_lines import check_intensities, three_number_lines
 from irtps.model.data import Dataset
 from irtps.model.scene import MIN_LIGHTS, Camera, Light, Scene, upward_problem
 
@@ -35,6 +38,9 @@ __all__ = ["load_rti", "lp_file", "rti_image_names", "rti_inputs"]
 
 LP_SUFFIX = ".lp"
 MASK_FILE = "mask.png"
+#: The lights' RGB strengths, one line per ``.lp`` line, as DiLiGenT's (``irtps calibrate``
+#: writes it); optional.
+INTENSITIES_FILE = "light_intensities.txt"
 #: How far the norm of a listed light direction may be from 1; within it, it is renormalised.
 UNIT_TOLERANCE = 1e-2
 _JPEG = (".jpg", ".jpeg")
@@ -68,9 +74,12 @@ class _RtiFiles(NamedTuple):
     images: list[Path]
     selection: ImageSelection
     mask: Path | None
+    #: ``light_intensities.txt``, when the folder has one.
+    intensities: Path | None = None
 
     def paths(self) -> list[Path]:
-        return [self.folder, self.lp, *self.images, *([] if self.mask is None else [self.mask])]
+        optional = [path for path in (self.mask, self.intensities) if path is not None]
+        return [self.folder, self.lp, *self.images, *optional]
 
 
 def rti_image_names(folder: str | Path) -> tuple[str, ...]:
@@ -107,8 +116,9 @@ def load_rti(path: str | Path, *, exclude_images: str | None = None, encoding: s
     -------
     Dataset
         Linear images in the ``.lp`` file's order, the lights' directions from it and their
-        strengths unknown (``irradiance_known`` False); ``saturation`` 1.0 when every image
-        holds integer codes (the largest clips).
+        strengths from ``light_intensities.txt`` (relative), or unknown without it
+        (``irradiance_known`` False); ``saturation`` 1.0 when every image holds integer codes
+        (the largest clips).
 
     Raises
     ------
@@ -117,7 +127,8 @@ def load_rti(path: str | Path, *, exclude_images: str | None = None, encoding: s
         its lines, a line that is not ``filename x y z``, an image that is missing, listed
         twice or not a JPEG, PNG, TIFF or RAW file that can be read, a direction that is not a
         unit vector (beyond 1e-2) or points away from the camera, fewer than 3 images,
-        images of different sizes.
+        images of different sizes; a ``light_intensities.txt`` whose line count is not the
+        ``.lp`` file's or whose line is not three non-negative numbers.
     ArgumentError
         Naming ``encoding`` or ``exclude_images``.
     """
@@ -128,14 +139,18 @@ def load_rti(path: str | Path, *, exclude_images: str | None = None, encoding: s
     size = images.shape[1:3]
     mask = read_mask(files.mask, size) if files.mask is not None else np.ones(size, dtype=bool)
     return Dataset(
-        scene=Scene(camera=Camera(width=size[1], height=size[0], pixel_size=1.0), lights=files.lights),
+        scene=Scene(
+            camera=Camera(width=size[1], height=size[0], pixel_size=1.0),
+            lights=files.lights,
+            relative_irradiance=files.intensities is not None,
+        ),
         images=images,
         mask=mask,
         source=str(files.folder),
         saturation=1.0 if integer_codes else None,
         image_names=files.selection.names,
         excluded_images=files.selection.excluded,
-        irradiance_known=False,
+        irradiance_known=files.intensities is not None,
     )
 
 
@@ -156,9 +171,26 @@ def _rti_files(folder: Path, exclude_images: str | None) -> _RtiFiles:
     kept = [entries[k] for k in selection.kept]
     for image, _, line in kept:
         check_file(image, f"listed on line {line} of {lp.name}")
-    lights = tuple(Light(direction=direction, irradiance=np.ones(3)) for _, direction, _ in kept)
+    intensities = _intensities(folder / INTENSITIES_FILE, lp, len(entries))
+    strengths = [np.ones(3)] * len(kept) if intensities is None else [intensities[k] for k in selection.kept]
+    lights = tuple(
+        Light(direction=direction, irradiance=strength) for (_, direction, _), strength in zip(kept, strengths)
+    )
     mask = folder / MASK_FILE if optional_file(folder / MASK_FILE) else None
-    return _RtiFiles(folder, lp, lights, [image for image, _, _ in kept], selection, mask)
+    intensities_file = None if intensities is None else folder / INTENSITIES_FILE
+    return _RtiFiles(folder, lp, lights, [image for image, _, _ in kept], selection, mask, intensities_file)
+
+
+def _intensities(path: Path, lp: Path, count: int) -> np.ndarray | None:
+    """The (N, 3) RGB intensities of ``light_intensities.txt`` in the ``.lp`` file's order, or
+    None when the folder has no such file."""
+    if not optional_file(path):
+        return None
+    intensities, lines = three_number_lines(path)
+    if len(intensities) != count:
+        raise DatasetError(f"{path}: {len(intensities)} lines, but {lp.name} lists {count} images")
+    check_intensities(path, intensities, lines)
+    return intensities
 
 
 def _read_lp(path: Path) -> list[tuple[Path, np.ndarray, int]]:
