@@ -216,6 +216,11 @@ def test_a_light_without_a_highlight_takes_the_matte_spheres_direction():
     assert _angles_deg(calibration.directions, lights).max() < 0.25
 
 
+def test_too_few_images_are_refused():
+    with pytest.raises(irtps.ArgumentError, match="^images: 2 images: a calibration needs at least 3"):
+        irtps.calibrate_lights(_capture(_directions(2), _strengths(2)))
+
+
 def test_a_capture_without_spheres_is_refused():
     rng = np.random.default_rng(0)
     images = rng.uniform(0.1, 0.2, (6, 40, 60, 3))

@@ -298,7 +298,7 @@ def _stack(images) -> np.ndarray:
     array = np.asarray(images) if not isinstance(images, (str, bytes)) else images
     if getattr(array, "ndim", None) == 2:
         return _image(array)[None]
-    stack = check_array("images", images, (None, None, None), nonempty=True)
+    stack = check_array("images", images, (None, None, None), dtype=np.float32, copy=False, nonempty=True)
     check_finite("images", stack)
     return stack
 

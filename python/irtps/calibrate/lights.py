@@ -15,6 +15,7 @@ from irtps.calibrate.circles import Circle, as_circle
 from irtps.calibrate.matte import Shading, fit_shading, matte_irradiance
 from irtps.calibrate.spheres import MAX_SHADING_RESIDUAL, find_spheres
 from irtps.errors import ArgumentError, DatasetError
+from irtps.model.scene import MIN_LIGHTS
 
 __all__ = ["LightCalibration", "calibrate_lights"]
 
@@ -130,11 +131,16 @@ def calibrate_lights(
         nor a direction from the matte sphere, or that lights too little of the matte sphere
         to measure its strength.
     ArgumentError
-        Naming the argument: `images` not (K, H, W, 3) finite, `saturated` of another shape,
+        Naming the argument: `images` not (K, H, W, 3) finite or fewer than 3 (each image's
+        highlight stands out of the median of all), `saturated` of another shape,
         `matte_albedo` not in (0, 1].
     """
-    images = check_array("images", images, (None, None, None, 3), nonempty=True)
+    images = check_array("images", images, (None, None, None, 3), dtype=np.float32, copy=False, nonempty=True)
     check_finite("images", images)
+    if len(images) < MIN_LIGHTS:
+        raise ArgumentError(
+            "images", f"{len(images)} images: a calibration needs at least {MIN_LIGHTS}, one light each"
+        )
     saturated = (
         np.zeros(images.shape[:3], dtype=bool)
         if saturated is None
@@ -146,7 +152,7 @@ def calibrate_lights(
     if not 0.0 < matte_albedo <= 1.0:
         raise ArgumentError("matte_albedo", f"must be in (0, 1], got {matte_albedo!r}")
     labels = list(names) if names is not None else [f"image {k}" for k in range(len(images))]
-    gray = images.mean(axis=-1)
+    gray = images.mean(axis=-1, dtype=np.float32)
     spheres = find_spheres(gray, saturated, chrome=chrome, matte=matte)
     if spheres.chrome is None and spheres.matte is None:
         raise DatasetError(

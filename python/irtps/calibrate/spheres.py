@@ -133,7 +133,7 @@ def _normalised(gray: np.ndarray) -> np.ndarray:
 
 
 def _stack(gray) -> np.ndarray:
-    gray = check_array("gray", gray, (None, None, None), nonempty=True)
+    gray = check_array("gray", gray, (None, None, None), dtype=np.float32, copy=False, nonempty=True)
     check_finite("gray", gray)
     return gray
 

@@ -37,6 +37,7 @@ from irtps.io.intrinsics import intrinsics_by_name
 from irtps.irt.folder import load_reconstruction, save_reconstruction
 from irtps.irt.reconstruct import load_and_reconstruct
 from irtps.model.metrics import evaluate, format_metrics
+from irtps.model.scene import MIN_LIGHTS
 from irtps.model.options import (
     ClusterOptions,
     ReconstructOptions,
@@ -261,6 +262,10 @@ def run_calibrate(args: argparse.Namespace) -> None:
     chrome = None if args.chrome is None else parse_circle(args.chrome, "chrome")
     matte = None if args.matte is None else parse_circle(args.matte, "matte")
     paths = capture_image_paths(args.capture)
+    if len(paths) < MIN_LIGHTS:
+        raise DatasetError(
+            f"{args.capture}: {len(paths)} images: a calibration needs at least {MIN_LIGHTS}, one light each"
+        )
     names = [path.name for path in paths]
     inputs: list[Path] = [args.capture, *paths]
     if args.names_from is not None:
