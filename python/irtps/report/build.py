@@ -30,7 +30,9 @@ from irtps.io.dataset_files import ground_truth_inputs, is_data_set
 from irtps.report.display import albedo_to_rgb, hillshade, normal_to_rgb, object_window, radiance_to_rgb
 from irtps.errors import DatasetError, IrtpsError
 from irtps.model.metrics import ErrorMaps, Metrics, error_maps, evaluate
-from irtps.report.figures import agreement_png, convergence_png, error_map_png, image_png
+from irtps.report.figures import ERROR_SCALE_PERCENTILE, agreement_png, convergence_png, error_map_png, image_png
+from irtps.report.shape_view import shape_mesh, shape_view_html, surface_colours
+from irtps.model.camera import Camera
 from irtps.ps.image_agreement import ImageAgreement
 from irtps.io.imageio import read_exr, read_png
 from irtps._shared.guarded import shown
@@ -104,6 +106,9 @@ class Report:
         Where the ground truth came from, or why there is none.
     notes : list of str
         Anything else the reader should know (e.g. an assumed pixel size).
+    shape_view : str or None
+        The 3-D view's HTML (`irtps.report.shape_view`), None when the run's camera is not
+        known.
     """
 
     run_dir: Path
@@ -115,6 +120,7 @@ class Report:
     metrics: Metrics | None = None
     ground_truth: str = ""
     notes: list[str] = field(default_factory=list)
+    shape_view: str | None = None
 
 
 def build_report(run_dir: str | Path, *, truth: str | Path | None = None) -> Report:
@@ -184,6 +190,9 @@ def build_report(run_dir: str | Path, *, truth: str | Path | None = None) -> Rep
     agreement = recorded_agreement(record)
     if agreement is not None and not np.isnan(agreement.brightness).all():
         report.figures.append(_agreement_figure(record["images"], agreement))
+    report.shape_view = _shape_view(
+        folder, record, height, albedo, mask, gt, maps if gt is not None else None, report.notes
+    )
     return report
 
 
@@ -394,6 +403,85 @@ def _rig_figure(record: dict, height: np.ndarray, mask: np.ndarray, notes: list[
         "and the camera's optical centre (blue); world units."
     )
     return ReportFigure("rig", "The rig", caption, rig_png(scene, height, mask, "The rig"))
+
+
+def _shape_view(
+    folder: Path,
+    record: dict,
+    height: np.ndarray,
+    albedo: np.ndarray,
+    mask: np.ndarray,
+    gt: GroundTruth | None,
+    maps: ErrorMaps | None,
+    notes: list[str],
+) -> str | None:
+    """The 3-D view of the reconstructed surface, beside the true one when the ground truth
+    has a height or a depth map (`irtps.report.shape_view`)."""
+    try:
+        camera = _recorded_camera(record, mask.shape)
+    except (IrtpsError, KeyError, TypeError, ValueError) as error:
+        notes.append(f"The 3-D view is not shown: run.json's camera cannot be read ({error}).")
+        return None
+    errors = None if maps is None else maps.angular_deg
+    scale = (
+        None if errors is None or np.isnan(errors).all() else float(np.nanpercentile(errors, ERROR_SCALE_PERCENTILE))
+    )
+    breaks_file = folder / "discontinuities.png"
+    breaks = None
+    if breaks_file.exists():
+        flags = read_png(breaks_file)[0] > 0
+        breaks = np.asarray(flags.any(axis=-1) if flags.ndim == 3 else flags)
+    meshes = [
+        shape_mesh("reconstruction", camera, height, mask, surface_colours(albedo, mask, errors, scale), breaks=breaks)
+    ]
+    true_height = None if gt is None else _true_height(gt, camera, mask.shape)
+    if true_height is not None:
+        true_mask = np.isfinite(true_height) & mask
+        if true_mask.any():
+            assert gt is not None
+            colours = surface_colours(gt.albedo, true_mask, None, None)
+            meshes.append(shape_mesh("truth", camera, np.nan_to_num(true_height), true_mask, colours))
+    shown_meshes = [mesh for mesh in meshes if mesh is not None]
+    if not shown_meshes:
+        return None
+    caption = (
+        "The surface in 3-D"
+        + (", the true one on its right" if len(shown_meshes) > 1 else "")
+        + f" ({'through the pinhole' if camera.projection == 'perspective' else 'orthographic heights'}, world units). "
+        "Drag to turn, scroll to zoom; coloured by albedo or by the normals' angular error "
+        + ("(the report's error colours)." if scale is not None else "(without ground truth: grey).")
+    )
+    return shape_view_html(shown_meshes, caption)
+
+
+def _recorded_camera(record: dict, shape: tuple[int, int]) -> Camera:
+    """The camera of a run (``run.json``'s ``camera``, or its pixel size, 1 when it has none)."""
+    recorded = record.get("camera")
+    if recorded and recorded.get("projection") == "perspective":
+        x, y, z = (float(value) for value in recorded["optical_center"])
+        return Camera(
+            width=int(recorded["width"]),
+            height=int(recorded["height"]),
+            projection="perspective",
+            fx=float(recorded["fx"]),
+            fy=float(recorded["fy"]),
+            cx=float(recorded["cx"]),
+            cy=float(recorded["cy"]),
+            optical_center=(x, y, z),
+        )
+    # an older run without its pixel size: 1 world unit a pixel, as the shaded relief says
+    return Camera(width=shape[1], height=shape[0], pixel_size=float(record.get("pixel_size") or 1.0))
+
+
+def _true_height(gt: GroundTruth, camera: Camera, shape: tuple[int, int]) -> np.ndarray | None:
+    """The true heights (NaN where unknown): the ground truth's height map, or its depth turned
+    into heights through the pinhole."""
+    if gt.height is not None and gt.height.shape == shape:
+        return gt.height.astype(np.float64)
+    if gt.depth is not None and gt.depth.shape == shape and camera.projection == "perspective":
+        assert camera.optical_center is not None
+        return camera.optical_center[2] - gt.depth.astype(np.float64)
+    return None
 
 
 def _error_figures(maps: ErrorMaps, metrics: Metrics, window: tuple[slice, slice]) -> list[ReportFigure]:

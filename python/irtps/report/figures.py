@@ -19,13 +19,23 @@ from irtps._shared.checks import check_array, check_instance
 from irtps.report.display import BACKGROUND
 from irtps.errors import ArgumentError
 
-__all__ = ["agreement_png", "convergence_png", "error_map_png", "figure_png", "image_png"]
+__all__ = [
+    "ERROR_COLOURS",
+    "ERROR_SCALE_PERCENTILE",
+    "agreement_png",
+    "convergence_png",
+    "error_map_png",
+    "figure_png",
+    "image_png",
+]
 
 #: Size of a figure in inches, and its resolution.
 FIGURE_SIZE = (4.8, 4.2)
 DPI = 120
 #: Percentile of an error map that the top of its colour scale marks.
 ERROR_SCALE_PERCENTILE = 99.0
+#: The colours of error maps, 0 to the top of their scale (grey where not evaluated).
+ERROR_COLOURS = colormaps["viridis"].with_extremes(bad=(BACKGROUND,) * 3)
 
 
 def image_png(rgb: np.ndarray, title: str) -> bytes:
@@ -96,7 +106,7 @@ def error_map_png(errors: np.ndarray, title: str, unit: str) -> bytes:
     top = float(np.percentile(finite, ERROR_SCALE_PERCENTILE))
     figure = Figure(figsize=FIGURE_SIZE, layout="constrained")
     axes = figure.add_subplot()
-    image = axes.imshow(np.ma.masked_invalid(errors), cmap=_error_colormap(), vmin=0.0, vmax=top if top > 0 else 1.0)
+    image = axes.imshow(np.ma.masked_invalid(errors), cmap=ERROR_COLOURS, vmin=0.0, vmax=top if top > 0 else 1.0)
     figure.colorbar(image, ax=axes, label=unit, extend="max" if finite.max() > top else "neither", shrink=0.85)
     _image_axes(axes, title)
     return figure_png(figure)
@@ -274,10 +284,6 @@ def _curve(axes, points: list[tuple[int, float]], label: str, title: str, chosen
     axes.set_title(title, fontsize="medium")
     axes.xaxis.set_major_locator(MaxNLocator(integer=True))
     axes.grid(True, alpha=0.3)
-
-
-def _error_colormap():
-    return colormaps["viridis"].with_extremes(bad=(BACKGROUND,) * 3)
 
 
 def _image_axes(axes, title: str) -> None:

@@ -1,7 +1,8 @@
 """The HTML page of a report: one self-contained file, figures embedded as data URIs.
 
-The page has no script and loads nothing from elsewhere (the icon is an empty data URI,
-so a browser does not ask for ``favicon.ico`` either); it can be mailed or archived as it is.
+The page loads nothing from elsewhere (the icon is an empty data URI, so a browser does not
+ask for ``favicon.ico`` either); its one script, the 3-D view's, is inline with its meshes
+(`irtps.report.shape_view`). It can be mailed or archived as it is, and works offline.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ table { border-collapse: collapse; }
 td, th { padding: 0.2em 0.8em; border-bottom: 1px solid #eee; text-align: left; vertical-align: top; }
 pre { background: #f6f6f6; padding: 0.8em; overflow-x: auto; }
 .notes { background: #fff6d8; padding: 0.6em 2em; }
+.controls { margin-top: 0.4em; font-size: 0.9em; }
 """
 
 
@@ -96,6 +98,8 @@ def report_html(report: Report) -> str:
     parts.append('<div class="grid">')
     parts += [_figure(figure) for figure in report.figures]
     parts += ["</div>", "</section>"]
+    if report.shape_view is not None:
+        parts += ['<section id="shape">', "<h2>Shape in 3-D</h2>", report.shape_view, "</section>"]
     parts += [
         '<section id="errors">',
         "<h2>Errors against ground truth</h2>",
