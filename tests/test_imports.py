@@ -15,7 +15,7 @@ MODULES = {
     for path in PACKAGE.rglob("*.py")
     if path != PACKAGE / "__init__.py"
 }
-#: The subpackages (and top-level modules) from the bottom up, as in the README's module map: a
+#: The subpackages (and top-level modules) from the bottom up, as in the module map (docs/architecture.md): a
 #: module imports only from its own subpackage and those of lower layers. A layer of more than
 #: one is of peers that import none of each other.
 LAYERS = [
