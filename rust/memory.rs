@@ -114,12 +114,18 @@ const HUGE_PAGES_FROM: usize = 8 << 20;
 /// walks (costlier still in a virtual machine) go. Only a hint, given before the memory is
 /// first written: where the kernel declines, or on other systems, nothing changes.
 pub fn with_huge_pages<T>(what: &str, len: usize) -> Result<Vec<T>> {
-    let values: Vec<T> = try_with_capacity(what, len)?;
-    let bytes = len.saturating_mul(size_of::<T>());
-    if bytes >= HUGE_PAGES_FROM {
-        advise_huge_pages(values.as_ptr().cast::<u8>(), bytes);
-    }
+    let values = try_with_capacity(what, len)?;
+    advise_huge_pages(&values);
     Ok(values)
+}
+
+/// Gives the hint of [`with_huge_pages`] for the spare capacity of `values` when it is
+/// large, before any of it is written (written pages stay as they are).
+pub fn advise_huge_pages<T>(values: &Vec<T>) {
+    let bytes = values.capacity().saturating_mul(size_of::<T>());
+    if bytes >= HUGE_PAGES_FROM {
+        madvise_huge_pages(values.as_ptr().cast::<u8>(), bytes);
+    }
 }
 
 /// `values` moved onto memory given [`with_huge_pages`]' hint, when they are as large as it
@@ -135,7 +141,7 @@ pub fn on_huge_pages<T: Copy>(what: &str, values: Vec<T>) -> Result<Vec<T>> {
 
 /// `madvise(MADV_HUGEPAGE)` over the whole 2 MiB pages inside `bytes` bytes from `start`.
 #[cfg(target_os = "linux")]
-fn advise_huge_pages(start: *const u8, bytes: usize) {
+fn madvise_huge_pages(start: *const u8, bytes: usize) {
     const HUGE_PAGE: usize = 2 << 20;
     let first = (start as usize).next_multiple_of(HUGE_PAGE);
     let end = (start as usize + bytes) / HUGE_PAGE * HUGE_PAGE;
@@ -150,7 +156,7 @@ fn advise_huge_pages(start: *const u8, bytes: usize) {
 }
 
 #[cfg(not(target_os = "linux"))]
-fn advise_huge_pages(_start: *const u8, _bytes: usize) {}
+fn madvise_huge_pages(_start: *const u8, _bytes: usize) {}
 
 /// Asks the processor to start loading the cache line holding the start of `value`, so that
 /// a read of it a little later does not wait as long for memory. Only a hint: nothing is

@@ -12,7 +12,7 @@ use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
 
 use crate::error::Result;
-use crate::memory::on_huge_pages;
+use crate::memory::{advise_huge_pages, on_huge_pages};
 
 /// A triangle laid out for intersection (64 bytes), on a cache line of its own: a test reads
 /// one line, not the two it would straddle where the allocator's alignment (16 bytes) puts it.
@@ -77,11 +77,14 @@ impl TriangleBvh {
             .iter()
             .map(|&i| ids.get(i as usize).copied().unwrap_or(u32::MAX))
             .collect();
-        let triangles = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| LeafTriangle(RtTriangle::from(&tris[i as usize])))
-            .collect();
+        // A large mesh's traversals read them at random places: on huge pages.
+        let mut triangles = Vec::with_capacity(bvh.primitive_indices.len());
+        advise_huge_pages(&triangles);
+        triangles.extend(
+            bvh.primitive_indices
+                .iter()
+                .map(|&i| LeafTriangle(RtTriangle::from(&tris[i as usize]))),
+        );
         TriangleBvh {
             bvh,
             triangles,
@@ -103,11 +106,11 @@ impl TriangleBvh {
         (bvh, order)
     }
 
-    /// Moves its nodes and triangles onto memory backed by huge pages when they are large
-    /// ([`on_huge_pages`]): a large mesh's traversals read them at random places.
+    /// Moves its nodes (which obvhs allocates) onto memory backed by huge pages when they
+    /// are large ([`on_huge_pages`]), as its triangles are: a large mesh's traversals read
+    /// them at random places.
     pub fn onto_huge_pages(&mut self) -> Result<()> {
         self.bvh.nodes = on_huge_pages("a BVH's nodes", std::mem::take(&mut self.bvh.nodes))?;
-        self.triangles = on_huge_pages("a BVH's triangles", std::mem::take(&mut self.triangles))?;
         Ok(())
     }
 
