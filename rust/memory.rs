@@ -103,6 +103,78 @@ fn cache_sizes() -> Option<[usize; 3]> {
     Some(sizes)
 }
 
+/// Bytes from which [`with_huge_pages`] asks for huge pages: below, a buffer is read from a
+/// few pages that the TLB holds anyway.
+const HUGE_PAGES_FROM: usize = 8 << 20;
+
+/// An empty vector with room for `len` values, or [`Error::Memory`] for `what`, whose memory
+/// the kernel is asked to back with huge pages when it is large (Linux's transparent huge
+/// pages, 2 MiB a page, through `madvise`): a buffer read at random places, such as a
+/// scanned environment's BVH and shading records, then misses the TLB far less, and its page
+/// walks (costlier still in a virtual machine) go. Only a hint, given before the memory is
+/// first written: where the kernel declines, or on other systems, nothing changes.
+pub fn with_huge_pages<T>(what: &str, len: usize) -> Result<Vec<T>> {
+    let values = try_with_capacity(what, len)?;
+    advise_huge_pages(&values);
+    Ok(values)
+}
+
+/// Gives the hint of [`with_huge_pages`] for the spare capacity of `values` when it is
+/// large, before any of it is written (written pages stay as they are).
+pub fn advise_huge_pages<T>(values: &Vec<T>) {
+    let bytes = values.capacity().saturating_mul(size_of::<T>());
+    if bytes >= HUGE_PAGES_FROM {
+        madvise_huge_pages(values.as_ptr().cast::<u8>(), bytes);
+    }
+}
+
+/// `values` moved onto memory given [`with_huge_pages`]' hint, when they are as large as it
+/// asks for (else as they are).
+pub fn on_huge_pages<T: Copy>(what: &str, values: Vec<T>) -> Result<Vec<T>> {
+    if values.len().saturating_mul(size_of::<T>()) < HUGE_PAGES_FROM {
+        return Ok(values);
+    }
+    let mut moved = with_huge_pages(what, values.len())?;
+    moved.extend_from_slice(&values);
+    Ok(moved)
+}
+
+/// `madvise(MADV_HUGEPAGE)` over the whole 2 MiB pages inside `bytes` bytes from `start`.
+#[cfg(target_os = "linux")]
+fn madvise_huge_pages(start: *const u8, bytes: usize) {
+    const HUGE_PAGE: usize = 2 << 20;
+    let first = (start as usize).next_multiple_of(HUGE_PAGE);
+    let end = (start as usize + bytes) / HUGE_PAGE * HUGE_PAGE;
+    if end > first {
+        // SAFETY: the range lies inside one live allocation; the advice changes how its
+        // pages are backed, never their contents. A refusal (an old kernel, huge pages
+        // disabled) is ignored: the memory stays as it was.
+        unsafe {
+            libc::madvise(first as *mut libc::c_void, end - first, libc::MADV_HUGEPAGE);
+        }
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn madvise_huge_pages(_start: *const u8, _bytes: usize) {}
+
+/// Asks the processor to start loading the cache line holding the start of `value`, so that
+/// a read of it a little later does not wait as long for memory. Only a hint: nothing is
+/// read or checked, and it does nothing on processors other than x86-64.
+#[inline(always)]
+pub fn prefetch<T>(value: &T) {
+    // SAFETY: SSE is part of every x86-64 processor, and a prefetch reads nothing (any
+    // address may be hinted).
+    #[cfg(target_arch = "x86_64")]
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
+            (value as *const T).cast::<i8>(),
+        );
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = value;
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -22,7 +22,7 @@ use rayon::prelude::*;
 use std::sync::Arc;
 
 use crate::scene::{Emitter, Rgb};
-use crate::trace::environment::EnvironmentVisibility;
+use crate::trace::environment::{lit, EnvironmentVisibility};
 use crate::trace::mesh::{Mesh, Panel, SurfaceKind, NO_PANEL};
 use crate::trace::Tracer;
 
@@ -350,8 +350,9 @@ impl LightCache {
         };
         let w = 1.0 - u - v;
         self.add_shaded::<true>(n, point, albedo, weight, acc, |k| {
-            if a[k] == b[k] && b[k] == c[k] {
-                if a[k] == 0 {
+            let [a, b, c] = [a, b, c].map(|row| lit(row, k));
+            if a == b && b == c {
+                if a == 0 {
                     0.0
                 } else {
                     past(k, false)
@@ -359,7 +360,7 @@ impl LightCache {
             } else if exact_edges {
                 past(k, true)
             } else {
-                (w * a[k] as f32 + u * b[k] as f32 + v * c[k] as f32) * past(k, false)
+                (w * a as f32 + u * b as f32 + v * c as f32) * past(k, false)
             }
         });
     }

@@ -11,12 +11,21 @@ use obvhs::rt_triangle::RtTriangle;
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
 
+use crate::error::Result;
+use crate::memory::{advise_huge_pages, on_huge_pages};
+
+/// A triangle laid out for intersection (64 bytes), on a cache line of its own: a test reads
+/// one line, not the two it would straddle where the allocator's alignment (16 bytes) puts it.
+#[derive(Clone, Copy)]
+#[repr(C, align(64))]
+struct LeafTriangle(RtTriangle);
+
 /// Triangles in a CWBVH, laid out for fast intersection.
 #[derive(Default)]
 pub struct TriangleBvh {
     bvh: CwBvh,
     /// Triangles in BVH order.
-    triangles: Vec<RtTriangle>,
+    triangles: Vec<LeafTriangle>,
     /// The caller's index of each triangle, in BVH order (empty when the triangles are
     /// numbered in BVH order: see [`TriangleBvh::in_bvh_order`]).
     ids: Vec<u32>,
@@ -68,11 +77,14 @@ impl TriangleBvh {
             .iter()
             .map(|&i| ids.get(i as usize).copied().unwrap_or(u32::MAX))
             .collect();
-        let triangles = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| RtTriangle::from(&tris[i as usize]))
-            .collect();
+        // A large mesh's traversals read them at random places: on huge pages.
+        let mut triangles = Vec::with_capacity(bvh.primitive_indices.len());
+        advise_huge_pages(&triangles);
+        triangles.extend(
+            bvh.primitive_indices
+                .iter()
+                .map(|&i| LeafTriangle(RtTriangle::from(&tris[i as usize]))),
+        );
         TriangleBvh {
             bvh,
             triangles,
@@ -92,6 +104,14 @@ impl TriangleBvh {
         let order = bvh.ids.iter().copied().filter(|&i| i != u32::MAX).collect();
         bvh.ids = Vec::new();
         (bvh, order)
+    }
+
+    /// Moves its nodes (which obvhs allocates) onto memory backed by huge pages when they
+    /// are large ([`on_huge_pages`]), as its triangles are: a large mesh's traversals read
+    /// them at random places.
+    pub fn onto_huge_pages(&mut self) -> Result<()> {
+        self.bvh.nodes = on_huge_pages("a BVH's nodes", std::mem::take(&mut self.bvh.nodes))?;
+        Ok(())
     }
 
     /// The caller's index of the triangle at BVH position `slot` (not the bounds guard's).
@@ -115,7 +135,7 @@ impl TriangleBvh {
         if slot == self.bounds_guard {
             f32::INFINITY
         } else {
-            self.triangles[slot].intersect(ray)
+            self.triangles[slot].0.intersect(ray)
         }
     }
 
@@ -123,6 +143,18 @@ impl TriangleBvh {
     /// and the barycentric weights of its vertices 1 and 2.
     #[inline(always)]
     pub fn closest(&self, ray: Ray) -> Option<(u32, f32, f32, f32)> {
+        self.closest_hinted(ray, |_| ())
+    }
+
+    /// [`TriangleBvh::closest`], calling `candidate` with the caller's index of each triangle
+    /// that becomes the nearest so far (to ask for what the caller reads of the hit, while
+    /// the search goes on).
+    #[inline(always)]
+    pub fn closest_hinted(
+        &self,
+        ray: Ray,
+        candidate: impl Fn(u32),
+    ) -> Option<(u32, f32, f32, f32)> {
         if self.is_empty() {
             return None;
         }
@@ -141,11 +173,12 @@ impl TriangleBvh {
                 if t < traverse_ray.tmax {
                     best = Some(slot);
                     traverse_ray.tmax = t;
+                    candidate(self.id(slot));
                 }
             }
         );
         best.map(|slot| {
-            let uv = self.triangles[slot].compute_barycentric(&traverse_ray);
+            let uv = self.triangles[slot].0.compute_barycentric(&traverse_ray);
             (self.id(slot), traverse_ray.tmax, uv.x, uv.y)
         })
     }

@@ -10,7 +10,7 @@ use obvhs::triangle::Triangle;
 use rayon::prelude::*;
 
 use crate::error::Result;
-use crate::memory::try_vec;
+use crate::memory::{prefetch, with_huge_pages};
 use crate::scene::{Emitter, EnvironmentMesh, Rgb};
 use crate::trace::bvh::TriangleBvh;
 use crate::trace::make_ray;
@@ -63,19 +63,28 @@ impl TriangleShading {
 /// shadow that the surroundings cast on themselves, which does not change from pass to pass.
 /// The object's shadow does, and is traced at each point where this one is known.
 pub struct EnvironmentVisibility {
-    /// `visible[v · K + k]` is 1 when light k reaches vertex v.
+    /// Vertex v's row, `visible[v · R..(v + 1) · R]` (R = `row_bytes`), has bit k % 8 of its
+    /// byte k / 8 set when light k reaches it: eight times less memory than a byte a light,
+    /// so that a scan's rows, read at random vertices, stay in the caches.
     visible: Vec<u8>,
-    lights: usize,
+    row_bytes: usize,
     /// The position or direction of each light it was traced for ([`light_geometry`]).
     traced_for: Vec<[f32; 4]>,
 }
 
 impl EnvironmentVisibility {
-    /// The visibility of every light at vertex `v`.
+    /// The visibility of every light at vertex `v`, eight lights a byte: see [`lit`].
     #[inline(always)]
     pub fn at_vertex(&self, v: u32) -> &[u8] {
-        &self.visible[v as usize * self.lights..][..self.lights]
+        &self.visible[v as usize * self.row_bytes..][..self.row_bytes]
     }
+}
+
+/// 1 when light `k` reaches the vertex of `row` (a row of [`EnvironmentVisibility::at_vertex`]),
+/// else 0.
+#[inline(always)]
+pub fn lit(row: &[u8], k: usize) -> u8 {
+    (row[k / 8] >> (k % 8)) & 1
 }
 
 impl EnvironmentAccel {
@@ -96,7 +105,8 @@ impl EnvironmentAccel {
                 Triangle { v0, v1, v2 }
             })
             .collect();
-        let (bvh, order) = TriangleBvh::in_bvh_order(tris);
+        let (mut bvh, order) = TriangleBvh::in_bvh_order(tris);
+        bvh.onto_huge_pages()?;
         // The degenerate triangles, never hit, after the BVH's.
         let triangle_order: Vec<u32> = order
             .iter()
@@ -105,14 +115,19 @@ impl EnvironmentAccel {
             .collect();
         let mesh = in_order(mesh, &triangle_order);
         // The same records in the new order, naming the renumbered vertices.
-        let shading = triangle_order
-            .iter()
-            .zip(&mesh.triangles)
-            .map(|(&t, &vertices)| TriangleShading {
-                vertices,
-                ..shading[t as usize]
-            })
-            .collect();
+        let mut ordered = with_huge_pages(
+            "the environment mesh's shading records",
+            triangle_order.len(),
+        )?;
+        ordered.extend(
+            triangle_order
+                .iter()
+                .zip(&mesh.triangles)
+                .map(|(&t, &vertices)| TriangleShading {
+                    vertices,
+                    ..shading[t as usize]
+                }),
+        );
         let bounds = mesh
             .positions
             .iter()
@@ -122,7 +137,7 @@ impl EnvironmentAccel {
         Ok(EnvironmentAccel {
             bvh,
             mesh,
-            shading,
+            shading: ordered,
             bounds,
             visibility: Mutex::new(None),
         })
@@ -151,20 +166,21 @@ impl EnvironmentAccel {
         lights: &[Emitter],
         traced_for: Vec<[f32; 4]>,
     ) -> Result<EnvironmentVisibility> {
-        let count = lights.len();
-        let mut visible = try_vec(
+        let row_bytes = lights.len().div_ceil(8);
+        let len = self.mesh.positions.len().saturating_mul(row_bytes);
+        let mut visible = with_huge_pages(
             "the light visibility at the environment mesh's vertices",
-            self.mesh.positions.len().saturating_mul(count),
-            0u8,
+            len,
         )?;
+        visible.resize(len, 0u8);
         let (lo, hi) = self.bounds;
         let offset = VERTEX_RAY_OFFSET * (hi - lo).max_element();
         visible
-            .par_chunks_mut(count.max(1))
+            .par_chunks_mut(row_bytes.max(1))
             .zip(&self.mesh.positions)
             .for_each(|(row, &vertex)| {
                 let start = offset.max(vertex.abs().max_element() * RELATIVE_VERTEX_RAY_OFFSET);
-                for (slot, light) in row.iter_mut().zip(lights) {
+                for (k, light) in lights.iter().enumerate() {
                     let (direction, distance) = match light {
                         Emitter::Distant(light) => (light.direction.normalize(), f32::INFINITY),
                         Emitter::Point(light) => {
@@ -175,12 +191,12 @@ impl EnvironmentAccel {
                     };
                     let reached = distance <= start
                         || !self.occluded(vertex + direction * start, direction, distance - start);
-                    *slot = u8::from(reached);
+                    row[k / 8] |= u8::from(reached) << (k % 8);
                 }
             });
         Ok(EnvironmentVisibility {
             visible,
-            lights: count,
+            row_bytes,
             traced_for,
         })
     }
@@ -247,7 +263,14 @@ impl EnvironmentAccel {
         direction: Vec3A,
         t_max: f32,
     ) -> Option<(u32, f32, f32, f32)> {
-        self.bvh.closest(make_ray(origin, direction, t_max))
+        // The shading record of each nearest triangle so far is asked for at once: a scan's
+        // records lie far apart in memory, and the hit's is read right after the search.
+        self.bvh
+            .closest_hinted(make_ray(origin, direction, t_max), |t| {
+                if let Some(shading) = self.shading.get(t as usize) {
+                    prefetch(shading);
+                }
+            })
     }
 
     /// Whether a triangle lies along `origin + t·direction`, t in (0, `t_max`), world units.
