@@ -102,10 +102,12 @@ def test_the_mitsuba_capture_is_calibrated_within_the_issue_bounds(tmp_path, cap
         found, true = record[name], truth[key]
         assert np.hypot(*np.subtract(found["center_px"], true["center_px"])) < 0.25, name
         assert abs(found["radius_px"] - true["radius_px"]) < 0.5, name
-    assert record["chrome_circle_source"] == "highlights"
+    assert record["chrome_circle_source"] == "highlights" and record["matte_circle_source"] == "shading"
     assert (tmp_path / "lights" / "calibration.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     printed = capsys.readouterr().out
     assert "calibrated 12 lights" in printed and "strengths from the matte sphere" in printed
+    assert "matte sphere (117.9" in printed or "matte sphere (118.0" in printed
+    assert "fitted to its shading" in printed
 
 
 def test_the_lp_file_turns_the_capture_into_an_rti_folder(tmp_path):

@@ -129,7 +129,7 @@ def _record(
         "chrome_sphere_outline": _circle(calibration.chrome_outline),
         "chrome_circle_source": calibration.chrome_circle_source,
         "matte_sphere": _circle(calibration.matte),
-        "matte_circle_source": None if calibration.matte is None else "given" if calibration.matte_given else "outline",
+        "matte_circle_source": None if calibration.matte is None else "given" if calibration.matte_given else "shading",
         "matte_albedo": matte_albedo if calibration.irradiance is not None else None,
         "coordinates": "circles and highlights in pixels from the image's top-left corner (column, row); "
         "directions toward the lights, x right, y up, z toward the camera",

@@ -37,7 +37,7 @@ def format_calibration(calibration: LightCalibration, names: Sequence[str]) -> l
         lines.append(f"mirror sphere {calibration.chrome}, {how}")
     if calibration.matte is not None:
         lines.append(
-            f"matte sphere {calibration.matte}, {'as given' if calibration.matte_given else 'fitted to its outline'}"
+            f"matte sphere {calibration.matte}, {'as given' if calibration.matte_given else 'fitted to its shading'}"
         )
     source = (
         "highlights on the mirror sphere" if calibration.direction_source == "chrome" else "the matte sphere's shading"
