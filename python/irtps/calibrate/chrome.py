@@ -15,7 +15,14 @@ from scipy import ndimage
 
 from irtps.calibrate.circles import Circle
 
-__all__ = ["Highlights", "circle_from_highlights", "find_highlights", "mirror_directions", "sphere_normals"]
+__all__ = [
+    "Highlights",
+    "SphereWindow",
+    "circle_from_highlights",
+    "find_highlights",
+    "mirror_directions",
+    "sphere_window",
+]
 
 #: The part of the sphere's radius searched for highlights (the rim mirrors the floor).
 SEARCH_RADIUS = 0.95
@@ -40,31 +47,49 @@ class Highlights(NamedTuple):
     found: np.ndarray
 
 
-def sphere_normals(circle: Circle, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """The outward normals of a sphere seen orthographically, at the pixel centres of an image.
+class SphereWindow(NamedTuple):
+    """A sphere's pixels: the window of an image that holds its disk, with each pixel's normal
+    (the work on a sphere stays in it, however large the image)."""
 
-    Parameters
-    ----------
-    circle : Circle
-        The sphere's outline.
-    shape : tuple of int
-        (H, W) of the image.
+    #: The window's rows and columns in the image.
+    rows: slice
+    columns: slice
+    #: (h, w, 3) unit outward normals of the sphere seen orthographically, (0, 0, 1) off the disk.
+    normals: np.ndarray
+    #: (h, w) each pixel centre's distance from the centre as a fraction of the radius.
+    fraction: np.ndarray
+    #: (h, w) each pixel centre's row and column in the image.
+    centre_rows: np.ndarray
+    centre_columns: np.ndarray
+
+    def of(self, stack: np.ndarray) -> np.ndarray:
+        """The window of each image of a (K, H, W, ...) stack (a view)."""
+        return stack[:, self.rows, self.columns]
+
+
+def sphere_window(circle: Circle, shape: tuple[int, int]) -> SphereWindow:
+    """The window of an image of size `shape` (H, W) that holds the disk of `circle` (empty
+    when it lies outside the image), with its pixels' normals.
 
     Returns
     -------
-    normals : numpy.ndarray
-        (H, W, 3) unit normals, (0, 0, 1) outside the disk.
-    fraction : numpy.ndarray
-        (H, W) each pixel centre's distance from the centre as a fraction of the radius.
+    SphereWindow
     """
-    rows, columns = np.mgrid[0 : shape[0], 0 : shape[1]] + 0.5
+    top, bottom = (
+        int(np.clip(value, 0, shape[0]))
+        for value in (np.floor(circle.row - circle.radius), np.ceil(circle.row + circle.radius))
+    )
+    left, right = (
+        int(np.clip(value, 0, shape[1]))
+        for value in (np.floor(circle.column - circle.radius), np.ceil(circle.column + circle.radius))
+    )
+    rows, columns = np.mgrid[top:bottom, left:right] + 0.5
     x = (columns - circle.column) / circle.radius
     y = -(rows - circle.row) / circle.radius
     fraction = np.hypot(x, y)
-    inside = fraction < 1.0
     z = np.sqrt(np.clip(1.0 - x**2 - y**2, 0.0, 1.0))
-    normals = np.where(inside[..., None], np.stack([x, y, z], axis=-1), np.array([0.0, 0.0, 1.0]))
-    return normals, fraction
+    normals = np.where((fraction < 1.0)[..., None], np.stack([x, y, z], axis=-1), np.array([0.0, 0.0, 1.0]))
+    return SphereWindow(slice(top, bottom), slice(left, right), normals, fraction, rows, columns)
 
 
 def find_highlights(gray: np.ndarray, circle: Circle) -> Highlights:
@@ -87,12 +112,15 @@ def find_highlights(gray: np.ndarray, circle: Circle) -> Highlights:
     -------
     Highlights
     """
-    _, fraction = sphere_normals(circle, gray.shape[1:])
-    disk = fraction < SEARCH_RADIUS
-    excess = np.where(disk, gray - np.median(gray, axis=0), 0.0)
-    rows, columns = np.mgrid[0 : gray.shape[1], 0 : gray.shape[2]] + 0.5
+    window = sphere_window(circle, gray.shape[1:])
+    disk = window.fraction < SEARCH_RADIUS
     positions = np.full((len(gray), 2), np.nan)
     found = np.zeros(len(gray), dtype=bool)
+    if not disk.any():
+        return Highlights(positions, found)
+    seen = window.of(gray)
+    excess = np.where(disk, seen - np.median(seen, axis=0), 0.0)
+    rows, columns = window.centre_rows, window.centre_columns
     for k, image in enumerate(excess):
         peak_at = np.unravel_index(np.argmax(image), image.shape)
         peak = image[peak_at]

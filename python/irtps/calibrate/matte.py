@@ -1,5 +1,5 @@
 """Light directions and strengths from a matte (Lambertian) sphere: its shading under each
-light, ``rho E max(0, n.l) / pi`` at the sphere's known normals (`irtps.calibrate.chrome.sphere_normals`)."""
+light, ``rho E max(0, n.l) / pi`` at the sphere's known normals (`irtps.calibrate.chrome.sphere_window`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy import optimize
 
-from irtps.calibrate.chrome import sphere_normals
+from irtps.calibrate.chrome import sphere_window
 from irtps.calibrate.circles import Circle
 
 __all__ = ["Shading", "fit_matte_circle", "fit_shading", "matte_irradiance"]
@@ -62,14 +62,15 @@ def fit_shading(gray: np.ndarray, saturated: np.ndarray, circle: Circle) -> Shad
     Shading
         A light that lights fewer than 3 unclipped pixels has direction (0, 0, 0) and residual inf.
     """
-    normals, fraction = sphere_normals(circle, gray.shape[1:])
-    disk = fraction < FIT_RADIUS
-    pixel_normals = normals[disk]
+    window = sphere_window(circle, gray.shape[1:])
+    disk = window.fraction < FIT_RADIUS
+    pixel_normals = window.normals[disk]
+    seen, clipped = window.of(gray), window.of(saturated)
     directions = np.zeros((len(gray), 3))
     scales = np.zeros(len(gray))
     residuals = np.full(len(gray), np.inf)
     for k in range(len(gray)):
-        values, usable = gray[k][disk], ~saturated[k][disk]
+        values, usable = seen[k][disk], ~clipped[k][disk]
         chosen = usable & (values > 0.1 * values[usable].max()) if usable.any() else usable
         for _ in range(ROUNDS):
             if chosen.sum() < 3:
@@ -114,19 +115,20 @@ def fit_matte_circle(gray: np.ndarray, saturated: np.ndarray, circle: Circle) ->
         `circle` itself when fewer than 3 lights light enough pixels to fit.
     """
     shading = fit_shading(gray, saturated, circle)
-    normals, fraction = sphere_normals(circle, gray.shape[1:])
-    index_rows, index_columns = np.nonzero(fraction < CIRCLE_FIT_RADIUS)
+    window = sphere_window(circle, gray.shape[1:])
+    index_rows, index_columns = np.nonzero(window.fraction < CIRCLE_FIT_RADIUS)
     step = max(1, len(index_rows) // CIRCLE_FIT_PIXELS)
     index_rows, index_columns = index_rows[::step], index_columns[::step]
-    rows, columns = index_rows + 0.5, index_columns + 0.5
-    pixel_normals = normals[index_rows, index_columns]
+    rows, columns = window.centre_rows[index_rows, index_columns], window.centre_columns[index_rows, index_columns]
+    pixel_normals = window.normals[index_rows, index_columns]
+    seen, clipped = window.of(gray), window.of(saturated)
     chosen = []
     for k in np.flatnonzero(np.isfinite(shading.residual)):
-        values = gray[k][index_rows, index_columns]
+        values = seen[k][index_rows, index_columns]
         error = values - shading.scale[k] * pixel_normals @ shading.directions[k]
         spread = 1.4826 * np.median(np.abs(error))
         lit = (pixel_normals @ shading.directions[k] > MIN_COSINE) & (np.abs(error) <= OUTLIER * spread)
-        lit &= ~saturated[k][index_rows, index_columns]
+        lit &= ~clipped[k][index_rows, index_columns]
         if lit.sum() >= 3:
             chosen.append((values[lit], rows[lit], columns[lit]))
     if len(chosen) < 3:
@@ -171,13 +173,14 @@ def matte_irradiance(
     numpy.ndarray
         (K, 3); NaN for a light that lights none of the sphere's pixels well.
     """
-    normals, fraction = sphere_normals(circle, images.shape[1:3])
-    disk = fraction < FIT_RADIUS
+    window = sphere_window(circle, images.shape[1:3])
+    disk = window.fraction < FIT_RADIUS
+    seen, clipped = window.of(images), window.of(saturated)
     irradiance = np.full((len(images), 3), np.nan)
     for k in range(len(images)):
-        cosine = normals[disk] @ directions[k]
-        lit = (cosine > STRENGTH_COSINE) & ~saturated[k][disk]
+        cosine = window.normals[disk] @ directions[k]
+        lit = (cosine > STRENGTH_COSINE) & ~clipped[k][disk]
         if lit.any():
-            values = images[k][disk][lit]
+            values = seen[k][disk][lit]
             irradiance[k] = np.median(np.pi * values / (albedo * cosine[lit, None]), axis=0)
     return irradiance

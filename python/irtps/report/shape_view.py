@@ -92,11 +92,10 @@ def shape_mesh(
     mask = check_mask(mask, nonempty=True)
     height = check_array("height", height, mask.shape)
     stride = max(1, int(np.ceil(np.sqrt(mask.sum() / MAX_VERTICES))))
-    points = camera.surface_points(height)[::stride, ::stride]
-    kept = mask[::stride, ::stride].copy()
-    while kept.sum() > MAX_VERTICES:  # the ceiling above is exact but for rounding
+    while mask[::stride, ::stride].sum() > MAX_VERTICES:  # the ceiling above is exact but for rounding
         stride += 1
-        points, kept = camera.surface_points(height)[::stride, ::stride], mask[::stride, ::stride].copy()
+    points = camera.surface_points(height)[::stride, ::stride]
+    kept = mask[::stride, ::stride]
     index = np.full(kept.shape, -1, dtype=np.int64)
     index[kept] = np.arange(int(kept.sum()))
     blocks = kept[:-1, :-1] & kept[1:, :-1] & kept[:-1, 1:] & kept[1:, 1:]
