@@ -32,7 +32,8 @@ FENCE = re.compile(r"^```.*?^```", re.S | re.M)
 CODE = re.compile(r"```.*?```|`[^`\n]+`", re.S)
 LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 HEADING = re.compile(r"^#{1,6} +(.+?) *$", re.M)
-ANCHOR = re.compile(r'<a id="([^"]+)">')
+#: A MyST include (the site's front page includes the README): its anchors are the page's too.
+INCLUDE = re.compile(r"^```\{include\} +(\S+)", re.M)
 
 
 def _page_id(page: Path) -> str:
@@ -83,9 +84,10 @@ def _slug(heading: str) -> str:
 
 
 def _anchors(page: Path) -> set[str]:
-    """The anchors of `page`: its headings' and those set by ``<a id="...">``."""
-    text = FENCE.sub("", page.read_text(encoding="utf-8"))
-    return {_slug(heading) for heading in HEADING.findall(text)} | set(ANCHOR.findall(text))
+    """The anchors of `page`: its headings' and those of the pages it includes."""
+    text = page.read_text(encoding="utf-8")
+    included = set().union(*(_anchors(page.parent / path) for path in INCLUDE.findall(text)))
+    return {_slug(heading) for heading in HEADING.findall(FENCE.sub("", text))} | included
 
 
 def broken_links(page: Path, text: str) -> list[str]:
@@ -159,3 +161,7 @@ def test_the_checks_catch_made_up_names(tmp_path):
     page.write_text("# A heading\n", encoding="utf-8")
     text = "[a](page.md#a-heading) [b](missing.md) [c](#no-heading) [d](https://example.org)"
     assert broken_links(page, text) == ["missing.md", "#no-heading"]
+    front = tmp_path / "front.md"
+    front.write_text("```{include} page.md\n```\n\n## Its own\n", encoding="utf-8")
+    text = "[a](front.md#a-heading) [b](front.md#its-own) [c](front.md#not-there)"
+    assert broken_links(front, text) == ["front.md#not-there"]

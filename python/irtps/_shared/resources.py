@@ -55,9 +55,8 @@ def return_freed_memory() -> bool:
     glibc maps every block above a threshold on its own and unmaps it when it is freed, but
     raises the threshold to the size of each such block freed (up to 32 MiB): from then on,
     image-sized temporaries come from the heap and stay resident after they are freed, which
-    raised classic photometric stereo's peak resident memory on DiLiGenT reading by a tenth of
-    the decoded images (benches/README.md, IRT-PS cost). This fixes the threshold at its
-    initial 128 KiB.
+    raised classic photometric stereo's peak resident memory on DiLiGenT reading
+    (docs/benchmarks.md, IRT-PS cost). This fixes the threshold at its initial 128 KiB.
 
     Returns
     -------

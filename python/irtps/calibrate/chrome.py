@@ -170,7 +170,7 @@ def circle_from_highlights(positions: np.ndarray, directions: np.ndarray) -> tup
     """The mirror sphere's outline that puts each light's highlight where it is seen, given the
     lights' directions (e.g. from a matte sphere).
 
-    A light toward l is mirrored where the normal is the half vector h = (l + v) / |l + v|,
+    A light toward l is mirrored where the normal is the half vector h = (l + v) / ‖l + v‖,
     at ``(column, row) = centre + radius (h_x, -h_y)``: linear in the centre and the radius,
     solved by least squares over the lights.
 

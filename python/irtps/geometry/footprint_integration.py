@@ -16,7 +16,7 @@ from irtps.geometry.sparse_solvers import SpdSolver, cached, mask_key
 #: Central differences leave the odd and even pixels free to drift apart: a weaker coupling
 #: let a pixel-scale ripple grow (pixels came out locally concave, then bright with false
 #: inter-reflections inside IRT-PS); this one keeps the ripple down and creases still sharp
-#: (benches/README, normal integration).
+#: (docs/benchmarks.md, Normal integration).
 _FOOTPRINT_COUPLING = 0.3
 #: Largest ``"footprint"`` systems (unknowns) factored rather than solved by AMG-PCG
 #: (`irtps.geometry.sparse_solvers.SpdSolver`): its factor's fill-in is larger than ``"ls"``'s.

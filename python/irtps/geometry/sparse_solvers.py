@@ -14,7 +14,7 @@ import numpy as np
 _MAX_COARSE = 300
 # Ruge-Stuben interpolation: "direct" sets up faster than "classical" on these
 # Laplacians, for one or two more conjugate-gradient iterations, which cost less than the
-# set-up saves (benches/README, normal integration).
+# set-up saves (docs/benchmarks.md, Normal integration).
 _INTERPOLATION = "direct"
 _MAX_PCG_ITERATIONS = 1000
 _PRESMOOTHER = ("gauss_seidel", {"sweep": "symmetric"})
@@ -33,7 +33,7 @@ class SpdSolver:
     ``_LS_DIRECT_LIMIT`` and ``_FOOTPRINT_DIRECT_LIMIT`` of
     `irtps.geometry.least_squares_integration` and `irtps.geometry.footprint_integration`),
     where the later passes are its gain and the kept factor stays small beside the images,
-    and set pyamg up once beyond (figures: benches/README, normal integration).
+    and set pyamg up once beyond (figures: docs/benchmarks.md, Normal integration).
     """
 
     def __init__(self, matrix, name, *, direct):

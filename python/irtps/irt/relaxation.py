@@ -21,7 +21,7 @@ class AdaptiveStep:
     """The step toward each new estimate, from how much of the last change remains.
 
     For a fixed-point map that contracts by ρ, a step ω leaves a fraction q = 1 − ω(1 − ρ)
-    of each change in the next; q = <change, previous> / |previous|² (on the object's
+    of each change in the next; q = <change, previous> / ‖previous‖² (on the object's
     pixels) gives 1 − ρ, and the step that would have removed it all is ω / (1 − q),
     within `STEP_BOUNDS`. Where the previous change is not above its noise, the loop has
     settled within that noise, and the step averages the running and the new estimate, each

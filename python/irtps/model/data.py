@@ -179,7 +179,7 @@ def pixel_observations(images: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """The observations of the pixels of `mask` (H, W) in images (K, H, W, C): (K, N, C),
     C-ordered, pixels row-major, as ``images[:, mask]`` gives them but gathered by index along
     the pixels of each image (several times faster on DiLiGenT-size images than the boolean
-    selection, which also leaves the result in Fortran order; benches/README.md, IRT-PS cost).
+    selection, which also leaves the result in Fortran order; docs/benchmarks.md, IRT-PS cost).
 
     Examples
     --------

@@ -434,8 +434,8 @@ LOBE_FIRST = 64
 #: Rounds of each exponent's fit, from each start, in `lobe_share`'s fits (the lobe mode's
 #: own fit has 15): half the cost per pixel. The shares come out a few points lower than
 #: after 15 rounds, some pixels taking a lobe only in later rounds, and the real and rendered
-#: objects of benches/README.md fall on the same side of `LOBE_ADVISED` either way
-#: (tests/test_ps.py checks a metal under 24 lights).
+#: objects of docs/benchmarks.md (Photometric stereo on rendered materials) fall on the same
+#: side of `LOBE_ADVISED` either way (tests/test_ps.py checks a metal under 24 lights).
 LOBE_CHECK_ROUNDS = 5
 #: Standard deviations of the Wilson score interval by which `share_is_decided` judges a share
 #: clearly on one side of `LOBE_ADVISED`: about one chance in 740 per look that a binomial
@@ -453,7 +453,7 @@ def choose_robust(share: float) -> str:
     ``"lobe"`` from `LOBE_ADVISED` on (most of the object reflects a broad highlight, as
     metal, metallic paint and broad glazes do), else ``"tukey"``: the lobe mode is the better
     fit of such objects and the slower and worse one of matte objects with deep folds
-    (benches/README.md).
+    (docs/benchmarks.md, Photometric stereo on rendered materials).
 
     Parameters
     ----------

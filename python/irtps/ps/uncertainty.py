@@ -4,7 +4,7 @@ normal, from the spread of its own fit's residual.
 A pixel's brightness under light k (its channels over the light's irradiance, summed) is
 fitted as g·lₖ, g = ρn. With the residual's variance s² per observation (over the K' − 3
 degrees of freedom of its K' observations), the covariance of g is s²(LᵀL)⁻¹; the part
-across n, over |g|, is the normal's angular standard error. Whatever the Lambertian model
+across n, over ‖g‖, is the normal's angular standard error. Whatever the Lambertian model
 does not explain (gloss, shadow edges, sensor noise, inter-reflections) counts in s: it is
 the precision the images give the normal under that model, the scale against which IRT-PS
 judges whether a correction of the images changes anything (`irtps.irt.early_exit`).

@@ -16,7 +16,7 @@ noise energy through them, which none of them does.
 
 Measured with ``benches/irtps_accuracy.py`` on the shared Mitsuba scenes, the filtered
 estimate from 64 paths a pixel gives IRT-PS lower errors than the raw one from 256 did, at a
-quarter of the tracing; the figures are in benches/README.md (IRT-PS cost).
+quarter of the tracing (docs/benchmarks.md, IRT-PS cost).
 """
 
 from __future__ import annotations

@@ -41,7 +41,7 @@ from irtps.geometry.surface import meshed_blocks
 __all__ = ["STABILITY", "SurroundingsLight", "edge_pixels", "mesh_coverage", "surroundings_light"]
 
 #: Largest change of a pixel's surroundings light under any one light (Σ over channels of
-#: |change|) when the object moves by one pixel up or down, relative to its light under the
+#: ‖change‖) when the object moves by one pixel up or down, relative to its light under the
 #: light that shows it most, at which it is subtracted. At the true shapes of the shared
 #: scenes it is 0 at nearly every edge pixel of pedestal_cornell (its cast shadows reach far
 #: beyond the footprints) and above this bound at every edge pixel of cap_cornell (1

@@ -222,8 +222,8 @@ fn a_fit_of_few_rounds_tells_glossy_pixels_from_matte_ones() {
             "{rounds} rounds: a matte pixel with a lobe"
         );
     }
-    // Five rounds leave the normals less settled than the full fit's (measured: worst
-    // errors 1.30° and 0.13°).
+    // Five rounds leave the normals less settled than the full fit's (what that does to the
+    // lobe share: docs/benchmarks.md, Photometric stereo on rendered materials).
     let worst = |out: &crate::ps::PsOutput| {
         normals
             .iter()
