@@ -3,6 +3,8 @@ imports included, imports for type checking only left out), each subpackage impo
 from its own layer and those below it, and the data classes depend on no layout."""
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import irtps
@@ -127,3 +129,16 @@ def test_the_subpackages_import_nothing():
 def test_the_data_classes_depend_on_no_layout():
     assert _imports("model.data") <= {"errors", "model", "model.scene"}
     assert not {"io.dataset", "io.dataset_files", "io.dataset_writer"} & _imports("io.diligent")
+
+
+#: Libraries that only some commands use, each tens of MiB at every start: `import irtps` and
+#: the command's own modules import them when a function needs them (drawing, circle
+#: detection, a cluster, camera RAW), not before.
+DEFERRED_LIBRARIES = ("matplotlib", "skimage", "distributed", "dask", "rawpy")
+
+
+def test_heavy_libraries_wait_until_a_command_needs_them():
+    listing = "import sys, irtps, irtps.cli.main; print(' '.join(sorted({m.split('.')[0] for m in sys.modules})))"
+    loaded = subprocess.run([sys.executable, "-c", listing], capture_output=True, text=True, check=True).stdout.split()
+    assert "irtps" in loaded and "numpy" in loaded
+    assert [library for library in DEFERRED_LIBRARIES if library in loaded] == []

@@ -12,7 +12,6 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy import ndimage, optimize
-from skimage import feature, transform
 
 from irtps._shared.checks import check_array, check_finite, check_integer, check_number
 from irtps.errors import ArgumentError
@@ -98,6 +97,9 @@ def find_circles(image: np.ndarray, count: int) -> list[Circle]:
     ArgumentError
         Naming `image` (not a finite (H, W) array) or `count` (not a positive integer).
     """
+    # Imported here: scikit-image would add to the start and the memory of every command.
+    from skimage import feature, transform
+
     image = _image(image)
     count = check_integer("count", count, 1)
     factor = max(1, int(np.ceil(max(image.shape) / HOUGH_SIDE_PX)))

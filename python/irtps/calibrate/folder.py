@@ -13,7 +13,6 @@ import numpy as np
 from irtps._shared.atomic import atomic_output_dir
 from irtps._shared.records import CALIBRATION, stamp
 from irtps.calibrate.circles import Circle
-from irtps.calibrate.figure import calibration_png
 from irtps.calibrate.lights import LightCalibration
 
 __all__ = ["lp_text", "save_calibration"]
@@ -96,6 +95,10 @@ def save_calibration(
         ]
         files[LIGHTS_FILE] = json.dumps({"lights": lights}, indent=1) + "\n"
         files[INTENSITIES_FILE] = "".join(f"{r:.6g} {g:.6g} {b:.6g}\n" for r, g, b in calibration.irradiance)
+    # Imported here: matplotlib, which the picture is drawn with, would add to the start and the
+    # memory of every command (the `irtps` command imports this module).
+    from irtps.calibrate.figure import calibration_png
+
     picture = calibration_png(calibration, mean_image, names)
     with atomic_output_dir(out) as folder:
         for name, text in files.items():
