@@ -9,7 +9,10 @@ installed package when the site is built (`docs/_ext`), never written by hand.
 import sys
 from pathlib import Path
 
-import irtps
+try:
+    import irtps
+except ImportError as error:
+    raise SystemExit(f"docs/conf.py: the site is built from the installed irtps ({error}): pip install '.[docs]'")
 
 DOCS = Path(__file__).resolve().parent
 sys.path.insert(0, str(DOCS / "_ext"))
@@ -31,6 +34,8 @@ extensions = [
 ]
 
 root_doc = "index"
+# No typographic quotes and dashes: help texts and pages name options (--out) outside code too.
+smartquotes = False
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 exclude_patterns = ["_build", "_generated", "Thumbs.db", ".DS_Store"]
 
