@@ -53,12 +53,10 @@ def _examples(epilog: str | None) -> list[str]:
     ]
 
 
-def command_lines(program: str, parser: argparse.ArgumentParser) -> list[str]:
-    """The reST of one command: a section with its texts and one ``option`` per argument."""
+def _option_lines(parser: argparse.ArgumentParser) -> list[str]:
+    """One ``option`` per argument of `parser` (its commands aside), with the help ``--help`` prints."""
     formatter = parser._get_formatter()
-    lines = [program, "-" * len(program), "", plain(parser.description or ""), ""]
-    lines += _block("text", parser.format_usage())
-    lines += [f".. program:: {program}", ""]
+    lines = []
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             continue
@@ -70,28 +68,27 @@ def command_lines(program: str, parser: argparse.ArgumentParser) -> list[str]:
             if action.choices:
                 help_text += f" (one of: {', '.join(map(str, action.choices))})"
         lines += [f".. option:: {signature}", "", f"   {plain(help_text)}", ""]
+    return lines
+
+
+def command_lines(program: str, parser: argparse.ArgumentParser) -> list[str]:
+    """The reST of one command: a section with its texts and one ``option`` per argument."""
+    lines = [program, "-" * len(program), "", plain(parser.description or ""), ""]
+    lines += _block("text", parser.format_usage())
+    lines += [f".. program:: {program}", "", *_option_lines(parser)]
     return lines + _examples(parser.epilog)
 
 
 def reference_lines(parser: argparse.ArgumentParser) -> list[str]:
     """The reST of the whole reference: ``irtps`` itself, its commands listed, then each one."""
-    commands = _subcommands(parser)
-    lines = [
-        "irtps",
-        "-----",
-        "",
-        plain(parser.description or ""),
-        "",
-        *_block("text", parser.format_usage()),
-    ]
+    lines = ["irtps", "-----", "", plain(parser.description or ""), "", *_block("text", parser.format_usage())]
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             for choice in action._choices_actions:
                 lines += [f"- :ref:`irtps {choice.dest} <irtps-cli-{choice.dest}>`: {plain(choice.help or '')}"]
             lines.append("")
-    lines += [".. program:: irtps", "", ".. option:: -h, --help", "", "   show the help and exit", ""]
-    lines += _examples(parser.epilog)
-    for name, subparser in commands.items():
+    lines += [".. program:: irtps", "", *_option_lines(parser), *_examples(parser.epilog)]
+    for name, subparser in _subcommands(parser).items():
         lines += [f".. _irtps-cli-{name}:", "", *command_lines(f"irtps {name}", subparser)]
     return lines
 
