@@ -99,6 +99,8 @@ class CommandLineReference(Directive):
     has_content = False
 
     def run(self):
+        # Read again at every build: what it shows comes from the code, not from this page.
+        self.state.document.settings.env.note_reread()
         text = StringList(reference_lines(build_parser()), source="irtps.cli.parser.build_parser")
         node = nodes.section()
         node.document = self.state.document

@@ -137,6 +137,8 @@ class ReportGallery(Directive):
     has_content = False
 
     def run(self):
+        # Read again at every build: what it shows comes from the code, not from this page.
+        self.state.document.settings.env.note_reread()
         source_folder = Path(self.state.document.settings.env.srcdir)
         text = StringList(gallery_lines(source_folder), source="report_gallery.RUNS")
         node = nodes.section()
