@@ -3,8 +3,9 @@
 When the build starts, each run of `RUNS` is carried out on a data set synthesized with
 ground truth (`irtps.synthesize`, then `irtps.reconstruct` and
 `irtps.report.build.build_report`, as a user's ``irtps synth``, ``irtps reconstruct`` and
-``irtps report`` would); its figures go to ``docs/_generated/gallery/RUN/`` and its
-self-contained report page into the site as ``gallery/RUN/index.html``. The directive
+``irtps report`` would, the report drawn once); its figures go to
+``docs/_generated/gallery/RUN/`` and its report page, as ``irtps report`` writes it, into
+the site as ``gallery/RUN/index.html``. The directive
 ``.. irtps-report-gallery::`` shows them with the captions that the report gives them, so
 the gallery is always what the installed irtps draws.
 """
@@ -22,7 +23,8 @@ from cli_reference import plain
 from docutils import nodes
 from docutils.parsers.rst import Directive
 from docutils.statemachine import StringList
-from irtps.report.build import build_report, write_report
+from irtps.report.build import PAGE_FILE, build_report
+from irtps.report.page import report_html
 from sphinx.util import logging
 from sphinx.util.nodes import nested_parse_with_titles
 
@@ -101,13 +103,15 @@ def make_gallery(source_folder: Path) -> None:
                 LOGGER.info(f"gallery: {run.name}: {warning.message}")
             irtps.save_reconstruction(result, run_folder, source=str(dataset_folder))
             report = build_report(run_folder)
-            (figures_root / run.name).mkdir()
             lines = []
+            for folder in (figures_root / run.name, pages_root / run.name):
+                folder.mkdir()
+                for figure in report.figures:
+                    (folder / f"{figure.name}.png").write_bytes(figure.png)
             for figure in report.figures:
-                (figures_root / run.name / f"{figure.name}.png").write_bytes(figure.png)
                 lines.append(f"{figure.name}\t{figure.title}\t{figure.caption}\t{'wide' if figure.wide else ''}")
             (figures_root / run.name / "figures.tsv").write_text("\n".join(lines) + "\n")
-            write_report(run_folder, pages_root / run.name)
+            (pages_root / run.name / PAGE_FILE).write_text(report_html(report), encoding="utf-8")
 
 
 def gallery_lines(source_folder: Path) -> list[str]:
