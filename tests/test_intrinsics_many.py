@@ -10,7 +10,7 @@ import pytest
 import irtps
 from irtps.batch.cluster import local_cluster
 from irtps.cli.main import main
-from irtps.io.intrinsics import intrinsics_by_name
+from irtps._shared.by_name import files_by_name
 
 DATA = Path(__file__).parent / "data"
 #: Pinholes about 18 degrees across the small cap's 96 pixels (tests/data/mitsuba_small).
@@ -34,12 +34,15 @@ def two_sets(tmp_path):
 
 
 def test_files_by_name_go_to_their_data_sets_and_one_for_all_to_the_rest():
-    assert intrinsics_by_name(["K.txt", "b=other.txt"], ["a", "b"]) == {"a": Path("K.txt"), "b": Path("other.txt")}
-    assert intrinsics_by_name(["b=other.txt"], ["a", "b"]) == {"a": None, "b": Path("other.txt")}
+    assert files_by_name("intrinsics", ["K.txt", "b=other.txt"], ["a", "b"]) == {
+        "a": Path("K.txt"),
+        "b": Path("other.txt"),
+    }
+    assert files_by_name("intrinsics", ["b=other.txt"], ["a", "b"]) == {"a": None, "b": Path("other.txt")}
     with pytest.raises(irtps.ArgumentError, match="intrinsics: 'L.txt' and 'K.txt' are both for every data set"):
-        intrinsics_by_name(["K.txt", "L.txt"], ["a"])
+        files_by_name("intrinsics", ["K.txt", "L.txt"], ["a"])
     with pytest.raises(irtps.ArgumentError, match="intrinsics: a is given two files, 'K.txt' and 'a=L.txt'"):
-        intrinsics_by_name(["a=K.txt", "a=L.txt"], ["a", "b"])
+        files_by_name("intrinsics", ["a=K.txt", "a=L.txt"], ["a", "b"])
 
 
 def test_reconstruct_records_its_intrinsics_and_camera(two_sets, tmp_path):

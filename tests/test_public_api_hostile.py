@@ -215,6 +215,8 @@ CASES = [
     ("load_dataset", lambda f: f(3), irtps.ArgumentError, "path: "),
     ("load_dataset", lambda f: f(b"no/such/folder"), irtps.DatasetError, "no/such/folder: "),
     ("load_dataset", lambda f: f("no/such/folder", exclude_images=5), irtps.ArgumentError, "exclude_images: "),
+    ("load_dataset", lambda f: f("no/such/folder", lights=5), irtps.ArgumentError, "lights: "),
+    ("load_dataset", lambda f: f(".", lights="no/such/rig.lp"), irtps.DatasetError, "no/such/rig.lp: "),
     ("load_ground_truth", lambda f: f("no/such/folder", "4x4"), irtps.ArgumentError, "size: "),
     ("load_ground_truth", lambda f: f(None, (4, 4)), irtps.ArgumentError, "path: "),
     ("load_scene_object", lambda f: f(3.5), irtps.ArgumentError, "path: "),

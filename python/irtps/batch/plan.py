@@ -1,18 +1,21 @@
-"""The data sets of a batch: the name of each one's output folder, the images it leaves out
-and the intrinsics file that gives it a perspective camera."""
+"""The data sets of a batch: the name of each one's output folder, the images it leaves out,
+the intrinsics file that gives it a perspective camera and the light position file that
+gives a folder of images its lights."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from irtps._shared.checks import check_path
 from irtps._shared.paths import resolve_path
 from irtps.batch.summary import SUMMARY_JSON, SUMMARY_MARKDOWN
 from irtps.errors import ArgumentError
 from irtps.io.image_selection import parse_image_list
 from irtps.io.intrinsics import read_intrinsics
+from irtps.io.rti import light_file_record
 
-__all__ = ["dataset_exclusions", "dataset_intrinsics", "output_names"]
+__all__ = ["dataset_exclusions", "dataset_intrinsics", "dataset_lights", "output_names"]
 
 
 def output_names(paths: Sequence[str | Path]) -> list[str]:
@@ -74,19 +77,40 @@ def dataset_intrinsics(
     """Each data set's intrinsics file (`irtps.batch.run.reconstruct_many`'s ``intrinsics``),
     as an absolute path, each file read and checked (`irtps.io.intrinsics.read_intrinsics`,
     which raises a `DatasetError` naming it)."""
-    if intrinsics is None or isinstance(intrinsics, (str, Path)):
-        chosen: dict[str, str | Path | None] = dict.fromkeys(names, intrinsics)
-    elif isinstance(intrinsics, Mapping):
-        unknown = sorted(set(intrinsics) - set(names), key=str)
-        if unknown:
-            raise ArgumentError("intrinsics", f"{unknown[0]!r} is none of the data sets ({', '.join(names)})")
-        chosen = {name: intrinsics.get(name) for name in names}
-    else:
-        raise ArgumentError(
-            "intrinsics",
-            f"expected a K.txt path or a mapping of data set names to paths, got {type(intrinsics).__name__}",
-        )
-    files = {name: None if path is None else str(resolve_path(path)) for name, path in chosen.items()}
+    files = _files_by_name("intrinsics", "a K.txt path", intrinsics, names)
     for path in {path for path in files.values() if path is not None}:
         read_intrinsics(path)
     return files
+
+
+def dataset_lights(
+    lights: str | Path | Mapping[str, str | Path | None] | None, names: list[str]
+) -> dict[str, str | None]:
+    """Each data set's light position file (`irtps.batch.run.reconstruct_many`'s ``lights``),
+    as an absolute path, each file and the intensities beside it read
+    (`irtps.io.rti.light_file_record`, which raises a `DatasetError` naming them)."""
+    files = _files_by_name("lights", "a .lp path", lights, names)
+    for path in {path for path in files.values() if path is not None}:
+        light_file_record(path)
+    return files
+
+
+def _files_by_name(
+    option: str, kind: str, files: str | Path | Mapping[str, str | Path | None] | None, names: list[str]
+) -> dict[str, str | None]:
+    """Each data set's file of `option`: one for all, or one (or None) per name; absolute."""
+    if files is None or isinstance(files, (str, Path)):
+        chosen: dict[str, str | Path | None] = dict.fromkeys(names, files)
+    elif isinstance(files, Mapping):
+        unknown = sorted(set(files) - set(names), key=str)
+        if unknown:
+            raise ArgumentError(option, f"{unknown[0]!r} is none of the data sets ({', '.join(names)})")
+        chosen = {name: files.get(name) for name in names}
+    else:
+        raise ArgumentError(
+            option, f"expected {kind} or a mapping of data set names to paths, got {type(files).__name__}"
+        )
+    return {
+        name: None if path is None else str(resolve_path(check_path(f"{option}[{name!r}]", path)))
+        for name, path in chosen.items()
+    }

@@ -10,6 +10,7 @@ from irtps.errors import IrtpsError
 from irtps.io.dataset_files import dataset_image_names
 from irtps.io.image_selection import select_images
 from irtps.io.intrinsics import Intrinsics, read_intrinsics
+from irtps.io.rti import light_file_record
 from irtps.irt.folder import indirect_file_names, load_reconstruction, load_run_record
 from irtps.model.options import ReconstructOptions
 
@@ -24,11 +25,14 @@ def complete_output(
     intrinsics: str | None = None,
     normal_map: str = "opengl",
     encoding: str | None = None,
+    *,
+    lights: str | None = None,
 ) -> tuple | None:
     """The normals, albedo, height and mask of a complete output folder of `source` made
     with `options`, leaving out the images of `exclude_images`, with the intrinsics file
     `intrinsics` (or none) and its camera as it reads now, its normal map in the convention
-    `normal_map`, its images decoded by `encoding` (see
+    `normal_map`, its images decoded by `encoding`, its lights from the light position file
+    `lights` (or the folder's own) as it and its intensities read now (see
     `irtps.batch.task.reconstruct_to_folder`), and its recorded robust mode, or None."""
     folder = Path(destination)
     try:
@@ -40,8 +44,9 @@ def complete_output(
         written = all(_nonempty_file(folder / name) for name in files)
         same_normal_map = (exports.get("normal.png") or {}).get("convention") == normal_map
         indirect = not record.get("chosen_pass") or _complete_indirect(folder / "indirect", record.get("images", []))
-        excluded = select_images(dataset_image_names(source), exclude_images, where=source).excluded
+        excluded = select_images(dataset_image_names(source, lights=lights), exclude_images, where=source).excluded
         camera = None if intrinsics is None else read_intrinsics(intrinsics)
+        light_file = None if lights is None else light_file_record(lights)
     except (IrtpsError, OSError):
         return None
     same_run = (
@@ -51,6 +56,7 @@ def complete_output(
         and _same_intrinsics(record, intrinsics, camera)
         and same_normal_map
         and record.get("encoding") == encoding
+        and record.get("lights") == light_file
     )
     return (maps, record.get("robust_used")) if same_run and written and indirect else None
 

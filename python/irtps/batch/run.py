@@ -33,7 +33,7 @@ from pathlib import Path
 
 from irtps._shared.paths import resolve_path
 from irtps.batch.cluster import import_distributed, local_cluster, quiet_logging
-from irtps.batch.plan import dataset_exclusions, dataset_intrinsics, output_names
+from irtps.batch.plan import dataset_exclusions, dataset_intrinsics, dataset_lights, output_names
 from irtps.batch.result import BatchResult, describe_error
 from irtps.batch.task import reconstruct_to_folder
 from irtps.batch.task_warnings import issue_warnings
@@ -57,6 +57,7 @@ def reconstruct_many(
     intrinsics: str | Path | Mapping[str, str | Path | None] | None = None,
     normal_map: str = "opengl",
     encoding: str | None = None,
+    lights: str | Path | Mapping[str, str | Path | None] | None = None,
     **settings,
 ) -> list[BatchResult]:
     """Reconstruct many data set folders on a Dask cluster, each into ``out/NAME/``.
@@ -85,7 +86,8 @@ def reconstruct_many(
     Parameters
     ----------
     datasets : sequence of str or pathlib.Path
-        Data set folders (irtps or DiLiGenT layout). Relative paths are made absolute
+        Data set folders (irtps, DiLiGenT or RTI layout, or folders of images given
+        `lights`). Relative paths are made absolute
         here, so the workers must see the client's file system under the same paths.
     out : str or pathlib.Path
         The folder to hold one reconstruction folder per data set.
@@ -120,6 +122,13 @@ def reconstruct_many(
         compares.
     encoding : {"srgb", "linear"}, optional
         How the images' values map to light (`irtps.load_dataset`), which `resume` compares.
+    lights : str, pathlib.Path or mapping, optional
+        A light position file (``*.lp``, as ``irtps calibrate`` writes it) that gives folders
+        of images their lights (`irtps.load_dataset`): one for every data set, or one (or
+        None) per ``NAME``. Each file, and the ``light_intensities.txt`` beside it, is read
+        here, before anything runs; one that does not list a data set's images, or given to
+        a data set whose lights are its own, fails that data set alone. Recorded in each
+        ``run.json`` with a digest of both files, which `resume` compares.
     **settings
         Fields of `ReconstructOptions` that replace those of `options`, e.g.
         ``method="irtps"``.
@@ -134,11 +143,12 @@ def reconstruct_many(
     ArgumentError
         Before anything runs: no data set, an option unknown or out of range
         (`irtps.model.options.OptionError`), a malformed list of images to leave out or one for
-        a ``NAME`` that is none of the data sets', intrinsics for a ``NAME`` that is none of
-        them, a `normal_map` that is neither convention, an unknown `encoding`.
+        a ``NAME`` that is none of the data sets', intrinsics or lights for a ``NAME`` that is
+        none of them, a `normal_map` that is neither convention, an unknown `encoding`.
     DatasetError
         Before anything runs: an intrinsics file that is missing or not a 3x3 intrinsic
-        matrix (`irtps.io.intrinsics.read_intrinsics`).
+        matrix (`irtps.io.intrinsics.read_intrinsics`), a light position file or its
+        intensities that cannot be read.
     IrtpsError
         Before anything runs: dask not installed.
 
@@ -171,6 +181,7 @@ def reconstruct_many(
     names = output_names(sources)
     exclusions = dataset_exclusions(exclude_images, names)
     cameras = dataset_intrinsics(intrinsics, names)
+    light_files = dataset_lights(lights, names)
     with _using(client) as active, _lost_workers(active) as lost:
         pending = {
             active.submit(
@@ -183,6 +194,7 @@ def reconstruct_many(
                 intrinsics=cameras[name],
                 normal_map=normal_map,
                 encoding=encoding,
+                lights=light_files[name],
                 pure=False,
                 priority=-index,
             ): (name, source)

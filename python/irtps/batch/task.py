@@ -38,6 +38,7 @@ def reconstruct_to_folder(
     intrinsics: str | None = None,
     normal_map: str = "opengl",
     encoding: str | None = None,
+    lights: str | None = None,
 ) -> BatchResult:
     """Reconstruct one data set folder into an output folder: the task of a batch.
 
@@ -50,7 +51,8 @@ def reconstruct_to_folder(
     `irtps.save_reconstruction`, is valid and records the same data set folder and the
     same options (an option left unset, resolved for each data set, matches any value)
     and left out the images that `exclude_images` names, no other, with the intrinsics file
-    `intrinsics` (or none) and the camera it gives now; its normal, albedo and
+    `intrinsics` (or none) and the camera it gives now, and the light position file `lights`
+    (or none) as it and the intensities beside it read now; its normal, albedo and
     height maps and its mask read back, all of one size; its two meshes are files that are
     not empty; and when the chosen IRT-PS pass is not pass 0, ``indirect/`` holds a file for
     each image fitted (`irtps.irt.folder.indirect_file_names`), none empty. Any other output
@@ -74,6 +76,9 @@ def reconstruct_to_folder(
         The convention of ``normal.png`` (`irtps.save_reconstruction`).
     encoding : {"srgb", "linear"}, optional
         How the images' values map to light (`irtps.load_dataset`).
+    lights : str, optional
+        A light position file (``*.lp``) kept outside the data set folder, which gives a
+        folder of images its lights (`irtps.load_dataset`).
 
     Returns
     -------
@@ -91,14 +96,21 @@ def reconstruct_to_folder(
     with _TASKS.running(), recorded_warnings() as recorded:
         try:
             kept = (
-                complete_output(destination, source, options, exclude_images, intrinsics, normal_map, encoding)
+                complete_output(
+                    destination, source, options, exclude_images, intrinsics, normal_map, encoding, lights=lights
+                )
                 if resume
                 else None
             )
             if kept is None:
                 status = "ok"
                 dataset, result = load_and_reconstruct(
-                    source, options=options, exclude_images=exclude_images, intrinsics=intrinsics, encoding=encoding
+                    source,
+                    options=options,
+                    exclude_images=exclude_images,
+                    intrinsics=intrinsics,
+                    encoding=encoding,
+                    lights=lights,
                 )
                 with _TASKS.writing():
                     save_reconstruction(
@@ -108,6 +120,7 @@ def reconstruct_to_folder(
                         intrinsics=intrinsics,
                         normal_map=normal_map,
                         encoding=encoding,
+                        lights=lights,
                     )
                 gt, normals, albedo, height, mask = (
                     dataset.gt,
@@ -120,7 +133,7 @@ def reconstruct_to_folder(
             else:
                 status = "reused"
                 (normals, albedo, height, mask), robust_used = kept
-                gt = load_ground_truth(source, mask.shape)
+                gt = None if lights is not None else load_ground_truth(source, mask.shape)  # an RTI folder: none
             metrics = (
                 None
                 if gt is None

@@ -176,6 +176,18 @@ INTRINSICS = Argument(
     "distance, and say so",
 )
 
+#: The lights of a folder of images, from a light position file kept elsewhere.
+LIGHTS = Argument(
+    "--lights",
+    type=Path,
+    metavar="FILE.lp",
+    help="a light position file ('irtps calibrate' writes one: a count, then 'filename x y z' per image) that gives "
+    "DATA, a folder of images, its lights without copying anything into it: the images it names are read from DATA, "
+    "the strengths from the light_intensities.txt beside it (estimated from the images without one); a .lp file "
+    "DATA holds is then not read, and a data set whose lights are its own (scene.json, light_directions.txt) is "
+    "refused; recorded in run.json with a digest of both files",
+)
+
 #: How the images' values map to light.
 ENCODING = Argument(
     "--encoding",
@@ -213,6 +225,17 @@ INTRINSICS_BY_NAME = Argument(
     help="the camera's 3x3 intrinsic matrix in pixels, as for 'irtps reconstruct': K.txt for every DATA, "
     "NAME=K.txt for the DATA named NAME (its folder's name, as in the summary), which takes it instead; each file "
     "is checked before anything runs, and recorded in run.json (--resume reconstructs again when it changed)",
+)
+
+#: The light position files of the commands that take many data sets: of all, or of one by name.
+LIGHTS_BY_NAME = Argument(
+    "--lights",
+    metavar="[NAME=]FILE.lp",
+    action="append",
+    default=[],
+    help="a light position file, as for 'irtps reconstruct': FILE.lp for every DATA, NAME=FILE.lp for the DATA named "
+    "NAME (its folder's name, as in the summary), which takes it instead; each file is read before anything runs, "
+    "and recorded in run.json with a digest (--resume reconstructs again when it or its intensities changed)",
 )
 
 #: How to reconstruct, the options of IRT-PS in a group of their own.

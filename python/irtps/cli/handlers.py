@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from irtps._shared.atomic import atomic_output_dir
+from irtps._shared.by_name import files_by_name
 from irtps._shared.output_rule import check_output
 from irtps._shared.paths import check_folder, resolve_path
 from irtps._shared.records import TABLE, stamp, written_by_irtps
@@ -33,7 +34,6 @@ from irtps.io.dataset import Dataset, GroundTruth, load_dataset, load_ground_tru
 from irtps.io.dataset_files import dataset_inputs, scene_object_inputs
 from irtps.io.dataset_writer import save_dataset
 from irtps.io.image_selection import exclusions_by_name, format_images_fitted
-from irtps.io.intrinsics import intrinsics_by_name
 from irtps.irt.folder import load_reconstruction, save_reconstruction
 from irtps.irt.reconstruct import load_and_reconstruct
 from irtps.model.metrics import evaluate, format_metrics
@@ -128,7 +128,9 @@ def _robust_line(asked: str, used: str | None, share: float | None) -> str:
 def run_reconstruct(args: argparse.Namespace) -> None:
     """``irtps reconstruct``: reconstruct one data set and report the run."""
     options = from_arguments(ReconstructOptions, args)
-    inputs = dataset_inputs(args.data, exclude_images=args.exclude_images, intrinsics=args.intrinsics)
+    inputs = dataset_inputs(
+        args.data, exclude_images=args.exclude_images, intrinsics=args.intrinsics, lights=args.lights
+    )
     check_output(args.out, inputs, force=args.force)
     dataset, result = load_and_reconstruct(
         args.data,
@@ -137,6 +139,7 @@ def run_reconstruct(args: argparse.Namespace) -> None:
         exclude_images=args.exclude_images,
         intrinsics=args.intrinsics,
         encoding=args.encoding,
+        lights=args.lights,
     )
     save_reconstruction(
         result,
@@ -145,6 +148,7 @@ def run_reconstruct(args: argparse.Namespace) -> None:
         intrinsics=args.intrinsics,
         normal_map=args.normal_map,
         encoding=args.encoding,
+        lights=args.lights,
     )
     if not args.quiet:
         stages = ", ".join(f"{name} {seconds:.2f} s" for name, seconds in result.timings.items())
@@ -190,10 +194,11 @@ def run_batch(args: argparse.Namespace) -> None:
     options, cluster_options = from_arguments(ReconstructOptions, args), from_arguments(ClusterOptions, args)
     names = output_names(args.data)
     exclusions = exclusions_by_name(args.exclude_images, names)
-    intrinsics = intrinsics_by_name(args.intrinsics, names)
+    intrinsics = files_by_name("intrinsics", args.intrinsics, names)
+    lights = files_by_name("lights", args.lights, names)
     check_output(
         args.out,
-        _batch_inputs(args.data, exclusions, intrinsics),
+        _batch_inputs(args.data, exclusions, intrinsics, lights),
         force=args.force or _holds_batch_outputs(args.out),
     )
     if args.force and os.path.lexists(args.out) and not args.out.is_dir():
@@ -215,6 +220,7 @@ def run_batch(args: argparse.Namespace) -> None:
             intrinsics=intrinsics,
             normal_map=args.normal_map,
             encoding=args.encoding,
+            lights=lights,
         )
     write_summary(results, args.out, settings=options.to_dict())
     print(summary_table(results), end="")
@@ -230,17 +236,22 @@ def run_batch(args: argparse.Namespace) -> None:
 
 
 def _batch_inputs(
-    folders: list[Path], exclusions: dict[str, str | None], intrinsics: dict[str, Path | None]
+    folders: list[Path],
+    exclusions: dict[str, str | None],
+    intrinsics: dict[str, Path | None],
+    lights: dict[str, Path | None],
 ) -> list[Path]:
     """Every file and folder that a batch reads (`irtps.io.dataset_files.dataset_inputs`); of a data
-    set that cannot be read, its folder and its intrinsics file (its task fails as it reads,
-    writing nothing)."""
+    set that cannot be read, its folder and its intrinsics and light position files (its task
+    fails as it reads, writing nothing)."""
     inputs: list[Path] = []
-    for folder, images, camera in zip(folders, exclusions.values(), intrinsics.values(), strict=True):
+    for folder, images, camera, light_file in zip(
+        folders, exclusions.values(), intrinsics.values(), lights.values(), strict=True
+    ):
         try:
-            inputs += dataset_inputs(folder, exclude_images=images, intrinsics=camera)
+            inputs += dataset_inputs(folder, exclude_images=images, intrinsics=camera, lights=light_file)
         except IrtpsError:
-            inputs += [folder] if camera is None else [folder, camera]
+            inputs += [path for path in (folder, camera, light_file) if path is not None]
     return inputs
 
 
@@ -354,7 +365,7 @@ def run_table(args: argparse.Namespace) -> None:
     options = from_arguments(TableOptions, args)
     names = output_names(args.data)
     exclusions = exclusions_by_name(args.exclude_images, names)
-    intrinsics = intrinsics_by_name(args.intrinsics, names)
+    intrinsics = files_by_name("intrinsics", args.intrinsics, names)
     if args.out is not None:
         inputs = [
             path

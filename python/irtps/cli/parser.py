@@ -18,6 +18,8 @@ from irtps.cli.arguments import (
     EXCLUDE_IMAGES_BY_NAME,
     INTRINSICS,
     INTRINSICS_BY_NAME,
+    LIGHTS,
+    LIGHTS_BY_NAME,
     NORMAL_MAP,
     RECONSTRUCT,
     RENDER,
@@ -111,7 +113,8 @@ COMMANDS = (
     Command(
         "reconstruct",
         help="recover normals, albedo, a height map and a mesh from a data set",
-        description="Reconstruct the object of DATA (contract layout, or DiLiGenT layout, detected; its camera "
+        description="Reconstruct the object of DATA (contract, DiLiGenT or RTI layout, detected, or a folder of "
+        "images given --lights; its camera "
         "orthographic, or perspective: scene.json's, a DiLiGenT folder's K.txt or --intrinsics) and write OUT: "
         "normal.exr (R, G, B = nx, ny, nz), albedo.exr, height.exr, mask.png, mesh.ply (the height field with "
         "per-vertex albedo colour and normals), mesh.obj (the same mesh for any viewer), for other tools normal.png "
@@ -136,12 +139,13 @@ COMMANDS = (
             "irtps reconstruct rig_capture --out rig --method irtps --albedo-scale 0.8",
             "irtps reconstruct bearPNG --out bear --exclude-images 1-20",
             "irtps reconstruct capture --out capture_ps --intrinsics capture/K.txt",
+            "irtps reconstruct dome_object --out dome_ps --lights dome_lights/lights.lp   # from irtps calibrate",
             "irtps reconstruct capture --out capture_ps --normal-map directx   # for Unreal",
         ),
         run=handlers.run_reconstruct,
         arguments=(Argument("data", type=Path, help="data set folder"),),
         output=Output("output folder", quiet="no progress bar or summary"),
-        options=(EXCLUDE_IMAGES, INTRINSICS, ENCODING, NORMAL_MAP, RECONSTRUCT),
+        options=(EXCLUDE_IMAGES, INTRINSICS, LIGHTS, ENCODING, NORMAL_MAP, RECONSTRUCT),
     ),
     Command(
         "batch",
@@ -165,6 +169,7 @@ COMMANDS = (
             "irtps batch shared/data/diligent/*PNG --out diligent_ps",
             "irtps batch shared/data/diligent/*PNG --out diligent_ps --exclude-images bearPNG=1-20",
             "irtps batch capture_a capture_b --out runs --intrinsics rig/K.txt --intrinsics capture_b=other/K.txt",
+            "irtps batch session_*/ --out runs --lights rig_lights/lights.lp   # one calibration, many captures",
             "irtps batch scenes/* --out runs --method irtps --bounces 2 --workers 2 --threads-per-worker 4",
             "irtps batch /shared/scenes/* --out /shared/runs --method irtps --scheduler tcp://head-node:8786",
             "irtps batch scenes/* --out runs --method irtps --bounces 2 --resume   # after an interrupted run",
@@ -174,7 +179,15 @@ COMMANDS = (
         output=Output(
             "folder for one reconstruction folder per data set and the summary", quiet="no progress bar", resume=True
         ),
-        options=(EXCLUDE_IMAGES_BY_NAME, INTRINSICS_BY_NAME, ENCODING, NORMAL_MAP, RECONSTRUCT, CLUSTER),
+        options=(
+            EXCLUDE_IMAGES_BY_NAME,
+            INTRINSICS_BY_NAME,
+            LIGHTS_BY_NAME,
+            ENCODING,
+            NORMAL_MAP,
+            RECONSTRUCT,
+            CLUSTER,
+        ),
     ),
     Command(
         "calibrate",
@@ -186,7 +199,8 @@ COMMANDS = (
         "brightness over n.l. The mirror sphere's outline is faint where it mirrors what is behind it, so with a "
         "matte sphere its circle is fitted to the highlights and the matte sphere's shading (each light's direction "
         "still comes from its own highlight); without a mirror sphere, the directions come from the matte sphere. "
-        "Writes OUT: lights.lp (for an RTI folder: 'name x y z' per image), with a matte sphere also "
+        "Writes OUT: lights.lp ('name x y z' per image: 'irtps reconstruct CAPTURE --lights OUT/lights.lp' "
+        "gives a capture's images these lights), with a matte sphere also "
         "light_intensities.txt (the strengths, one RGB line per image, which an RTI folder takes beside its .lp) and "
         "lights.json (the scene contract's 'lights'), calibration.json (the circles, each highlight, both "
         "spheres' directions and how far apart they are) and calibration.png (what was found). OUT is replaced "

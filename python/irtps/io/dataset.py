@@ -53,6 +53,7 @@ def load_dataset(
     exclude_images: str | None = None,
     intrinsics: str | Path | None = None,
     encoding: str | None = None,
+    lights: str | Path | None = None,
 ) -> Dataset:
     """Read a data set folder, in the irtps layout, the DiLiGenT layout or as an RTI folder
     (`irtps.io.rti`: a ``*.lp`` file and its images, the lights' strengths unknown).
@@ -75,6 +76,11 @@ def load_dataset(
         How the images' values map to light, whatever the layout's default: linear for the
         irtps and DiLiGenT layouts (their contract), by bit depth in an RTI folder (8-bit
         sRGB, else linear). ``"srgb"`` applies to PNG, JPEG and TIFF images only.
+    lights : str or pathlib.Path, optional
+        A light position file (``*.lp``, as ``irtps calibrate`` writes it) kept outside the
+        folder: `path` is then read as an RTI folder with those lights (`irtps.io.rti`), the
+        images the file names found in it, the strengths from the ``light_intensities.txt``
+        beside the file (unknown without one). Nothing needs copying into the folder.
 
     Returns
     -------
@@ -96,7 +102,8 @@ def load_dataset(
         the data set's images (`irtps.model.camera.intrinsics_problem`).
     ArgumentError
         Naming ``exclude_images``: malformed (checked before anything is read), an item
-        that names no image, or fewer than 3 images left.
+        that names no image, or fewer than 3 images left. Naming ``lights``: given for a
+        folder in the irtps or the DiLiGenT layout, whose lights are their own.
     IrtpsError
         If decoding the images would need more memory than is available (checked from
         the first image's header before decoding any), naming the images' folder.
@@ -112,10 +119,11 @@ def load_dataset(
     if encoding is not None and encoding not in ENCODINGS:
         raise ArgumentError("encoding", f"{encoding!r} is not one of {', '.join(ENCODINGS)}")
     camera = None if intrinsics is None else read_intrinsics(check_path("intrinsics", intrinsics))
+    lights = None if lights is None else check_path("lights", lights)
     folder = check_folder(path)
-    layout = dataset_layout(folder)
+    layout = dataset_layout(folder, lights)
     if layout == "rti":
-        dataset = load_rti(folder, exclude_images=exclude_images, encoding=encoding)
+        dataset = load_rti(folder, exclude_images=exclude_images, encoding=encoding, lights=lights)
     elif layout == "irtps":
         dataset, camera = _load_irtps(folder, ground_truth, exclude_images, camera), None  # its camera set
     else:

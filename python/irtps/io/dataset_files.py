@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 from irtps._shared.checks import check_path
 from irtps._shared.paths import check_file, check_folder, exists, folder_problem, optional_file, optional_folder
-from irtps.errors import DatasetError
+from irtps.errors import ArgumentError, DatasetError
 from irtps.io.diligent import diligent_ground_truth_inputs, diligent_image_names, diligent_inputs
 from irtps.io.rti import lp_file, rti_image_names, rti_inputs
 from irtps.io.image_selection import ImageSelection, parse_image_list, select_images
@@ -46,9 +46,28 @@ def is_data_set(path: str | Path) -> bool:
     return exists(folder / SCENE_FILE) or exists(folder / DILIGENT_MARKER) or _has_lp_file(folder)
 
 
-def dataset_layout(folder: Path) -> str:
+def dataset_layout(folder: Path, lights: str | Path | None = None) -> str:
     """``"irtps"``, ``"diligent"`` or ``"rti"``: the layout of a data set folder, told by its
-    marker file."""
+    marker file; ``"rti"`` for a folder given its lights in a ``.lp`` file kept elsewhere
+    (`lights`, `irtps.io.rti.load_rti`).
+
+    Raises
+    ------
+    DatasetError
+        For a folder that is not a data set.
+    ArgumentError
+        Naming ``lights``, for a folder in the irtps or the DiLiGenT layout: its lights are
+        its own.
+    """
+    if lights is not None:
+        for marker, layout in ((SCENE_FILE, "irtps"), (DILIGENT_MARKER, "DiLiGenT")):
+            if exists(folder / marker):
+                raise ArgumentError(
+                    "lights",
+                    f"{folder} is a data set in the {layout} layout, whose {marker} gives its lights; "
+                    "a light position file is for a folder of images (an RTI folder)",
+                )
+        return "rti"
     if exists(folder / SCENE_FILE):
         return "irtps"
     if exists(folder / DILIGENT_MARKER):
@@ -72,13 +91,19 @@ def _not_a_dataset(folder: Path) -> DatasetError:
     )
 
 
-def dataset_image_names(path: str | Path) -> tuple[str, ...]:
+def dataset_image_names(path: str | Path, *, lights: str | Path | None = None) -> tuple[str, ...]:
     """The file names of every image of a data set folder, in its order, without reading
     them: what a list of images to leave out (`irtps.io.image_selection`) is matched against.
 
+    Parameters
+    ----------
+    path : str or pathlib.Path
+    lights : str or pathlib.Path, optional
+        As for `irtps.io.dataset.load_dataset`: the ``.lp`` file that lists the images.
+
     Raises
     ------
-    DatasetError
+    DatasetError, ArgumentError
         As `irtps.io.dataset.load_dataset`, for a folder that is not a data set or whose
         images are missing.
 
@@ -93,12 +118,13 @@ def dataset_image_names(path: str | Path) -> tuple[str, ...]:
     ...     dataset_image_names(folder + "/cap")
     ('000.exr', '001.exr', '002.exr', '003.exr')
     """
+    lights = None if lights is None else check_path("lights", lights)
     folder = check_folder(path)
-    layout = dataset_layout(folder)
+    layout = dataset_layout(folder, lights)
     if layout == "diligent":
         return diligent_image_names(folder)
     if layout == "rti":
-        return rti_image_names(folder)
+        return rti_image_names(folder, lights)
     scene = load_scene(folder / SCENE_FILE)
     return tuple(image.name for image in _numbered_images(folder / IMAGES_FOLDER, len(scene.lights)))
 
@@ -109,6 +135,7 @@ def dataset_inputs(
     ground_truth: bool = True,
     exclude_images: str | None = None,
     intrinsics: str | Path | None = None,
+    lights: str | Path | None = None,
 ) -> list[Path]:
     """Every file and folder that `irtps.io.dataset.load_dataset` reads, found by the code
     that reads them (the small files that list the rest are read; no image is decoded).
@@ -119,14 +146,15 @@ def dataset_inputs(
 
     Parameters
     ----------
-    path, ground_truth, exclude_images, intrinsics
+    path, ground_truth, exclude_images, intrinsics, lights
         As for `irtps.io.dataset.load_dataset`.
 
     Returns
     -------
     list of pathlib.Path
         The data set folder, then the files and folders read, as the reader names them
-        (symbolic links not resolved), then the intrinsics file, if given.
+        (symbolic links not resolved; the light position file `lights` and the intensities
+        beside it among them), then the intrinsics file, if given.
 
     Raises
     ------
@@ -147,12 +175,13 @@ def dataset_inputs(
     if exclude_images is not None:
         parse_image_list(exclude_images)
     camera = [] if intrinsics is None else [check_path("intrinsics", intrinsics)]
+    lights = None if lights is None else check_path("lights", lights)
     folder = check_folder(check_path("path", path))
-    layout = dataset_layout(folder)
+    layout = dataset_layout(folder, lights)
     if layout == "diligent":
         return diligent_inputs(folder, ground_truth=ground_truth, exclude_images=exclude_images) + camera
     if layout == "rti":
-        return rti_inputs(folder, exclude_images=exclude_images) + camera
+        return rti_inputs(folder, exclude_images=exclude_images, lights=lights) + camera
     return irtps_files(folder, ground_truth, exclude_images).paths() + camera
 
 

@@ -20,6 +20,7 @@ from pathlib import PurePosixPath
 
 from irtps.model.data import Dataset
 from irtps.errors import ArgumentError
+from irtps._shared.by_name import entry_target
 from irtps._shared.guarded import MAX_DIGITS, parse_int
 from irtps.model.scene import MIN_LIGHTS
 
@@ -180,14 +181,13 @@ def exclusions_by_name(entries: Sequence[str], names: Sequence[str]) -> dict[str
     """
     lists: dict[str, list[str]] = {name: [] for name in names}
     for entry in entries:
-        named = [name for name in names if entry.startswith(name + "=")]
-        if named:
-            name = max(named, key=len)
-            targets, images = [name], entry[len(name) + 1 :]
+        name, images = entry_target(entry, names)
+        if name is not None:
+            targets = [name]
         elif "=" in entry:
             raise ArgumentError("exclude_images", f"{entry!r} names no data set (the data sets: {', '.join(names)})")
         else:
-            targets, images = list(names), entry
+            targets = list(names)
         parse_image_list(images)
         for target in targets:
             lists[target].append(images)

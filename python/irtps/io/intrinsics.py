@@ -24,18 +24,17 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
 from pathlib import Path
 from typing import NamedTuple
 
 from irtps._shared.guarded import read_text
 from irtps._shared.paths import check_file
-from irtps.errors import ArgumentError, DatasetError
+from irtps.errors import DatasetError
 from irtps.io.number_lines import three_numbers
 from irtps.model.camera import Camera, intrinsics_problem
 from irtps.model.scene import Scene
 
-__all__ = ["INTRINSICS_FILE", "Intrinsics", "intrinsics_by_name", "read_intrinsics", "with_intrinsics"]
+__all__ = ["INTRINSICS_FILE", "Intrinsics", "read_intrinsics", "with_intrinsics"]
 
 #: The name of the intrinsics file in a DiLiGenT folder.
 INTRINSICS_FILE = "K.txt"
@@ -121,49 +120,3 @@ def with_intrinsics(scene: Scene, intrinsics: Intrinsics) -> Scene:
         camera.width, camera.height, projection="perspective", fx=fx, fy=fy, cx=cx, cy=cy, optical_center=center
     )
     return dataclasses.replace(scene, camera=perspective)
-
-
-def intrinsics_by_name(entries: Sequence[str], names: Sequence[str]) -> dict[str, Path | None]:
-    """Each data set's intrinsics file, from files given for many data sets at once
-    (``irtps batch`` and ``irtps table``): ``K.txt`` for every data set, ``NAME=K.txt`` for the
-    data set named ``NAME``, which takes it instead.
-
-    Parameters
-    ----------
-    entries : sequence of str
-        The files, each a path or ``NAME=`` and a path (``NAME`` the longest of `names` that the
-        entry starts with, followed by ``=``).
-    names : sequence of str
-        The data sets' names (`irtps.batch.plan.output_names`).
-
-    Returns
-    -------
-    dict
-        Name -> the file (not read yet), or None for a data set that none is given for.
-
-    Raises
-    ------
-    ArgumentError
-        Naming ``intrinsics``: two files for every data set, or two for one ``NAME``.
-
-    Examples
-    --------
-    >>> intrinsics_by_name(["K.txt", "bearPNG=bear/K.txt"], ["ballPNG", "bearPNG"])
-    {'ballPNG': PosixPath('K.txt'), 'bearPNG': PosixPath('bear/K.txt')}
-    >>> intrinsics_by_name([], ["ballPNG"])
-    {'ballPNG': None}
-    """
-    every: Path | None = None
-    named: dict[str, Path] = {}
-    for entry in entries:
-        matches = [name for name in names if entry.startswith(name + "=")]
-        if not matches:
-            if every is not None:
-                raise ArgumentError("intrinsics", f"{entry!r} and {str(every)!r} are both for every data set: give one")
-            every = Path(entry)
-            continue
-        name = max(matches, key=len)
-        if name in named:
-            raise ArgumentError("intrinsics", f"{name} is given two files, {str(named[name])!r} and {entry!r}")
-        named[name] = Path(entry[len(name) + 1 :])
-    return {name: named.get(name, every) for name in names}

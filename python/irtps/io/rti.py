@@ -12,6 +12,12 @@ strengths come from ``light_intensities.txt`` beside it when there is one (one R
 camera is orthographic, one world unit a pixel, with no floor and no environment; ``mask.png``
 is optional.
 
+A ``.lp`` file kept elsewhere (``lights``: the one ``irtps calibrate`` wrote for a rig, with its
+``light_intensities.txt`` beside it) gives a folder of images its lights without copying
+anything into it: the images it names are then found in the folder (a path as written from
+the folder, else the file of that name in it), and a ``.lp`` or ``light_intensities.txt`` the
+folder holds is not read.
+
 8-bit images (JPEG, 8-bit PNG or TIFF) are read as sRGB, the encoding of cameras' JPEGs, and
 linearised; 16-bit and float images are read as linear. `load_rti`'s ``encoding`` overrides
 both.
@@ -19,13 +25,14 @@ both.
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path, PureWindowsPath
 from typing import NamedTuple
 
 import numpy as np
 
 from irtps._shared.guarded import read_text
-from irtps._shared.paths import check_file, check_folder, exists, optional_file
+from irtps._shared.paths import check_file, check_folder, exists, optional_file, resolve_path
 from irtps.errors import ArgumentError, DatasetError
 from irtps.io.image_selection import ImageSelection, select_images
 from irtps.io.capture import read_capture_images
@@ -34,7 +41,7 @@ from irtps.io.number_lines import check_intensities, three_number_lines
 from irtps.model.data import Dataset
 from irtps.model.scene import MIN_LIGHTS, Camera, Light, Scene, upward_problem
 
-__all__ = ["load_rti", "lp_file", "rti_image_names", "rti_inputs"]
+__all__ = ["light_file_record", "load_rti", "lp_file", "rti_image_names", "rti_inputs"]
 
 LP_SUFFIX = ".lp"
 MASK_FILE = "mask.png"
@@ -82,35 +89,49 @@ class _RtiFiles(NamedTuple):
         return [self.folder, self.lp, *self.images, *optional]
 
 
-def rti_image_names(folder: str | Path) -> tuple[str, ...]:
-    """The names of the images that a folder's ``.lp`` file lists, in its order (not read)."""
-    return tuple(entry[0].name for entry in _read_lp(_the_lp(Path(folder))))
+def rti_image_names(folder: str | Path, lights: str | Path | None = None) -> tuple[str, ...]:
+    """The names of the images that a folder's ``.lp`` file (or `lights`, see `load_rti`)
+    lists, in its order (not read)."""
+    folder = Path(folder)
+    return tuple(entry[0].name for entry in _read_lp(_the_lp(folder, lights), folder))
 
 
-def rti_inputs(path: str | Path, *, exclude_images: str | None = None) -> list[Path]:
-    """Every file and folder that `load_rti` reads: the folder, its ``.lp`` file, the images
-    it lists but those left out, and the mask when present.
+def rti_inputs(path: str | Path, *, exclude_images: str | None = None, lights: str | Path | None = None) -> list[Path]:
+    """Every file and folder that `load_rti` reads: the folder, its ``.lp`` file (or
+    `lights`), the images it lists but those left out, and the mask and the light
+    intensities when present.
 
     Raises
     ------
     DatasetError, ArgumentError
         As `load_rti`, for what is found wrong without decoding an image.
     """
-    return _rti_files(check_folder(path), exclude_images).paths()
+    return _rti_files(check_folder(path), exclude_images, lights).paths()
 
 
-def load_rti(path: str | Path, *, exclude_images: str | None = None, encoding: str | None = None) -> Dataset:
+def load_rti(
+    path: str | Path,
+    *,
+    exclude_images: str | None = None,
+    encoding: str | None = None,
+    lights: str | Path | None = None,
+) -> Dataset:
     """Read an RTI folder: a ``*.lp`` light position file and its images.
 
     Parameters
     ----------
     path : str or pathlib.Path
+        The folder of the images (and of ``mask.png``, when there is one).
     exclude_images : str, optional
         Images to leave out, not read (`irtps.io.image_selection`): by file name, with or
         without its extension (a number names an image whose file name is that number).
     encoding : {"srgb", "linear"}, optional
         How the images' values map to light; default by bit depth: 8-bit images sRGB,
         16-bit and float ones linear.
+    lights : str or pathlib.Path, optional
+        A ``.lp`` file kept outside the folder, read instead of the folder's own: its images
+        are found in the folder, and the strengths are read from the
+        ``light_intensities.txt`` beside it (an ``irtps calibrate`` output folder holds both).
 
     Returns
     -------
@@ -123,7 +144,7 @@ def load_rti(path: str | Path, *, exclude_images: str | None = None, encoding: s
     Raises
     ------
     DatasetError
-        Naming the file (and line): no ``.lp`` file or several, a count that disagrees with
+        Naming the file (and line): no ``.lp`` file or several (without `lights`), a count that disagrees with
         its lines, a line that is not ``filename x y z``, an image that is missing, listed
         twice or not a JPEG, PNG, TIFF or RAW file that can be read, a direction that is not a
         unit vector (beyond 1e-2) or points away from the camera, fewer than 3 images,
@@ -134,7 +155,7 @@ def load_rti(path: str | Path, *, exclude_images: str | None = None, encoding: s
     """
     if encoding is not None and encoding not in ENCODINGS:
         raise ArgumentError("encoding", f"{encoding!r} is not one of {', '.join(ENCODINGS)}")
-    files = _rti_files(check_folder(path), exclude_images)
+    files = _rti_files(check_folder(path), exclude_images, lights)
     images, integer_codes = read_capture_images(files.images, encoding, where=files.lp)
     size = images.shape[1:3]
     mask = read_mask(files.mask, size) if files.mask is not None else np.ones(size, dtype=bool)
@@ -154,7 +175,37 @@ def load_rti(path: str | Path, *, exclude_images: str | None = None, encoding: s
     )
 
 
-def _the_lp(folder: Path) -> Path:
+def light_file_record(path: str | Path) -> dict:
+    """What a reconstruction records of a light position file kept outside its folder (the
+    ``lights`` of `load_rti`): its absolute path, and one SHA-256 digest of its text and of
+    the ``light_intensities.txt`` beside it, so that a resumed batch sees a calibration
+    written again over the same file.
+
+    Raises
+    ------
+    DatasetError
+        Naming the file, when either cannot be read.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     _ = (Path(folder) / "rig.lp").write_text("3\\na.png 0 0 1\\nb.png 0.6 0 0.8\\nc.png 0 0.6 0.8\\n")
+    ...     sorted(light_file_record(Path(folder) / "rig.lp"))
+    ['file', 'sha256']
+    """
+    lp = check_file(path, "lights: a light position file (*.lp)")
+    digest = hashlib.sha256(read_text(lp).encode())
+    intensities = lp.parent / INTENSITIES_FILE
+    if optional_file(intensities):
+        digest.update(b"\0" + read_text(intensities).encode())
+    return {"file": str(resolve_path(lp)), "sha256": digest.hexdigest()}
+
+
+def _the_lp(folder: Path, lights: str | Path | None) -> Path:
+    """`lights`, or else the folder's own ``.lp`` file; checked to be a readable file."""
+    if lights is not None:
+        return check_file(lights, "lights: a light position file (*.lp)")
     lp = lp_file(folder)
     if lp is None:
         raise DatasetError(f"{folder}: no light position file (*.lp)")
@@ -162,23 +213,32 @@ def _the_lp(folder: Path) -> Path:
     return lp
 
 
-def _rti_files(folder: Path, exclude_images: str | None) -> _RtiFiles:
-    lp = _the_lp(folder)
-    entries = _read_lp(lp)
+def _rti_files(folder: Path, exclude_images: str | None, lights_file: str | Path | None = None) -> _RtiFiles:
+    lp = _the_lp(folder, lights_file)
+    entries = _read_lp(lp, folder)
     if len(entries) < MIN_LIGHTS:
         raise DatasetError(f"{lp}: {len(entries)} images: photometric stereo needs at least {MIN_LIGHTS}")
     selection = select_images([entry[0].name for entry in entries], exclude_images, where=str(folder))
     kept = [entries[k] for k in selection.kept]
+    names_hint = "" if lights_file is None else f" of {folder}: 'irtps calibrate --names-from' names a capture's images"
     for image, _, line in kept:
-        check_file(image, f"listed on line {line} of {lp.name}")
-    intensities = _intensities(folder / INTENSITIES_FILE, lp, len(entries))
+        check_file(image, f"listed on line {line} of {lp}{names_hint}")
+    intensities_file = lp.parent / INTENSITIES_FILE
+    intensities = _intensities(intensities_file, lp, len(entries))
     strengths = [np.ones(3)] * len(kept) if intensities is None else [intensities[k] for k in selection.kept]
     lights = tuple(
         Light(direction=direction, irradiance=strength) for (_, direction, _), strength in zip(kept, strengths)
     )
     mask = folder / MASK_FILE if optional_file(folder / MASK_FILE) else None
-    intensities_file = None if intensities is None else folder / INTENSITIES_FILE
-    return _RtiFiles(folder, lp, lights, [image for image, _, _ in kept], selection, mask, intensities_file)
+    return _RtiFiles(
+        folder,
+        lp,
+        lights,
+        [image for image, _, _ in kept],
+        selection,
+        mask,
+        None if intensities is None else intensities_file,
+    )
 
 
 def _intensities(path: Path, lp: Path, count: int) -> np.ndarray | None:
@@ -193,8 +253,9 @@ def _intensities(path: Path, lp: Path, count: int) -> np.ndarray | None:
     return intensities
 
 
-def _read_lp(path: Path) -> list[tuple[Path, np.ndarray, int]]:
-    """Each image of a ``.lp`` file with its unit light direction and line number."""
+def _read_lp(path: Path, folder: Path) -> list[tuple[Path, np.ndarray, int]]:
+    """Each image of a ``.lp`` file, found in `folder`, with its unit light direction and line
+    number."""
     lines = [(number, line.strip()) for number, line in enumerate(read_text(path).splitlines(), 1) if line.strip()]
     if not lines:
         raise DatasetError(f"{path}: empty: expected the image count, then 'filename x y z' lines")
@@ -220,7 +281,7 @@ def _read_lp(path: Path) -> list[tuple[Path, np.ndarray, int]]:
         upward = upward_problem(direction[2] / norm)
         if upward is not None:
             raise DatasetError(f"{path}: line {number}: light direction {upward}")
-        image = _image_path(path.parent, parts[0])
+        image = _image_path(folder, parts[0])
         if image.name in seen:
             raise DatasetError(f"{path}: line {number}: {image.name} is listed again (line {seen[image.name]})")
         seen[image.name] = number
@@ -229,8 +290,8 @@ def _read_lp(path: Path) -> list[tuple[Path, np.ndarray, int]]:
 
 
 def _image_path(folder: Path, name: str) -> Path:
-    """The image a ``.lp`` line names: the path as written when something is there, else the
-    file of that name (a Windows or POSIX path's last part) beside the ``.lp`` file."""
+    """The image a ``.lp`` line names: the path as written (from `folder`) when something is
+    there, else the file of that name (a Windows or POSIX path's last part) in `folder`."""
     written = folder / name
     if exists(written):
         return written

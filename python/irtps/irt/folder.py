@@ -31,6 +31,7 @@ from irtps.io.dataset import read_albedo_map, read_height_map, read_normal_map
 from irtps.io.exchange import NORMAL_MAP_CONVENTIONS, write_float_tiff, write_normal_png, write_quantised_png
 from irtps.io.imageio import read_mask, write_exr, write_png
 from irtps.io.mesh import height_field_mesh, pinhole_mesh, write_glb, write_obj, write_ply
+from irtps.io.rti import light_file_record
 from irtps.irt.reconstruct import Reconstruction
 from irtps.model.scene import camera_to_dict
 from irtps.ps.fit import FLAGS
@@ -70,6 +71,7 @@ def save_reconstruction(
     intrinsics: str | Path | None = None,
     normal_map: str = "opengl",
     encoding: str | None = None,
+    lights: str | Path | None = None,
 ) -> None:
     """Write a reconstruction folder atomically.
 
@@ -109,6 +111,10 @@ def save_reconstruction(
     encoding : {"srgb", "linear"}, optional
         How the images were decoded when they were read (`irtps.load_dataset`), recorded in
         ``run.json`` (None: by the layout).
+    lights : str or pathlib.Path, optional
+        The light position file that gave a folder of images its lights (``--lights``),
+        recorded in ``run.json`` with a digest of it and of its intensities
+        (`irtps.io.rti.light_file_record`).
 
     Raises
     ------
@@ -121,6 +127,7 @@ def save_reconstruction(
         raise ArgumentError("result", f"expected a Reconstruction, got {type(result).__name__}")
     if normal_map not in NORMAL_MAP_CONVENTIONS:
         raise ArgumentError("normal_map", f"{normal_map!r} is not one of {', '.join(NORMAL_MAP_CONVENTIONS)}")
+    lights_record = None if lights is None else light_file_record(check_path("lights", lights))
     with atomic_output_dir(check_path("path", path)) as folder:
         write_exr(folder / "normal.exr", result.normals)
         write_exr(folder / "albedo.exr", result.albedo)
@@ -156,6 +163,7 @@ def save_reconstruction(
             "pixel_size": result.pixel_size,
             "camera": None if result.camera is None else camera_to_dict(result.camera),
             "intrinsics": None if intrinsics is None else str(resolve_path(intrinsics)),
+            "lights": lights_record,
             "encoding": encoding,
             "timings_s": result.timings,
             "flags": {name: int((result.flags[result.mask] == value).sum()) for value, name in FLAGS.items()},
@@ -306,6 +314,7 @@ _OPTIONAL_RUN_FIELDS = {
     "irradiance_factors": (list, type(None)),
     "camera": (dict, type(None)),
     "intrinsics": (str, type(None)),
+    "lights": (dict, type(None)),
     "stop": (dict, type(None)),
 }
 _HISTORY_FIELDS = {

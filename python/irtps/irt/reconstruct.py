@@ -319,6 +319,7 @@ def load_and_reconstruct(
     exclude_images: str | None = None,
     intrinsics: str | Path | None = None,
     encoding: str | None = None,
+    lights: str | Path | None = None,
     **options,
 ) -> tuple[Dataset, Reconstruction]:
     """Read a data set folder and reconstruct it, timing the reading too.
@@ -335,6 +336,9 @@ def load_and_reconstruct(
         A ``K.txt`` that gives the data set a perspective camera (`irtps.load_dataset`).
     encoding : {"srgb", "linear"}, optional
         How the images' values map to light (`irtps.load_dataset`).
+    lights : str or pathlib.Path, optional
+        A light position file (``*.lp``) kept outside the folder, which gives a folder of
+        images its lights (`irtps.load_dataset`).
     **options
         The other keyword arguments of `reconstruct` (``options``, ``progress``, fields
         of `ReconstructOptions`).
@@ -352,7 +356,8 @@ def load_and_reconstruct(
     OptionError
         For an option out of range, before the data set is read.
     ArgumentError
-        For a malformed `exclude_images`, before the data set is read.
+        For a malformed `exclude_images`, before the data set is read; naming `lights`
+        given to a data set whose lights are its own (`irtps.load_dataset`).
 
     Examples
     --------
@@ -371,7 +376,7 @@ def load_and_reconstruct(
     settings = {key: value for key, value in options.items() if key not in ("options", "progress")}
     ReconstructOptions.build(options.get("options"), **settings)  # a bad option fails before the data set is read
     start = time.perf_counter()
-    dataset = load_dataset(path, exclude_images=exclude_images, intrinsics=intrinsics, encoding=encoding)
+    dataset = load_dataset(path, exclude_images=exclude_images, intrinsics=intrinsics, encoding=encoding, lights=lights)
     loaded = time.perf_counter() - start
     result = reconstruct(dataset, **options)
     result.timings = {"load": loaded, **result.timings}

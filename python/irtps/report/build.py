@@ -363,6 +363,12 @@ def _recorded_source(record: dict) -> tuple[str | None, str]:
         return None, "run.json names no source data set"
     if folder_problem(source) is not None:
         return None, f"the source data set {shown(source, 200)} is not there"
+    lights = record.get("lights") or {}
+    if lights:
+        return (
+            None,
+            f"the source {shown(source, 200)} is a folder of images given its lights by {shown(lights.get('file'), 200)}",
+        )
     if not is_data_set(source):
         return None, f"the recorded source {shown(source, 200)} is not a data set"
     return source, ""
