@@ -125,7 +125,7 @@ def test_irtps_on_an_object_that_fills_a_cornell_box_beats_its_fallback_placemen
 def test_without_anything_around_a_filling_object_the_fallback_says_why():
     data, _ = synthesize("relief", size=32, lights=6, bounces=1, samples=8, fill=True, environment="none")
     placement = irtps.reconstruct(data).placement
-    assert placement.source == "boundary" and "no floor in scene.json" in placement.reason
+    assert placement.source == "boundary" and "the scene has no floor" in placement.reason
 
 
 def test_without_a_floor_the_fallback_is_used_and_recorded(tmp_path):

@@ -68,8 +68,8 @@ def format_placement(placement: Placement | dict) -> str:
     --------
     >>> format_placement(Placement(base_height=20.04, source="images", floor_residual=0.061, floor_pixels=6224))
     'boundary at height 20.04, estimated from the floor around the object (6224 floor pixels, residual 0.0610)'
-    >>> format_placement(Placement(base_height=0.0, source="boundary", reason="no floor in scene.json"))
-    'boundary at height 0 (the floor): no floor in scene.json'
+    >>> format_placement(Placement(base_height=0.0, source="boundary", reason="the scene has no floor"))
+    "boundary at height 0 (the floor's, 0 without one): the scene has no floor"
     >>> format_placement(Placement(base_height=38.2, source="object", reason="no floor is visible",
     ...                            object_residual=0.0712, object_pixels=6400))
     "boundary at height 38.2, estimated from the surroundings' light on the object (6400 object pixels, residual 0.0712): no floor is visible"
@@ -90,7 +90,7 @@ def format_placement(placement: Placement | dict) -> str:
         )
     if fields["source"] == "given":
         return f"{height}, as given"
-    return f"{height} (the floor)" + (f": {fields['reason']}" if fields.get("reason") else "")
+    return f"{height} (the floor's, 0 without one)" + (f": {fields['reason']}" if fields.get("reason") else "")
 
 
 def raised(relief: np.ndarray, mask: np.ndarray, base_height: float, scene: Scene) -> np.ndarray:

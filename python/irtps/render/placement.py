@@ -111,7 +111,7 @@ def estimate_placement(
     ('images', 6)
     """
     if scene.floor is None and scene.environment is None:
-        return fallback_placement(scene, "no floor in scene.json: nothing in the images fixes the object's height")
+        return fallback_placement(scene, "the scene has no floor: nothing in the images fixes the object's height")
     chosen = spread_lights(scene.nominal_light_directions, MAX_LIGHTS)
     scene = dataclasses.replace(scene, lights=tuple(scene.lights[k] for k in chosen))
     images = np.asarray(images, dtype=np.float32)[chosen]
@@ -147,7 +147,7 @@ class _Compared:
     def why_not_floor(self) -> str | None:
         """Why the floor cannot place the object, or None."""
         if self.scene.floor is None:
-            return "no floor in scene.json"
+            return "the scene has no floor"
         if self.mask.all():
             return "the mask covers the whole image: no floor is visible"
         return None
