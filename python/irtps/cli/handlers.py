@@ -21,7 +21,7 @@ from irtps.batch.cluster import connect, local_cluster
 from irtps.batch.plan import output_names
 from irtps.batch.run import reconstruct_many
 from irtps.calibrate.circles import parse_circle
-from irtps.calibrate.folder import save_calibration
+from irtps.calibrate.folder import LP_FILE, save_calibration
 from irtps.calibrate.lights import calibrate_lights
 from irtps.calibrate.summary import format_calibration
 from irtps.batch.summary import SUMMARY_JSON, SUMMARY_MARKDOWN, summary_table, write_summary
@@ -311,6 +311,13 @@ def run_calibrate(args: argparse.Namespace) -> None:
         print(f"calibrated {len(paths)} lights from {args.capture} -> {args.out} ({', '.join(written)})")
         for line in format_calibration(calibration, names):
             print(f"  {line}")
+        lights = args.out / LP_FILE
+        if args.names_from is None:
+            print(
+                f"  {LP_FILE} names the calibration's images; --names-from CAPTURE names a capture's, for its reconstruction"
+            )
+        else:
+            print(f"  next: irtps reconstruct {args.names_from} --lights {lights} --out RESULT")
 
 
 def run_evaluate(args: argparse.Namespace) -> None:
