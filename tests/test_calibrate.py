@@ -108,6 +108,10 @@ def test_the_mitsuba_capture_is_calibrated_within_the_issue_bounds(tmp_path, cap
     assert "calibrated 12 lights" in printed and "strengths from the matte sphere" in printed
     assert "matte sphere (117.9" in printed or "matte sphere (118.0" in printed
     assert "fitted to its shading" in printed
+    assert (
+        f"--names-from CAPTURE (to name its images), then irtps reconstruct CAPTURE --lights {tmp_path / 'lights' / 'lights.lp'}"
+        in printed
+    )
 
 
 def test_the_lp_file_turns_the_capture_into_an_rti_folder(tmp_path):

@@ -87,8 +87,8 @@ def reconstruct_many(
     ----------
     datasets : sequence of str or pathlib.Path
         Data set folders (irtps, DiLiGenT or RTI layout, or folders of images given
-        `lights`). Relative paths are made absolute
-        here, so the workers must see the client's file system under the same paths.
+        `lights`). Relative paths are made absolute here, so the workers must see the
+        client's file system under the same paths.
     out : str or pathlib.Path
         The folder to hold one reconstruction folder per data set.
     options : ReconstructOptions, optional

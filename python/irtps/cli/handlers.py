@@ -314,7 +314,8 @@ def run_calibrate(args: argparse.Namespace) -> None:
         lights = args.out / LP_FILE
         if args.names_from is None:
             print(
-                f"  {LP_FILE} names the calibration's images; --names-from CAPTURE names a capture's, for its reconstruction"
+                f"  for a capture taken under these lights: irtps calibrate {args.capture} --out {args.out} "
+                f"--names-from CAPTURE (to name its images), then irtps reconstruct CAPTURE --lights {lights} --out RESULT"
             )
         else:
             print(f"  next: irtps reconstruct {args.names_from} --lights {lights} --out RESULT")

@@ -144,8 +144,8 @@ def load_rti(
     Raises
     ------
     DatasetError
-        Naming the file (and line): no ``.lp`` file or several (without `lights`), a count that disagrees with
-        its lines, a line that is not ``filename x y z``, an image that is missing, listed
+        Naming the file (and line): no ``.lp`` file or several (without `lights`), a count
+        that disagrees with its lines, a line that is not ``filename x y z``, an image that is missing, listed
         twice or not a JPEG, PNG, TIFF or RAW file that can be read, a direction that is not a
         unit vector (beyond 1e-2) or points away from the camera, fewer than 3 images,
         images of different sizes; a ``light_intensities.txt`` whose line count is not the
