@@ -12,7 +12,12 @@ Then each object as a dome user would hold it (an RTI folder, `irtps.io.rti`): i
 sRGB-encoded into 8-bit JPEG files at quality 95 (Pillow), a ``.lp`` file of its light
 directions, its mask, no intensities; the mean angular error of ``irtps.reconstruct`` on it.
 
-    python benches/semi_calibrated.py [--runs 5] [--only ballPNG]
+Last, IRT-PS (defaults) on the shared Mitsuba scenes of distant lights with their strengths
+given and estimated: estimated strengths are relative (the median light's is 1), so IRT-PS
+must find their scale from the images (`irtps.render.radiometry`) before it renders the
+inter-reflections.
+
+    python benches/semi_calibrated.py [--runs 5] [--only ballPNG] [--scenes cap_cornell]
 """
 
 from __future__ import annotations
@@ -34,15 +39,42 @@ from irtps.model.scene import with_emission
 from irtps.ps.semi_calibrated import estimate_light_intensities
 
 DILIGENT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "diligent"
+MITSUBA = DILIGENT.parent / "mitsuba"
 OBJECTS = ("ballPNG", "readingPNG")
+#: The shared Mitsuba scenes of distant lights (semi-calibrated photometric stereo needs them).
+SCENES = ("cap_cornell", "grooves_dark", "pedestal_cornell", "cap_persp_cornell", "grooves_persp_dark")
 
 
-def mean_error(dataset: irtps.Dataset) -> float:
-    """Mean angular error (degrees) of ``irtps.reconstruct``'s normals over the mask."""
+def reconstructed(dataset: irtps.Dataset, method: str = "ps") -> irtps.Reconstruction:
+    """``irtps.reconstruct`` with its defaults, its warnings (the estimate's) silenced."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", irtps.IrtpsWarning)
-        result = irtps.reconstruct(dataset)
-    return float(irtps.angular_error_deg(result.normals, dataset.gt.normal, dataset.mask)[dataset.mask].mean())
+        return irtps.reconstruct(dataset, method)
+
+
+def mean_error(dataset: irtps.Dataset, method: str = "ps") -> float:
+    """Mean angular error (degrees) of ``irtps.reconstruct``'s normals over the mask where the
+    true normal is known."""
+    normals = reconstructed(dataset, method).normals
+    return irtps.evaluate(mask=dataset.mask, normals=normals, gt=dataset.gt).normal_mean_angular_deg
+
+
+def without_strengths(dataset: irtps.Dataset) -> irtps.Dataset:
+    """`dataset` read as a folder without its lights' strengths is: all equal, and unknown."""
+    lights = tuple(with_emission(light, np.ones(3)) for light in dataset.scene.lights)
+    return dataclasses.replace(dataset, scene=dataclasses.replace(dataset.scene, lights=lights), irradiance_known=False)
+
+
+def irtps_row(path: Path) -> str:
+    """IRT-PS on a scene with its strengths given and estimated, and the scale it found."""
+    dataset = irtps.load_dataset(path)
+    unknown = without_strengths(dataset)
+    result = reconstructed(unknown, "irtps")
+    error = irtps.evaluate(mask=dataset.mask, normals=result.normals, gt=dataset.gt).normal_mean_angular_deg
+    return (
+        f"| {path.name} | {mean_error(dataset):.3f}° | {mean_error(dataset, 'irtps'):.3f}° "
+        f"| {mean_error(unknown):.3f}° | {error:.3f}° | {result.albedo_scale.factor:.3g} (pass {result.chosen}) |"
+    )
 
 
 def as_rti_folder(dataset: irtps.Dataset, source: Path, folder: Path) -> Path:
@@ -64,6 +96,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--only", nargs="*", default=list(OBJECTS))
+    parser.add_argument("--scenes", nargs="*", default=list(SCENES), help="Mitsuba scenes for IRT-PS")
     args = parser.parse_args()
     print(
         "| object | given | all equal | estimated | strengths' error, mean / largest | estimate s | RTI folder, JPEG |"
@@ -73,13 +106,8 @@ def main() -> None:
         dataset = irtps.load_dataset(DILIGENT / name)
         given = np.array([light.irradiance for light in dataset.scene.lights])
         directions = np.array([light.direction for light in dataset.scene.lights])
-        equal = dataclasses.replace(
-            dataset,
-            scene=dataclasses.replace(
-                dataset.scene, lights=tuple(with_emission(light, np.ones(3)) for light in dataset.scene.lights)
-            ),
-        )
-        unknown = dataclasses.replace(equal, irradiance_known=False)
+        unknown = without_strengths(dataset)
+        equal = dataclasses.replace(unknown, irradiance_known=True)
         seconds = []
         for _ in range(args.runs + 1):
             start = time.perf_counter()
@@ -94,6 +122,12 @@ def main() -> None:
             f"| {100 * relative.mean():.1f} % / {100 * relative.max():.1f} % | {statistics.median(seconds[1:]):.2f} "
             f"| {mean_error(rti):.3f}° |"
         )
+    if args.scenes:
+        print()
+        print("| scene | classic PS, given | IRT-PS, given | classic PS, estimated | IRT-PS, estimated | scale found |")
+        print("|---|---|---|---|---|---|")
+        for name in args.scenes:
+            print(irtps_row(MITSUBA / name), flush=True)
 
 
 if __name__ == "__main__":

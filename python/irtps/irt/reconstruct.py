@@ -448,7 +448,10 @@ def _with_estimated_irradiance(dataset: Dataset, options: ReconstructOptions) ->
         IrtpsWarning,
         stacklevel=3,
     )
-    return replace(dataset, scene=replace(dataset.scene, lights=lights), irradiance_known=True), strengths
+    # Relative by construction (the median light's is 1): IRT-PS estimates their scale from the
+    # images, as for DiLiGenT's relative intensities, and renders with it.
+    scene = replace(dataset.scene, lights=lights, relative_irradiance=True)
+    return replace(dataset, scene=scene, irradiance_known=True), strengths
 
 
 def _chosen(options: ReconstructOptions, fit: PsResult, share: float | None) -> tuple[ReconstructOptions, float | None]:
