@@ -119,6 +119,6 @@ def test_irtps_finds_the_scale_of_estimated_strengths_and_removes_the_inter_refl
         classic = irtps.reconstruct(unknown)
     errors["classic"] = irtps.evaluate(mask=data.mask, normals=classic.normals, gt=data.gt).normal_mean_angular_deg
     assert result.albedo_scale.source == "images" and result.chosen > 0
-    # Most of what IRT-PS removes with the strengths given (15.8 -> 5.9 deg here).
+    # Most of what IRT-PS removes with the strengths given.
     closed = (errors["classic"] - errors["unknown"]) / (errors["classic"] - errors["known"])
     assert closed > 0.8, errors

@@ -77,7 +77,7 @@ def dataset_intrinsics(
     """Each data set's intrinsics file (`irtps.batch.run.reconstruct_many`'s ``intrinsics``),
     as an absolute path, each file read and checked (`irtps.io.intrinsics.read_intrinsics`,
     which raises a `DatasetError` naming it)."""
-    files = _files_by_name("intrinsics", "a K.txt path", intrinsics, names)
+    files = _chosen_files("intrinsics", "a K.txt path", intrinsics, names)
     for path in {path for path in files.values() if path is not None}:
         read_intrinsics(path)
     return files
@@ -89,13 +89,13 @@ def dataset_lights(
     """Each data set's light position file (`irtps.batch.run.reconstruct_many`'s ``lights``),
     as an absolute path, each file and the intensities beside it read
     (`irtps.io.rti.light_file_record`, which raises a `DatasetError` naming them)."""
-    files = _files_by_name("lights", "a .lp path", lights, names)
+    files = _chosen_files("lights", "a .lp path", lights, names)
     for path in {path for path in files.values() if path is not None}:
         light_file_record(path)
     return files
 
 
-def _files_by_name(
+def _chosen_files(
     option: str, kind: str, files: str | Path | Mapping[str, str | Path | None] | None, names: list[str]
 ) -> dict[str, str | None]:
     """Each data set's file of `option`: one for all, or one (or None) per name; absolute."""

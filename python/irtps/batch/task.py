@@ -133,7 +133,7 @@ def reconstruct_to_folder(
             else:
                 status = "reused"
                 (normals, albedo, height, mask), robust_used = kept
-                gt = None if lights is not None else load_ground_truth(source, mask.shape)  # an RTI folder: none
+                gt = load_ground_truth(source, mask.shape, lights=lights)
             metrics = (
                 None
                 if gt is None

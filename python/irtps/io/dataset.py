@@ -171,7 +171,9 @@ def _load_irtps(folder: Path, ground_truth: bool, exclude_images: str | None, ca
     )
 
 
-def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | None:
+def load_ground_truth(
+    path: str | Path, size: tuple[int, int], *, lights: str | Path | None = None
+) -> GroundTruth | None:
     """Read only the ground truth of a data set folder, without decoding its images.
 
     The direct-light images of ``gt/direct/`` are left out: this is what evaluating a
@@ -183,6 +185,9 @@ def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | 
         A data set folder (irtps or DiLiGenT layout).
     size : tuple of int
         The (H, W) the ground truth must have (the reconstruction's).
+    lights : str or pathlib.Path, optional
+        The light position file the folder was read with (`load_dataset`): a folder of
+        images, which holds no ground truth.
 
     Returns
     -------
@@ -198,7 +203,7 @@ def load_ground_truth(path: str | Path, size: tuple[int, int]) -> GroundTruth | 
     """
     size = _checked_image_size(size)
     folder = check_folder(check_path("path", path))
-    layout = dataset_layout(folder)
+    layout = dataset_layout(folder, None if lights is None else check_path("lights", lights))
     if layout == "diligent":
         return load_diligent_ground_truth(folder, (size[0], size[1]))
     if layout == "rti":

@@ -48,6 +48,8 @@ MASK_FILE = "mask.png"
 #: The lights' RGB strengths, one line per ``.lp`` line, as DiLiGenT's (``irtps calibrate``
 #: writes it); optional.
 INTENSITIES_FILE = "light_intensities.txt"
+#: What a light position file given from outside the folder is, in errors.
+_LIGHTS_FILE = "lights: a light position file (*.lp)"
 #: How far the norm of a listed light direction may be from 1; within it, it is renormalised.
 UNIT_TOLERANCE = 1e-2
 _JPEG = (".jpg", ".jpeg")
@@ -194,7 +196,7 @@ def light_file_record(path: str | Path) -> dict:
     ...     sorted(light_file_record(Path(folder) / "rig.lp"))
     ['file', 'sha256']
     """
-    lp = check_file(path, "lights: a light position file (*.lp)")
+    lp = check_file(path, _LIGHTS_FILE)
     digest = hashlib.sha256(read_text(lp).encode())
     intensities = lp.parent / INTENSITIES_FILE
     if optional_file(intensities):
@@ -205,7 +207,7 @@ def light_file_record(path: str | Path) -> dict:
 def _the_lp(folder: Path, lights: str | Path | None) -> Path:
     """`lights`, or else the folder's own ``.lp`` file; checked to be a readable file."""
     if lights is not None:
-        return check_file(lights, "lights: a light position file (*.lp)")
+        return check_file(lights, _LIGHTS_FILE)
     lp = lp_file(folder)
     if lp is None:
         raise DatasetError(f"{folder}: no light position file (*.lp)")
