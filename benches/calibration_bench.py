@@ -5,7 +5,8 @@ here the same way with other lights and the spheres elsewhere (``calibration_sce
 Mitsuba 3 needed: ``pip install "irtps[bench]"``).
 
 For each capture: the light directions' mean and largest angular error, the relative
-strengths' largest error (each normalised by the mean ratio to the truth, per channel), the
+strengths' largest error (each normalised by the mean ratio to the truth, per channel) and
+the absolute ones' (``matte_albedo`` the sphere's 0.8, not normalised), the
 distance of each sphere's circle from the truth, and the median time of the calibration over
 ``--runs`` calls (images already read). Then the mirror sphere alone, as a capture without a
 matte sphere gives it: the images cut to a square about it (1.3 radii each way, the matte
@@ -29,6 +30,8 @@ import irtps
 from irtps.io.capture import capture_image_paths, read_capture
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "calibration" / "spheres"
+#: The matte sphere's albedo in the shared capture and in those `calibration_scenes.py` renders.
+MATTE_ALBEDO = 0.8
 
 
 def check(folder: Path, truth: dict, runs: int) -> dict:
@@ -50,9 +53,12 @@ def check(folder: Path, truth: dict, runs: int) -> dict:
         "matte_px": _distance(calibration.matte, truth["matte_sphere"]),
         "seconds": statistics.median(times),
     }
+    row["absolute_max_pct"] = None
     if calibration.irradiance is not None:
         ratio = calibration.irradiance / irradiance
         row["strengths_max_pct"] = float(100 * np.abs(ratio / ratio.mean(axis=0) - 1).max())
+        absolute = irtps.calibrate_lights(capture.images, saturated=capture.saturated, matte_albedo=MATTE_ALBEDO)
+        row["absolute_max_pct"] = float(100 * np.abs(absolute.irradiance / irradiance - 1).max())
     row["chrome_alone"] = _chrome_alone(capture.images, capture.saturated, truth, directions)
     return row
 
@@ -80,7 +86,9 @@ def _distance(circle, true: dict) -> float | None:
 
 
 def _line(name: str, row: dict) -> str:
-    strengths = "-" if row["strengths_max_pct"] is None else f"{row['strengths_max_pct']:.2f}"
+    strengths = " / ".join(
+        "-" if row[key] is None else f"{row[key]:.2f}" for key in ("strengths_max_pct", "absolute_max_pct")
+    )
     circles = " / ".join("-" if row[key] is None else f"{row[key]:.2f}" for key in ("chrome_px", "matte_px"))
     return (
         f"| {name} | {row['directions_mean_deg']:.3f} | {row['directions_max_deg']:.3f} | {strengths} | "
@@ -98,7 +106,8 @@ def main() -> None:
     )
     args = parser.parse_args()
     print(
-        "| capture | directions mean ° | max ° | strengths max % | circle off px (chrome / matte) | seconds "
+        "| capture | directions mean ° | max ° | strengths max %, relative / absolute | circle off px (chrome / matte) "
+        "| seconds "
         "| mirror sphere alone, mean / max ° |"
     )
     print("|---|---|---|---|---|---|---|")

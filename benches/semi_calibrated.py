@@ -13,9 +13,10 @@ sRGB-encoded into 8-bit JPEG files at quality 95 (Pillow), a ``.lp`` file of its
 directions, its mask, no intensities; the mean angular error of ``irtps.reconstruct`` on it.
 
 Last, IRT-PS (defaults) on the shared Mitsuba scenes of distant lights with their strengths
-given and estimated: estimated strengths are relative (the median light's is 1), so IRT-PS
-must find their scale from the images (`irtps.render.radiometry`) before it renders the
-inter-reflections.
+given, given as absolute but off by a factor (what a calibration whose matte sphere's albedo
+was misstated gives), and estimated: estimated strengths are relative (the median light's is
+1), so IRT-PS must find their scale from the images (`irtps.render.radiometry`) before it
+renders the inter-reflections.
 
     python benches/semi_calibrated.py [--runs 5] [--only ballPNG] [--scenes cap_cornell]
 """
@@ -43,6 +44,9 @@ MITSUBA = DILIGENT.parent / "mitsuba"
 OBJECTS = ("ballPNG", "readingPNG")
 #: The shared Mitsuba scenes of distant lights (semi-calibrated photometric stereo needs them).
 SCENES = ("cap_cornell", "grooves_dark", "pedestal_cornell", "cap_persp_cornell", "grooves_persp_dark")
+#: Absolute strengths off by these factors: a matte sphere's albedo given 25 % and 10 % too
+#: high, and 10 % and 25 % too low (`irtps calibrate --matte-albedo`).
+MISSTATED = (0.8, 0.9, 1.1, 1.25)
 
 
 def reconstructed(dataset: irtps.Dataset, method: str = "ps") -> irtps.Reconstruction:
@@ -65,14 +69,23 @@ def without_strengths(dataset: irtps.Dataset) -> irtps.Dataset:
     return dataclasses.replace(dataset, scene=dataclasses.replace(dataset.scene, lights=lights), irradiance_known=False)
 
 
+def misstated(dataset: irtps.Dataset, factor: float) -> irtps.Dataset:
+    """`dataset` with absolute strengths `factor` times the true ones: a calibration whose
+    matte sphere's albedo was given 1 / `factor` times its own."""
+    lights = tuple(with_emission(light, light.irradiance * factor) for light in dataset.scene.lights)
+    return dataclasses.replace(dataset, scene=dataclasses.replace(dataset.scene, lights=lights))
+
+
 def irtps_row(path: Path) -> str:
-    """IRT-PS on a scene with its strengths given and estimated, and the scale it found."""
+    """IRT-PS on a scene with its strengths given, given as absolute but misstated by each of
+    `MISSTATED`, and estimated, and the scale it found."""
     dataset = irtps.load_dataset(path)
     unknown = without_strengths(dataset)
     result = reconstructed(unknown, "irtps")
     error = irtps.evaluate(mask=dataset.mask, normals=result.normals, gt=dataset.gt).normal_mean_angular_deg
+    wrong = " / ".join(f"{mean_error(misstated(dataset, factor), 'irtps'):.3f}°" for factor in MISSTATED)
     return (
-        f"| {path.name} | {mean_error(dataset):.3f}° | {mean_error(dataset, 'irtps'):.3f}° "
+        f"| {path.name} | {mean_error(dataset):.3f}° | {mean_error(dataset, 'irtps'):.3f}° | {wrong} "
         f"| {mean_error(unknown):.3f}° | {error:.3f}° | {result.albedo_scale.factor:.3g} (pass {result.chosen}) |"
     )
 
@@ -124,8 +137,12 @@ def main() -> None:
         )
     if args.scenes:
         print()
-        print("| scene | classic PS, given | IRT-PS, given | classic PS, estimated | IRT-PS, estimated | scale found |")
-        print("|---|---|---|---|---|---|")
+        print(
+            "| scene | classic PS, given | IRT-PS, given | IRT-PS, given ×"
+            + " / ×".join(f"{factor:g}" for factor in MISSTATED)
+            + " | classic PS, estimated | IRT-PS, estimated | scale found |"
+        )
+        print("|---|---|---|---|---|---|---|")
         for name in args.scenes:
             print(irtps_row(MITSUBA / name), flush=True)
 

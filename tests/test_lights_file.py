@@ -7,6 +7,7 @@ import hashlib
 import html
 import json
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -19,12 +20,14 @@ from irtps.batch.run import reconstruct_many
 from irtps.cli.main import main
 from irtps.io.dataset_files import dataset_inputs
 from irtps.io.imageio import write_png
+from irtps.io.rti import light_file_record
 from irtps.irt.folder import load_reconstruction
 from irtps.model.scene import Light
 from irtps.render.renderer import render
 from irtps.render.synth import synthesize
 
 BALL = Path(__file__).parent / "data" / "diligent_ball_small"
+SPHERES = Path(__file__).parent / "data" / "calibration_spheres"
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +63,11 @@ def rig(tmp_path):
 
 
 def _mean_error(result, data):
-    return irtps.angular_error_deg(result.normals, data.gt.normal, data.mask)[data.mask].mean()
+    return _normal_error(result.normals, data)
+
+
+def _normal_error(normals, data):
+    return irtps.angular_error_deg(normals, data.gt.normal, data.mask)[data.mask].mean()
 
 
 def test_a_folder_of_images_takes_the_lights_of_a_file_kept_elsewhere(rig):
@@ -195,8 +202,7 @@ def test_reconstruct_many_refuses_lights_it_cannot_place_before_anything_runs(ri
 def test_a_rig_calibrated_once_reconstructs_a_capture_taken_under_its_lights(tmp_path, capsys):
     """The README's steps: ``irtps calibrate SPHERES --names-from OBJECT``, then ``irtps
     reconstruct OBJECT --lights``; the object rendered here under the spheres' true lights."""
-    spheres = Path(__file__).parent / "data" / "calibration_spheres"
-    truth = json.loads((spheres / "truth.json").read_text())["lights"]
+    truth = json.loads((SPHERES / "truth.json").read_text())["lights"]
     data, _ = synthesize("cap", size=32, lights=3, bounces=0, environment="none")
     lights = tuple(Light(direction=np.array(t["direction"]), irradiance=np.array(t["irradiance"])) for t in truth)
     scene = dataclasses.replace(data.scene, lights=lights)
@@ -206,7 +212,7 @@ def test_a_rig_calibrated_once_reconstructs_a_capture_taken_under_its_lights(tmp
     for k, image in enumerate(images):
         write_png(capture / f"IMG_{k + 1:04d}.png", image / images.max(), bit_depth=16)
     write_png(capture / "mask.png", data.mask.astype(np.float32))
-    assert main(["calibrate", str(spheres), "--out", str(tmp_path / "rig"), "--names-from", str(capture)]) == 0
+    assert main(["calibrate", str(SPHERES), "--out", str(tmp_path / "rig"), "--names-from", str(capture)]) == 0
     lp = tmp_path / "rig" / "lights.lp"
     assert f"next: irtps reconstruct {capture} --lights {lp} --out RESULT" in capsys.readouterr().out
     assert main(["reconstruct", str(capture), "--lights", str(lp), "--out", str(tmp_path / "result"), "--quiet"]) == 0
@@ -214,3 +220,108 @@ def test_a_rig_calibrated_once_reconstructs_a_capture_taken_under_its_lights(tmp
     exact = irtps.photometric_stereo(images, scene.light_directions, [light.irradiance for light in lights]).normals
     errors = [irtps.angular_error_deg(n, data.gt.normal, data.mask)[data.mask].mean() for n in (exact, calibrated)]
     assert errors[0] < 1.0 and errors[1] < errors[0] + 0.5, errors  # the calibration's error, no more
+
+
+def _grooves_under_the_spheres_lights(folder: Path):
+    """Grooves alone in the dark, their inter-reflections rendered under the calibration
+    spheres' true lights, written as 16-bit linear PNG at the spheres' exposure (the rig's
+    camera settings), with its mask: what ``--matte-albedo`` is for."""
+    truth = json.loads((SPHERES / "truth.json").read_text())["lights"]
+    data, _ = synthesize("grooves", size=48, lights=3, bounces=0, environment="none")
+    lights = tuple(Light(direction=np.array(t["direction"]), irradiance=np.array(t["irradiance"])) for t in truth)
+    scene = dataclasses.replace(data.scene, lights=lights)
+    images = render(scene, data.gt.height, data.gt.albedo, data.mask, bounces=4, samples=64).images
+    folder.mkdir()
+    for k, image in enumerate(images):
+        write_png(folder / f"IMG_{k + 1:04d}.png", image, bit_depth=16)
+    write_png(folder / "mask.png", data.mask.astype(np.float32))
+    return data, scene
+
+
+def test_strengths_calibrated_with_the_spheres_albedo_are_absolute_and_irtps_takes_them(tmp_path):
+    """Alone in the dark, grooves' inter-reflections are all the light there is, so IRT-PS
+    cannot find the scale of relative strengths and stays at classic photometric stereo;
+    ``irtps calibrate --matte-albedo`` makes them absolute, and IRT-PS removes the
+    inter-reflections nearly as with the true lights."""
+    capture = tmp_path / "object"
+    data, scene = _grooves_under_the_spheres_lights(capture)
+    errors = {}
+    for kind, extra in (("absolute", ["--matte-albedo", "0.8"]), ("relative", [])):
+        rig = tmp_path / kind
+        assert (
+            main(["calibrate", str(SPHERES), "--out", str(rig), "--names-from", str(capture), "--quiet", *extra]) == 0
+        )
+        out = tmp_path / f"result_{kind}"
+        assert (
+            main(
+                [
+                    "reconstruct",
+                    str(capture),
+                    "--lights",
+                    str(rig / "lights.lp"),
+                    "--method",
+                    "irtps",
+                    "--out",
+                    str(out),
+                    "--quiet",
+                ]
+            )
+            == 0
+        )
+        errors[kind] = _normal_error(load_reconstruction(out)[0], data)
+        assert json.loads((out / "run.json").read_text())["albedo_scale"]["source"] == (
+            "absolute" if kind == "absolute" else "images"
+        )
+    dataset = dataclasses.replace(irtps.load_dataset(capture, lights=tmp_path / "absolute" / "lights.lp"), scene=scene)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", irtps.IrtpsWarning)
+        errors["true lights"] = _normal_error(irtps.reconstruct(dataset, "irtps").normals, data)
+        errors["classic"] = _normal_error(irtps.reconstruct(dataset).normals, data)
+    assert errors["relative"] > errors["classic"] - 0.1, errors  # IRT-PS fell back to classic PS
+    assert errors["absolute"] < errors["classic"] / 2 and errors["absolute"] < errors["true lights"] + 1.0, errors
+
+
+def test_the_calibration_says_whether_its_strengths_are_absolute_and_the_reader_follows_it(tmp_path, capsys):
+    for kind, extra in (("absolute", ["--matte-albedo", "0.8"]), ("relative", [])):
+        assert main(["calibrate", str(SPHERES), "--out", str(tmp_path / kind), *extra]) == 0
+        printed = capsys.readouterr().out
+        assert ("absolute irradiances (its albedo 0.8)" in printed) == (kind == "absolute"), printed
+        record = json.loads((tmp_path / kind / "calibration.json").read_text())
+        assert record["irradiance"] == kind and record["matte_albedo"] == (0.8 if kind == "absolute" else None)
+        lights_json = json.loads((tmp_path / kind / "lights.json").read_text())
+        assert lights_json.get("irradiance", "absolute") == kind
+        scene = irtps.load_dataset(SPHERES, lights=tmp_path / kind / "lights.lp").scene
+        assert scene.relative_irradiance == (kind == "relative")
+    absolute, relative = (tmp_path / kind / "light_intensities.txt" for kind in ("absolute", "relative"))
+    assert np.allclose(np.loadtxt(absolute), 1.25 * np.loadtxt(relative), rtol=1e-5)  # 1 / 0.8
+    # the same intensities, said absolute or not, are another calibration for a resumed batch
+    shutil.copy(absolute, relative)
+    records = [light_file_record(tmp_path / kind / "lights.lp") for kind in ("absolute", "relative")]
+    assert records[0]["sha256"] != records[1]["sha256"]
+    # copied without the record, or beside another tool's calibration.json, the strengths are relative
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for name in ("lights.lp", "light_intensities.txt"):
+        shutil.copy(tmp_path / "absolute" / name, copy / name)
+    assert irtps.load_dataset(SPHERES, lights=copy / "lights.lp").scene.relative_irradiance
+    (copy / "calibration.json").write_text('{"irradiance": "absolute"}')
+    assert irtps.load_dataset(SPHERES, lights=copy / "lights.lp").scene.relative_irradiance
+
+
+@pytest.mark.parametrize(
+    ("record", "message"),
+    [
+        ('{"format": "irtps.calibration/1", "irradiance": "bright"}', "irradiance is 'bright': expected one of"),
+        ('{"format": "irtps.calibration/1", "irradiance": ', "line 1"),
+    ],
+)
+def test_a_calibration_record_that_cannot_say_is_one_named_error_and_nothing_is_written(
+    tmp_path, capsys, record, message
+):
+    assert main(["calibrate", str(SPHERES), "--out", str(tmp_path / "rig"), "--matte-albedo", "0.8", "--quiet"]) == 0
+    (tmp_path / "rig" / "calibration.json").write_text(record)
+    out = tmp_path / "result"
+    assert main(["reconstruct", str(SPHERES), "--lights", str(tmp_path / "rig" / "lights.lp"), "--out", str(out)]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and str(tmp_path / "rig" / "calibration.json") in error[0] and message in error[0], error
+    assert not out.exists()

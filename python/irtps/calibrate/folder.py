@@ -14,13 +14,14 @@ from irtps._shared.atomic import atomic_output_dir
 from irtps._shared.records import CALIBRATION, stamp
 from irtps.calibrate.circles import Circle
 from irtps.calibrate.lights import LightCalibration
+from irtps.io.rti import CALIBRATION_RECORD, INTENSITIES_FILE
+from irtps.model.scene import IRRADIANCE_KINDS
 
 __all__ = ["lp_text", "save_calibration"]
 
 LP_FILE = "lights.lp"
-INTENSITIES_FILE = "light_intensities.txt"
 LIGHTS_FILE = "lights.json"
-RECORD_FILE = "calibration.json"
+ABSOLUTE, RELATIVE = IRRADIANCE_KINDS
 PICTURE_FILE = "calibration.png"
 
 
@@ -49,17 +50,18 @@ def save_calibration(
     names: Sequence[str],
     mean_image: np.ndarray,
     source: str,
-    matte_albedo: float,
     encoding: str | None,
 ) -> list[str]:
     """Write a calibration to a folder, replaced atomically.
 
     ``lights.lp`` lists `names` with their lights' directions; ``light_intensities.txt`` their
     RGB strengths, one line each in the same order (`irtps.io.rti`), and ``lights.json`` the
-    contract's ``lights`` (directions and RGB irradiances), both written only when a matte
-    sphere gave the strengths; ``calibration.json`` records the circles, each light's highlight, both
-    spheres' directions and their agreement, the notes and the inputs; ``calibration.png`` is
-    `irtps.calibrate.figure.calibration_png`.
+    contract's ``lights`` (directions and RGB irradiances, marked ``"irradiance": "relative"``
+    unless the matte sphere's albedo was given), both written only when a matte sphere gave the
+    strengths; ``calibration.json`` records the circles, each light's highlight, both spheres'
+    directions and their agreement, the notes, the inputs, and in ``irradiance`` whether the
+    strengths are ``"absolute"`` or ``"relative"`` (which `irtps.io.rti` reads beside the
+    ``.lp`` file); ``calibration.png`` is `irtps.calibrate.figure.calibration_png`.
 
     Parameters
     ----------
@@ -71,8 +73,6 @@ def save_calibration(
         (H, W, 3) the capture's mean linear image, for the picture.
     source : str
         The capture's folder, recorded.
-    matte_albedo : float
-        The matte sphere's albedo the strengths were taken with, recorded.
     encoding : str or None
         The encoding asked for (None: by bit depth), recorded.
 
@@ -83,17 +83,15 @@ def save_calibration(
     """
     files = {
         LP_FILE: lp_text(names, calibration.directions),
-        RECORD_FILE: json.dumps(
-            _record(calibration, names, source=source, matte_albedo=matte_albedo, encoding=encoding), indent=1
-        )
-        + "\n",
+        CALIBRATION_RECORD: json.dumps(_record(calibration, names, source=source, encoding=encoding), indent=1) + "\n",
     }
     if calibration.irradiance is not None:
         lights = [
             {"direction": direction.tolist(), "irradiance": irradiance.tolist()}
             for direction, irradiance in zip(calibration.directions, calibration.irradiance)
         ]
-        files[LIGHTS_FILE] = json.dumps({"lights": lights}, indent=1) + "\n"
+        relative = {} if calibration.matte_albedo is not None else {"irradiance": RELATIVE}
+        files[LIGHTS_FILE] = json.dumps({"lights": lights, **relative}, indent=1) + "\n"
         files[INTENSITIES_FILE] = "".join(f"{r:.6g} {g:.6g} {b:.6g}\n" for r, g, b in calibration.irradiance)
     # Imported here: matplotlib, which the picture is drawn with, would add to the start and the
     # memory of every command (the `irtps` command imports this module).
@@ -107,9 +105,7 @@ def save_calibration(
     return sorted([*files, PICTURE_FILE])
 
 
-def _record(
-    calibration: LightCalibration, names: Sequence[str], *, source: str, matte_albedo: float, encoding: str | None
-) -> dict:
+def _record(calibration: LightCalibration, names: Sequence[str], *, source: str, encoding: str | None) -> dict:
     lights = []
     for k, name in enumerate(names):
         light: dict = {"image": name, "direction": calibration.directions[k].tolist()}
@@ -133,12 +129,21 @@ def _record(
         "chrome_circle_source": calibration.chrome_circle_source,
         "matte_sphere": _circle(calibration.matte),
         "matte_circle_source": None if calibration.matte is None else "given" if calibration.matte_given else "shading",
-        "matte_albedo": matte_albedo if calibration.irradiance is not None else None,
+        "matte_albedo": calibration.matte_albedo,
+        "irradiance": _irradiance_kind(calibration),
         "coordinates": "circles and highlights in pixels from the image's top-left corner (column, row); "
         "directions toward the lights, x right, y up, z toward the camera",
         "notes": list(calibration.notes),
         "lights": lights,
     }
+
+
+def _irradiance_kind(calibration: LightCalibration) -> str | None:
+    """``"absolute"`` when the matte sphere's albedo was given, ``"relative"`` when it was not,
+    None without strengths."""
+    if calibration.irradiance is None:
+        return None
+    return ABSOLUTE if calibration.matte_albedo is not None else RELATIVE
 
 
 def _circle(circle: Circle | None) -> dict | None:

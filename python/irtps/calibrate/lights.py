@@ -41,8 +41,10 @@ class LightCalibration:
     directions : numpy.ndarray
         (K, 3) unit vectors toward each light (x right, y up, z toward the camera).
     irradiance : numpy.ndarray or None
-        (K, 3) each light's RGB irradiance from the matte sphere (relative to a white sphere
-        unless its albedo was given); None without a matte sphere.
+        (K, 3) each light's RGB irradiance from the matte sphere; None without a matte sphere.
+    matte_albedo : float or None
+        The matte sphere's albedo the irradiances were taken with: they are then absolute.
+        None when it was not given: they are relative, taken as from a white sphere.
     direction_source : str
         ``"chrome"`` (highlights on the mirror sphere) or ``"matte"`` (the matte sphere's shading).
     chrome : Circle or None
@@ -68,6 +70,7 @@ class LightCalibration:
 
     directions: np.ndarray
     irradiance: np.ndarray | None
+    matte_albedo: float | None
     direction_source: str
     chrome: Circle | None
     chrome_outline: Circle | None
@@ -87,7 +90,7 @@ def calibrate_lights(
     saturated: np.ndarray | None = None,
     chrome: Circle | None = None,
     matte: Circle | None = None,
-    matte_albedo: float = 1.0,
+    matte_albedo: float | None = None,
     names: Sequence[str] | None = None,
     where: str = "capture",
 ) -> LightCalibration:
@@ -112,9 +115,10 @@ def calibrate_lights(
         (K, H, W) bool: clipped pixels (8-bit codes at 255), left out of the matte sphere's fits.
     chrome, matte : Circle, optional
         The spheres' circles (pixels from the top-left corner), taken as given.
-    matte_albedo : float
-        The matte sphere's albedo; the default 1.0 gives irradiances relative to a white sphere
-        (albedos reconstructed with them are then relative to the sphere's).
+    matte_albedo : float, optional
+        The matte sphere's albedo: the irradiances are then absolute, and photometric stereo and
+        IRT-PS take them as they are. Without it they are relative (taken as from a white
+        sphere), and a reconstruction finds their scale from its own images.
     names : sequence of str, optional
         The images' names, for messages.
     where : str
@@ -148,9 +152,10 @@ def calibrate_lights(
     )
     chrome = None if chrome is None else as_circle(chrome, "chrome")
     matte = None if matte is None else as_circle(matte, "matte")
-    matte_albedo = check_number("matte_albedo", matte_albedo)
-    if not 0.0 < matte_albedo <= 1.0:
-        raise ArgumentError("matte_albedo", f"must be in (0, 1], got {matte_albedo!r}")
+    if matte_albedo is not None:
+        matte_albedo = check_number("matte_albedo", matte_albedo)
+        if not 0.0 < matte_albedo <= 1.0:
+            raise ArgumentError("matte_albedo", f"must be in (0, 1], got {matte_albedo!r}")
     labels = list(names) if names is not None else [f"image {k}" for k in range(len(images))]
     gray = images.mean(axis=-1, dtype=np.float32)
     spheres = find_spheres(gray, saturated, chrome=chrome, matte=matte)
@@ -177,7 +182,9 @@ def calibrate_lights(
         source = "chrome"
     irradiance = None
     if spheres.matte is not None:
-        irradiance = matte_irradiance(images, saturated, spheres.matte, directions, matte_albedo)
+        irradiance = matte_irradiance(
+            images, saturated, spheres.matte, directions, 1.0 if matte_albedo is None else matte_albedo
+        )
         _require(
             ~np.isfinite(irradiance).all(axis=1),
             labels,
@@ -191,6 +198,7 @@ def calibrate_lights(
     return LightCalibration(
         directions=directions,
         irradiance=irradiance,
+        matte_albedo=None if irradiance is None else matte_albedo,
         direction_source=source,
         chrome=circle,
         chrome_outline=spheres.chrome,

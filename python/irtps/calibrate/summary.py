@@ -42,10 +42,15 @@ def format_calibration(calibration: LightCalibration, names: Sequence[str]) -> l
     source = (
         "highlights on the mirror sphere" if calibration.direction_source == "chrome" else "the matte sphere's shading"
     )
-    lines.append(
-        f"directions from the {source}"
-        + ("" if calibration.irradiance is None else "; strengths from the matte sphere")
-    )
+    if calibration.irradiance is None:
+        strengths = ""
+    elif calibration.matte_albedo is None:
+        strengths = (
+            "; strengths from the matte sphere, relative (its albedo not given: a reconstruction finds their scale)"
+        )
+    else:
+        strengths = f"; strengths from the matte sphere, absolute irradiances (its albedo {calibration.matte_albedo:g})"
+    lines.append(f"directions from the {source}{strengths}")
     strength = None if calibration.irradiance is None else calibration.irradiance.mean(axis=1)
     for k, name in enumerate(names):
         x, y, z = calibration.directions[k]

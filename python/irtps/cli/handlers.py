@@ -304,7 +304,6 @@ def run_calibrate(args: argparse.Namespace) -> None:
         names=names,
         mean_image=capture.images.mean(axis=0),
         source=str(resolve_path(args.capture)),
-        matte_albedo=args.matte_albedo,
         encoding=args.encoding,
     )
     if not args.quiet:

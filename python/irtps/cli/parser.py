@@ -227,9 +227,10 @@ COMMANDS = (
             Argument(
                 "--matte-albedo",
                 type=float,
-                default=1.0,
-                help="the matte sphere's albedo: strengths are then irradiances, and albedos reconstructed with them "
-                "absolute (default 1.0: relative to a white sphere)",
+                help="the matte sphere's albedo: the strengths are then absolute irradiances, which reconstructions "
+                "take as they are (albedos absolute; IRT-PS needs no scale from the images: give it for an object "
+                "alone in the dark, captured with the calibration's exposure). Default: unknown, the strengths "
+                "relative, their scale found from each capture",
             ),
             Argument(
                 "--names-from",

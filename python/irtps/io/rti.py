@@ -8,8 +8,11 @@ contract's frame). A file name may be a path written on another machine (``C:\\d
 when nothing is at it, the file of that name beside the ``.lp`` file is read. The lights'
 strengths come from ``light_intensities.txt`` beside it when there is one (one RGB line per
 ``.lp`` line, in its order, as DiLiGenT's and as ``irtps calibrate`` writes it); without it,
-`irtps.reconstruct` estimates them (`irtps.model.data.Dataset.irradiance_known` False). The
-camera is orthographic, one world unit a pixel, with no floor and no environment; ``mask.png``
+`irtps.reconstruct` estimates them (`irtps.model.data.Dataset.irradiance_known` False). They
+are relative (`irtps.model.scene.Scene.relative_irradiance`: a reconstruction finds their
+scale), unless ``irtps calibrate``'s record beside them, ``calibration.json``, says they are
+absolute (``"irradiance": "absolute"``: the matte sphere's albedo was given). The camera is
+orthographic, one world unit a pixel, with no floor and no environment; ``mask.png``
 is optional.
 
 A ``.lp`` file kept elsewhere (``lights``: the one ``irtps calibrate`` wrote for a rig, with its
@@ -31,7 +34,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from irtps._shared.guarded import read_text
+from irtps._shared.guarded import parse_json, read_text
+from irtps._shared.records import CALIBRATION
 from irtps._shared.paths import check_file, check_folder, exists, optional_file, resolve_path
 from irtps.errors import ArgumentError, DatasetError
 from irtps.io.image_selection import ImageSelection, select_images
@@ -39,7 +43,7 @@ from irtps.io.capture import read_capture_images
 from irtps.io.imageio import ENCODINGS, read_mask
 from irtps.io.number_lines import check_intensities, three_number_lines
 from irtps.model.data import Dataset
-from irtps.model.scene import MIN_LIGHTS, Camera, Light, Scene, upward_problem
+from irtps.model.scene import IRRADIANCE_KINDS, MIN_LIGHTS, Camera, Light, Scene, upward_problem
 
 __all__ = ["light_file_record", "load_rti", "lp_file", "rti_image_names", "rti_inputs"]
 
@@ -48,6 +52,9 @@ MASK_FILE = "mask.png"
 #: The lights' RGB strengths, one line per ``.lp`` line, as DiLiGenT's (``irtps calibrate``
 #: writes it); optional.
 INTENSITIES_FILE = "light_intensities.txt"
+#: ``irtps calibrate``'s record, written beside the two; its ``irradiance`` says whether the
+#: strengths are absolute.
+CALIBRATION_RECORD = "calibration.json"
 #: What a light position file given from outside the folder is, in errors.
 _LIGHTS_FILE = "lights: a light position file (*.lp)"
 #: How far the norm of a listed light direction may be from 1; within it, it is renormalised.
@@ -85,9 +92,11 @@ class _RtiFiles(NamedTuple):
     mask: Path | None
     #: ``light_intensities.txt``, when the folder has one.
     intensities: Path | None = None
+    #: ``calibration.json`` when it says that the intensities are absolute.
+    absolute_record: Path | None = None
 
     def paths(self) -> list[Path]:
-        optional = [path for path in (self.mask, self.intensities) if path is not None]
+        optional = [path for path in (self.mask, self.intensities, self.absolute_record) if path is not None]
         return [self.folder, self.lp, *self.images, *optional]
 
 
@@ -139,9 +148,9 @@ def load_rti(
     -------
     Dataset
         Linear images in the ``.lp`` file's order, the lights' directions from it and their
-        strengths from ``light_intensities.txt`` (relative), or unknown without it
-        (``irradiance_known`` False); ``saturation`` 1.0 when every image holds integer codes
-        (the largest clips).
+        strengths from ``light_intensities.txt`` (relative, or absolute when ``calibration.json``
+        says so), or unknown without it (``irradiance_known`` False); ``saturation`` 1.0 when
+        every image holds integer codes (the largest clips).
 
     Raises
     ------
@@ -151,7 +160,9 @@ def load_rti(
         twice or not a JPEG, PNG, TIFF or RAW file that can be read, a direction that is not a
         unit vector (beyond 1e-2) or points away from the camera, fewer than 3 images,
         images of different sizes; a ``light_intensities.txt`` whose line count is not the
-        ``.lp`` file's or whose line is not three non-negative numbers.
+        ``.lp`` file's or whose line is not three non-negative numbers; a ``calibration.json``
+        of ``irtps calibrate`` that cannot be read or whose ``irradiance`` is not ``"absolute"``
+        or ``"relative"``.
     ArgumentError
         Naming ``encoding`` or ``exclude_images``.
     """
@@ -165,7 +176,7 @@ def load_rti(
         scene=Scene(
             camera=Camera(width=size[1], height=size[0], pixel_size=1.0),
             lights=files.lights,
-            relative_irradiance=files.intensities is not None,
+            relative_irradiance=files.intensities is not None and files.absolute_record is None,
         ),
         images=images,
         mask=mask,
@@ -201,7 +212,45 @@ def light_file_record(path: str | Path) -> dict:
     intensities = lp.parent / INTENSITIES_FILE
     if optional_file(intensities):
         digest.update(b"\0" + read_text(intensities).encode())
+        if _strengths_absolute(lp.parent):
+            digest.update(b"\0absolute")
     return {"file": str(resolve_path(lp)), "sha256": digest.hexdigest()}
+
+
+def _strengths_absolute(folder: str | Path) -> bool:
+    """Whether the ``light_intensities.txt`` in `folder` holds absolute irradiances: True when
+    ``irtps calibrate``'s record there (``calibration.json``, format ``irtps.calibration/1``)
+    says ``"irradiance": "absolute"``. False without it, for another tool's file of that name,
+    and for a record written before it said (its strengths were relative).
+
+    Raises
+    ------
+    DatasetError
+        Naming the record: it cannot be read, or its ``irradiance`` is not ``"absolute"``,
+        ``"relative"`` or null.
+
+    Examples
+    --------
+    >>> import json, tempfile
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     before = _strengths_absolute(folder)
+    ...     record = {"format": "irtps.calibration/1", "irradiance": "absolute"}
+    ...     _ = (Path(folder) / "calibration.json").write_text(json.dumps(record))
+    ...     before, _strengths_absolute(folder)
+    (False, True)
+    """
+    path = Path(folder) / CALIBRATION_RECORD
+    if not optional_file(path):
+        return False
+    record = parse_json(read_text(path), str(path))
+    if not isinstance(record, dict) or record.get("format") != CALIBRATION:
+        return False
+    kind = record.get("irradiance")
+    if kind is not None and kind not in IRRADIANCE_KINDS:
+        raise DatasetError(
+            f"{path}: irradiance is {kind!r}: expected one of {', '.join(map(repr, IRRADIANCE_KINDS))} or null"
+        )
+    return kind == "absolute"
 
 
 def _the_lp(folder: Path, lights: str | Path | None) -> Path:
@@ -232,6 +281,7 @@ def _rti_files(folder: Path, exclude_images: str | None, lights_file: str | Path
         Light(direction=direction, irradiance=strength) for (_, direction, _), strength in zip(kept, strengths)
     )
     mask = folder / MASK_FILE if optional_file(folder / MASK_FILE) else None
+    absolute = intensities is not None and _strengths_absolute(lp.parent)
     return _RtiFiles(
         folder,
         lp,
@@ -240,6 +290,7 @@ def _rti_files(folder: Path, exclude_images: str | None, lights_file: str | Path
         selection,
         mask,
         None if intensities is None else intensities_file,
+        lp.parent / CALIBRATION_RECORD if absolute else None,
     )
 
 
