@@ -1,7 +1,9 @@
 """The irtps command line, run as a user would."""
 
 import json
+import os
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -201,3 +203,22 @@ def test_evaluate_rejects_ground_truth_of_another_size(tmp_path, capsys):
     assert main(["reconstruct", str(small), "--out", str(out), "--quiet"]) == 0
     assert main(["evaluate", str(out), "--gt", str(large)]) == 2
     assert "scene.json" in capsys.readouterr().err
+
+
+def test_output_closed_by_its_reader_ends_the_command_quietly_keeping_what_was_written(tmp_path):
+    """``irtps calibrate ... | head -1``: the reader goes before irtps prints; irtps exits as a
+    command that SIGPIPE ends (141), says nothing, and its complete output stays."""
+    spheres = Path(__file__).parent / "data" / "calibration_spheres"
+    out = tmp_path / "rig"
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    process = subprocess.run(
+        [sys.executable, "-m", "irtps.cli", "calibrate", str(spheres), "--out", str(out)],
+        stdout=write_end,
+        stderr=subprocess.PIPE,
+        text=True,
+        check=False,
+    )
+    os.close(write_end)
+    assert process.returncode == 128 + signal.SIGPIPE and process.stderr == "", process.stderr
+    assert (out / "lights.lp").is_file() and (out / "calibration.json").is_file()

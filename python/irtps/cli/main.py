@@ -4,6 +4,8 @@ its errors, warnings and interrupts into messages and exit statuses."""
 from __future__ import annotations
 
 import argparse
+import os
+import select
 import signal
 import sys
 import warnings
@@ -31,6 +33,26 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
         sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
 
 
+def _stdout_closed() -> bool:
+    """Whether what reads the standard output has closed it (``irtps ... | head``): polling it
+    reports an error. Then it is pointed at the null device, so that nothing more is said at
+    exit."""
+    try:
+        descriptor = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        return False
+    if not hasattr(select, "poll"):
+        return False
+    poller = select.poll()
+    poller.register(descriptor, select.POLLOUT)
+    if not any(events & select.POLLERR for _, events in poller.poll(0)):
+        return False
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, descriptor)
+    os.close(null)
+    return True
+
+
 def _argument_name(parser: argparse.ArgumentParser, command: str, argument: str) -> str:
     """An argument's name as `command` takes it on the command line: ``exclude_images`` is
     ``--exclude-images`` (an argument that is no option of the command keeps its name)."""
@@ -43,7 +65,9 @@ def main(argv: list[str] | None = None) -> int:
     """Run the ``irtps`` command; returns the exit status.
 
     0 on success; 2 on bad input, printed as ``irtps: error: ...`` naming the file or
-    field; 130 on Ctrl-C and 143 on SIGTERM, after removing any partial output.
+    field; 130 on Ctrl-C and 143 on SIGTERM, after removing any partial output; 141, as a
+    command that SIGPIPE ends, with nothing said, when what reads its output has closed it
+    (what was complete by then stays).
     """
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -59,6 +83,11 @@ def main(argv: list[str] | None = None) -> int:
             f"irtps: error: {_argument_name(parser, args.command, err.argument)}: {escaped(err.problem)}",
             file=sys.stderr,
         )
+        return 2
+    except BrokenPipeError as err:
+        if _stdout_closed():
+            return 128 + signal.SIGPIPE
+        print(f"irtps: error: {escaped(str(err))}", file=sys.stderr)
         return 2
     except (IrtpsError, OSError) as err:
         print(f"irtps: error: {escaped(str(err))}", file=sys.stderr)
