@@ -45,8 +45,9 @@ OBJECTS = ("ballPNG", "readingPNG")
 #: The shared Mitsuba scenes of distant lights (semi-calibrated photometric stereo needs them).
 SCENES = ("cap_cornell", "grooves_dark", "pedestal_cornell", "cap_persp_cornell", "grooves_persp_dark")
 #: Absolute strengths off by these factors: a matte sphere's albedo given 25 % and 10 % too
-#: high, and 10 % and 25 % too low (`irtps calibrate --matte-albedo`).
-MISSTATED = (0.8, 0.9, 1.1, 1.25)
+#: high, and 10 % and 25 % too low (`irtps calibrate --matte-albedo`); a capture taken at
+#: twice or half the calibration's exposure.
+MISSTATED = (0.5, 0.8, 0.9, 1.1, 1.25, 2.0)
 
 
 def reconstructed(dataset: irtps.Dataset, method: str = "ps") -> irtps.Reconstruction:

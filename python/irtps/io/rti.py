@@ -110,7 +110,7 @@ def rti_image_names(folder: str | Path, lights: str | Path | None = None) -> tup
 def rti_inputs(path: str | Path, *, exclude_images: str | None = None, lights: str | Path | None = None) -> list[Path]:
     """Every file and folder that `load_rti` reads: the folder, its ``.lp`` file (or
     `lights`), the images it lists but those left out, and the mask and the light
-    intensities when present.
+    intensities when present (with ``calibration.json`` when it makes them absolute).
 
     Raises
     ------
@@ -161,8 +161,8 @@ def load_rti(
         unit vector (beyond 1e-2) or points away from the camera, fewer than 3 images,
         images of different sizes; a ``light_intensities.txt`` whose line count is not the
         ``.lp`` file's or whose line is not three non-negative numbers; a ``calibration.json``
-        of ``irtps calibrate`` that cannot be read or whose ``irradiance`` is not ``"absolute"``
-        or ``"relative"``.
+        beside it that is not JSON, or is ``irtps calibrate``'s and whose ``irradiance`` is not
+        ``"absolute"``, ``"relative"`` or null.
     ArgumentError
         Naming ``encoding`` or ``exclude_images``.
     """
@@ -226,8 +226,8 @@ def _strengths_absolute(folder: str | Path) -> bool:
     Raises
     ------
     DatasetError
-        Naming the record: it cannot be read, or its ``irradiance`` is not ``"absolute"``,
-        ``"relative"`` or null.
+        Naming the record: it cannot be read or is not JSON, or it is ours and its
+        ``irradiance`` is not ``"absolute"``, ``"relative"`` or null.
 
     Examples
     --------
