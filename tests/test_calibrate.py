@@ -150,8 +150,14 @@ def test_a_mirror_sphere_alone_gives_directions_from_its_outline_and_no_strength
     lights, strengths = _directions(seed=2), _strengths(seed=2)
     images = _capture(lights, strengths, matte=None)
     calibration = irtps.calibrate_lights(images)
-    assert calibration.matte is None and calibration.irradiance is None
-    assert calibration.chrome_circle_source == "outline"
+    assert calibration.matte is None and calibration.irradiance is None and calibration.matte_albedo is None
+    assert calibration.chrome_circle_source == "outline" and calibration.notes == ()
+    # an albedo given for a matte sphere that is not there is said, not silently dropped
+    notes = irtps.calibrate_lights(images, matte_albedo=0.8).notes
+    assert notes == (
+        "the matte sphere's albedo was given, but no matte sphere was found: no strengths "
+        "(give its circle with --matte COLUMN,ROW,RADIUS)",
+    )
     assert np.hypot(calibration.chrome.column - CHROME[0], calibration.chrome.row - CHROME[1]) < 0.1
     assert _angles_deg(calibration.directions, lights).max() < 0.3
     capture = tmp_path / "capture"

@@ -191,6 +191,11 @@ def calibrate_lights(
             where,
             "lights too little of the matte sphere to measure its strength",
         )
+    elif matte_albedo is not None:
+        notes.append(
+            "the matte sphere's albedo was given, but no matte sphere was found: no strengths "
+            "(give its circle with --matte COLUMN,ROW,RADIUS)"
+        )
     agreement = None
     if shading is not None and source == "chrome":
         cosine = np.clip(np.sum(directions * shading.directions, axis=1), -1.0, 1.0)
