@@ -15,13 +15,11 @@ from irtps._shared.records import CALIBRATION, stamp
 from irtps.calibrate.circles import Circle
 from irtps.calibrate.lights import LightCalibration
 from irtps.io.rti import CALIBRATION_RECORD, INTENSITIES_FILE
-from irtps.model.scene import IRRADIANCE_KINDS
 
 __all__ = ["lp_text", "save_calibration"]
 
 LP_FILE = "lights.lp"
 LIGHTS_FILE = "lights.json"
-ABSOLUTE, RELATIVE = IRRADIANCE_KINDS
 PICTURE_FILE = "calibration.png"
 
 
@@ -90,7 +88,7 @@ def save_calibration(
             {"direction": direction.tolist(), "irradiance": irradiance.tolist()}
             for direction, irradiance in zip(calibration.directions, calibration.irradiance)
         ]
-        relative = {} if calibration.matte_albedo is not None else {"irradiance": RELATIVE}
+        relative = {} if calibration.matte_albedo is not None else {"irradiance": "relative"}
         files[LIGHTS_FILE] = json.dumps({"lights": lights, **relative}, indent=1) + "\n"
         files[INTENSITIES_FILE] = "".join(f"{r:.6g} {g:.6g} {b:.6g}\n" for r, g, b in calibration.irradiance)
     # Imported here: matplotlib, which the picture is drawn with, would add to the start and the
@@ -143,7 +141,7 @@ def _irradiance_kind(calibration: LightCalibration) -> str | None:
     None without strengths."""
     if calibration.irradiance is None:
         return None
-    return ABSOLUTE if calibration.matte_albedo is not None else RELATIVE
+    return "absolute" if calibration.matte_albedo is not None else "relative"
 
 
 def _circle(circle: Circle | None) -> dict | None:
