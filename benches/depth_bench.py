@@ -12,13 +12,21 @@ then the mean absolute difference in mm where the truth is known) and the median
   depths as an orthographic camera at the object's median true depth would see them (pixel
   size = that depth / fx), which is what a user without the pinhole gets.
 
-BiNI's figures on the same data (k = 2, perspective, run on the 2-core development machine
-from the same normals) are in ../shared/data/diligent/README.md: 0.221 mm in 0.97 s from the
-true normals, 3.30 mm from irtps's; BiNI is GPL and is not run here.
+The same from the ground-truth normals of the shared Mitsuba perspective scenes
+(``--scenes``; MADE in scene units), for ``bilateral`` and ``bini``.
+
+Beside them, ``bini``: BiNI's iteration (k = 2, its defaults) as ``bini_iteration.py``
+re-states it, on the same normals, once per tolerance of its conjugate-gradient solves
+(``--bini-tolerances``, BiNI's 1e-3 first): the spread shows how much its figure depends on
+where those inexact solves stop. Its time is that of a numpy re-statement, not BiNI's own
+speed. BiNI's own figures (run on the 2-core development machine, numba) are in
+../shared/data/diligent/README.md: 0.221 mm in 0.97 s from the true normals, 3.30 mm from
+irtps's; BiNI is GPL and is not run here.
 
 Usage::
 
-    python benches/depth_bench.py [--data ../shared/data/diligent/readingPNG] [--runs 5] [--json PATH]
+    python benches/depth_bench.py [--data ../shared/data/diligent/readingPNG] [--runs 5]
+        [--bini-tolerances 1e-3,5e-4,2e-3] [--json PATH]
 """
 
 from __future__ import annotations
@@ -34,8 +42,11 @@ import numpy as np
 import scipy.io
 
 import irtps
+from bini_iteration import bini_depth
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "diligent" / "readingPNG"
+SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+SHARED = SHARED_DATA / "diligent" / "readingPNG"
+SCENES = [SHARED_DATA / "mitsuba" / name for name in ("cap_persp_cornell", "grooves_persp_dark")]
 METHODS = ("bilateral", "ls", "mestimator", "footprint")
 
 
@@ -66,10 +77,74 @@ def timed(method: str, normals, mask, K, depth, runs: int) -> tuple[float, np.nd
     return statistics.median(seconds), result
 
 
+def tolerances(text: str) -> list[float]:
+    """Comma-separated positive conjugate-gradient tolerances."""
+    values = [float(part) for part in text.split(",") if part.strip()]
+    if not values or not all(0.0 < value < 1.0 for value in values):
+        raise argparse.ArgumentTypeError(f"expected tolerances in (0, 1), got {text!r}")
+    return values
+
+
+def bini_row(cg_tol: float, truth, fitted, mask, K, depth) -> dict:
+    """BiNI's iteration (re-stated) from both normal maps at one conjugate-gradient tolerance."""
+    row: dict = {"method": f"bini cg {cg_tol:g}"}
+    for label, normals in (("true_normals", truth), ("irtps_normals", fitted)):
+        start = time.perf_counter()
+        estimate, solves, _ = bini_depth(normals, mask, K, cg_tol=cg_tol)
+        row[f"seconds_{label}"] = time.perf_counter() - start
+        row[f"made_{label}_mm"] = made(estimate, depth, mask)
+        row[f"solves_{label}"] = solves
+    return row
+
+
+def print_row(row: dict) -> None:
+    """One table line."""
+    print(
+        f"{row['method']:<16} {row['made_true_normals_mm']:>14.3f} {row['seconds_true_normals']:>7.3f}s "
+        f"{row['made_irtps_normals_mm']:>14.3f} {row['seconds_irtps_normals']:>7.3f}s"
+    )
+
+
+def scene_rows(scene: Path, cg_tolerances: list[float]) -> list[dict]:
+    """``bilateral`` and BiNI's iteration from a rendered scene's ground-truth normals."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", irtps.IrtpsWarning)
+        dataset = irtps.load_dataset(scene)
+    K = dataset.scene.camera.intrinsics()
+    normals = dataset.gt.normal
+    mask = dataset.mask & (np.linalg.norm(normals, axis=-1) > 0.5)
+    depth = np.where(mask, dataset.gt.depth, np.nan)
+    start = time.perf_counter()
+    estimate = irtps.integrate_normals(normals, mask, intrinsics=K)
+    rows = [{"method": "bilateral", "made": made(estimate, depth, mask), "seconds": time.perf_counter() - start}]
+    for cg_tol in cg_tolerances:
+        start = time.perf_counter()
+        estimate, solves, _ = bini_depth(normals, mask, K, cg_tol=cg_tol)
+        rows.append(
+            {
+                "method": f"bini cg {cg_tol:g}",
+                "made": made(estimate, depth, mask),
+                "seconds": time.perf_counter() - start,
+            }
+        )
+    for row in rows:
+        row["scene"] = scene.name
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", type=Path, default=SHARED, help="a DiLiGenT object with K.txt and depth_gt.npz")
     parser.add_argument("--runs", type=int, default=5)
+    parser.add_argument(
+        "--bini-tolerances",
+        type=tolerances,
+        default=[1e-3, 5e-4, 8e-4, 1.25e-3, 2e-3],
+        help="conjugate-gradient tolerances for BiNI's iteration, comma-separated (default: 1e-3 and ×0.5–×2)",
+    )
+    parser.add_argument(
+        "--scenes", type=Path, nargs="*", default=SCENES, help="rendered perspective scenes with gt/depth.exr"
+    )
     parser.add_argument("--json", type=Path, help="also write the rows as JSON")
     args = parser.parse_args()
     with warnings.catch_warnings():
@@ -82,7 +157,7 @@ def main() -> None:
     mask = dataset.mask
     rows = []
     print(f"{args.data.name}: {int(mask.sum())} pixels; MADE in mm, median of {args.runs} after a warm-up")
-    print(f"{'method':<12} {'true normals':>14} {'time':>8} {'irtps normals':>14} {'time':>8}")
+    print(f"{'method':<16} {'true normals':>14} {'time':>8} {'irtps normals':>14} {'time':>8}")
     for method in METHODS:
         true_seconds, from_truth = timed(method, truth, mask, K, depth, args.runs)
         fitted_seconds, from_fit = timed(method, fitted, mask, K, depth, args.runs)
@@ -94,10 +169,15 @@ def main() -> None:
             "seconds_irtps_normals": fitted_seconds,
         }
         rows.append(row)
-        print(
-            f"{method:<12} {row['made_true_normals_mm']:>14.3f} {true_seconds:>7.3f}s "
-            f"{row['made_irtps_normals_mm']:>14.3f} {fitted_seconds:>7.3f}s"
-        )
+        print_row(row)
+    for cg_tol in args.bini_tolerances:
+        rows.append(bini_row(cg_tol, truth, fitted, mask, K, depth))
+        print_row(rows[-1])
+    for scene in args.scenes:
+        print(f"\n{scene.name}: MADE in scene units from the true normals (one run)")
+        for row in scene_rows(scene, args.bini_tolerances):
+            rows.append(row)
+            print(f"{row['method']:<16} {row['made']:>10.4f} {row['seconds']:>7.3f}s")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2) + "\n", encoding="utf-8")
 
