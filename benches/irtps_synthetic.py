@@ -3,8 +3,9 @@
 The shared Mitsuba scenes are few, and scenes made the same way but not shared decide
 whether IRT-PS generalises. This renders stand-ins with irtps's own renderer (80×80 pixels,
 12 lights, 4 bounces, 256 paths a pixel): raised boundaries, textured albedo, a floor with
-and without a Cornell box, no floor, and each shape filling the frame (``fill``: its edges
-leave the image, no floor or wall in view). For each it prints classic PS's and IRT-PS's mean
+and without a Cornell box, no floor, each shape filling the frame (``fill``: its edges
+leave the image, no floor or wall in view), and seen through a pinhole (``irtps synth
+--camera perspective``). For each it prints classic PS's and IRT-PS's mean
 angular error (defaults, as ``irtps reconstruct``), and the share of the gap to the floor
 (classic PS on the direct-only images) that IRT-PS closes.
 
@@ -60,6 +61,17 @@ CASES = [
     *(
         (f"{shape}, fills the frame, no floor", {"shape": shape, "environment": "none", "fill": True})
         for shape in ("relief", "grooves")
+    ),
+    ("cap, pinhole, Cornell", {"shape": "cap", "environment": "cornell", "camera": "perspective"}),
+    (
+        "cavity, textured, pinhole, Cornell",
+        {"shape": "cavity", "albedo": "textured", "environment": "cornell", "camera": "perspective"},
+    ),
+    ("pedestal, pinhole, Cornell", {"shape": "pedestal", "environment": "cornell", "camera": "perspective"}),
+    ("grooves, pinhole, no floor", {"shape": "grooves", "environment": "none", "camera": "perspective"}),
+    (
+        "relief, pinhole, floor only",
+        {"shape": "relief", "environment": "none", "floor": True, "camera": "perspective"},
     ),
 ]
 
@@ -160,7 +172,7 @@ def mitsuba_dataset(mi, variant: str, keywords: dict, seed: int, changes: dict |
         sys.exit(
             f"Mitsuba's direct images differ from irtps's by {100 * difference:.1f} % of their mean: not the same scene"
         )
-    truth = GroundTruth(height=gt.height, normal=gt.normal, albedo=albedo, direct=direct)
+    truth = GroundTruth(height=gt.height, normal=gt.normal, albedo=albedo, direct=direct, depth=gt.depth)
     return Dataset(scene=scene, images=images, mask=mask, gt=truth, source=f"mitsuba:{geometry.source}")
 
 

@@ -102,6 +102,45 @@ class Stopwatch:
         self.seconds = (time.perf_counter() - self.start[0], time.process_time() - self.start[1])
 
 
+def camera_sensor(mi, cam, top: float, extent: float) -> dict:
+    """The Mitsuba sensor (without film and sampler) of an irtps camera over a scene whose
+    highest point is `top` and whose size is `extent`.
+
+    Orthographic: its [-1, 1] film width maps to the image's W·s. Perspective (contract §1b):
+    the pinhole at the optical centre, the horizontal field of view from fx; Mitsuba's
+    perspective sensor has one focal length and a principal point in the image's middle here,
+    so other intrinsics are refused. Both look down −z with +y up; Mitsuba's camera x axis
+    points left, which puts +x on the image's right."""
+    if cam.projection == "perspective":
+        if not (
+            np.isclose(cam.fx, cam.fy) and np.isclose(cam.cx, cam.width / 2) and np.isclose(cam.cy, cam.height / 2)
+        ):
+            raise ValueError(
+                f"a perspective camera with fx = fy and the principal point in the middle, got {cam.intrinsics().tolist()}"
+            )
+        eye = float(cam.center_z)
+        if eye <= top:
+            raise ValueError(f"the optical centre (height {eye}) is not above the scene's top ({top})")
+        return {
+            "type": "perspective",
+            "fov_axis": "x",
+            "fov": float(np.degrees(2 * np.arctan(cam.width / (2 * cam.fx)))),
+            # Within the gap to the top: an unbounded floor's extent would clip everything.
+            "near_clip": 1e-3 * (eye - top),
+            "far_clip": 10 * extent + eye,
+            "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, eye], target=[0, 0, eye - 1], up=[0, 1, 0]),
+        }
+    eye = top + extent
+    half = cam.width * cam.pixel_size / 2
+    to_world = mi.ScalarTransform4f().look_at(origin=[0, 0, eye], target=[0, 0, eye - 1], up=[0, 1, 0])
+    return {
+        "type": "orthographic",
+        "near_clip": 1e-3 * extent,
+        "far_clip": 10 * extent + eye,
+        "to_world": to_world @ mi.ScalarTransform4f().scale([half, half, 1]),
+    }
+
+
 class MitsubaScene:
     """The irtps scene as a Mitsuba scene with one directional light, re-aimed per light.
 
@@ -125,31 +164,18 @@ class MitsubaScene:
         params["faces"] = ints(np.ascontiguousarray(triangles, dtype=np.uint32).ravel())
         params.update()
         mesh.add_attribute("vertex_color", 3, floats(np.ascontiguousarray(albedo, dtype=np.float32).ravel()))
-        cam = scene.camera
-        # Orthographic sensor: its [-1, 1] film width maps to the image's W·s; Mitsuba's camera
-        # x axis points left, so looking down −z with +y up puts +x on the image's right.
         top = float(positions[:, 2].max())
         extent = float(np.ptp(positions, axis=0).max())
-        eye = top + extent
-        half = cam.width * cam.pixel_size / 2
-        to_world = mi.ScalarTransform4f().look_at(
-            origin=[0, 0, eye], target=[0, 0, eye - 1], up=[0, 1, 0]
-        ) @ mi.ScalarTransform4f().scale([half, half, 1])
-        sensor = {
-            "type": "orthographic",
-            "near_clip": 1e-3 * extent,
-            "far_clip": 10 * extent + eye,
-            "to_world": to_world,
-            "film": {
-                "type": "hdrfilm",
-                "width": cam.width,
-                "height": cam.height,
-                "rfilter": {"type": "box"},
-                "pixel_format": "rgb",
-                "component_format": "float32",
-            },
-            "sampler": {"type": sampler, "sample_count": 1},
+        film = {
+            "type": "hdrfilm",
+            "width": scene.camera.width,
+            "height": scene.camera.height,
+            "rfilter": {"type": "box"},
+            "pixel_format": "rgb",
+            "component_format": "float32",
         }
+        sensor = dict(camera_sensor(mi, scene.camera, top, extent), film=film)
+        sensor["sampler"] = {"type": sampler, "sample_count": 1}
         self.scene_mi = mi.load_dict(
             {
                 "type": "scene",
