@@ -5,7 +5,7 @@ whether IRT-PS generalises. This renders stand-ins with irtps's own renderer (80
 12 lights, 4 bounces, 256 paths a pixel): raised boundaries, textured albedo, a floor with
 and without a Cornell box, no floor, each shape filling the frame (``fill``: its edges
 leave the image, no floor or wall in view), and seen through a pinhole (``irtps synth
---camera perspective``). For each it prints classic PS's and IRT-PS's mean
+--camera perspective``) or lit by point lights near it (``--lights-near``, a rig's LEDs). For each it prints classic PS's and IRT-PS's mean
 angular error (defaults, as ``irtps reconstruct``), and the share of the gap to the floor
 (classic PS on the direct-only images) that IRT-PS closes.
 
@@ -13,7 +13,7 @@ With ``--renderer mitsuba`` Mitsuba 3 renders them instead, as the shared scenes
 (``path`` integrator, 4 bounces at 256 samples per pixel for the images, direct light only
 at 64 for the ground truth, ``independent`` sampler, the very triangles of
 ``Renderer.mesh_arrays()``), under 12 lights drawn at random 10–45° from the camera axis (a
-fresh draw per case, seeded), and nine variations follow (`MITSUBA_VARIATIONS`: dark,
+fresh draw per case, seeded; point lights at the case's distance in those directions), and nine variations follow (`MITSUBA_VARIATIONS`: dark,
 bright and coloured objects, other wall colours, 6 and 24 lights, no floor). irtps then
 reconstructs images that its own renderer did not make, with Mitsuba's noise, as on unseen
 scenes. Before a case is used, Mitsuba's direct images must agree with irtps's within 3 %
@@ -40,7 +40,10 @@ import irtps
 from irtps.model.data import Dataset, GroundTruth
 from irtps.errors import IrtpsWarning
 from irtps.model.scene import Light
-from irtps.render.synth import SHAPES
+from irtps.render.synth import SHAPES, near_lights
+
+#: The stand-ins' image width and height, pixels.
+SIZE = 80
 
 #: (label, synthesize keywords)
 CASES = [
@@ -72,6 +75,15 @@ CASES = [
     (
         "relief, pinhole, floor only",
         {"shape": "relief", "environment": "none", "floor": True, "camera": "perspective"},
+    ),
+    ("cap, LEDs 2 widths away, Cornell", {"shape": "cap", "environment": "cornell", "lights_near": 2.0}),
+    (
+        "cavity, textured, LEDs 1.5 widths away, Cornell",
+        {"shape": "cavity", "albedo": "textured", "environment": "cornell", "lights_near": 1.5},
+    ),
+    (
+        "grooves, LEDs 2 widths away, pinhole, no floor",
+        {"shape": "grooves", "environment": "none", "camera": "perspective", "lights_near": 2.0},
     ),
 ]
 
@@ -133,11 +145,13 @@ def mitsuba_dataset(mi, variant: str, keywords: dict, seed: int, changes: dict |
     from irtps.render.renderer import make_renderer, render
 
     changes = changes or {}
-    geometry, _ = irtps.synthesize(size=80, lights=12, bounces=0, samples=1, **keywords)
+    geometry, _ = irtps.synthesize(size=SIZE, lights=12, bounces=0, samples=1, **keywords)
     gt, mask = geometry.gt, geometry.mask
     lights = random_lights(
         changes.get("lights", 12), np.random.default_rng(seed), changes.get("zenith_deg", (10.0, 45.0))
     )
+    if keywords.get("lights_near") is not None:
+        lights = tuple(near_lights(list(lights), keywords["lights_near"] * SIZE))
     scene = replace(geometry.scene, lights=lights)
     if "walls" in changes:
         scene = replace(
@@ -207,7 +221,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.renderer == "mitsuba":
             dataset = mitsuba_dataset(mi, usable[0], keywords, seed=1000 * (index + 1), changes=changes)
         else:
-            dataset, _ = irtps.synthesize(size=80, lights=12, bounces=4, samples=256, **keywords)
+            dataset, _ = irtps.synthesize(size=SIZE, lights=12, bounces=4, samples=256, **keywords)
         classic = angular_error(dataset, irtps.reconstruct(dataset).normals)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", IrtpsWarning)

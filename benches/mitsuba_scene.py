@@ -142,7 +142,8 @@ def camera_sensor(mi, cam, top: float, extent: float) -> dict:
 
 
 class MitsubaScene:
-    """The irtps scene as a Mitsuba scene with one directional light, re-aimed per light.
+    """The irtps scene as a Mitsuba scene with one light, re-aimed (a distant light) or moved
+    (a point light, a rig's LED) per light; the scene's lights are all of one kind.
 
     Every triangle is Lambertian with the scene's per-vertex albedo, unless `bsdf` gives
     another Mitsuba BSDF (a dictionary for ``mi.load_dict``) for all of them."""
@@ -176,16 +177,24 @@ class MitsubaScene:
         }
         sensor = dict(camera_sensor(mi, scene.camera, top, extent), film=film)
         sensor["sampler"] = {"type": sampler, "sample_count": 1}
+        kinds = {type(light).__name__ for light in scene.lights}
+        if len(kinds) != 1:
+            raise ValueError(f"the scene's lights are of one kind here, got {sorted(kinds)}")
+        self.point_lights = kinds == {"PointLight"}
+        if self.point_lights:
+            emitter = {"type": "point", "position": [0.0, 0.0, 1.0], "intensity": {"type": "rgb", "value": [1.0] * 3}}
+        else:
+            emitter = {
+                "type": "directional",
+                "direction": [0.0, 0.0, -1.0],
+                "irradiance": {"type": "rgb", "value": [1.0] * 3},
+            }
         self.scene_mi = mi.load_dict(
             {
                 "type": "scene",
                 "sensor": sensor,
                 "object": mesh,
-                "light": {
-                    "type": "directional",
-                    "direction": [0.0, 0.0, -1.0],
-                    "irradiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]},
-                },
+                "light": emitter,
             }
         )
         self.params = mi.traverse(self.scene_mi)
@@ -203,6 +212,12 @@ class MitsubaScene:
             return
         mi = self.mi
         light = self.scene.lights[k]
+        if self.point_lights:
+            self.params["light.position"] = mi.Point3f(*[float(e) for e in light.position])
+            self.params["light.intensity.value"] = mi.Color3f(*[float(e) for e in light.intensity])
+            self.params.update()
+            self.light = k
+            return
         travel = -np.asarray(light.direction, dtype=np.float64)
         up = [0.0, 1.0, 0.0] if abs(travel[1]) < 0.9 else [1.0, 0.0, 0.0]
         # The directional emitter sends light along its local +z.
