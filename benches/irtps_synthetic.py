@@ -19,9 +19,16 @@ reconstructs images that its own renderer did not make, with Mitsuba's noise, as
 scenes. Before a case is used, Mitsuba's direct images must agree with irtps's within 3 %
 (mean absolute difference over the mean), else the script stops.
 
+With ``--noise-limit`` each case also reports the images' noise limit: classic PS on the
+images less their expected inter-reflected light (irtps's rendering of the true scene at
+1024 paths a pixel). The floor comes from direct-only images, which lack the Monte-Carlo
+noise that the inter-reflected light brings into the images; no correction removes that
+noise, so the gap to this limit is the share that IRT-PS can close.
+
 Usage::
 
-    python benches/irtps_synthetic.py [--renderer irtps|mitsuba] [--only TEXT ...] [--json synthetic.json]
+    python benches/irtps_synthetic.py [--renderer irtps|mitsuba] [--only TEXT ...] [--noise-limit]
+        [--json synthetic.json]
 """
 
 from __future__ import annotations
@@ -90,6 +97,8 @@ CASES = [
 
 #: Mitsuba's depths and samples per pixel, as the shared scenes were rendered.
 MITSUBA_BOUNCES, MITSUBA_SAMPLES, MITSUBA_DIRECT_SAMPLES = 4, 256, 64
+#: Paths a pixel of the expected inter-reflections that `noise_limit_error` removes.
+NOISE_LIMIT_PATHS = 1024
 #: Largest mean absolute difference between Mitsuba's and irtps's direct images, over their mean.
 DIRECT_TOLERANCE = 0.03
 
@@ -190,6 +199,28 @@ def mitsuba_dataset(mi, variant: str, keywords: dict, seed: int, changes: dict |
     return Dataset(scene=scene, images=images, mask=mask, gt=truth, source=f"mitsuba:{geometry.source}")
 
 
+def noise_limit_error(dataset: Dataset) -> float:
+    """Classic PS as `floor_error` fits it, on the images less their expected inter-reflected
+    light (irtps's rendering of the true scene, `NOISE_LIMIT_PATHS` paths a pixel): what
+    removing the inter-reflections exactly would reach with the images' own noise, which the
+    direct-only floor does not have."""
+    from irtps.render.renderer import render
+
+    gt = dataset.gt
+    expected = render(
+        dataset.scene,
+        gt.height,
+        gt.albedo,
+        dataset.mask,
+        bounces=MITSUBA_BOUNCES,
+        samples=NOISE_LIMIT_PATHS,
+        direct_samples=MITSUBA_DIRECT_SAMPLES,
+        seed=1,
+    ).indirect
+    cleaned = (dataset.images - expected).astype(np.float32)
+    return floor_error(replace(dataset, gt=replace(gt, direct=cleaned)))
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
@@ -201,6 +232,12 @@ def main(argv: list[str] | None = None) -> int:
         help="which renderer makes the images (default: irtps)",
     )
     parser.add_argument("--only", nargs="+", metavar="TEXT", help="the cases whose label holds one of these")
+    parser.add_argument(
+        "--noise-limit",
+        action="store_true",
+        help="also fit the images less their expected inter-reflections (the images' noise limit) and report "
+        "the share of the gap to it that IRT-PS closes",
+    )
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
     if args.renderer == "mitsuba":
@@ -210,8 +247,9 @@ def main(argv: list[str] | None = None) -> int:
         if not usable:
             sys.exit("no usable Mitsuba variant")
     rows = []
-    print("| case | classic PS | IRT-PS | floor | gap closed | stop | first turn / noise (medians) |")
-    print("|---|---|---|---|---|---|---|")
+    extra = " noise limit | its gap closed |" if args.noise_limit else ""
+    print(f"| case | classic PS | IRT-PS | floor | gap closed |{extra} stop | first turn / noise (medians) |")
+    print("|---|---|---|---|---|" + "---|---|" * args.noise_limit + "---|---|")
     cases = [(label, keywords, {}) for label, keywords in CASES]
     if args.renderer == "mitsuba":
         cases += MITSUBA_VARIATIONS
@@ -243,8 +281,14 @@ def main(argv: list[str] | None = None) -> int:
             }
         )
         turn = "n/a" if correction is None else f"{correction['change_deg']:.2f}° / {correction['noise_deg']:.2f}°"
+        limit_cells = ""
+        if args.noise_limit:
+            limit = noise_limit_error(dataset)
+            rows[-1]["noise_limit_deg"] = limit
+            rows[-1]["gap_to_noise_limit_closed"] = (classic - corrected) / (classic - limit)
+            limit_cells = f" {limit:.2f}° | {100 * rows[-1]['gap_to_noise_limit_closed']:.1f} % |"
         print(
-            f"| {label} | {classic:.2f}° | {corrected:.2f}° | {floor:.2f}° | {100 * closed:.1f} % | {stop.reason if stop else 'n/a'} | {turn} |",
+            f"| {label} | {classic:.2f}° | {corrected:.2f}° | {floor:.2f}° | {100 * closed:.1f} % |{limit_cells} {stop.reason if stop else 'n/a'} | {turn} |",
             flush=True,
         )
     if args.json:
