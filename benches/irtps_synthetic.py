@@ -4,17 +4,19 @@ The shared Mitsuba scenes are few, and scenes made the same way but not shared d
 whether IRT-PS generalises. This renders stand-ins with irtps's own renderer (80×80 pixels,
 12 lights, 4 bounces, 256 paths a pixel): raised boundaries, textured albedo, a floor with
 and without a Cornell box, no floor, each shape filling the frame (``fill``: its edges
-leave the image, no floor or wall in view), and seen through a pinhole (``irtps synth
---camera perspective``) or lit by point lights near it (``--lights-near``, a rig's LEDs). For each it prints classic PS's and IRT-PS's mean
-angular error (defaults, as ``irtps reconstruct``), and the share of the gap to the floor
-(classic PS on the direct-only images) that IRT-PS closes.
+leave the image, no floor or wall in view), seen through a pinhole (``irtps synth --camera
+perspective``) and lit by point lights near it (``--lights-near``, a rig's LEDs). For each
+it prints classic PS's and IRT-PS's mean angular error (defaults, as ``irtps
+reconstruct``), and the share of the gap to the floor (classic PS on the direct-only
+images) that IRT-PS closes.
 
 With ``--renderer mitsuba`` Mitsuba 3 renders them instead, as the shared scenes were made
 (``path`` integrator, 4 bounces at 256 samples per pixel for the images, direct light only
 at 64 for the ground truth, ``independent`` sampler, the very triangles of
 ``Renderer.mesh_arrays()``), under 12 lights drawn at random 10–45° from the camera axis (a
-fresh draw per case, seeded; point lights at the case's distance in those directions), and nine variations follow (`MITSUBA_VARIATIONS`: dark,
-bright and coloured objects, other wall colours, 6 and 24 lights, no floor). irtps then
+fresh draw per case, seeded; point lights at the case's distance in those directions), and
+nine variations follow (`MITSUBA_VARIATIONS`: dark, bright and coloured objects, other wall
+colours, 6 and 24 lights, no floor). irtps then
 reconstructs images that its own renderer did not make, with Mitsuba's noise, as on unseen
 scenes. Before a case is used, Mitsuba's direct images must agree with irtps's within 3 %
 (mean absolute difference over the mean), else the script stops.

@@ -179,7 +179,7 @@ class MitsubaScene:
         sensor["sampler"] = {"type": sampler, "sample_count": 1}
         kinds = {type(light).__name__ for light in scene.lights}
         if len(kinds) != 1:
-            raise ValueError(f"the scene's lights are of one kind here, got {sorted(kinds)}")
+            raise ValueError(f"MitsubaScene takes lights of one kind, got {sorted(kinds)}")
         self.point_lights = kinds == {"PointLight"}
         if self.point_lights:
             emitter = {"type": "point", "position": [0.0, 0.0, 1.0], "intensity": {"type": "rgb", "value": [1.0] * 3}}
