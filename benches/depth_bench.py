@@ -26,7 +26,7 @@ irtps's; BiNI is GPL and is not run here.
 Usage::
 
     python benches/depth_bench.py [--data ../shared/data/diligent/readingPNG] [--runs 5]
-        [--bini-tolerances 1e-3,5e-4,2e-3] [--json PATH]
+        [--bini-tolerances 1e-3,5e-4,2e-3] [--scenes SCENE ...] [--json PATH]
 """
 
 from __future__ import annotations
