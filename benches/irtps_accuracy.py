@@ -15,6 +15,11 @@ Usage::
     python benches/irtps_accuracy.py --json accuracy.json
     python benches/irtps_accuracy.py --samples 128       # IRT-PS with 128 paths per pixel
     python benches/irtps_accuracy.py --no-denoise        # its estimates not filtered
+    python benches/irtps_accuracy.py --noise-limit       # and the images' noise limit
+
+The noise limit is classic PS on the images less their expected inter-reflections (irtps's
+rendering of the true scene at 1024 paths a pixel): the direct-only floor lacks the images'
+Monte-Carlo noise, which no correction removes.
 """
 
 from __future__ import annotations
@@ -27,13 +32,20 @@ import time
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 import irtps
 from irtps.errors import DatasetError, IrtpsWarning
 from irtps.model.options import ReconstructOptions
 from irtps.model.scene import orthographic_scene
 from irtps.irt.pipeline import fit_photometric_stereo, resolve_options, settled_near_fit, with_chosen_robust
+from irtps.render.renderer import render
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+#: Paths a pixel of the expected inter-reflections that `noise_limit_error` removes.
+NOISE_LIMIT_PATHS = 1024
+#: Indirect bounces in the shared Mitsuba images (their README: ``max_depth = 6``).
+SHARED_BOUNCES = 4
 
 
 def angular_error(dataset, normals) -> float:
@@ -56,7 +68,29 @@ def floor_error(dataset) -> float | None:
     return angular_error(dataset, fit_photometric_stereo(dataset, dataset.gt.direct, options).normals)
 
 
-def measure(path: Path, passes: int | None, settings: dict) -> dict:
+def noise_limit_error(dataset, bounces: int) -> float | None:
+    """Classic PS as `floor_error` fits it, on the images less their expected inter-reflected
+    light (irtps's rendering of the true scene, `NOISE_LIMIT_PATHS` paths a pixel, `bounces`
+    bounces): what removing the inter-reflections exactly would reach with the images' own
+    Monte-Carlo noise, which the direct-only floor does not have."""
+    gt = dataset.gt
+    if gt is None or gt.direct is None or gt.height is None:
+        return None
+    expected = render(
+        dataset.scene,
+        gt.height,
+        gt.albedo,
+        dataset.mask,
+        bounces=bounces,
+        samples=NOISE_LIMIT_PATHS,
+        direct_samples=64,
+        seed=1,
+    ).indirect
+    cleaned = (dataset.images - expected).astype(np.float32)
+    return floor_error(dataclasses.replace(dataset, gt=dataclasses.replace(gt, direct=cleaned)))
+
+
+def measure(path: Path, passes: int | None, settings: dict, noise_limit: bool = False) -> dict:
     dataset = irtps.load_dataset(path)
     classic = angular_error(dataset, irtps.reconstruct(dataset).normals)
     start = time.perf_counter()
@@ -84,6 +118,10 @@ def measure(path: Path, passes: int | None, settings: dict) -> dict:
         "seconds": seconds,
         "warnings": [str(w.message) for w in caught],
     }
+    if noise_limit:
+        limit = noise_limit_error(dataset, SHARED_BOUNCES)
+        row["noise_limit_deg"] = limit
+        row["gap_to_noise_limit_closed"] = None if limit is None else (classic - irtps_error) / (classic - limit)
     if passes is not None and floor is not None:
         long = irtps.reconstruct(dataset, "irtps", iterations=passes, early_stop=False, **settings)
         short = irtps.reconstruct(dataset, "irtps", iterations=5, **settings)
@@ -107,6 +145,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--no-denoise", action="store_true", help="IRT-PS without the filter of its estimates (irtps.render.denoise)"
     )
+    parser.add_argument(
+        "--noise-limit",
+        action="store_true",
+        help="also fit the images less their expected inter-reflections (the images' noise limit) and report "
+        "the share of the gap to it that IRT-PS closes",
+    )
     parser.add_argument("--json", type=Path, help="write the rows here")
     args = parser.parse_args(argv)
     paths = sorted(p for group in ("mitsuba", "diligent") for p in (args.shared / group).glob("*") if p.is_dir())
@@ -123,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
             {"denoise": False} if args.no_denoise else {}
         )
         try:
-            row = measure(path, args.passes, settings)
+            row = measure(path, args.passes, settings, args.noise_limit)
         except DatasetError as err:
             print(f"| {path.name} | refused: {err} | | | | | | | |", flush=True)
             continue
@@ -135,6 +179,11 @@ def main(argv: list[str] | None = None) -> int:
             f"| {row['data']} | {row['classic_deg']:.3f}° | {row['irtps_deg']:.3f}° | {floor} | {closed} | {row['passes']} ({row['chosen_pass']}) | {row['stop']} | {placement} | {row['seconds']:.1f} |",
             flush=True,
         )
+        if row.get("noise_limit_deg") is not None:
+            print(
+                f"|   | noise limit {row['noise_limit_deg']:.3f}°: {100 * row['gap_to_noise_limit_closed']:.1f} % of its gap closed | | | | | | | |",
+                flush=True,
+            )
         if f"error_{args.passes}_passes_deg" in row:
             print(
                 f"|   | {args.passes} passes: {row[f'error_{args.passes}_passes_deg']:.3f}° | at most 5: {row['error_at_most_5_passes_deg']:.3f}° | | | | | | |",

@@ -43,7 +43,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from irtps_accuracy import angular_error, floor_error
+from irtps_accuracy import angular_error, floor_error, noise_limit_error
 
 import irtps
 from irtps.model.data import Dataset, GroundTruth
@@ -99,8 +99,6 @@ CASES = [
 
 #: Mitsuba's depths and samples per pixel, as the shared scenes were rendered.
 MITSUBA_BOUNCES, MITSUBA_SAMPLES, MITSUBA_DIRECT_SAMPLES = 4, 256, 64
-#: Paths a pixel of the expected inter-reflections that `noise_limit_error` removes.
-NOISE_LIMIT_PATHS = 1024
 #: Largest mean absolute difference between Mitsuba's and irtps's direct images, over their mean.
 DIRECT_TOLERANCE = 0.03
 
@@ -201,28 +199,6 @@ def mitsuba_dataset(mi, variant: str, keywords: dict, seed: int, changes: dict |
     return Dataset(scene=scene, images=images, mask=mask, gt=truth, source=f"mitsuba:{geometry.source}")
 
 
-def noise_limit_error(dataset: Dataset) -> float:
-    """Classic PS as `floor_error` fits it, on the images less their expected inter-reflected
-    light (irtps's rendering of the true scene, `NOISE_LIMIT_PATHS` paths a pixel): what
-    removing the inter-reflections exactly would reach with the images' own noise, which the
-    direct-only floor does not have."""
-    from irtps.render.renderer import render
-
-    gt = dataset.gt
-    expected = render(
-        dataset.scene,
-        gt.height,
-        gt.albedo,
-        dataset.mask,
-        bounces=MITSUBA_BOUNCES,
-        samples=NOISE_LIMIT_PATHS,
-        direct_samples=MITSUBA_DIRECT_SAMPLES,
-        seed=1,
-    ).indirect
-    cleaned = (dataset.images - expected).astype(np.float32)
-    return floor_error(replace(dataset, gt=replace(gt, direct=cleaned)))
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
@@ -285,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
         turn = "n/a" if correction is None else f"{correction['change_deg']:.2f}° / {correction['noise_deg']:.2f}°"
         limit_cells = ""
         if args.noise_limit:
-            limit = noise_limit_error(dataset)
+            limit = noise_limit_error(dataset, MITSUBA_BOUNCES)
             rows[-1]["noise_limit_deg"] = limit
             rows[-1]["gap_to_noise_limit_closed"] = (classic - corrected) / (classic - limit)
             limit_cells = f" {limit:.2f}° | {100 * rows[-1]['gap_to_noise_limit_closed']:.1f} % |"
