@@ -12,9 +12,6 @@ then the mean absolute difference in mm where the truth is known) and the median
   depths as an orthographic camera at the object's median true depth would see them (pixel
   size = that depth / fx), which is what a user without the pinhole gets.
 
-The same from the ground-truth normals of the shared Mitsuba perspective scenes
-(``--scenes``; MADE in scene units), for ``bilateral`` and ``bini``.
-
 Beside them, ``bini``: BiNI's iteration (k = 2, its defaults) as ``bini_iteration.py``
 re-states it, on the same normals, once per tolerance of its conjugate-gradient solves
 (``--bini-tolerances``, BiNI's 1e-3 first): the spread shows how much its figure depends on
@@ -22,6 +19,9 @@ where those inexact solves stop. Its time is that of a numpy re-statement, not B
 speed. BiNI's own figures (run on the 2-core development machine, numba) are in
 ../shared/data/diligent/README.md: 0.221 mm in 0.97 s from the true normals, 3.30 mm from
 irtps's; BiNI is GPL and is not run here.
+
+Then the same, ``bilateral`` and ``bini``, from the ground-truth normals of the shared Mitsuba
+perspective scenes (``--scenes``; MADE in scene units, one run each).
 
 Usage::
 
@@ -119,7 +119,7 @@ def scene_rows(scene: Path, cg_tolerances: list[float]) -> list[dict]:
     rows = [{"method": "bilateral", "made": made(estimate, depth, mask), "seconds": time.perf_counter() - start}]
     for cg_tol in cg_tolerances:
         start = time.perf_counter()
-        estimate, solves, _ = bini_depth(normals, mask, K, cg_tol=cg_tol)
+        estimate, _, _ = bini_depth(normals, mask, K, cg_tol=cg_tol)
         rows.append(
             {
                 "method": f"bini cg {cg_tol:g}",
@@ -156,7 +156,10 @@ def main() -> None:
     truth = scipy.io.loadmat(args.data / "Normal_gt.mat")["Normal_gt"].astype(np.float32)
     mask = dataset.mask
     rows = []
-    print(f"{args.data.name}: {int(mask.sum())} pixels; MADE in mm, median of {args.runs} after a warm-up")
+    print(
+        f"{args.data.name}: {int(mask.sum())} pixels; MADE in mm; times: median of {args.runs} after a warm-up "
+        "(bini: one run)"
+    )
     print(f"{'method':<16} {'true normals':>14} {'time':>8} {'irtps normals':>14} {'time':>8}")
     for method in METHODS:
         true_seconds, from_truth = timed(method, truth, mask, K, depth, args.runs)
