@@ -10,9 +10,9 @@ run it side by side on the same normals:
   ``t_p (z_q - z_p) = -n_along`` with ``t_p = u n_up + v n_right + f n_in`` (u, v: the pixel's
   offset from the principal point, integer pixel centres; f: the focal length along the
   difference's axis);
-- weights start at 1/2; after each solve, with ``d`` the log-depth difference to each
-  neighbour, the "up" equation weighs ``sigmoid(k (d_down^2 - d_up^2))`` and the "down" one
-  the rest (the same for right and left);
+- weights start at 1/2; after each solve, with ``d`` each equation's left side
+  ``t_p (z_q - z_p)``, the "up" equation weighs ``sigmoid(k (d_down^2 - d_up^2))`` and the
+  "down" one the rest (the same for right and left);
 - each weighted system is solved by Jacobi-preconditioned conjugate gradients, warm-started
   from the last depth, until the residual is at most ``cg_tol`` times the right-hand side;
 - the loop stops when the weighted energy changes by less than ``tol`` (relative) or after
