@@ -20,8 +20,9 @@ speed. BiNI's own figures (run on the 2-core development machine, numba) are in
 ../shared/data/diligent/README.md: 0.221 mm in 0.97 s from the true normals, 3.30 mm from
 irtps's; BiNI is GPL and is not run here.
 
-Then the same, ``bilateral`` and ``bini``, from the ground-truth normals of the shared Mitsuba
-perspective scenes (``--scenes``; MADE in scene units, one run each).
+Then the same, ``bilateral`` and ``bini``, on the shared Mitsuba perspective scenes, from
+their ground-truth normals and from those that IRT-PS fits (``--scenes``; MADE in scene
+units, one run each).
 
 Usage::
 
@@ -106,29 +107,30 @@ def print_row(row: dict) -> None:
 
 
 def scene_rows(scene: Path, cg_tolerances: list[float]) -> list[dict]:
-    """``bilateral`` and BiNI's iteration from a rendered scene's ground-truth normals."""
+    """``bilateral`` and BiNI's iteration from a rendered scene's ground-truth normals and
+    from those that ``irtps reconstruct --method irtps`` fits (one run each)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", irtps.IrtpsWarning)
         dataset = irtps.load_dataset(scene)
+        fitted = irtps.reconstruct(dataset, "irtps").normals
     K = dataset.scene.camera.intrinsics()
-    normals = dataset.gt.normal
-    mask = dataset.mask & (np.linalg.norm(normals, axis=-1) > 0.5)
+    truth = dataset.gt.normal
+    mask = dataset.mask & (np.linalg.norm(truth, axis=-1) > 0.5)
     depth = np.where(mask, dataset.gt.depth, np.nan)
-    start = time.perf_counter()
-    estimate = irtps.integrate_normals(normals, mask, intrinsics=K)
-    rows = [{"method": "bilateral", "made": made(estimate, depth, mask), "seconds": time.perf_counter() - start}]
-    for cg_tol in cg_tolerances:
-        start = time.perf_counter()
-        estimate, _, _ = bini_depth(normals, mask, K, cg_tol=cg_tol)
-        rows.append(
-            {
-                "method": f"bini cg {cg_tol:g}",
-                "made": made(estimate, depth, mask),
-                "seconds": time.perf_counter() - start,
-            }
-        )
-    for row in rows:
-        row["scene"] = scene.name
+    integrations = [("bilateral", lambda normals: irtps.integrate_normals(normals, mask, intrinsics=K))]
+    integrations += [
+        (f"bini cg {cg_tol:g}", lambda normals, cg_tol=cg_tol: bini_depth(normals, mask, K, cg_tol=cg_tol)[0])
+        for cg_tol in cg_tolerances
+    ]
+    rows = []
+    for method, integrate_scene in integrations:
+        row: dict = {"scene": scene.name, "method": method}
+        for label, normals in (("true_normals", truth), ("irtps_method_normals", fitted)):
+            start = time.perf_counter()
+            estimate = integrate_scene(normals)
+            row[f"seconds_{label}"] = time.perf_counter() - start
+            row[f"made_{label}"] = made(estimate, depth, mask)
+        rows.append(row)
     return rows
 
 
@@ -177,10 +179,14 @@ def main() -> None:
         rows.append(bini_row(cg_tol, truth, fitted, mask, K, depth))
         print_row(rows[-1])
     for scene in args.scenes:
-        print(f"\n{scene.name}: MADE in scene units from the true normals (one run)")
+        print(f"\n{scene.name}: MADE in scene units (one run each)")
+        print(f"{'method':<16} {'true normals':>14} {'time':>8} {'IRT-PS normals':>14} {'time':>8}")
         for row in scene_rows(scene, args.bini_tolerances):
             rows.append(row)
-            print(f"{row['method']:<16} {row['made']:>10.4f} {row['seconds']:>7.3f}s")
+            print(
+                f"{row['method']:<16} {row['made_true_normals']:>14.4f} {row['seconds_true_normals']:>7.3f}s "
+                f"{row['made_irtps_method_normals']:>14.4f} {row['seconds_irtps_method_normals']:>7.3f}s"
+            )
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2) + "\n", encoding="utf-8")
 
