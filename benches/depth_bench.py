@@ -49,6 +49,9 @@ SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 SHARED = SHARED_DATA / "diligent" / "readingPNG"
 SCENES = [SHARED_DATA / "mitsuba" / name for name in ("cap_persp_cornell", "grooves_persp_dark")]
 METHODS = ("bilateral", "ls", "mestimator", "footprint")
+#: The normal maps of each table: the data set's true ones and irtps's.
+READING_LABELS = ("true_normals", "irtps_normals")
+SCENE_LABELS = ("true_normals", "irtps_method_normals")
 
 
 def made(estimate: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
@@ -86,24 +89,27 @@ def tolerances(text: str) -> list[float]:
     return values
 
 
-def bini_row(cg_tol: float, truth, fitted, mask, K, depth) -> dict:
-    """BiNI's iteration (re-stated) from both normal maps at one conjugate-gradient tolerance."""
-    row: dict = {"method": f"bini cg {cg_tol:g}"}
-    for label, normals in (("true_normals", truth), ("irtps_normals", fitted)):
+def one_run_row(method: str, depth_from, normal_maps: dict, mask: np.ndarray, depth: np.ndarray) -> dict:
+    """MADE and seconds of one call of `depth_from` (normals → depth) on each of `normal_maps`
+    (label → normals)."""
+    row: dict = {"method": method}
+    for label, normals in normal_maps.items():
         start = time.perf_counter()
-        estimate, solves, _ = bini_depth(normals, mask, K, cg_tol=cg_tol)
+        estimate = depth_from(normals)
         row[f"seconds_{label}"] = time.perf_counter() - start
-        row[f"made_{label}_mm"] = made(estimate, depth, mask)
-        row[f"solves_{label}"] = solves
+        row[f"made_{label}"] = made(estimate, depth, mask)
     return row
 
 
-def print_row(row: dict) -> None:
-    """One table line."""
-    print(
-        f"{row['method']:<16} {row['made_true_normals_mm']:>14.3f} {row['seconds_true_normals']:>7.3f}s "
-        f"{row['made_irtps_normals_mm']:>14.3f} {row['seconds_irtps_normals']:>7.3f}s"
-    )
+def print_row(row: dict, labels: tuple[str, str], digits: int) -> None:
+    """One table line: the method, then MADE and time per normal map."""
+    cells = " ".join(f"{row[f'made_{label}']:>14.{digits}f} {row[f'seconds_{label}']:>7.3f}s" for label in labels)
+    print(f"{row['method']:<16} {cells}")
+
+
+def bini_depth_from(mask: np.ndarray, K: np.ndarray, cg_tol: float):
+    """normals → depth by BiNI's iteration (re-stated) at one conjugate-gradient tolerance."""
+    return lambda normals: bini_depth(normals, mask, K, cg_tol=cg_tol)[0]
 
 
 def scene_rows(scene: Path, cg_tolerances: list[float]) -> list[dict]:
@@ -117,21 +123,13 @@ def scene_rows(scene: Path, cg_tolerances: list[float]) -> list[dict]:
     truth = dataset.gt.normal
     mask = dataset.mask & (np.linalg.norm(truth, axis=-1) > 0.5)
     depth = np.where(mask, dataset.gt.depth, np.nan)
+    normal_maps = dict(zip(SCENE_LABELS, (truth, fitted)))
     integrations = [("bilateral", lambda normals: irtps.integrate_normals(normals, mask, intrinsics=K))]
-    integrations += [
-        (f"bini cg {cg_tol:g}", lambda normals, cg_tol=cg_tol: bini_depth(normals, mask, K, cg_tol=cg_tol)[0])
-        for cg_tol in cg_tolerances
+    integrations += [(f"bini cg {cg_tol:g}", bini_depth_from(mask, K, cg_tol)) for cg_tol in cg_tolerances]
+    return [
+        one_run_row(method, depth_from, normal_maps, mask, depth) | {"scene": scene.name}
+        for method, depth_from in integrations
     ]
-    rows = []
-    for method, integrate_scene in integrations:
-        row: dict = {"scene": scene.name, "method": method}
-        for label, normals in (("true_normals", truth), ("irtps_method_normals", fitted)):
-            start = time.perf_counter()
-            estimate = integrate_scene(normals)
-            row[f"seconds_{label}"] = time.perf_counter() - start
-            row[f"made_{label}"] = made(estimate, depth, mask)
-        rows.append(row)
-    return rows
 
 
 def main() -> None:
@@ -168,25 +166,23 @@ def main() -> None:
         fitted_seconds, from_fit = timed(method, fitted, mask, K, depth, args.runs)
         row = {
             "method": method,
-            "made_true_normals_mm": made(from_truth, depth, mask),
+            "made_true_normals": made(from_truth, depth, mask),
             "seconds_true_normals": true_seconds,
-            "made_irtps_normals_mm": made(from_fit, depth, mask),
+            "made_irtps_normals": made(from_fit, depth, mask),
             "seconds_irtps_normals": fitted_seconds,
         }
         rows.append(row)
-        print_row(row)
+        print_row(row, READING_LABELS, 3)
+    normal_maps = dict(zip(READING_LABELS, (truth, fitted)))
     for cg_tol in args.bini_tolerances:
-        rows.append(bini_row(cg_tol, truth, fitted, mask, K, depth))
-        print_row(rows[-1])
+        rows.append(one_run_row(f"bini cg {cg_tol:g}", bini_depth_from(mask, K, cg_tol), normal_maps, mask, depth))
+        print_row(rows[-1], READING_LABELS, 3)
     for scene in args.scenes:
         print(f"\n{scene.name}: MADE in scene units (one run each)")
         print(f"{'method':<16} {'true normals':>14} {'time':>8} {'IRT-PS normals':>14} {'time':>8}")
         for row in scene_rows(scene, args.bini_tolerances):
             rows.append(row)
-            print(
-                f"{row['method']:<16} {row['made_true_normals']:>14.4f} {row['seconds_true_normals']:>7.3f}s "
-                f"{row['made_irtps_method_normals']:>14.4f} {row['seconds_irtps_method_normals']:>7.3f}s"
-            )
+            print_row(row, SCENE_LABELS, 4)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2) + "\n", encoding="utf-8")
 

@@ -43,7 +43,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from irtps_accuracy import angular_error, floor_error, noise_limit_error
+from irtps_accuracy import SHARED_BOUNCES, angular_error, floor_error, noise_limit_error
 
 import irtps
 from irtps.model.data import Dataset, GroundTruth
@@ -97,8 +97,8 @@ CASES = [
 ]
 
 
-#: Mitsuba's depths and samples per pixel, as the shared scenes were rendered.
-MITSUBA_BOUNCES, MITSUBA_SAMPLES, MITSUBA_DIRECT_SAMPLES = 4, 256, 64
+#: Mitsuba's bounces and samples per pixel, as the shared scenes were rendered.
+MITSUBA_BOUNCES, MITSUBA_SAMPLES, MITSUBA_DIRECT_SAMPLES = SHARED_BOUNCES, 256, 64
 #: Largest mean absolute difference between Mitsuba's and irtps's direct images, over their mean.
 DIRECT_TOLERANCE = 0.03
 

@@ -15,6 +15,8 @@ import time
 
 import numpy as np
 
+from irtps.model.scene import PointLight
+
 
 def find_libllvm() -> str | None:
     """DRJIT_LIBLLVM_PATH, else the newest libLLVM-N.so in the usual library folders."""
@@ -177,10 +179,10 @@ class MitsubaScene:
         }
         sensor = dict(camera_sensor(mi, scene.camera, top, extent), film=film)
         sensor["sampler"] = {"type": sampler, "sample_count": 1}
-        kinds = {type(light).__name__ for light in scene.lights}
-        if len(kinds) != 1:
-            raise ValueError(f"MitsubaScene takes lights of one kind, got {sorted(kinds)}")
-        self.point_lights = kinds == {"PointLight"}
+        points = [isinstance(light, PointLight) for light in scene.lights]
+        if any(points) and not all(points):
+            raise ValueError("MitsubaScene takes lights of one kind, got point and distant lights")
+        self.point_lights = all(points)
         if self.point_lights:
             emitter = {"type": "point", "position": [0.0, 0.0, 1.0], "intensity": {"type": "rgb", "value": [1.0] * 3}}
         else:
